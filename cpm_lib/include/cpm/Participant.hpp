@@ -1,0 +1,59 @@
+#pragma once
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace eprosima::fastdds::dds {
+class DomainParticipant;
+}
+
+namespace cpm {
+namespace detail {
+class ParticipantCore;
+}
+
+/// How a participant reaches others. The default reaches this host only: UDPv4 bound to
+/// 127.0.0.1 plus shared memory, unicast discovery, no multicast. Naming interfaces,
+/// initial peers or a discovery server opens it to a network.
+struct ParticipantOptions
+{
+    int domain_id = -1;                      ///< 0..232; -1: cpm::init's --dds_domain / CPM_DOMAIN_ID
+    std::string name;                        ///< participant name; empty: cpm::init's node id
+    std::vector<std::string> interfaces;     ///< IPv4 addresses or interface names to use besides 127.0.0.1
+    std::vector<std::string> initial_peers;  ///< "host" or "host:port" of remote participants (unicast discovery)
+    std::string discovery_server;            ///< "host:port" of a Fast DDS discovery server (server id 0)
+    bool shared_memory = true;               ///< use shared memory between processes on this host
+    int max_initial_peers_range = 32;        ///< participants per host that unicast discovery probes
+
+    /// The options given by cpm::init (or the environment).
+    static ParticipantOptions from_init();
+};
+
+/// Owns one Fast DDS domain participant with its publisher and subscriber. Movable, not
+/// copyable. Readers and writers created on it keep it alive until they are gone.
+/// Throws cpm::Error when the options are invalid or Fast DDS refuses them.
+class Participant
+{
+public:
+    explicit Participant(const ParticipantOptions& options = ParticipantOptions::from_init());
+    ~Participant();
+    Participant(Participant&&) noexcept;
+    Participant& operator=(Participant&&) noexcept;
+    Participant(const Participant&) = delete;
+    Participant& operator=(const Participant&) = delete;
+
+    /// The process-wide participant that readers and writers use when none is given;
+    /// created on first use from cpm::init's settings. Thread-safe.
+    static Participant& default_participant();
+
+    int domain_id() const;
+    /// The Fast DDS participant, for what cpm does not wrap. Owned by this object.
+    eprosima::fastdds::dds::DomainParticipant* native() const;
+    /// Shared with readers and writers; not part of the stable interface.
+    const std::shared_ptr<detail::ParticipantCore>& core() const { return core_; }
+
+private:
+    std::shared_ptr<detail::ParticipantCore> core_;
+};
+
+}  // namespace cpm

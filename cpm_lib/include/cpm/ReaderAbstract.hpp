@@ -1,0 +1,49 @@
+#pragma once
+#include <chrono>
+#include <string>
+#include <vector>
+
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderOptions.hpp>
+#include <cpm/detail/ReaderCore.hpp>
+
+namespace cpm {
+
+/// A plain DDS reader: take() what arrived, wait for data, see the match count.
+/// Thread-safe. Throws cpm::Error only at construction.
+template <class T>
+class ReaderAbstract
+{
+public:
+    explicit ReaderAbstract(const std::string& topic, ReaderOptions options = {})
+        : ReaderAbstract(Participant::default_participant(), topic, options)
+    {
+    }
+    ReaderAbstract(Participant& participant, const std::string& topic, ReaderOptions options = {})
+        : core_(participant.core(), topic, &detail::make_type_support<T>, options, "ReaderAbstract")
+    {
+    }
+
+    /// The samples received since the last call, in arrival order (up to the DDS history
+    /// the options keep: history_depth per instance, or all with keep_all).
+    std::vector<T> take()
+    {
+        std::vector<T> samples;
+        core_.drain([&](void* s) { samples.push_back(std::move(*static_cast<T*>(s))); });
+        return samples;
+    }
+
+    /// Waits until a sample can be taken; false on timeout.
+    bool wait_for_data(std::chrono::milliseconds timeout) { return core_.wait_for_data(timeout); }
+
+    size_t matched_publications() const { return core_.matched_publications(); }
+    bool wait_for_matched(size_t n, std::chrono::milliseconds timeout) const
+    {
+        return core_.wait_for_matched(n, timeout);
+    }
+
+private:
+    detail::ReaderCore core_;
+};
+
+}  // namespace cpm

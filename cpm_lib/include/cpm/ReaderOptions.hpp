@@ -1,0 +1,19 @@
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+
+namespace cpm {
+
+/// Quality of service and buffering of the reader family.
+struct ReaderOptions
+{
+    bool reliable = false;         ///< request reliable delivery (needs a reliable writer)
+    bool keep_all = false;         ///< DDS keeps every sample until taken (else history_depth per instance)
+    int history_depth = 1;         ///< DDS samples kept per instance when not keep_all
+    bool transient_local = false;  ///< receive samples written before the reader existed
+    size_t buffer_capacity = 2000; ///< Reader/MultiVehicleReader: samples buffered per vehicle; oldest arrivals go first
+    std::optional<uint8_t> vehicle_id;  ///< Reader of a keyed type: only this vehicle's samples
+};
+
+}  // namespace cpm

@@ -1,0 +1,15 @@
+#pragma once
+
+namespace cpm {
+
+/// Quality of service of a Writer. A reader only matches a writer that offers at least
+/// what it requests (a reliable reader needs a reliable writer, transient-local likewise).
+struct WriterOptions
+{
+    bool reliable = false;         ///< retransmit lost samples (else best effort)
+    bool keep_all = false;         ///< keep every unacknowledged sample (else the last history_depth)
+    int history_depth = 1;         ///< samples kept per instance when not keep_all
+    bool transient_local = false;  ///< late-joining readers receive the kept samples
+};
+
+}  // namespace cpm

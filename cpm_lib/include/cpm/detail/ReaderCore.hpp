@@ -1,0 +1,50 @@
+#pragma once
+#include <chrono>
+#include <cstddef>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include <cpm/ReaderOptions.hpp>
+#include <cpm/detail/TypeSupport.hpp>
+
+namespace cpm::detail {
+class ParticipantCore;
+
+/// The type-independent part of every reader: one DDS DataReader, its match count, and
+/// taking samples out of DDS. Templates (Reader<T>, ...) are thin glue over it.
+class ReaderCore
+{
+public:
+    /// Receives one sample with valid data; it may move from it.
+    using Sink = std::function<void(void* sample)>;
+
+    /// `on_arrival`, if given, is called for every sample as it arrives, on a DDS receive
+    /// thread with DDS locks held (used to fill internal buffers; then do not call drain). `role` names the reader in error messages.
+    /// Throws cpm::Error naming the topic when the reader cannot be created.
+    ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
+               MakeTypeSupport make_type, const ReaderOptions& options, const char* role,
+               Sink on_arrival = {});
+    ~ReaderCore();
+    ReaderCore(const ReaderCore&) = delete;
+    ReaderCore& operator=(const ReaderCore&) = delete;
+
+    /// Takes every sample DDS holds and passes each valid one to `sink`, in arrival order.
+    /// Returns how many were passed. Never throws.
+    size_t drain(const Sink& sink);
+    /// Waits until samples are ready to take, `interrupt()` is called, or the timeout.
+    /// Returns true when samples are ready.
+    bool wait_for_data(std::chrono::nanoseconds timeout);
+    /// Wakes every wait_for_data (used to stop worker threads).
+    void interrupt();
+
+    size_t matched_publications() const;
+    bool wait_for_matched(size_t n, std::chrono::nanoseconds timeout) const;
+    const std::string& topic() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace cpm::detail

@@ -1,0 +1,47 @@
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <mutex>
+
+namespace cpm::detail {
+
+/// The buffer behind Reader<T>::get_sample, type-erased. Thread-safe.
+///
+/// select(t_now) picks, among buffered samples with valid_after <= t_now, the one with the
+/// largest create stamp (a tie goes to the later arrival); then drops every other sample
+/// that can never win again (create stamp not larger than the pick). With nothing valid it
+/// returns no sample and drops nothing. At capacity, the earliest arrival is dropped.
+/// add and select are O(buffered samples) at worst, usually O(1) amortised.
+class SampleSelector
+{
+public:
+    struct Pick
+    {
+        std::shared_ptr<const void> sample;  ///< null when no sample is valid at t_now
+        uint64_t valid_after_ns = 0;
+    };
+
+    explicit SampleSelector(size_t capacity);
+
+    void add(uint64_t create_ns, uint64_t valid_after_ns, std::shared_ptr<const void> sample);
+    Pick select(uint64_t t_now_ns);
+    size_t size() const;
+    /// Samples dropped because the buffer was full.
+    uint64_t overflow_count() const;
+
+private:
+    struct Entry
+    {
+        uint64_t create_ns;
+        uint64_t valid_after_ns;
+        std::shared_ptr<const void> sample;
+    };
+    mutable std::mutex mutex_;
+    std::deque<Entry> entries_;  // arrival order
+    size_t capacity_;
+    uint64_t overflow_count_ = 0;
+};
+
+}  // namespace cpm::detail

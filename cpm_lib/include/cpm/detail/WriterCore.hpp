@@ -1,0 +1,37 @@
+#pragma once
+#include <chrono>
+#include <cstddef>
+#include <memory>
+#include <string>
+
+#include <cpm/WriterOptions.hpp>
+#include <cpm/detail/TypeSupport.hpp>
+
+namespace cpm::detail {
+class ParticipantCore;
+
+/// The type-independent part of Writer<T>: one DDS DataWriter and its match count.
+class WriterCore
+{
+public:
+    /// Throws cpm::Error naming the topic when the writer cannot be created.
+    WriterCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
+               MakeTypeSupport make_type, const WriterOptions& options);
+    ~WriterCore();
+    WriterCore(const WriterCore&) = delete;
+    WriterCore& operator=(const WriterCore&) = delete;
+
+    /// Publishes one sample; false when DDS refused it (e.g. keep-all history full). Never throws.
+    bool write(const void* sample);
+    size_t matched_subscriptions() const;
+    bool wait_for_matched(size_t n, std::chrono::nanoseconds timeout) const;
+    /// Waits until every matched reliable reader acknowledged everything written.
+    bool wait_for_acknowledgments(std::chrono::nanoseconds timeout);
+    const std::string& topic() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace cpm::detail

@@ -1,0 +1,34 @@
+#pragma once
+#include <string>
+#include <vector>
+
+namespace cpm {
+
+/// The settings every cpm program shares, read by cpm::init from its command line.
+struct InitSettings
+{
+    int domain_id = 0;                       ///< --dds_domain (or CPM_DOMAIN_ID), 0..232
+    std::string node_id;                     ///< --node_id; default: the program's name
+    std::vector<std::string> interfaces;     ///< --dds_interface (IPv4 address or interface name)
+    std::vector<std::string> initial_peers;  ///< --dds_initial_peer (host or host:port)
+    std::string discovery_server;            ///< --dds_discovery_server (host:port)
+    bool simulated_time = false;             ///< --simulated_time
+};
+
+/// Reads cpm's flags (`--flag=value` or `--flag value`) from the command line and
+/// CPM_DOMAIN_ID from the environment; other flags are left to the program.
+/// Throws cpm::Error naming the flag and value when a value is malformed or out of range.
+/// Call before the first Participant is created (the default participant uses these).
+void init(int argc, char* argv[]);
+
+/// The settings from the last cpm::init (or from the environment alone if never called).
+InitSettings init_settings();
+
+/// Parses settings without touching global state; env_domain is CPM_DOMAIN_ID or nullptr.
+InitSettings parse_init_settings(int argc, const char* const argv[], const char* env_domain);
+
+/// Checks a DDS domain id: Fast DDS accepts 233 and above but then never discovers anyone.
+/// `source` names where the value came from in the error message.
+int checked_domain_id(long long domain_id, const std::string& source);
+
+}  // namespace cpm

@@ -1,0 +1,207 @@
+#include "ParticipantCore.hpp"
+
+#include <cpm/Error.hpp>
+#include <cpm/init.hpp>
+
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/publisher/Publisher.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+#include <fastdds/rtps/attributes/ServerAttributes.h>
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
+#include <fastrtps/utils/IPLocator.h>
+
+#include <algorithm>
+
+namespace cpm {
+namespace detail {
+
+namespace dds = eprosima::fastdds::dds;
+namespace rtps = eprosima::fastrtps::rtps;
+
+namespace {
+
+// "a.b.c.d" or "a.b.c.d:port" as a UDPv4 locator; port 0 means "the well-known ports".
+rtps::Locator_t udp_locator(const std::string& text, const std::string& what)
+{
+    std::string host = text;
+    uint32_t port = 0;
+    const auto colon = text.rfind(':');
+    if (colon != std::string::npos) {
+        host = text.substr(0, colon);
+        const std::string port_text = text.substr(colon + 1);
+        char* end = nullptr;
+        const long value = std::strtol(port_text.c_str(), &end, 10);
+        if (port_text.empty() || *end != '\0' || value < 1 || value > 65535) {
+            throw Error(what + " '" + text + "': port '" + port_text + "' is not a number in 1..65535");
+        }
+        port = static_cast<uint32_t>(value);
+    }
+    if (!rtps::IPLocator::isIPv4(host)) {
+        throw Error(what + " '" + text + "': '" + host + "' is not an IPv4 address (use a.b.c.d or a.b.c.d:port)");
+    }
+    rtps::Locator_t locator;
+    locator.kind = LOCATOR_KIND_UDPv4;
+    rtps::IPLocator::setIPv4(locator, host);
+    locator.port = port;
+    return locator;
+}
+
+}  // namespace
+
+dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
+{
+    dds::DomainParticipantQos qos = dds::PARTICIPANT_QOS_DEFAULT;
+    qos.name(options.name.empty() ? init_settings().node_id : options.name);
+
+    // Never Fast DDS's built-in transports: they multicast discovery on every interface.
+    auto& transport = qos.transport();
+    transport.use_builtin_transports = false;
+    auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+    udp->maxInitialPeersRange = static_cast<uint32_t>(std::max(options.max_initial_peers_range, 1));
+    const bool open_network = !options.interfaces.empty() || !options.initial_peers.empty() ||
+                              !options.discovery_server.empty();
+    if (!open_network || !options.interfaces.empty()) {
+        udp->interfaceWhiteList.push_back("127.0.0.1");
+        for (const auto& name : options.interfaces) udp->interfaceWhiteList.push_back(name);
+    }
+    if (options.shared_memory) transport.user_transports.push_back(std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>());
+    transport.user_transports.push_back(udp);
+
+    auto& builtin = qos.wire_protocol().builtin;
+    builtin.discovery_config.leaseDuration_announcementperiod = {1, 0};
+    builtin.discovery_config.leaseDuration = {10, 0};
+    builtin.discovery_config.initial_announcements.count = 5;
+    builtin.discovery_config.initial_announcements.period = {0, 100'000'000};
+    qos.wire_protocol().participant_id = -1;
+
+    if (!options.discovery_server.empty()) {
+        builtin.discovery_config.discoveryProtocol = rtps::DiscoveryProtocol_t::CLIENT;
+        rtps::RemoteServerAttributes server;
+        rtps::get_server_client_default_guidPrefix(0, server.guidPrefix);
+        rtps::Locator_t locator = udp_locator(options.discovery_server, "discovery server");
+        if (locator.port == 0) locator.port = 11811;  // Fast DDS's default server port
+        server.metatrafficUnicastLocatorList.push_back(locator);
+        builtin.discovery_config.m_DiscoveryServers.push_back(server);
+    } else if (options.interfaces.empty() || !options.initial_peers.empty()) {
+        // Unicast discovery only: an explicit (any-address, well-known-port) metatraffic
+        // locator stops Fast DDS from adding its multicast one; peers are this host plus
+        // the ones named.
+        rtps::Locator_t any;
+        any.kind = LOCATOR_KIND_UDPv4;
+        builtin.metatrafficUnicastLocatorList.push_back(any);
+        builtin.initialPeersList.push_back(udp_locator("127.0.0.1", "initial peer"));
+        for (const auto& peer : options.initial_peers) {
+            builtin.initialPeersList.push_back(udp_locator(peer, "initial peer"));
+        }
+    }
+    // else: interfaces named, no peers, no server: standard multicast discovery on them.
+    return qos;
+}
+
+ParticipantCore::ParticipantCore(const ParticipantOptions& options)
+    : factory_(dds::DomainParticipantFactory::get_shared_instance()),
+      domain_id_(checked_domain_id(options.domain_id >= 0 ? options.domain_id : init_settings().domain_id,
+                                   "participant option domain_id"))
+{
+    dds::DomainParticipantQos qos = participant_qos(options);
+    participant_ = factory_->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos);
+    if (participant_ == nullptr) {
+        throw Error("cannot create a DDS participant on domain " + std::to_string(domain_id_) +
+                    " (Fast DDS refused the transport or discovery settings; see its log above)");
+    }
+    publisher_ = participant_->create_publisher(dds::PUBLISHER_QOS_DEFAULT);
+    subscriber_ = participant_->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
+    if (publisher_ == nullptr || subscriber_ == nullptr) {
+        participant_->delete_contained_entities();
+        factory_->delete_participant(participant_);
+        throw Error("cannot create the DDS publisher/subscriber on domain " + std::to_string(domain_id_));
+    }
+}
+
+ParticipantCore::~ParticipantCore()
+{
+    participant_->delete_contained_entities();
+    factory_->delete_participant(participant_);
+}
+
+dds::Topic* ParticipantCore::acquire_topic(const std::string& name, MakeTypeSupport make_type, const char* role)
+{
+    if (name.empty()) throw Error(std::string(role) + ": the topic name is empty");
+    dds::TypeSupport type(make_type());
+    const std::string type_name = type.get_type_name();
+
+    std::lock_guard<std::mutex> lock(topics_mutex_);
+    auto found = topics_.find(name);
+    if (found != topics_.end()) {
+        const std::string existing = found->second.topic->get_type_name();
+        if (existing != type_name) {
+            throw Error(std::string(role) + " on topic '" + name + "' with type '" + type_name +
+                        "': the topic already has type '" + existing + "' in this participant");
+        }
+        ++found->second.users;
+        return found->second.topic;
+    }
+    if (participant_->find_type(type_name).empty()) {
+        // Without type information in discovery, Cyclone DDS and others can match us.
+        type->auto_fill_type_information(false);
+        type->auto_fill_type_object(false);
+        if (type.register_type(participant_) != ReturnCode_t::RETCODE_OK) {
+            throw Error(std::string(role) + " on topic '" + name + "': cannot register type '" + type_name + "'");
+        }
+    }
+    dds::Topic* topic = participant_->create_topic(name, type_name, dds::TOPIC_QOS_DEFAULT);
+    if (topic == nullptr) {
+        throw Error(std::string(role) + ": cannot create topic '" + name + "' of type '" + type_name + "'");
+    }
+    topics_.emplace(name, TopicUse{topic, 1});
+    return topic;
+}
+
+void ParticipantCore::release_topic(dds::Topic* topic)
+{
+    std::lock_guard<std::mutex> lock(topics_mutex_);
+    auto found = topics_.find(topic->get_name());
+    if (found == topics_.end() || --found->second.users > 0) return;
+    participant_->delete_topic(topic);
+    topics_.erase(found);
+}
+
+}  // namespace detail
+
+ParticipantOptions ParticipantOptions::from_init()
+{
+    const InitSettings settings = init_settings();
+    ParticipantOptions options;
+    options.domain_id = settings.domain_id;
+    options.name = settings.node_id;
+    options.interfaces = settings.interfaces;
+    options.initial_peers = settings.initial_peers;
+    options.discovery_server = settings.discovery_server;
+    return options;
+}
+
+Participant::Participant(const ParticipantOptions& options)
+    : core_(std::make_shared<detail::ParticipantCore>(options))
+{
+}
+
+Participant::~Participant() = default;
+Participant::Participant(Participant&&) noexcept = default;
+Participant& Participant::operator=(Participant&&) noexcept = default;
+
+Participant& Participant::default_participant()
+{
+    // Never destroyed: readers and writers in static objects may outlive main(), and Fast
+    // DDS's factory deletes whatever participants remain when the process ends.
+    static Participant* instance = new Participant(ParticipantOptions::from_init());
+    return *instance;
+}
+
+int Participant::domain_id() const { return core_->domain_id(); }
+
+eprosima::fastdds::dds::DomainParticipant* Participant::native() const { return core_->participant(); }
+
+}  // namespace cpm

@@ -1,0 +1,61 @@
+#pragma once
+#include <cpm/Participant.hpp>
+#include <cpm/detail/TypeSupport.hpp>
+
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+namespace eprosima::fastdds::dds {
+class DomainParticipant;
+class Publisher;
+class Subscriber;
+class Topic;
+}  // namespace eprosima::fastdds::dds
+
+namespace cpm::detail {
+
+/// The DDS participant QoS cpm uses for these options (this host only by default).
+/// Throws cpm::Error naming a malformed peer, server or domain id.
+eprosima::fastdds::dds::DomainParticipantQos participant_qos(const ParticipantOptions& options);
+
+/// One Fast DDS participant with one publisher and one subscriber, and the topics that
+/// readers and writers share (a participant may create each topic name only once).
+class ParticipantCore
+{
+public:
+    explicit ParticipantCore(const ParticipantOptions& options);
+    ~ParticipantCore();
+
+    eprosima::fastdds::dds::DomainParticipant* participant() const { return participant_; }
+    eprosima::fastdds::dds::Publisher* publisher() const { return publisher_; }
+    eprosima::fastdds::dds::Subscriber* subscriber() const { return subscriber_; }
+    int domain_id() const { return domain_id_; }
+
+    /// The topic `name` of the given type, created on first use; throws cpm::Error when the
+    /// name is empty or the topic already exists here with another type. `role` (Reader,
+    /// Writer, ...) names the caller in messages. Pair with release_topic.
+    eprosima::fastdds::dds::Topic* acquire_topic(const std::string& name, MakeTypeSupport make_type,
+                                                 const char* role);
+    void release_topic(eprosima::fastdds::dds::Topic* topic);
+
+private:
+    std::shared_ptr<eprosima::fastdds::dds::DomainParticipantFactory> factory_;
+    int domain_id_;
+    eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
+    eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
+    eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
+    std::mutex topics_mutex_;
+    struct TopicUse
+    {
+        eprosima::fastdds::dds::Topic* topic;
+        int users;
+    };
+    std::map<std::string, TopicUse> topics_;
+};
+
+}  // namespace cpm::detail

@@ -1,0 +1,52 @@
+#include "QosFromOptions.hpp"
+
+#include <cpm/Error.hpp>
+
+namespace cpm::detail {
+
+namespace dds = eprosima::fastdds::dds;
+
+namespace {
+
+// The parts readers and writers share: reliability, durability, history and limits.
+template <class Qos>
+void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, int depth, const std::string& topic,
+                  const char* role)
+{
+    if (!keep_all && depth < 1) {
+        throw Error(std::string(role) + " on topic '" + topic + "': history_depth = " + std::to_string(depth) +
+                    " must be at least 1 (or set keep_all)");
+    }
+    qos.reliability().kind = reliable ? dds::RELIABLE_RELIABILITY_QOS : dds::BEST_EFFORT_RELIABILITY_QOS;
+    qos.durability().kind = transient_local ? dds::TRANSIENT_LOCAL_DURABILITY_QOS : dds::VOLATILE_DURABILITY_QOS;
+    qos.history().kind = keep_all ? dds::KEEP_ALL_HISTORY_QOS : dds::KEEP_LAST_HISTORY_QOS;
+    qos.history().depth = keep_all ? 1 : depth;
+    // Fast DDS's default allows only 10 instances (vehicles) per reader and writer. 0 means
+    // "no limit" to Fast DDS 2.9's histories; LENGTH_UNLIMITED (-1) makes every write fail.
+    qos.resource_limits().max_instances = 0;
+    qos.resource_limits().max_samples = 0;
+    qos.resource_limits().max_samples_per_instance = keep_all ? 0 : depth;
+}
+
+}  // namespace
+
+dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic)
+{
+    dds::DataWriterQos qos = dds::DATAWRITER_QOS_DEFAULT;
+    apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth, topic,
+                 "Writer");
+    // Fast DDS's default heartbeat (3 s) delays recovery of a lost sample by seconds.
+    qos.reliable_writer_qos().times.heartbeatPeriod = {0, 100'000'000};
+    qos.reliability().max_blocking_time = {0, 100'000'000};
+    return qos;
+}
+
+dds::DataReaderQos reader_qos(const ReaderOptions& options, const std::string& topic)
+{
+    dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
+    apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth, topic,
+                 "Reader");
+    return qos;
+}
+
+}  // namespace cpm::detail

@@ -1,0 +1,161 @@
+#include <cpm/detail/ReaderCore.hpp>
+
+#include "MatchCounter.hpp"
+#include "ParticipantCore.hpp"
+#include "QosFromOptions.hpp"
+#include "log_internal.hpp"
+
+#include <cpm/Error.hpp>
+
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TopicDataType.hpp>
+
+#include <condition_variable>
+#include <mutex>
+
+namespace cpm::detail {
+
+namespace dds = eprosima::fastdds::dds;
+
+struct ReaderCore::Impl : public dds::DataReaderListener
+{
+    std::shared_ptr<ParticipantCore> participant;
+    std::string topic_name;
+    std::unique_ptr<dds::TopicDataType> type;
+    dds::Topic* topic = nullptr;
+    dds::DataReader* reader = nullptr;
+    Sink on_arrival;
+
+    std::mutex take_mutex;  // guards scratch
+    void* scratch = nullptr;
+
+    // Fast DDS calls the listener with the reader's history locked, so nobody may call into
+    // DDS while holding wait_mutex: the listener only raises `pending` under it.
+    std::mutex wait_mutex;
+    std::condition_variable data_ready;
+    bool pending = false;
+    bool interrupted = false;
+
+    MatchCounter matched;
+
+    std::mutex listener_mutex;  // held while a listener callback runs
+    bool closing = false;
+
+    size_t drain_from(dds::DataReader* from, const Sink& sink)
+    {
+        std::lock_guard<std::mutex> lock(take_mutex);
+        size_t n = 0;
+        dds::SampleInfo info;
+        while (from->take_next_sample(scratch, &info) == ReturnCode_t::RETCODE_OK) {
+            if (!info.valid_data) continue;  // disposals and unregistrations carry no data
+            try {
+                sink(scratch);
+            } catch (const std::exception& e) {
+                log_error("reader on topic '" + topic_name + "': dropped a sample: " + e.what());
+            }
+            ++n;
+        }
+        return n;
+    }
+
+    void on_data_available(dds::DataReader* from) override
+    {
+        std::lock_guard<std::mutex> lock(listener_mutex);
+        if (closing) return;
+        if (on_arrival) {
+            drain_from(from, on_arrival);
+            return;
+        }
+        {
+            std::lock_guard<std::mutex> wait_lock(wait_mutex);
+            pending = true;
+        }
+        data_ready.notify_all();
+    }
+
+    void on_subscription_matched(dds::DataReader*, const dds::SubscriptionMatchedStatus& status) override
+    {
+        matched.set(status.current_count);
+    }
+};
+
+ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
+                       MakeTypeSupport make_type, const ReaderOptions& options, const char* role, Sink on_arrival)
+    : impl_(std::make_unique<Impl>())
+{
+    if (topic.empty()) throw Error(std::string(role) + ": the topic name is empty");
+    const dds::DataReaderQos qos = reader_qos(options, topic);
+    impl_->participant = std::move(participant);
+    impl_->topic_name = topic;
+    impl_->on_arrival = std::move(on_arrival);
+    impl_->type.reset(make_type());
+    impl_->scratch = impl_->type->createData();
+    impl_->topic = impl_->participant->acquire_topic(topic, make_type, role);
+    impl_->reader = impl_->participant->subscriber()->create_datareader(
+        impl_->topic, qos, impl_.get(),
+        dds::StatusMask::data_available() << dds::StatusMask::subscription_matched());
+    if (impl_->reader == nullptr) {
+        impl_->participant->release_topic(impl_->topic);
+        impl_->type->deleteData(impl_->scratch);
+        throw Error(std::string(role) + " on topic '" + topic + "': DDS refused to create the reader "
+                    "(inconsistent options?)");
+    }
+}
+
+ReaderCore::~ReaderCore()
+{
+    {
+        std::lock_guard<std::mutex> lock(impl_->listener_mutex);  // waits for a running callback
+        impl_->closing = true;
+    }
+    interrupt();
+    impl_->reader->set_listener(nullptr);
+    impl_->participant->subscriber()->delete_datareader(impl_->reader);
+    impl_->participant->release_topic(impl_->topic);
+    impl_->type->deleteData(impl_->scratch);
+}
+
+size_t ReaderCore::drain(const Sink& sink) { return impl_->drain_from(impl_->reader, sink); }
+
+bool ReaderCore::wait_for_data(std::chrono::nanoseconds timeout)
+{
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (true) {
+        {
+            std::lock_guard<std::mutex> lock(impl_->wait_mutex);
+            if (impl_->interrupted) return false;
+        }
+        if (impl_->reader->get_unread_count() > 0) return true;  // no lock of ours held
+        // Data arriving from here on raises `pending`, so no wake-up is lost.
+        std::unique_lock<std::mutex> lock(impl_->wait_mutex);
+        if (!impl_->data_ready.wait_until(lock, deadline, [&] { return impl_->interrupted || impl_->pending; })) {
+            return false;
+        }
+        if (impl_->interrupted) return false;
+        impl_->pending = false;
+    }
+}
+
+void ReaderCore::interrupt()
+{
+    {
+        std::lock_guard<std::mutex> lock(impl_->wait_mutex);
+        impl_->interrupted = true;
+    }
+    impl_->data_ready.notify_all();
+}
+
+size_t ReaderCore::matched_publications() const { return impl_->matched.get(); }
+
+bool ReaderCore::wait_for_matched(size_t n, std::chrono::nanoseconds timeout) const
+{
+    return impl_->matched.wait_for_at_least(n, timeout);
+}
+
+const std::string& ReaderCore::topic() const { return impl_->topic_name; }
+
+}  // namespace cpm::detail

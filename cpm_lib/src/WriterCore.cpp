@@ -1,0 +1,79 @@
+#include <cpm/detail/WriterCore.hpp>
+
+#include "MatchCounter.hpp"
+#include "ParticipantCore.hpp"
+#include "QosFromOptions.hpp"
+
+#include <cpm/Error.hpp>
+
+#include <fastdds/dds/publisher/DataWriter.hpp>
+#include <fastdds/dds/publisher/DataWriterListener.hpp>
+#include <fastdds/dds/publisher/Publisher.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+
+namespace cpm::detail {
+
+namespace dds = eprosima::fastdds::dds;
+
+struct WriterCore::Impl : public dds::DataWriterListener
+{
+    std::shared_ptr<ParticipantCore> participant;
+    std::string topic_name;
+    dds::Topic* topic = nullptr;
+    dds::DataWriter* writer = nullptr;
+    MatchCounter matched;
+
+    void on_publication_matched(dds::DataWriter*, const dds::PublicationMatchedStatus& status) override
+    {
+        matched.set(status.current_count);
+    }
+};
+
+WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
+                       MakeTypeSupport make_type, const WriterOptions& options)
+    : impl_(std::make_unique<Impl>())
+{
+    if (topic.empty()) throw Error("Writer: the topic name is empty");
+    const dds::DataWriterQos qos = writer_qos(options, topic);
+    impl_->participant = std::move(participant);
+    impl_->topic_name = topic;
+    impl_->topic = impl_->participant->acquire_topic(topic, make_type, "Writer");
+    impl_->writer = impl_->participant->publisher()->create_datawriter(impl_->topic, qos, impl_.get(),
+                                                                      dds::StatusMask::publication_matched());
+    if (impl_->writer == nullptr) {
+        impl_->participant->release_topic(impl_->topic);
+        throw Error("Writer on topic '" + topic + "': DDS refused to create the writer (inconsistent options?)");
+    }
+}
+
+WriterCore::~WriterCore()
+{
+    impl_->writer->set_listener(nullptr);
+    impl_->participant->publisher()->delete_datawriter(impl_->writer);
+    impl_->participant->release_topic(impl_->topic);
+}
+
+bool WriterCore::write(const void* sample)
+{
+    // Fast DDS takes a non-const pointer but only reads the sample.
+    return impl_->writer->write(const_cast<void*>(sample));
+}
+
+size_t WriterCore::matched_subscriptions() const { return impl_->matched.get(); }
+
+bool WriterCore::wait_for_matched(size_t n, std::chrono::nanoseconds timeout) const
+{
+    return impl_->matched.wait_for_at_least(n, timeout);
+}
+
+bool WriterCore::wait_for_acknowledgments(std::chrono::nanoseconds timeout)
+{
+    const auto ns = timeout.count();
+    const eprosima::fastrtps::Duration_t max_wait(static_cast<int32_t>(ns / 1'000'000'000),
+                                                  static_cast<uint32_t>(ns % 1'000'000'000));
+    return impl_->writer->wait_for_acknowledgments(max_wait) == ReturnCode_t::RETCODE_OK;
+}
+
+const std::string& WriterCore::topic() const { return impl_->topic_name; }
+
+}  // namespace cpm::detail

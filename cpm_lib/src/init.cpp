@@ -1,0 +1,114 @@
+#include <cpm/init.hpp>
+
+#include <cpm/Error.hpp>
+
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <mutex>
+#include <optional>
+
+namespace cpm {
+namespace {
+
+std::mutex g_settings_mutex;
+std::optional<InitSettings> g_settings;
+
+long long parse_integer(const std::string& text, const std::string& source)
+{
+    if (text.empty()) throw Error(source + ": expected a number, got an empty value");
+    char* end = nullptr;
+    errno = 0;
+    const long long value = std::strtoll(text.c_str(), &end, 10);
+    if (errno != 0 || *end != '\0') throw Error(source + ": '" + text + "' is not a whole number");
+    return value;
+}
+
+bool parse_bool(const std::string& text, const std::string& source)
+{
+    if (text == "true" || text == "1" || text == "yes" || text == "on") return true;
+    if (text == "false" || text == "0" || text == "no" || text == "off") return false;
+    throw Error(source + ": '" + text + "' is not a boolean (true/false)");
+}
+
+std::string basename_of(const char* path)
+{
+    if (path == nullptr) return "cpm_node";
+    const char* slash = std::strrchr(path, '/');
+    return slash ? slash + 1 : path;
+}
+
+// The value of `--name=value` or `--name value`; advances i past a separate value.
+std::optional<std::string> flag_value(int argc, const char* const argv[], int& i, const std::string& name)
+{
+    const std::string arg = argv[i];
+    const std::string prefix = "--" + name;
+    if (arg.rfind(prefix, 0) != 0) return std::nullopt;
+    if (arg.size() == prefix.size()) {
+        if (i + 1 >= argc) throw Error("flag " + prefix + ": missing value");
+        return std::string(argv[++i]);
+    }
+    if (arg[prefix.size()] != '=') return std::nullopt;  // a longer, different flag
+    return arg.substr(prefix.size() + 1);
+}
+
+}  // namespace
+
+int checked_domain_id(long long domain_id, const std::string& source)
+{
+    if (domain_id < 0 || domain_id > 232) {
+        throw Error(source + ": DDS domain id " + std::to_string(domain_id) +
+                    " is outside 0..232 (Fast DDS would accept it and then discover nobody)");
+    }
+    return static_cast<int>(domain_id);
+}
+
+InitSettings parse_init_settings(int argc, const char* const argv[], const char* env_domain)
+{
+    InitSettings settings;
+    settings.node_id = basename_of(argc > 0 ? argv[0] : nullptr);
+    if (env_domain != nullptr && *env_domain != '\0') {
+        settings.domain_id = checked_domain_id(parse_integer(env_domain, "CPM_DOMAIN_ID"), "CPM_DOMAIN_ID");
+    }
+    for (int i = 1; i < argc; ++i) {
+        if (std::strcmp(argv[i], "--simulated_time") == 0) {
+            settings.simulated_time = true;
+        } else if (auto v = flag_value(argc, argv, i, "simulated_time")) {
+            settings.simulated_time = parse_bool(*v, "--simulated_time");
+        } else if (auto v = flag_value(argc, argv, i, "dds_domain")) {
+            settings.domain_id = checked_domain_id(parse_integer(*v, "--dds_domain"), "--dds_domain");
+        } else if (auto v = flag_value(argc, argv, i, "node_id")) {
+            if (v->empty()) throw Error("--node_id: empty value");
+            settings.node_id = *v;
+        } else if (auto v = flag_value(argc, argv, i, "dds_interface")) {
+            if (v->empty()) throw Error("--dds_interface: empty value");
+            settings.interfaces.push_back(*v);
+        } else if (auto v = flag_value(argc, argv, i, "dds_initial_peer")) {
+            if (v->empty()) throw Error("--dds_initial_peer: empty value");
+            settings.initial_peers.push_back(*v);
+        } else if (auto v = flag_value(argc, argv, i, "dds_discovery_server")) {
+            if (v->empty()) throw Error("--dds_discovery_server: empty value");
+            settings.discovery_server = *v;
+        }
+    }
+    return settings;
+}
+
+void init(int argc, char* argv[])
+{
+    InitSettings settings = parse_init_settings(argc, argv, std::getenv("CPM_DOMAIN_ID"));
+    std::lock_guard<std::mutex> lock(g_settings_mutex);
+    g_settings = std::move(settings);
+}
+
+InitSettings init_settings()
+{
+    std::lock_guard<std::mutex> lock(g_settings_mutex);
+    if (!g_settings) {
+        const char* argv0[] = {"cpm_node"};
+        g_settings = parse_init_settings(1, argv0, std::getenv("CPM_DOMAIN_ID"));
+    }
+    return *g_settings;
+}
+
+}  // namespace cpm

@@ -1,0 +1,84 @@
+#include <cpm/Error.hpp>
+#include <cpm/init.hpp>
+#include <cpm/stamp_message.hpp>
+
+#include <VehicleState.h>
+
+#include <gtest/gtest.h>
+#include <gmock/gmock.h>
+
+using ::testing::HasSubstr;
+
+namespace {
+
+cpm::InitSettings parse(std::vector<const char*> args, const char* env = nullptr)
+{
+    args.insert(args.begin(), "/usr/bin/my_node");
+    return cpm::parse_init_settings(static_cast<int>(args.size()), args.data(), env);
+}
+
+std::string error_of(std::vector<const char*> args, const char* env = nullptr)
+{
+    try {
+        parse(std::move(args), env);
+    } catch (const cpm::Error& e) {
+        return e.what();
+    }
+    return "(no error)";
+}
+
+}  // namespace
+
+TEST(Init, DefaultsAreDomainZeroNodeIdFromProgramNameAndNoNetwork)
+{
+    auto sut = parse({});
+    EXPECT_EQ(sut.domain_id, 0);
+    EXPECT_EQ(sut.node_id, "my_node");
+    EXPECT_TRUE(sut.interfaces.empty());
+    EXPECT_TRUE(sut.initial_peers.empty());
+    EXPECT_TRUE(sut.discovery_server.empty());
+    EXPECT_FALSE(sut.simulated_time);
+}
+
+TEST(Init, ReadsFlagsInBothSpellingsAndLeavesOthersAlone)
+{
+    auto sut = parse({"--dds_domain=7", "--node_id", "planner", "--my_flag=3", "--dds_initial_peer=10.0.0.2",
+                      "--dds_initial_peer", "10.0.0.3:7412", "--dds_interface=eth1", "--simulated_time"});
+    EXPECT_EQ(sut.domain_id, 7);
+    EXPECT_EQ(sut.node_id, "planner");
+    EXPECT_EQ(sut.initial_peers, (std::vector<std::string>{"10.0.0.2", "10.0.0.3:7412"}));
+    EXPECT_EQ(sut.interfaces, (std::vector<std::string>{"eth1"}));
+    EXPECT_TRUE(sut.simulated_time);
+}
+
+TEST(Init, EnvironmentGivesDomainAndFlagOverridesIt)
+{
+    EXPECT_EQ(parse({}, "12").domain_id, 12);
+    EXPECT_EQ(parse({"--dds_domain=3"}, "12").domain_id, 3);
+}
+
+TEST(Init, DomainAbove232IsAnErrorNamingFlagAndValue)
+{
+    const std::string message = error_of({"--dds_domain=233"});
+    EXPECT_THAT(message, HasSubstr("--dds_domain"));
+    EXPECT_THAT(message, HasSubstr("233"));
+    EXPECT_THAT(message, HasSubstr("0..232"));
+}
+
+TEST(Init, BadValuesAreErrorsNamingTheirSource)
+{
+    EXPECT_THAT(error_of({"--dds_domain=abc"}), HasSubstr("--dds_domain: 'abc'"));
+    EXPECT_THAT(error_of({"--dds_domain=-1"}), HasSubstr("-1"));
+    EXPECT_THAT(error_of({}, "999"), HasSubstr("CPM_DOMAIN_ID"));
+    EXPECT_THAT(error_of({"--simulated_time=maybe"}), HasSubstr("--simulated_time: 'maybe'"));
+    EXPECT_THAT(error_of({"--node_id"}), HasSubstr("--node_id: missing value"));
+    EXPECT_THAT(error_of({"--node_id="}), HasSubstr("--node_id: empty value"));
+}
+
+TEST(StampMessage, SetsCreateAndValidAfterStamps)
+{
+    VehicleState sut;
+    cpm::stamp_message(sut, 1000, 60);
+    EXPECT_EQ(sut.header().create_stamp().nanoseconds(), 1000u);
+    EXPECT_EQ(sut.header().valid_after_stamp().nanoseconds(), 1060u);
+}

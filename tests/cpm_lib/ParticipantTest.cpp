@@ -1,0 +1,150 @@
+// What a participant sends and where: this host only, unless told otherwise.
+#include <cpm/Error.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+
+#include <VehicleState.h>
+
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastrtps/utils/IPLocator.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <mutex>
+
+using namespace std::chrono_literals;
+using ::testing::HasSubstr;
+namespace fdds = eprosima::fastdds::dds;
+namespace rtps = eprosima::fastrtps::rtps;
+
+namespace {
+
+// Records the locators every discovered participant announces.
+class LocatorProbe : public fdds::DomainParticipantListener
+{
+public:
+    void on_participant_discovery(fdds::DomainParticipant*, rtps::ParticipantDiscoveryInfo&& info) override
+    {
+        if (info.status != rtps::ParticipantDiscoveryInfo::DISCOVERED_PARTICIPANT) return;
+        std::lock_guard<std::mutex> lock(mutex);
+        const auto& data = info.info;
+        Seen& seen = by_name[data.m_participantName.to_string()];
+        for (const auto& l : data.metatraffic_locators.unicast) seen.unicast.push_back(l);
+        for (const auto& l : data.default_locators.unicast) seen.unicast.push_back(l);
+        for (const auto& l : data.metatraffic_locators.multicast) seen.multicast.push_back(l);
+        for (const auto& l : data.default_locators.multicast) seen.multicast.push_back(l);
+    }
+    struct Seen
+    {
+        std::vector<rtps::Locator_t> unicast, multicast;
+    };
+    std::mutex mutex;
+    std::map<std::string, Seen> by_name;
+};
+
+std::string describe(const rtps::Locator_t& l)
+{
+    std::ostringstream out;
+    out << l;
+    return out.str();
+}
+
+}  // namespace
+
+TEST(Participant, DefaultParticipantAnnouncesOnlyLoopbackAndSharedMemory)
+{
+    cpm::ParticipantOptions options = cpm_test::isolated_options();  // also sets CPM_DOMAIN_ID
+    cpm::Participant& sut = cpm::Participant::default_participant();
+    ASSERT_EQ(sut.domain_id(), options.domain_id);
+    const std::string sut_name = sut.native()->get_qos().name().to_string();
+
+    // A probe participant with the same transport settings sees what sut announces.
+    LocatorProbe probe;
+    auto qos = sut.native()->get_qos();
+    qos.name("locator_probe");
+    auto* factory = fdds::DomainParticipantFactory::get_instance();
+    fdds::DomainParticipant* probe_participant = factory->create_participant(
+        options.domain_id, qos, &probe, fdds::StatusMask::none());
+    ASSERT_NE(probe_participant, nullptr);
+
+    const bool seen = cpm_test::wait_until([&] {
+        std::lock_guard<std::mutex> lock(probe.mutex);
+        return probe.by_name.count(sut_name) > 0;
+    });
+    factory->delete_participant(probe_participant);
+
+    ASSERT_TRUE(seen) << "the probe never discovered the default participant";
+    const auto& announced = probe.by_name[sut_name];
+    EXPECT_TRUE(announced.multicast.empty()) << "announces multicast: " << describe(announced.multicast.front());
+    ASSERT_FALSE(announced.unicast.empty());
+    for (const auto& l : announced.unicast) {
+        const bool shm = l.kind == LOCATOR_KIND_SHM;
+        const bool loopback = l.kind == LOCATOR_KIND_UDPv4 && rtps::IPLocator::toIPv4string(l) == "127.0.0.1";
+        EXPECT_TRUE(shm || loopback) << "announces a locator beyond this host: " << describe(l);
+    }
+}
+
+TEST(Participant, DomainAbove232IsRejected)
+{
+    cpm::ParticipantOptions options;
+    options.domain_id = 233;
+    try {
+        cpm::Participant sut(options);
+        FAIL() << "no error";
+    } catch (const cpm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("233"));
+    }
+}
+
+TEST(Participant, MalformedPeerIsAnErrorNamingIt)
+{
+    cpm::ParticipantOptions options = cpm_test::isolated_options();
+    options.initial_peers = {"not-an-address:7400"};
+    try {
+        cpm::Participant sut(options);
+        FAIL() << "no error";
+    } catch (const cpm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("not-an-address"));
+    }
+}
+
+TEST(Participant, MovedParticipantKeepsWorking)
+{
+    cpm::Participant original(cpm_test::isolated_options());
+    cpm::Participant sut(std::move(original));
+    cpm::Participant other(cpm_test::isolated_options());
+    const std::string topic = cpm_test::unique_topic("vehicleState");
+
+    cpm::Writer<VehicleState> writer(sut, topic);
+    cpm::ReaderAbstract<VehicleState> reader(other, topic);
+
+    EXPECT_TRUE(writer.wait_for_matched(1, 5000ms));
+}
+
+TEST(Participant, ReadersAndWritersMeetThroughADiscoveryServer)
+{
+    // A real Fast DDS discovery server on loopback; both participants are its clients.
+    const int port = 20000 + cpm_test::test_domain_id() * 10;
+    cpm_test::Process server({"/usr/bin/fast-discovery-server", "-i", "0", "-l", "127.0.0.1", "-p",
+                              std::to_string(port)});
+    cpm::ParticipantOptions options = cpm_test::isolated_options();
+    options.discovery_server = "127.0.0.1:" + std::to_string(port);
+    options.interfaces = {"127.0.0.1"};
+    cpm::Participant a(options), b(options);
+    const std::string topic = cpm_test::unique_topic("vehicleState");
+
+    cpm::Writer<VehicleState> writer(a, topic, {.reliable = true});
+    cpm::ReaderAbstract<VehicleState> reader(b, topic, {.reliable = true});
+
+    ASSERT_TRUE(writer.wait_for_matched(1, 10000ms)) << "no match through the discovery server";
+    ASSERT_TRUE(writer.write(cpm_test::vehicle_state(5, 1, 1)));
+    ASSERT_TRUE(reader.wait_for_data(5000ms));
+    EXPECT_EQ(reader.take().at(0).vehicle_id(), 5);
+}

@@ -1,0 +1,60 @@
+#include <cpm/Error.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+
+#include <VehicleState.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <memory>
+
+using namespace std::chrono_literals;
+using ::testing::HasSubstr;
+
+TEST(Writer, MatchCountGoesBackDownWhenAReaderIsDestroyed)
+{
+    cpm::Participant writer_side(cpm_test::isolated_options());
+    cpm::Participant reader_side(cpm_test::isolated_options());
+    const std::string topic = cpm_test::unique_topic("vehicleState");
+    cpm::Writer<VehicleState> sut(writer_side, topic);
+    EXPECT_EQ(sut.matched_subscriptions(), 0u);
+
+    auto first = std::make_unique<cpm::ReaderAbstract<VehicleState>>(reader_side, topic);
+    auto second = std::make_unique<cpm::ReaderAbstract<VehicleState>>(reader_side, topic);
+    ASSERT_TRUE(sut.wait_for_matched(2, 5000ms));
+    first.reset();
+
+    EXPECT_TRUE(cpm_test::wait_until([&] { return sut.matched_subscriptions() == 1; }))
+        << "count stayed at " << sut.matched_subscriptions();
+    second.reset();
+    EXPECT_TRUE(cpm_test::wait_until([&] { return sut.matched_subscriptions() == 0; }));
+}
+
+TEST(Writer, ReliableReaderDoesNotMatchABestEffortWriter)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    const std::string topic = cpm_test::unique_topic("vehicleState");
+    cpm::Writer<VehicleState> sut(participant, topic, {.reliable = false});
+    cpm::ReaderAbstract<VehicleState> best_effort(participant, topic, {.reliable = false});
+    cpm::ReaderAbstract<VehicleState> reliable(participant, topic, {.reliable = true});
+
+    ASSERT_TRUE(sut.wait_for_matched(1, 5000ms));
+    EXPECT_FALSE(sut.wait_for_matched(2, 300ms));
+    EXPECT_EQ(reliable.matched_publications(), 0u);
+}
+
+TEST(Writer, BadOptionsAreErrorsNamingTopicAndValue)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    try {
+        cpm::Writer<VehicleState> sut(participant, "vehicleState", {.reliable = true, .keep_all = false, .history_depth = 0});
+        FAIL() << "no error";
+    } catch (const cpm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("'vehicleState'"));
+        EXPECT_THAT(e.what(), HasSubstr("history_depth = 0"));
+    }
+    EXPECT_THROW(cpm::Writer<VehicleState>(participant, ""), cpm::Error);
+}

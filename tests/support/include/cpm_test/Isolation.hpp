@@ -1,0 +1,22 @@
+#pragma once
+#include <chrono>
+#include <functional>
+#include <string>
+#include <thread>
+
+namespace cpm_test {
+
+/// A DDS domain id in 1..232 that no other test process on this host holds: claimed with
+/// an flock on a file in /tmp/cpm_test_domains and held until the process ends. Also
+/// exported as CPM_DOMAIN_ID so child processes and the default participant use it.
+int test_domain_id();
+
+/// A topic name unique to this process and call ("base_<pid>_<n>").
+std::string unique_topic(const std::string& base);
+
+/// Polls `condition` until it is true or `timeout` passes; returns its last value.
+bool wait_until(const std::function<bool()>& condition,
+                std::chrono::milliseconds timeout = std::chrono::seconds(5),
+                std::chrono::milliseconds poll = std::chrono::milliseconds(2));
+
+}  // namespace cpm_test

@@ -1,0 +1,36 @@
+#pragma once
+#include <chrono>
+#include <string>
+#include <vector>
+
+namespace cpm_test {
+
+/// A child process started by a test, with its stdout captured to a file. The destructor
+/// kills it (SIGTERM, then SIGKILL) and reaps it, so a failing test never leaves it behind.
+class Process
+{
+public:
+    /// Starts `argv[0]` with the given arguments and extra environment ("NAME=value").
+    explicit Process(std::vector<std::string> argv, std::vector<std::string> env = {});
+    ~Process();
+    Process(const Process&) = delete;
+    Process& operator=(const Process&) = delete;
+
+    /// Waits for the process to exit; returns its exit code, or -1 on timeout/signal.
+    int wait(std::chrono::milliseconds timeout);
+    /// Everything it has written to stdout so far.
+    std::string output() const;
+    void kill(int signal);
+    int pid() const { return pid_; }
+
+private:
+    int pid_ = -1;
+    bool reaped_ = false;
+    int status_ = 0;
+    std::string out_path_;
+};
+
+/// The path of a program built next to the tests (set by CMake as CPM_BIN_DIR).
+std::string built_program(const std::string& name);
+
+}  // namespace cpm_test
