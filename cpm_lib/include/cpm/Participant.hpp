@@ -1,4 +1,6 @@
 #pragma once
+#include <cpm/Error.hpp>
+
 #include <memory>
 #include <string>
 #include <vector>

@@ -1,0 +1,73 @@
+// Reads every vehicle's newest valid VehicleState once a second with one MultiVehicleReader
+// and prints it with its age (now - valid_after_stamp).
+//
+//   vehicle_state_monitor [--vehicles N] [--seconds S] [--dds_domain D]
+#include <cpm/MultiVehicleReader.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
+
+#include <VehicleState.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <thread>
+
+namespace {
+
+int int_flag(int argc, char** argv, const char* name, int fallback)
+{
+    for (int i = 1; i + 1 < argc; ++i) {
+        if (std::strcmp(argv[i], name) == 0) return std::stoi(argv[i + 1]);
+    }
+    return fallback;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    for (int i = 1; i < argc; ++i) {
+        if (std::strcmp(argv[i], "--help") == 0) {
+            std::puts("usage: vehicle_state_monitor [--vehicles N (default 4)] [--seconds S (default 5)] [--dds_domain D]\n"
+                      "Prints each vehicle's newest valid state on topic 'vehicleState' once a second.");
+            return 0;
+        }
+    }
+    try {
+        cpm::init(argc, argv);
+        const int vehicles = int_flag(argc, argv, "--vehicles", 4);
+        const int seconds = int_flag(argc, argv, "--seconds", 5);
+        cpm::MultiVehicleReader<VehicleState> reader("vehicleState", vehicles);
+
+        int reports_with_all = 0;
+        double max_age_ms = 0;
+        for (int s = 1; s <= seconds; ++s) {
+            std::this_thread::sleep_for(std::chrono::seconds(1));
+            const uint64_t now = cpm::get_time_ns();
+            std::printf("t=%ds  vehicle      x [m]      y [m]   yaw [rad]  speed [m/s]   age [ms]  since created [ms]\n", s);
+            int valid = 0;
+            for (const auto& [id, result] : reader.get_samples(now)) {
+                if (!result.valid) {
+                    std::printf("       %7d   (no valid sample yet)\n", int(id));
+                    continue;
+                }
+                ++valid;
+                const double age_ms = double(result.age_ns) * 1e-6;
+                max_age_ms = std::max(max_age_ms, age_ms);
+                const auto& p = result.sample.pose();
+                const double since_created_ms = double(now - result.sample.header().create_stamp().nanoseconds()) * 1e-6;
+                std::printf("       %7d %10.3f %10.3f %11.3f %12.2f %10.1f %19.1f\n", int(id), p.x(), p.y(), p.yaw(),
+                            result.sample.speed(), age_ms, since_created_ms);
+            }
+            if (valid == vehicles) ++reports_with_all;
+        }
+        std::printf("monitor: %d of %d reports had a valid state for all %d vehicles; largest age %.1f ms\n",
+                    reports_with_all, seconds, vehicles, max_age_ms);
+        return reports_with_all > 0 ? 0 : 2;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "vehicle_state_monitor: %s\n", e.what());
+        return 1;
+    }
+}
