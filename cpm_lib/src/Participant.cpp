@@ -14,6 +14,7 @@
 #include <fastrtps/utils/IPLocator.h>
 
 #include <algorithm>
+#include <cstdlib>
 
 namespace cpm {
 namespace detail {
@@ -67,7 +68,9 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
         udp->interfaceWhiteList.push_back("127.0.0.1");
         for (const auto& name : options.interfaces) udp->interfaceWhiteList.push_back(name);
     }
-    if (options.shared_memory) transport.user_transports.push_back(std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>());
+    if (options.shared_memory) {
+        transport.user_transports.push_back(std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>());
+    }
     transport.user_transports.push_back(udp);
 
     auto& builtin = qos.wire_protocol().builtin;

@@ -10,8 +10,8 @@ namespace {
 
 // The parts readers and writers share: reliability, durability, history and limits.
 template <class Qos>
-void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, int depth, const std::string& topic,
-                  const char* role)
+void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, int depth, bool data_sharing,
+                  const std::string& topic, const char* role)
 {
     if (!keep_all && depth < 1) {
         throw Error(std::string(role) + " on topic '" + topic + "': history_depth = " + std::to_string(depth) +
@@ -26,6 +26,11 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
     qos.resource_limits().max_instances = 0;
     qos.resource_limits().max_samples = 0;
     qos.resource_limits().max_samples_per_instance = keep_all ? 0 : depth;
+    if (data_sharing) {
+        qos.data_sharing().automatic();
+    } else {
+        qos.data_sharing().off();  // shared-memory transport instead: faster for small samples
+    }
 }
 
 }  // namespace
@@ -33,8 +38,8 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
 dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic)
 {
     dds::DataWriterQos qos = dds::DATAWRITER_QOS_DEFAULT;
-    apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth, topic,
-                 "Writer");
+    apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth,
+                 options.data_sharing, topic, "Writer");
     // Fast DDS's default heartbeat (3 s) delays recovery of a lost sample by seconds.
     qos.reliable_writer_qos().times.heartbeatPeriod = {0, 100'000'000};
     qos.reliability().max_blocking_time = {0, 100'000'000};
@@ -44,8 +49,8 @@ dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& t
 dds::DataReaderQos reader_qos(const ReaderOptions& options, const std::string& topic)
 {
     dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
-    apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth, topic,
-                 "Reader");
+    apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth,
+                 options.data_sharing, topic, "Reader");
     return qos;
 }
 

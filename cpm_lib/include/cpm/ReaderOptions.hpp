@@ -14,6 +14,7 @@ struct ReaderOptions
     bool transient_local = false;  ///< receive samples written before the reader existed
     size_t buffer_capacity = 2000; ///< Reader/MultiVehicleReader: samples buffered per vehicle; oldest arrivals go first
     std::optional<uint8_t> vehicle_id;  ///< Reader of a keyed type: only this vehicle's samples
+    bool data_sharing = false;     ///< Fast DDS data sharing (see WriterOptions::data_sharing)
 };
 
 }  // namespace cpm

@@ -10,6 +10,10 @@ struct WriterOptions
     bool keep_all = false;         ///< keep every unacknowledged sample (else the last history_depth)
     int history_depth = 1;         ///< samples kept per instance when not keep_all
     bool transient_local = false;  ///< late-joining readers receive the kept samples
+    /// Fast DDS data sharing between processes on this host (needs it on the reader too).
+    /// Off by default: measured slower for small samples (bench/latency); try it for
+    /// large ones such as camera frames.
+    bool data_sharing = false;
 };
 
 }  // namespace cpm

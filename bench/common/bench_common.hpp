@@ -1,0 +1,44 @@
+#pragma once
+// What every benchmark here shares: statistics printed the same way, child processes, the
+// Cyclone configuration that pins ddsperf to loopback, and the machine description.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace bench {
+
+struct Stats
+{
+    size_t n = 0;
+    double min = 0, p50 = 0, p90 = 0, p99 = 0, max = 0;  // microseconds
+};
+
+/// Percentiles of samples given in microseconds (sorts a copy).
+Stats stats_of(std::vector<double> samples_us);
+
+/// "n min p50 p90 p99 max" header and one row; ratio rows compare p50/p99.
+void print_header(const std::string& what);
+void print_row(const std::string& label, const Stats& s);
+void print_ratio(const std::string& label, const Stats& ours, const Stats& reference);
+
+/// Machine and settings, printed once at the top.
+void print_machine(const std::string& settings);
+
+/// Starts this program again (via /proc/self/exe) with `args`; returns the pid.
+int spawn_self(const std::vector<std::string>& args);
+/// Starts a program with args and extra environment, stdout to `out_path`; returns the pid.
+int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path);
+/// Waits for a child; returns its exit code (-1 if killed). Kills it after timeout_s.
+int wait_child(int pid, double timeout_s);
+
+/// CYCLONEDDS_URI=... for loopback only, unicast discovery, no multicast.
+std::string cyclone_loopback_env();
+
+/// Whether this run uses Fast DDS data sharing (BENCH_DATA_SHARING=1), for cpm and raw alike;
+/// off by default, as in cpm.
+bool data_sharing();
+
+/// The value of "--name value" in argv, or fallback.
+std::string arg(int argc, char** argv, const std::string& name, const std::string& fallback);
+
+}  // namespace bench

@@ -1,0 +1,363 @@
+// Ping-pong latency between two processes: cpm Writer/AsyncReader versus raw Fast DDS with
+// the same QoS and transport, and Cyclone DDS's ddsperf, in one run.
+//
+//   bench_latency [--count 10000] [--warmup 1000] [--sizes 100,65536] [--domain 200]
+//
+// One-way latency = round trip / 2, as ddsperf reports it. Reliable, keep-last 1.
+#include "bench_common.hpp"
+#include "raw_fastdds.hpp"
+
+#include <cpm/AsyncReader.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+
+#include <BenchPayload.h>
+
+#include <fastdds/dds/core/condition/WaitSet.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <thread>
+
+#include <csignal>
+#include <unistd.h>
+
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+namespace fdds = eprosima::fastdds::dds;
+
+namespace {
+
+// A ping unanswered for this long during warm-up is sent again (a reply can be lost only
+// before both directions have matched); in the measured phase it is a failure.
+constexpr auto kResendAfter = 500ms;
+constexpr int kMaxTries = 20;
+
+const cpm::WriterOptions kWriterOptions{.reliable = true, .keep_all = false, .history_depth = 1, .data_sharing = bench::data_sharing()};
+const cpm::ReaderOptions kReaderOptions{.reliable = true, .keep_all = false, .history_depth = 1, .data_sharing = bench::data_sharing()};
+
+cpm::ParticipantOptions options_for(int domain)
+{
+    cpm::ParticipantOptions o;
+    o.domain_id = domain;
+    o.name = "bench_latency";
+    return o;
+}
+
+BenchPayload payload_of_size(size_t size)
+{
+    BenchPayload p;
+    p.data().resize(size > 28 ? size - 28 : 0);  // 16 header + 8 seq + 4 length
+    return p;
+}
+
+std::atomic<bool> g_stop{false};
+
+// ---- pong side: echoes every ping back on "pong" ----------------------------------------
+
+void pong_cpm(int domain)
+{
+    cpm::Participant participant(options_for(domain));
+    cpm::Writer<BenchPayload> pong(participant, "pong", kWriterOptions);
+    cpm::AsyncReader<BenchPayload> ping(
+        [&](std::vector<BenchPayload>& batch) {
+            for (auto& s : batch) pong.write(s);
+        },
+        participant, "ping", kReaderOptions);
+    while (!g_stop) std::this_thread::sleep_for(50ms);
+}
+
+struct EchoListener : fdds::DataReaderListener
+{
+    fdds::DataWriter* writer = nullptr;
+    BenchPayload sample;
+    void on_data_available(fdds::DataReader* reader) override
+    {
+        fdds::SampleInfo info;
+        while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
+            if (info.valid_data) writer->write(&sample);
+        }
+    }
+};
+
+void pong_raw_listener(int domain)
+{
+    cpm::Participant participant(options_for(domain));
+    bench::RawEndpoints raw(participant);
+    EchoListener echo;
+    echo.writer = raw.writer("pong", false, 1);
+    raw.reader("ping", false, 1, &echo);
+    while (!g_stop) std::this_thread::sleep_for(50ms);
+}
+
+void pong_raw_waitset(int domain)
+{
+    cpm::Participant participant(options_for(domain));
+    bench::RawEndpoints raw(participant);
+    fdds::DataWriter* writer = raw.writer("pong", false, 1);
+    fdds::DataReader* reader = raw.reader("ping", false, 1, nullptr);
+    fdds::WaitSet waitset;
+    reader->get_statuscondition().set_enabled_statuses(fdds::StatusMask::data_available());
+    waitset.attach_condition(reader->get_statuscondition());
+    BenchPayload sample;
+    fdds::SampleInfo info;
+    fdds::ConditionSeq triggered;
+    while (!g_stop) {
+        waitset.wait(triggered, eprosima::fastrtps::Duration_t(0, 100'000'000));
+        while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
+            if (info.valid_data) writer->write(&sample);
+        }
+    }
+}
+
+// ---- ping side: measures round trips ----------------------------------------------------
+
+// One ping endpoint pair; run() measures a block of round trips. All cases stay connected
+// for the whole run, and blocks of each case alternate, so machine noise hits all alike.
+class Pinger
+{
+public:
+    virtual ~Pinger() = default;
+    virtual bool connected() = 0;
+    // Appends one-way latencies (us) of `count` round trips after `warmup` unmeasured ones.
+    bool run(size_t size, int count, int warmup, std::vector<double>& one_way_us)
+    {
+        BenchPayload sample = payload_of_size(size);
+        for (int i = 0; i < warmup + count; ++i) {
+            sample.seq(++seq_);
+            const auto t0 = Clock::now();
+            write(sample);
+            bool answered = false;
+            for (int tries = 0; !answered; ++tries) {
+                if (!wait_reply(seq_, answered)) {
+                    // At start-up the pong's writer may not have matched our reader yet.
+                    if (tries == kMaxTries || i >= warmup) return false;
+                    write(sample);
+                }
+            }
+            const double us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count() / 2;
+            if (i >= warmup) one_way_us.push_back(us);
+        }
+        return true;
+    }
+
+protected:
+    virtual void write(const BenchPayload& sample) = 0;
+    // Waits up to kResendAfter; false on timeout, else sets `answered` if seq came back.
+    virtual bool wait_reply(uint64_t seq, bool& answered) = 0;
+    uint64_t seq_ = 0;
+};
+
+class CpmPinger : public Pinger
+{
+public:
+    explicit CpmPinger(int domain)
+        : participant_(options_for(domain)),
+          ping_(participant_, "ping", kWriterOptions),
+          pong_(participant_, "pong", kReaderOptions)
+    {
+    }
+    bool connected() override { return ping_.wait_for_matched(1, 10s) && pong_.wait_for_matched(1, 10s); }
+
+private:
+    void write(const BenchPayload& sample) override { ping_.write(sample); }
+    bool wait_reply(uint64_t seq, bool& answered) override
+    {
+        if (!pong_.wait_for_data(kResendAfter)) return false;
+        for (auto& s : pong_.take()) answered = answered || s.seq() == seq;
+        return true;
+    }
+    cpm::Participant participant_;
+    cpm::Writer<BenchPayload> ping_;
+    cpm::ReaderAbstract<BenchPayload> pong_;
+};
+
+class RawPinger : public Pinger
+{
+public:
+    explicit RawPinger(int domain) : participant_(options_for(domain)), raw_(participant_)
+    {
+        ping_ = raw_.writer("ping", false, 1);
+        pong_ = raw_.reader("pong", false, 1, nullptr);
+        pong_->get_statuscondition().set_enabled_statuses(fdds::StatusMask::data_available());
+        waitset_.attach_condition(pong_->get_statuscondition());
+    }
+    bool connected() override
+    {
+        const auto deadline = Clock::now() + 10s;
+        fdds::PublicationMatchedStatus pm;
+        fdds::SubscriptionMatchedStatus sm;
+        do {
+            std::this_thread::sleep_for(10ms);
+            ping_->get_publication_matched_status(pm);
+            pong_->get_subscription_matched_status(sm);
+        } while ((pm.current_count < 1 || sm.current_count < 1) && Clock::now() < deadline);
+        return pm.current_count >= 1 && sm.current_count >= 1;
+    }
+
+private:
+    void write(const BenchPayload& sample) override { ping_->write(const_cast<BenchPayload*>(&sample)); }
+    bool wait_reply(uint64_t seq, bool& answered) override
+    {
+        fdds::ConditionSeq triggered;
+        if (waitset_.wait(triggered, eprosima::fastrtps::Duration_t(0, 500'000'000)) != ReturnCode_t::RETCODE_OK) {
+            return false;
+        }
+        fdds::SampleInfo info;
+        while (pong_->take_next_sample(&reply_, &info) == ReturnCode_t::RETCODE_OK) {
+            answered = answered || (info.valid_data && reply_.seq() == seq);
+        }
+        return true;
+    }
+    cpm::Participant participant_;
+    bench::RawEndpoints raw_;
+    fdds::DataWriter* ping_ = nullptr;
+    fdds::DataReader* pong_ = nullptr;
+    fdds::WaitSet waitset_;
+    BenchPayload reply_;
+};
+
+// ---- Cyclone DDS: ddsperf ping/pong, pinned to loopback ---------------------------------
+
+// ddsperf prints one line per second: "... size S mean Xus min Xus 50% Xus 90% Xus 99% Xus max Xus cnt N".
+// Percentiles are per one-second window; we report the median window's value (first window
+// dropped as warm-up), and min/max/n over all windows.
+bench::Stats ddsperf_latency(int domain, size_t size, int seconds)
+{
+    const std::string pong_out = "/tmp/bench_ddsperf_pong_" + std::to_string(getpid());
+    const std::string ping_out = "/tmp/bench_ddsperf_ping_" + std::to_string(getpid());
+    const std::vector<std::string> env{bench::cyclone_loopback_env()};
+    const std::string dur = std::to_string(seconds + 2);
+    const int pong = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", dur, "pong"}, env, pong_out);
+    const int ping = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds),
+                                   "ping", "size", std::to_string(size)},
+                                  env, ping_out);
+    bench::wait_child(ping, seconds + 20);
+    kill(pong, SIGTERM);
+    bench::wait_child(pong, 5);
+
+    std::vector<double> p50s, p90s, p99s;
+    bench::Stats s;
+    s.min = 1e300;
+    std::ifstream in(ping_out);
+    bool first = true;
+    for (std::string line; std::getline(in, line);) {
+        const auto pos = line.find(" mean ");
+        if (pos == std::string::npos || line.find(" cnt ") == std::string::npos) continue;
+        std::map<std::string, double> v;
+        std::istringstream fields(line.substr(pos));
+        for (std::string key, value; fields >> key >> value;) v[key] = std::atof(value.c_str());
+        if (first) {
+            first = false;
+            continue;
+        }
+        s.n += static_cast<size_t>(v["cnt"]);
+        s.min = std::min(s.min, v["min"]);
+        s.max = std::max(s.max, v["max"]);
+        p50s.push_back(v["50%"]);
+        p90s.push_back(v["90%"]);
+        p99s.push_back(v["99%"]);
+    }
+    std::remove(pong_out.c_str());
+    std::remove(ping_out.c_str());
+    if (p50s.empty()) return {};
+    s.p50 = bench::stats_of(p50s).p50;
+    s.p90 = bench::stats_of(p90s).p50;
+    s.p99 = bench::stats_of(p99s).p50;
+    return s;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    const std::string role = bench::arg(argc, argv, "--role", "main");
+    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "200"));
+    if (role == "pong") {
+        std::signal(SIGTERM, [](int) { g_stop = true; });
+        const std::string impl = bench::arg(argc, argv, "--impl", "cpm");
+        if (impl == "cpm") pong_cpm(domain);
+        else if (impl == "raw_listener") pong_raw_listener(domain);
+        else pong_raw_waitset(domain);
+        return 0;
+    }
+    if (argc > 1 && std::string(argv[1]) == "--help") {
+        std::puts("usage: bench_latency [--count 10000] [--warmup 1000] [--sizes 100,65536] [--domain 200]");
+        return 0;
+    }
+    const int count = std::stoi(bench::arg(argc, argv, "--count", "10000"));
+    const int warmup = std::stoi(bench::arg(argc, argv, "--warmup", "1000"));
+    std::vector<size_t> sizes;
+    std::stringstream size_list(bench::arg(argc, argv, "--sizes", "100,65536"));
+    for (std::string s; std::getline(size_list, s, ',');) sizes.push_back(std::stoul(s));
+
+    bench::print_machine("reliable, keep-last 1, volatile; loopback UDP + shared memory (cpm defaults); " +
+                         std::to_string(count) + " round trips after " + std::to_string(warmup) +
+                         " warm-up; one-way = RTT/2 in microseconds; each case its own pong process and domain, "
+                         "cases alternating in 10 blocks");
+    int exit_code = 0;
+    struct Case
+    {
+        std::string impl, label;
+    };
+    const std::vector<Case> cases{{"cpm", "cpm Writer/AsyncReader"},
+                                  {"raw_listener", "raw Fast DDS (listener pong)"},
+                                  {"raw_waitset", "raw Fast DDS (wait-set pong)"}};
+    const int rounds = 10;
+    for (size_t size : sizes) {
+        bench::print_header("one-way latency, payload " + std::to_string(size) + " B");
+        // Every case gets its own domain and pong process for the whole run.
+        std::vector<int> pongs;
+        std::vector<std::unique_ptr<Pinger>> pingers;
+        for (size_t k = 0; k < cases.size(); ++k) {
+            const int d = domain + int(k);
+            pongs.push_back(bench::spawn_self({"--role", "pong", "--impl", cases[k].impl, "--domain", std::to_string(d)}));
+            if (cases[k].impl == "cpm") pingers.push_back(std::make_unique<CpmPinger>(d));
+            else pingers.push_back(std::make_unique<RawPinger>(d));
+        }
+        std::vector<std::vector<double>> samples(cases.size());
+        std::vector<bool> ok(cases.size(), true);
+        for (size_t k = 0; k < cases.size(); ++k) ok[k] = pingers[k]->connected();
+        for (int round = 0; round < rounds; ++round) {
+            for (size_t k = 0; k < cases.size(); ++k) {
+                if (!ok[k]) continue;
+                const int block_warmup = round == 0 ? warmup : 50;
+                ok[k] = pingers[k]->run(size, count / rounds, block_warmup, samples[k]);
+            }
+        }
+        pingers.clear();
+        for (int pid : pongs) kill(pid, SIGTERM);
+        for (int pid : pongs) bench::wait_child(pid, 10);
+
+        std::map<std::string, bench::Stats> results;
+        for (size_t k = 0; k < cases.size(); ++k) {
+            if (!ok[k]) {
+                std::printf("%-44s FAILED after %zu round trips\n", cases[k].label.c_str(), samples[k].size());
+                exit_code = 1;
+                continue;
+            }
+            results[cases[k].impl] = bench::stats_of(samples[k]);
+            bench::print_row(cases[k].label, results[cases[k].impl]);
+        }
+        const int seconds = 5;
+        results["cyclone"] = ddsperf_latency(domain, size, seconds);
+        bench::print_row("Cyclone DDS ddsperf ping/pong (" + std::to_string(seconds) + " s)", results["cyclone"]);
+        if (results.count("cpm") && results.count("raw_listener")) {
+            bench::print_ratio("cpm / raw Fast DDS (listener pong)", results["cpm"], results["raw_listener"]);
+        }
+        if (results.count("cpm") && results.count("raw_waitset")) {
+            bench::print_ratio("cpm / raw Fast DDS (wait-set pong)", results["cpm"], results["raw_waitset"]);
+        }
+        if (results.count("cpm") && results["cyclone"].n > 0) {
+            bench::print_ratio("cpm / Cyclone DDS", results["cpm"], results["cyclone"]);
+        }
+    }
+    return exit_code;
+}

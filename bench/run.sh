@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# ./lab bench: runs every benchmark; each prints its machine, settings, the cpm figures, the
+# reference figures measured in the same run, and their ratio.
+set -euo pipefail
+build="$1"; shift || true
+bin="$build/bin"
+echo "== bench_latency (ping-pong, cpm vs raw Fast DDS vs Cyclone ddsperf)"
+"$bin/bench_latency" "$@"
+echo
+echo "== bench_throughput (1 KiB reliable, cpm vs raw Fast DDS vs Cyclone ddsperf)"
+"$bin/bench_throughput"

@@ -1,0 +1,253 @@
+// Throughput of 1 KiB reliable samples from a publisher process to a subscriber process,
+// with none lost: cpm Writer/AsyncReader versus raw Fast DDS with the same QoS and
+// transport, and Cyclone DDS's ddsperf pub/sub, in one run.
+//
+//   bench_throughput [--seconds 5] [--size 1024] [--domain 201]
+//
+// The publisher writes as fast as the writer accepts for the given time, then an end marker;
+// the subscriber counts, checks sequence numbers for gaps and reports samples per second
+// between its first and last sample.
+#include "bench_common.hpp"
+#include "raw_fastdds.hpp"
+
+#include <cpm/AsyncReader.hpp>
+#include <cpm/Writer.hpp>
+
+#include <BenchPayload.h>
+
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include <unistd.h>
+
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+namespace fdds = eprosima::fastdds::dds;
+
+namespace {
+
+constexpr uint64_t kEndMarker = UINT64_MAX;
+const cpm::WriterOptions kWriterOptions{.reliable = true, .keep_all = true, .data_sharing = bench::data_sharing()};
+const cpm::ReaderOptions kReaderOptions{.reliable = true, .keep_all = true, .data_sharing = bench::data_sharing()};
+
+cpm::ParticipantOptions options_for(int domain)
+{
+    cpm::ParticipantOptions o;
+    o.domain_id = domain;
+    o.name = "bench_throughput";
+    return o;
+}
+
+// Counts samples and gaps; shared by the cpm and raw subscribers.
+struct Counter
+{
+    std::mutex mutex;
+    uint64_t received = 0, lost = 0, next_seq = 0;
+    Clock::time_point first, last;
+    std::atomic<bool> done{false};
+
+    void add(uint64_t seq)
+    {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (seq == kEndMarker) {
+            done = true;
+            return;
+        }
+        const auto now = Clock::now();
+        if (received == 0) first = now;
+        last = now;
+        ++received;
+        if (seq > next_seq) lost += seq - next_seq;
+        next_seq = seq + 1;
+    }
+    void report()
+    {
+        const double seconds = std::chrono::duration<double>(last - first).count();
+        std::printf("received %llu lost %llu seconds %.6f\n", (unsigned long long)received, (unsigned long long)lost,
+                    seconds);
+        std::fflush(stdout);
+    }
+};
+
+struct CountingListener : fdds::DataReaderListener
+{
+    Counter* counter;
+    BenchPayload sample;
+    void on_data_available(fdds::DataReader* reader) override
+    {
+        fdds::SampleInfo info;
+        while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
+            if (info.valid_data) counter->add(sample.seq());
+        }
+    }
+};
+
+int subscribe(const std::string& impl, int domain, int max_seconds)
+{
+    Counter counter;
+    cpm::Participant participant(options_for(domain));
+    std::unique_ptr<cpm::AsyncReader<BenchPayload>> cpm_reader;
+    std::unique_ptr<bench::RawEndpoints> raw;
+    CountingListener listener;
+    listener.counter = &counter;
+    if (impl == "cpm") {
+        cpm_reader = std::make_unique<cpm::AsyncReader<BenchPayload>>(
+            [&](std::vector<BenchPayload>& batch) {
+                for (auto& s : batch) counter.add(s.seq());
+            },
+            participant, "throughput", kReaderOptions);
+    } else {
+        raw = std::make_unique<bench::RawEndpoints>(participant);
+        raw->reader("throughput", true, 1, &listener);
+    }
+    const auto deadline = Clock::now() + std::chrono::seconds(max_seconds);
+    while (!counter.done && Clock::now() < deadline) std::this_thread::sleep_for(5ms);
+    counter.report();
+    return counter.done ? 0 : 3;
+}
+
+// Returns the number of samples written.
+uint64_t publish(const std::string& impl, int domain, size_t size, int seconds)
+{
+    cpm::Participant participant(options_for(domain));
+    BenchPayload sample;
+    sample.data().resize(size > 28 ? size - 28 : 0);
+    std::unique_ptr<cpm::Writer<BenchPayload>> writer;
+    std::unique_ptr<bench::RawEndpoints> raw;
+    fdds::DataWriter* raw_writer = nullptr;
+    if (impl == "cpm") {
+        writer = std::make_unique<cpm::Writer<BenchPayload>>(participant, "throughput", kWriterOptions);
+        writer->wait_for_matched(1, 10s);
+    } else {
+        raw = std::make_unique<bench::RawEndpoints>(participant);
+        raw_writer = raw->writer("throughput", true, 1);
+        fdds::PublicationMatchedStatus status;
+        const auto deadline = Clock::now() + 10s;
+        do {
+            std::this_thread::sleep_for(10ms);
+            raw_writer->get_publication_matched_status(status);
+        } while (status.current_count < 1 && Clock::now() < deadline);
+    }
+    auto write = [&](const BenchPayload& s) { return writer ? writer->write(s) : bool(raw_writer->write((void*)&s)); };
+
+    uint64_t seq = 0;
+    const auto end = Clock::now() + std::chrono::seconds(seconds);
+    while (Clock::now() < end) {
+        sample.seq(seq);
+        if (write(sample)) ++seq;  // a refused write (history full) is retried, not lost
+    }
+    sample.seq(kEndMarker);
+    while (!write(sample)) {
+    }
+    if (writer) writer->wait_for_acknowledgments(30s);
+    else raw_writer->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(30, 0));
+    return seq;
+}
+
+struct Result
+{
+    double rate = 0;
+    uint64_t received = 0, lost = 0, written = 0;
+    bool ok = false;
+};
+
+Result run_fastdds(const std::string& impl, int domain, size_t size, int seconds)
+{
+    const std::string out = "/tmp/bench_throughput_sub_" + std::to_string(getpid());
+    char self[4096];
+    const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+    self[n > 0 ? n : 0] = '\0';
+    const int sub = bench::spawn({self, "--role", "sub", "--impl", impl, "--domain", std::to_string(domain), "--seconds",
+                                  std::to_string(seconds + 60)},
+                                 {}, out);
+    Result r;
+    r.written = publish(impl, domain, size, seconds);
+    const int code = bench::wait_child(sub, seconds + 90);
+    std::ifstream in(out);
+    std::string word;
+    double secs = 0;
+    in >> word >> r.received >> word >> r.lost >> word >> secs;
+    std::remove(out.c_str());
+    r.ok = code == 0 && r.received == r.written && r.lost == 0;
+    r.rate = secs > 0 ? double(r.received) / secs : 0;
+    return r;
+}
+
+// ddsperf sub prints per second: "... size S total T lost L delta D lost L rate R kS/s ...".
+Result run_ddsperf(int domain, size_t size, int seconds)
+{
+    const std::string sub_out = "/tmp/bench_ddsperf_sub_" + std::to_string(getpid());
+    const std::vector<std::string> env{bench::cyclone_loopback_env()};
+    const int sub = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds + 2), "sub"},
+                                 env, sub_out);
+    const int pub = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds), "pub",
+                                  "size", std::to_string(size)},
+                                 env, "/dev/null");
+    bench::wait_child(pub, seconds + 20);
+    bench::wait_child(sub, seconds + 20);
+    Result r;
+    std::vector<double> rates;
+    std::ifstream in(sub_out);
+    for (std::string line; std::getline(in, line);) {
+        const auto pos = line.find(" total ");
+        if (pos == std::string::npos) continue;
+        std::istringstream f(line.substr(pos));
+        std::string w;
+        uint64_t total = 0, lost_total = 0, delta = 0, lost_delta = 0;
+        double rate = 0;
+        f >> w >> total >> w >> lost_total >> w >> delta >> w >> lost_delta >> w >> rate;
+        r.received = total;
+        r.lost = lost_total;
+        if (delta > 0) rates.push_back(rate * 1000);
+    }
+    std::remove(sub_out.c_str());
+    // Whole seconds of publishing only: drop the first and last (partial) windows.
+    if (rates.size() > 2) rates = std::vector<double>(rates.begin() + 1, rates.end() - 1);
+    r.rate = rates.empty() ? 0 : bench::stats_of(rates).p50;
+    r.ok = r.received > 0 && r.lost == 0;
+    return r;
+}
+
+void print_result(const std::string& label, const Result& r)
+{
+    std::printf("%-44s %12.0f %12llu %8llu   %s\n", label.c_str(), r.rate, (unsigned long long)r.received,
+                (unsigned long long)r.lost, r.ok ? "ok" : "INCOMPLETE");
+    std::fflush(stdout);
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    const std::string role = bench::arg(argc, argv, "--role", "main");
+    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "201"));
+    const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "5"));
+    if (role == "sub") return subscribe(bench::arg(argc, argv, "--impl", "cpm"), domain, seconds);
+    if (argc > 1 && std::string(argv[1]) == "--help") {
+        std::puts("usage: bench_throughput [--seconds 5] [--size 1024] [--domain 201]");
+        return 0;
+    }
+    const size_t size = std::stoul(bench::arg(argc, argv, "--size", "1024"));
+    bench::print_machine("reliable, keep-all, volatile; loopback UDP + shared memory (cpm defaults); " +
+                         std::to_string(size) + " B samples for " + std::to_string(seconds) +
+                         " s; publisher and subscriber in separate processes");
+    std::printf("\nthroughput, %zu B samples\n%-44s %12s %12s %8s\n", size, "case", "samples/s", "received", "lost");
+    const Result cpm_result = run_fastdds("cpm", domain, size, seconds);
+    print_result("cpm Writer/AsyncReader", cpm_result);
+    const Result raw_result = run_fastdds("raw", domain, size, seconds);
+    print_result("raw Fast DDS (listener)", raw_result);
+    const Result cyclone = run_ddsperf(domain, size, seconds);
+    print_result("Cyclone DDS ddsperf pub/sub (median second)", cyclone);
+    if (raw_result.rate > 0) std::printf("%-44s %.2f\n", "cpm / raw Fast DDS", cpm_result.rate / raw_result.rate);
+    if (cyclone.rate > 0) std::printf("%-44s %.2f\n", "cpm / Cyclone DDS", cpm_result.rate / cyclone.rate);
+    return cpm_result.ok && raw_result.ok ? 0 : 1;
+}
