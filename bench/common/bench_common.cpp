@@ -113,13 +113,7 @@ int wait_child(int pid, double timeout_s)
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-std::string cyclone_loopback_env()
-{
-    return "CYCLONEDDS_URI=<CycloneDDS><Domain id=\"any\"><General><Interfaces><NetworkInterface name=\"lo\"/>"
-           "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto"
-           "</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer address=\"127.0.0.1\"/>"
-           "</Peers></Discovery></Domain></CycloneDDS>";
-}
+std::string cyclone_loopback_env() { return "CYCLONEDDS_URI=file://" CPM_CYCLONE_LOOPBACK_XML; }
 
 bool data_sharing()
 {

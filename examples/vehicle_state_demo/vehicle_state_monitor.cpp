@@ -6,39 +6,27 @@
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
 
+#include "demo_flags.hpp"
+
 #include <VehicleState.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <cstring>
 #include <string>
 #include <thread>
 
-namespace {
-
-int int_flag(int argc, char** argv, const char* name, int fallback)
-{
-    for (int i = 1; i + 1 < argc; ++i) {
-        if (std::strcmp(argv[i], name) == 0) return std::stoi(argv[i + 1]);
-    }
-    return fallback;
-}
-
-}  // namespace
-
 int main(int argc, char** argv)
 {
-    for (int i = 1; i < argc; ++i) {
-        if (std::strcmp(argv[i], "--help") == 0) {
-            std::puts("usage: vehicle_state_monitor [--vehicles N (default 4)] [--seconds S (default 5)] [--dds_domain D]\n"
-                      "Prints each vehicle's newest valid state on topic 'vehicleState' once a second.");
-            return 0;
-        }
+    if (demo::wants_help(argc, argv)) {
+        std::puts("usage: vehicle_state_monitor [--vehicles N (default 4)] [--seconds S (default 5)] [--dds_domain D]\n"
+                  "Prints each vehicle's newest valid state on topic 'vehicleState' once a second.");
+        return 0;
     }
     try {
         cpm::init(argc, argv);
-        const int vehicles = int_flag(argc, argv, "--vehicles", 4);
-        const int seconds = int_flag(argc, argv, "--seconds", 5);
+        const int vehicles = demo::int_flag(argc, argv, "--vehicles", 4, 1, 255);
+        const int seconds = demo::int_flag(argc, argv, "--seconds", 5, 1, 3600);
         cpm::MultiVehicleReader<VehicleState> reader("vehicleState", vehicles);
 
         int reports_with_all = 0;

@@ -5,6 +5,8 @@
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
+
+#include "demo_flags.hpp"
 #include <cpm/stamp_message.hpp>
 
 #include <VehicleState.h>
@@ -12,7 +14,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <string>
 #include <thread>
 
@@ -21,30 +22,19 @@ namespace {
 constexpr uint64_t kPeriodNs = 20'000'000;        // 50 Hz
 constexpr uint64_t kExpectedDelayNs = 60'000'000;  // valid_after = create + 60 ms
 
-int int_flag(int argc, char** argv, const char* name, int fallback)
-{
-    for (int i = 1; i + 1 < argc; ++i) {
-        if (std::strcmp(argv[i], name) == 0) return std::stoi(argv[i + 1]);
-    }
-    return fallback;
-}
-
 }  // namespace
 
 int main(int argc, char** argv)
 {
-    for (int i = 1; i < argc; ++i) {
-        if (std::strcmp(argv[i], "--help") == 0) {
-            std::puts("usage: vehicle_state_writer [--vehicles N (1..20, default 4)] [--seconds S (default 5)] "
-                      "[--dds_domain D]\nPublishes simulated vehicles' VehicleState on topic 'vehicleState' at 50 Hz.");
-            return 0;
-        }
+    if (demo::wants_help(argc, argv)) {
+        std::puts("usage: vehicle_state_writer [--vehicles N (1..20, default 4)] [--seconds S (default 5)] "
+                  "[--dds_domain D]\nPublishes simulated vehicles' VehicleState on topic 'vehicleState' at 50 Hz.");
+        return 0;
     }
     try {
         cpm::init(argc, argv);
-        const int vehicles = int_flag(argc, argv, "--vehicles", 4);
-        const int seconds = int_flag(argc, argv, "--seconds", 5);
-        if (vehicles < 1 || vehicles > 20) throw cpm::Error("--vehicles " + std::to_string(vehicles) + " is outside 1..20");
+        const int vehicles = demo::int_flag(argc, argv, "--vehicles", 4, 1, 20);
+        const int seconds = demo::int_flag(argc, argv, "--seconds", 5, 1, 3600);
 
         cpm::Writer<VehicleState> writer("vehicleState");
         const uint64_t start = cpm::get_time_ns();

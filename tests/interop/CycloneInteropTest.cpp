@@ -17,13 +17,8 @@ using namespace std::chrono_literals;
 
 namespace {
 
-// Cyclone on loopback only, unicast discovery to this host's well-known ports (the same
-// ports cpm's participants use), no multicast.
-const std::string kCycloneConfig =
-    "CYCLONEDDS_URI=<CycloneDDS><Domain id=\"any\"><General><Interfaces><NetworkInterface name=\"lo\"/>"
-    "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto"
-    "</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer address=\"127.0.0.1\"/>"
-    "</Peers></Discovery></Domain></CycloneDDS>";
+// Cyclone on loopback only, unicast discovery to this host's well-known ports.
+const std::string kCycloneConfig = "CYCLONEDDS_URI=file://" CPM_CYCLONE_LOOPBACK_XML;
 
 std::vector<std::string> peer_env(const std::string& topic) { return {kCycloneConfig, "CPM_INTEROP_TOPIC=" + topic}; }
 
