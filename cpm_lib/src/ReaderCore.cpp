@@ -92,9 +92,9 @@ ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::
     impl_->participant = std::move(participant);
     impl_->topic_name = topic;
     impl_->on_arrival = std::move(on_arrival);
+    impl_->topic = impl_->participant->acquire_topic(topic, make_type, role);  // may throw: first
     impl_->type.reset(make_type());
     impl_->scratch = impl_->type->createData();
-    impl_->topic = impl_->participant->acquire_topic(topic, make_type, role);
     impl_->reader = impl_->participant->subscriber()->create_datareader(
         impl_->topic, qos, impl_.get(),
         dds::StatusMask::data_available() << dds::StatusMask::subscription_matched());
