@@ -63,6 +63,7 @@ TEST_F(AsyncReaderTest, CallbackRunsOnTheReadersOwnThreadNotTheCallers)
                                        reader_side, topic, {.reliable = true});
     cpm::Writer<VehicleState> writer(writer_side, topic, {.reliable = true});
     ASSERT_TRUE(writer.wait_for_matched(1, 5000ms));
+    ASSERT_TRUE(sut.wait_for_matched(1, 5000ms));  // both directions, or a write may be skipped
 
     ASSERT_TRUE(writer.write(vehicle_state(1, 1, 1)));
 
@@ -81,6 +82,7 @@ TEST_F(AsyncReaderTest, ThrowingCallbackIsLoggedAndReadingGoesOn)
         reader_side, topic, {.reliable = true});
     cpm::Writer<VehicleState> writer(writer_side, topic, {.reliable = true});
     ASSERT_TRUE(writer.wait_for_matched(1, 5000ms));
+    ASSERT_TRUE(sut.wait_for_matched(1, 5000ms));  // both directions, or a write may be skipped
 
     ASSERT_TRUE(writer.write(vehicle_state(1, 1, 1)));
     ASSERT_TRUE(cpm_test::wait_until([&] { return calls >= 1; }));
@@ -101,6 +103,7 @@ TEST_F(AsyncReaderTest, DestroyedWhileItsCallbackRunsWaitsForItAndReturns)
         reader_side, topic, cpm::ReaderOptions{.reliable = true});
     cpm::Writer<VehicleState> writer(writer_side, topic, {.reliable = true});
     ASSERT_TRUE(writer.wait_for_matched(1, 5000ms));
+    ASSERT_TRUE(sut->wait_for_matched(1, 5000ms));  // both directions, or a write may be skipped
     ASSERT_TRUE(writer.write(vehicle_state(1, 1, 1)));
     ASSERT_TRUE(cpm_test::wait_until([&] { return in_callback.load(); }));
 
@@ -117,6 +120,7 @@ TEST_F(AsyncReaderTest, StopBeforeAnyDataReturnsPromptlyAndNoCallbackFollows)
                                        {.reliable = true});
     cpm::Writer<VehicleState> writer(writer_side, topic, {.reliable = true});
     ASSERT_TRUE(writer.wait_for_matched(1, 5000ms));
+    ASSERT_TRUE(sut.wait_for_matched(1, 5000ms));  // both directions, or a write may be skipped
 
     const auto start = std::chrono::steady_clock::now();
     sut.stop();
@@ -140,6 +144,7 @@ TEST_F(AsyncReaderTest, StopFromInsideTheCallbackEndsReading)
         reader_side, topic, cpm::ReaderOptions{.reliable = true});
     cpm::Writer<VehicleState> writer(writer_side, topic, {.reliable = true});
     ASSERT_TRUE(writer.wait_for_matched(1, 5000ms));
+    ASSERT_TRUE(sut->wait_for_matched(1, 5000ms));  // both directions, or a write may be skipped
 
     ASSERT_TRUE(writer.write(vehicle_state(1, 1, 1)));
     ASSERT_TRUE(cpm_test::wait_until([&] { return calls >= 1; }));

@@ -75,6 +75,7 @@ TEST(MultiVehicleReader, CountConstructorReadsIdsOneToNInclusive)
     cpm::Participant writer_side(options);
     cpm::Writer<VehicleState> writer(writer_side, topic, kReliable);
     ASSERT_TRUE(writer.wait_for_matched(1, 5000ms));
+    ASSERT_TRUE(sut.wait_for_matched(1, 5000ms));  // both directions, or a write may be skipped
 
     for (int id = 0; id <= 13; ++id) ASSERT_TRUE(writer.write(vehicle_state(uint8_t(id), kT0, kT0, id)));
     ASSERT_TRUE(writer.wait_for_acknowledgments(5000ms));

@@ -144,6 +144,7 @@ TEST(Participant, ReadersAndWritersMeetThroughADiscoveryServer)
     cpm::ReaderAbstract<VehicleState> reader(b, topic, {.reliable = true});
 
     ASSERT_TRUE(writer.wait_for_matched(1, 10000ms)) << "no match through the discovery server";
+    ASSERT_TRUE(reader.wait_for_matched(1, 5000ms));  // both directions, or a write may be skipped
     ASSERT_TRUE(writer.write(cpm_test::vehicle_state(5, 1, 1)));
     ASSERT_TRUE(reader.wait_for_data(5000ms));
     EXPECT_EQ(reader.take().at(0).vehicle_id(), 5);

@@ -1,5 +1,6 @@
 // cpm (Fast DDS) and a Cyclone DDS program built from the same IDL exchange VehicleState
-// both ways, on loopback only.
+// both ways, on loopback only. Transient-local on both sides: each side may see the match
+// before the other does, and a volatile reader may then skip what was written before.
 #include <cpm/MultiVehicleReader.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm_test/Dds.hpp>
@@ -29,7 +30,7 @@ TEST(CycloneInterop, CyclonePublisherIsReadByMultiVehicleReaderWithKeysAndStamps
     cpm::Participant participant(cpm_test::isolated_options());
     const std::string topic = cpm_test::unique_topic("vehicleState");
     cpm::MultiVehicleReader<VehicleState> sut(participant, topic, std::vector<uint8_t>{1, 2},
-                                              {.reliable = true, .keep_all = true});
+                                              {.reliable = true, .keep_all = true, .transient_local = true});
     constexpr int kCount = 20;
 
     cpm_test::Process peer({cpm_test::built_program("cyclone_peer"), "pub", std::to_string(kCount), "1", "2"},
@@ -59,7 +60,7 @@ TEST(CycloneInterop, CpmWriterIsReadByCycloneReader)
     cpm_test::Process peer({cpm_test::built_program("cyclone_peer"), "sub", std::to_string(2 * kPerVehicle)},
                            peer_env(topic));
     ASSERT_TRUE(cpm_test::wait_until([&] { return peer.output().find("ready") != std::string::npos; }, 10000ms));
-    cpm::Writer<VehicleState> sut(participant, topic, {.reliable = true, .keep_all = true});
+    cpm::Writer<VehicleState> sut(participant, topic, {.reliable = true, .keep_all = true, .transient_local = true});
     ASSERT_TRUE(sut.wait_for_matched(1, 20000ms)) << "the Cyclone reader never matched";
 
     for (int k = 0; k < kPerVehicle; ++k) {

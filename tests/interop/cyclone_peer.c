@@ -6,7 +6,7 @@
  *   cyclone_peer sub COUNT         prints "vehicle create valid_after x" for each sample
  *                                  until COUNT arrived; exits 0, or 3 after 20 s.
  *
- * Domain from CPM_DOMAIN_ID; transport settings from CYCLONEDDS_URI (the test pins it to
+ * Both sides are reliable, keep-all and transient-local. Domain from CPM_DOMAIN_ID; transport settings from CYCLONEDDS_URI (the test pins it to
  * loopback with unicast discovery).
  */
 #include "VehicleState.h"
@@ -23,11 +23,14 @@ static dds_entity_t make_topic(dds_entity_t participant)
     return dds_create_topic(participant, &VehicleState_desc, topic ? topic : "vehicleState", NULL, NULL);
 }
 
+/* Reliable, keep-all, transient-local: a reader that matches after the writer wrote still
+ * gets everything (a volatile one may legitimately skip what came before its match). */
 static dds_qos_t* reliable_qos(void)
 {
     dds_qos_t* qos = dds_create_qos();
     dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
     dds_qset_history(qos, DDS_HISTORY_KEEP_ALL, 0);
+    dds_qset_durability(qos, DDS_DURABILITY_TRANSIENT_LOCAL);
     return qos;
 }
 
