@@ -38,6 +38,11 @@ fdds::DataWriter* RawEndpoints::writer(const std::string& topic, bool keep_all, 
     fdds::DataWriterQos qos = fdds::DATAWRITER_QOS_DEFAULT;
     same_as_cpm(qos, keep_all, depth);
     qos.reliable_writer_qos().times.heartbeatPeriod = {0, 100'000'000};
+    if (keep_all) {  // cpm's max_unacknowledged window for an unkeyed type
+        qos.resource_limits().max_instances = 1;
+        qos.resource_limits().max_samples_per_instance = 1024;
+        qos.resource_limits().max_samples = 1024;
+    }
     qos.reliability().max_blocking_time = {0, 100'000'000};
     return publisher->create_datawriter(t, qos);
 }

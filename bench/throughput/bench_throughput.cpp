@@ -233,7 +233,7 @@ int main(int argc, char** argv)
     const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "5"));
     if (role == "sub") return subscribe(bench::arg(argc, argv, "--impl", "cpm"), domain, seconds);
     if (argc > 1 && std::string(argv[1]) == "--help") {
-        std::puts("usage: bench_throughput [--seconds 5] [--size 1024] [--domain 201]");
+        std::puts("usage: bench_throughput [--seconds 5] [--size 1024] [--domain 201] [--only cpm|raw|cyclone]");
         return 0;
     }
     const size_t size = std::stoul(bench::arg(argc, argv, "--size", "1024"));
@@ -241,13 +241,21 @@ int main(int argc, char** argv)
                          std::to_string(size) + " B samples for " + std::to_string(seconds) +
                          " s; publisher and subscriber in separate processes");
     std::printf("\nthroughput, %zu B samples\n%-44s %12s %12s %8s\n", size, "case", "samples/s", "received", "lost");
-    const Result cpm_result = run_fastdds("cpm", domain, size, seconds);
-    print_result("cpm Writer/AsyncReader", cpm_result);
-    const Result raw_result = run_fastdds("raw", domain, size, seconds);
-    print_result("raw Fast DDS (listener)", raw_result);
-    const Result cyclone = run_ddsperf(domain, size, seconds);
-    print_result("Cyclone DDS ddsperf pub/sub (median second)", cyclone);
+    const std::string only = bench::arg(argc, argv, "--only", "");  // cpm, raw or cyclone
+    Result cpm_result, raw_result, cyclone;
+    if (only.empty() || only == "cpm") {
+        cpm_result = run_fastdds("cpm", domain, size, seconds);
+        print_result("cpm Writer/AsyncReader", cpm_result);
+    }
+    if (only.empty() || only == "raw") {
+        raw_result = run_fastdds("raw", domain, size, seconds);
+        print_result("raw Fast DDS (listener)", raw_result);
+    }
+    if (only.empty() || only == "cyclone") {
+        cyclone = run_ddsperf(domain, size, seconds);
+        print_result("Cyclone DDS ddsperf pub/sub (median second)", cyclone);
+    }
     if (raw_result.rate > 0) std::printf("%-44s %.2f\n", "cpm / raw Fast DDS", cpm_result.rate / raw_result.rate);
     if (cyclone.rate > 0) std::printf("%-44s %.2f\n", "cpm / Cyclone DDS", cpm_result.rate / cyclone.rate);
-    return cpm_result.ok && raw_result.ok ? 0 : 1;
+    return (only == "cyclone" || only == "raw" || cpm_result.ok) && (only == "cyclone" || only == "cpm" || raw_result.ok) ? 0 : 1;
 }

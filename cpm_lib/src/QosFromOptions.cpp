@@ -9,9 +9,14 @@ namespace dds = eprosima::fastdds::dds;
 namespace {
 
 // The parts readers and writers share: reliability, durability, history and limits.
+// Instances a bounded keep-all writer serves: every possible vehicle_id.
+constexpr int32_t kKeepAllMaxInstances = 256;
+
+// keep_all_limit: samples per instance a keep-all history holds (0: no limit); keyed: whether
+// the type has instances (an unkeyed topic has one, and only max_samples applies to it).
 template <class Qos>
-void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, int depth, bool data_sharing,
-                  const std::string& topic, const char* role)
+void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, int depth, int keep_all_limit,
+                  bool keyed, bool data_sharing, const std::string& topic, const char* role)
 {
     if (!keep_all && depth < 1) {
         throw Error(std::string(role) + " on topic '" + topic + "': history_depth = " + std::to_string(depth) +
@@ -23,9 +28,17 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
     qos.history().depth = keep_all ? 1 : depth;
     // Fast DDS's default allows only 10 instances (vehicles) per reader and writer. 0 means
     // "no limit" to Fast DDS 2.9's histories; LENGTH_UNLIMITED (-1) makes every write fail.
-    qos.resource_limits().max_instances = 0;
-    qos.resource_limits().max_samples = 0;
-    qos.resource_limits().max_samples_per_instance = keep_all ? 0 : depth;
+    auto& limits = qos.resource_limits();
+    if (keep_all && keep_all_limit > 0) {
+        // A bounded window; Fast DDS then wants every limit finite (max_samples = product).
+        limits.max_instances = keyed ? kKeepAllMaxInstances : 1;
+        limits.max_samples_per_instance = keep_all_limit;
+        limits.max_samples = limits.max_instances * keep_all_limit;
+    } else {
+        limits.max_instances = 0;
+        limits.max_samples = 0;
+        limits.max_samples_per_instance = keep_all ? 0 : depth;
+    }
     if (data_sharing) {
         qos.data_sharing().automatic();
     } else {
@@ -35,11 +48,17 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
 
 }  // namespace
 
-dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic)
+dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic, bool keyed)
 {
     dds::DataWriterQos qos = dds::DATAWRITER_QOS_DEFAULT;
+    if (options.keep_all && options.max_unacknowledged < 1) {
+        throw Error("Writer on topic '" + topic + "': max_unacknowledged = " +
+                    std::to_string(options.max_unacknowledged) + " must be at least 1");
+    }
+    // An unlimited keep-all writer slows down quadratically in Fast DDS 2.9 (its per-reader
+    // list of changes grows one element at a time); a bounded window also bounds memory.
     apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth,
-                 options.data_sharing, topic, "Writer");
+                 options.max_unacknowledged, keyed, options.data_sharing, topic, "Writer");
     // Fast DDS's default heartbeat (3 s) delays recovery of a lost sample by seconds.
     qos.reliable_writer_qos().times.heartbeatPeriod = {0, 100'000'000};
     qos.reliability().max_blocking_time = {0, 100'000'000};
@@ -49,8 +68,9 @@ dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& t
 dds::DataReaderQos reader_qos(const ReaderOptions& options, const std::string& topic)
 {
     dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
-    apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth,
-                 options.data_sharing, topic, "Reader");
+    // A keep-all reader keeps what was not taken yet, without limit.
+    apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth, 0,
+                 true, options.data_sharing, topic, "Reader");
     return qos;
 }
 

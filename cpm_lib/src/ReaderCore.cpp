@@ -9,6 +9,7 @@
 
 #include <fastdds/dds/subscriber/DataReader.hpp>
 #include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/core/LoanableCollection.hpp>
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
@@ -21,17 +22,29 @@ namespace cpm::detail {
 
 namespace dds = eprosima::fastdds::dds;
 
+namespace {
+
+// A sequence that only ever holds samples loaned by the reader: take() then hands over a
+// whole batch under one lock of the reader's history, instead of one lock per sample.
+class LoanedSamples : public dds::LoanableCollection
+{
+public:
+    void* at(size_type i) const { return buffer()[i]; }
+
+protected:
+    void resize(size_type) override {}  // never owns elements: loans only
+};
+
+}  // namespace
+
 struct ReaderCore::Impl : public dds::DataReaderListener
 {
     std::shared_ptr<ParticipantCore> participant;
     std::string topic_name;
-    std::unique_ptr<dds::TopicDataType> type;
     dds::Topic* topic = nullptr;
     dds::DataReader* reader = nullptr;
     Sink on_arrival;
 
-    std::mutex take_mutex;  // guards scratch
-    void* scratch = nullptr;
 
     // Fast DDS calls the listener with the reader's history locked, so nobody may call into
     // DDS while holding wait_mutex: the listener only raises `pending` under it.
@@ -45,19 +58,24 @@ struct ReaderCore::Impl : public dds::DataReaderListener
     std::mutex listener_mutex;  // held while a listener callback runs
     bool closing = false;
 
+    // Samples are passed in arrival order; the sink may move from them (a loaned sample is
+    // deserialized anew before Fast DDS lends it again).
     size_t drain_from(dds::DataReader* from, const Sink& sink)
     {
-        std::lock_guard<std::mutex> lock(take_mutex);
         size_t n = 0;
-        dds::SampleInfo info;
-        while (from->take_next_sample(scratch, &info) == ReturnCode_t::RETCODE_OK) {
-            if (!info.valid_data) continue;  // disposals and unregistrations carry no data
-            try {
-                sink(scratch);
-            } catch (const std::exception& e) {
-                log_error("reader on topic '" + topic_name + "': dropped a sample: " + e.what());
+        LoanedSamples samples;
+        dds::SampleInfoSeq infos;
+        while (from->take(samples, infos) == ReturnCode_t::RETCODE_OK) {
+            for (LoanedSamples::size_type i = 0; i < samples.length(); ++i) {
+                if (!infos[i].valid_data) continue;  // disposals and unregistrations carry no data
+                try {
+                    sink(samples.at(i));
+                } catch (const std::exception& e) {
+                    log_error("reader on topic '" + topic_name + "': dropped a sample: " + e.what());
+                }
+                ++n;
             }
-            ++n;
+            from->return_loan(samples, infos);
         }
         return n;
     }
@@ -92,15 +110,12 @@ ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::
     impl_->participant = std::move(participant);
     impl_->topic_name = topic;
     impl_->on_arrival = std::move(on_arrival);
-    impl_->topic = impl_->participant->acquire_topic(topic, make_type, role);  // may throw: first
-    impl_->type.reset(make_type());
-    impl_->scratch = impl_->type->createData();
+    impl_->topic = impl_->participant->acquire_topic(topic, make_type, role);
     impl_->reader = impl_->participant->subscriber()->create_datareader(
         impl_->topic, qos, impl_.get(),
         dds::StatusMask::data_available() << dds::StatusMask::subscription_matched());
     if (impl_->reader == nullptr) {
         impl_->participant->release_topic(impl_->topic);
-        impl_->type->deleteData(impl_->scratch);
         throw Error(std::string(role) + " on topic '" + topic + "': DDS refused to create the reader "
                     "(inconsistent options?)");
     }
@@ -116,7 +131,6 @@ ReaderCore::~ReaderCore()
     impl_->reader->set_listener(nullptr);
     impl_->participant->subscriber()->delete_datareader(impl_->reader);
     impl_->participant->release_topic(impl_->topic);
-    impl_->type->deleteData(impl_->scratch);
 }
 
 size_t ReaderCore::drain(const Sink& sink) { return impl_->drain_from(impl_->reader, sink); }

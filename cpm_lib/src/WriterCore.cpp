@@ -10,6 +10,7 @@
 #include <fastdds/dds/publisher/DataWriterListener.hpp>
 #include <fastdds/dds/publisher/Publisher.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TopicDataType.hpp>
 
 namespace cpm::detail {
 
@@ -34,7 +35,8 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
     : impl_(std::make_unique<Impl>())
 {
     if (topic.empty()) throw Error("Writer: the topic name is empty");
-    const dds::DataWriterQos qos = writer_qos(options, topic);
+    const std::unique_ptr<dds::TopicDataType> type(make_type());
+    const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined);
     impl_->participant = std::move(participant);
     impl_->topic_name = topic;
     impl_->topic = impl_->participant->acquire_topic(topic, make_type, "Writer");

@@ -3,12 +3,14 @@
 #include <cpm/Writer.hpp>
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
 
 #include <VehicleState.h>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <csignal>
 #include <memory>
 
 using namespace std::chrono_literals;
@@ -57,4 +59,27 @@ TEST(Writer, BadOptionsAreErrorsNamingTopicAndValue)
         EXPECT_THAT(e.what(), HasSubstr("history_depth = 0"));
     }
     EXPECT_THROW(cpm::Writer<VehicleState>(participant, ""), cpm::Error);
+}
+
+TEST(Writer, KeepAllWriteFailsVisiblyWhenAReaderStopsAcknowledgingAndRecovers)
+{
+    cpm::ParticipantOptions options = cpm_test::isolated_options();
+    const std::string topic = cpm_test::unique_topic("vehicleState");
+    cpm_test::Process reader({cpm_test::built_program("reliable_reader"), topic});
+    cpm::Participant participant(options);
+    cpm::Writer<VehicleState> sut(participant, topic, {.reliable = true, .keep_all = true, .max_unacknowledged = 4});
+    ASSERT_TRUE(sut.wait_for_matched(1, 10000ms));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return reader.output().find("matched") != std::string::npos; }, 10000ms));
+    ASSERT_TRUE(sut.write(cpm_test::vehicle_state(1, 0, 0)));
+    ASSERT_TRUE(sut.wait_for_acknowledgments(5000ms));
+
+    reader.kill(SIGSTOP);  // a frozen reader acknowledges nothing
+    int accepted = 0, refused = 0;
+    for (int i = 1; i <= 8; ++i) (sut.write(cpm_test::vehicle_state(1, i, i)) ? accepted : refused)++;
+    reader.kill(SIGCONT);
+
+    EXPECT_EQ(accepted, 4) << "the window of unacknowledged samples";
+    EXPECT_EQ(refused, 4) << "writes beyond the window must fail, not vanish";
+    EXPECT_TRUE(sut.wait_for_acknowledgments(5000ms));
+    EXPECT_TRUE(sut.write(cpm_test::vehicle_state(1, 9, 9))) << "writing resumes once acknowledged";
 }
