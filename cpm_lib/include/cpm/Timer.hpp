@@ -1,0 +1,53 @@
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include <cpm/Participant.hpp>
+
+namespace cpm {
+
+/// Calls back at absolute lab times k * period + offset (cpm_lab's Timer).
+///
+/// With wait_for_start, the timer announces `ReadyStatus{source_id = node_id}` on
+/// `readyStatus` about once a second and waits for a `SystemTrigger` on `systemTrigger`; its
+/// first tick is the first k * period + offset >= next_start. A trigger of UINT64_MAX stops
+/// every timer (also while running). The callback receives the *nominal* tick time. When a
+/// callback overruns, the missed ticks are skipped (no catch-up burst), counted and logged.
+/// stop() works from any thread — before start, during the start wait, while running, and
+/// from inside the callback — and returns at once. Throws cpm::Error on invalid arguments and
+/// on a second start.
+class Timer
+{
+public:
+    using Callback = std::function<void(uint64_t t_nominal_ns)>;
+
+    /// A timer on the real clock (CLOCK_REALTIME). With --simulated_time and
+    /// simulated_time_allowed the lab's simulated clock is meant; not available yet (throws).
+    /// offset_ns must be < period_ns. The participant (default: the process's) carries the
+    /// ready announcements and the start/stop triggers.
+    static std::shared_ptr<Timer> create(const std::string& node_id, uint64_t period_ns, uint64_t offset_ns,
+                                         bool wait_for_start, bool simulated_time_allowed);
+    static std::shared_ptr<Timer> create(Participant& participant, const std::string& node_id, uint64_t period_ns,
+                                         uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed);
+
+    virtual ~Timer() = default;
+
+    /// Runs the timer on the calling thread until stop() or a stop trigger; then calls
+    /// on_stop (if given) and returns.
+    virtual void start(Callback callback, std::function<void()> on_stop = {}) = 0;
+    /// The same on a thread the timer owns; stop() or destroying the timer ends it.
+    virtual void start_async(Callback callback, std::function<void()> on_stop = {}) = 0;
+    /// Ends the timer; safe from any thread, any time, more than once.
+    virtual void stop() = 0;
+
+    /// The nominal time of the first tick (0 before the start is known).
+    virtual uint64_t start_time() const = 0;
+    /// Ticks skipped because a callback overran.
+    virtual uint64_t missed_deadlines() const = 0;
+    virtual uint64_t period_ns() const = 0;
+    virtual uint64_t offset_ns() const = 0;
+};
+
+}  // namespace cpm

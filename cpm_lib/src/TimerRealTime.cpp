@@ -1,0 +1,195 @@
+#include "TimerRealTime.hpp"
+
+#include "log_internal.hpp"
+
+#include <cpm/Error.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
+
+#include <cerrno>
+#include <cstring>
+
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <sys/timerfd.h>
+#include <unistd.h>
+
+namespace cpm {
+
+namespace {
+constexpr uint64_t kStopTrigger = UINT64_MAX;
+constexpr auto kReadyAnnouncePeriod = std::chrono::seconds(1);
+}  // namespace
+
+std::shared_ptr<Timer> Timer::create(const std::string& node_id, uint64_t period_ns, uint64_t offset_ns,
+                                     bool wait_for_start, bool simulated_time_allowed)
+{
+    return create(Participant::default_participant(), node_id, period_ns, offset_ns, wait_for_start,
+                  simulated_time_allowed);
+}
+
+std::shared_ptr<Timer> Timer::create(Participant& participant, const std::string& node_id, uint64_t period_ns,
+                                     uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed)
+{
+    if (init_settings().simulated_time && simulated_time_allowed) {
+        throw Error("Timer '" + node_id + "': simulated time is not available yet");
+    }
+    return std::make_shared<detail::TimerRealTime>(participant, node_id, period_ns, offset_ns, wait_for_start);
+}
+
+namespace detail {
+
+TimerRealTime::TimerRealTime(Participant& participant, std::string node_id, uint64_t period_ns, uint64_t offset_ns,
+                             bool wait_for_start)
+    : node_id_(std::move(node_id)), period_ns_(period_ns), offset_ns_(offset_ns), wait_for_start_(wait_for_start)
+{
+    if (node_id_.empty()) throw Error("Timer: node_id is empty");
+    if (period_ns_ == 0) throw Error("Timer '" + node_id_ + "': period_ns must be > 0");
+    if (offset_ns_ >= period_ns_) {
+        throw Error("Timer '" + node_id_ + "': offset_ns = " + std::to_string(offset_ns_) +
+                    " must be smaller than period_ns = " + std::to_string(period_ns_));
+    }
+    timer_fd_ = timerfd_create(CLOCK_REALTIME, TFD_CLOEXEC);
+    stop_fd_ = eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
+    if (timer_fd_ < 0 || stop_fd_ < 0) {
+        if (timer_fd_ >= 0) close(timer_fd_);
+        if (stop_fd_ >= 0) close(stop_fd_);
+        throw Error("Timer '" + node_id_ + "': cannot create timerfd/eventfd: " + std::strerror(errno));
+    }
+    // The trigger reader exists from construction on, so a trigger sent while the program
+    // is still preparing is not missed; a stop trigger (UINT64_MAX) ends every timer.
+    ReaderOptions trigger_options;
+    trigger_options.reliable = true;
+    trigger_options.history_depth = 10;
+    WriterOptions ready_options;
+    ready_options.reliable = true;
+    ready_options.history_depth = 10;
+    if (wait_for_start_) ready_writer_ = std::make_unique<Writer<ReadyStatus>>(participant, "readyStatus", ready_options);
+    trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
+        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, "systemTrigger",
+        trigger_options);
+}
+
+TimerRealTime::~TimerRealTime()
+{
+    stop();
+    if (thread_.joinable()) {
+        if (thread_.get_id() == std::this_thread::get_id()) {
+            thread_.detach();
+        } else {
+            thread_.join();
+        }
+    }
+    trigger_reader_.reset();  // no more on_trigger calls before the descriptors go
+    close(timer_fd_);
+    close(stop_fd_);
+}
+
+void TimerRealTime::on_trigger(std::vector<SystemTrigger>& triggers)
+{
+    for (const auto& trigger : triggers) {
+        const uint64_t next_start = trigger.next_start().nanoseconds();
+        if (next_start == kStopTrigger) {
+            stop();
+            continue;
+        }
+        std::lock_guard<std::mutex> lock(trigger_mutex_);
+        next_start_ = next_start;
+    }
+    trigger_changed_.notify_all();
+}
+
+void TimerRealTime::stop()
+{
+    stopping_ = true;
+    const uint64_t one = 1;
+    [[maybe_unused]] const ssize_t n = write(stop_fd_, &one, sizeof one);
+    std::lock_guard<std::mutex> lock(trigger_mutex_);
+    trigger_changed_.notify_all();
+}
+
+uint64_t TimerRealTime::wait_for_trigger()
+{
+    std::unique_lock<std::mutex> lock(trigger_mutex_);
+    while (!stopping_ && next_start_ == 0) {
+        ReadyStatus ready;
+        ready.source_id(node_id_);
+        ready_writer_->write(ready);
+        trigger_changed_.wait_for(lock, kReadyAnnouncePeriod, [&] { return stopping_ || next_start_ != 0; });
+    }
+    return stopping_ ? 0 : next_start_;
+}
+
+bool TimerRealTime::sleep_until(uint64_t t_ns)
+{
+    itimerspec spec{};
+    spec.it_value.tv_sec = static_cast<time_t>(t_ns / 1'000'000'000ull);
+    spec.it_value.tv_nsec = static_cast<long>(t_ns % 1'000'000'000ull);
+    if (timerfd_settime(timer_fd_, TFD_TIMER_ABSTIME, &spec, nullptr) != 0) {
+        log_error("timer '" + node_id_ + "': timerfd_settime failed: " + std::strerror(errno));
+        return false;
+    }
+    pollfd fds[2] = {{timer_fd_, POLLIN, 0}, {stop_fd_, POLLIN, 0}};
+    while (!stopping_) {
+        const int ready = poll(fds, 2, -1);
+        if (ready < 0 && errno == EINTR) continue;
+        if (ready < 0) {
+            log_error("timer '" + node_id_ + "': poll failed: " + std::strerror(errno));
+            return false;
+        }
+        if (fds[1].revents != 0) return false;
+        if (fds[0].revents != 0) {
+            uint64_t expirations = 0;
+            [[maybe_unused]] const ssize_t n = read(timer_fd_, &expirations, sizeof expirations);
+            return !stopping_;
+        }
+    }
+    return false;
+}
+
+void TimerRealTime::start(Callback callback, std::function<void()> on_stop)
+{
+    if (started_.exchange(true)) throw Error("Timer '" + node_id_ + "': start called a second time");
+    run(callback, on_stop);
+}
+
+void TimerRealTime::run(const Callback& callback, const std::function<void()>& on_stop)
+{
+    const uint64_t begin = wait_for_start_ ? wait_for_trigger() : get_time_ns();
+    if (begin != 0 && !stopping_) {
+        // The first absolute tick k * period + offset at or after `begin`.
+        uint64_t deadline = (begin / period_ns_) * period_ns_ + offset_ns_;
+        if (deadline < begin) deadline += period_ns_;
+        start_time_ = deadline;
+        while (sleep_until(deadline)) {
+            callback(deadline);
+            deadline += period_ns_;
+            const uint64_t now = get_time_ns();
+            if (now >= deadline) {
+                // Skip every tick that has already passed: no burst of late callbacks.
+                const uint64_t skipped = (now - deadline) / period_ns_ + 1;
+                missed_ += skipped;
+                log_error("timer '" + node_id_ + "': callback overran by " +
+                          std::to_string(double(now - (deadline - period_ns_)) * 1e-6) + " ms; skipped " +
+                          std::to_string(skipped) + " tick(s)");
+                deadline += skipped * period_ns_;
+            }
+        }
+    }
+    if (on_stop) on_stop();
+}
+
+void TimerRealTime::start_async(Callback callback, std::function<void()> on_stop)
+{
+    if (started_.exchange(true)) throw Error("Timer '" + node_id_ + "': start called a second time");
+    thread_ = std::thread([this, callback = std::move(callback), on_stop = std::move(on_stop)] {
+        try {
+            run(callback, on_stop);
+        } catch (const std::exception& e) {
+            log_error("timer '" + node_id_ + "': callback threw: " + e.what());
+        }
+    });
+}
+
+}  // namespace detail
+}  // namespace cpm

@@ -1,0 +1,64 @@
+#pragma once
+#include <cpm/AsyncReader.hpp>
+#include <cpm/Timer.hpp>
+#include <cpm/Writer.hpp>
+
+#include <ReadyStatus.h>
+#include <SystemTrigger.h>
+
+#include <atomic>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+namespace cpm::detail {
+
+/// cpm::Timer on CLOCK_REALTIME: a timerfd armed with absolute deadlines and an eventfd that
+/// stop() writes to, polled together, so a stop ends any wait at once.
+class TimerRealTime : public Timer
+{
+public:
+    TimerRealTime(Participant& participant, std::string node_id, uint64_t period_ns, uint64_t offset_ns,
+                  bool wait_for_start);
+    ~TimerRealTime() override;
+
+    void start(Callback callback, std::function<void()> on_stop) override;
+    void start_async(Callback callback, std::function<void()> on_stop) override;
+    void stop() override;
+
+    uint64_t start_time() const override { return start_time_; }
+    uint64_t missed_deadlines() const override { return missed_; }
+    uint64_t period_ns() const override { return period_ns_; }
+    uint64_t offset_ns() const override { return offset_ns_; }
+
+private:
+    // The timer loop: the start wait, then ticks until stopped.
+    void run(const Callback& callback, const std::function<void()>& on_stop);
+    // Announces readiness until a start trigger (its next_start) or a stop; 0 when stopped.
+    uint64_t wait_for_trigger();
+    // Waits until the absolute time t or a stop; false when stopped.
+    bool sleep_until(uint64_t t_ns);
+    void on_trigger(std::vector<SystemTrigger>& triggers);
+
+    const std::string node_id_;
+    const uint64_t period_ns_;
+    const uint64_t offset_ns_;
+    const bool wait_for_start_;
+    int timer_fd_ = -1;
+    int stop_fd_ = -1;
+    std::atomic<bool> started_{false};
+    std::atomic<bool> stopping_{false};
+    std::atomic<uint64_t> start_time_{0};
+    std::atomic<uint64_t> missed_{0};
+
+    std::mutex trigger_mutex_;
+    std::condition_variable trigger_changed_;
+    uint64_t next_start_ = 0;  // 0: none received yet
+
+    std::unique_ptr<Writer<ReadyStatus>> ready_writer_;
+    std::unique_ptr<AsyncReader<SystemTrigger>> trigger_reader_;
+    std::thread thread_;
+};
+
+}  // namespace cpm::detail

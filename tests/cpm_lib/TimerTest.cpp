@@ -1,0 +1,208 @@
+// cpm::Timer on the real clock, with the lab's start/stop triggers over DDS.
+#include <cpm/Error.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Timer.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+
+#include <ReadyStatus.h>
+#include <SystemTrigger.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <mutex>
+#include <thread>
+
+using namespace std::chrono_literals;
+using ::testing::HasSubstr;
+
+namespace {
+
+constexpr uint64_t kMs = 1'000'000;
+
+// The lab side of a synchronised start: sees ReadyStatus, sends SystemTrigger.
+class TimerTest : public ::testing::Test
+{
+protected:
+    cpm::Participant lab{cpm_test::isolated_options()};
+    cpm::Participant node{cpm_test::isolated_options()};
+    cpm::ReaderAbstract<ReadyStatus> ready{lab, "readyStatus", {.reliable = true, .history_depth = 10}};
+    cpm::Writer<SystemTrigger> trigger{lab, "systemTrigger", {.reliable = true, .history_depth = 10}};
+
+    std::mutex mutex;
+    std::vector<uint64_t> nominal, actual;
+
+    cpm::Timer::Callback recorder(std::function<void(size_t)> extra = {})
+    {
+        return [this, extra](uint64_t t) {
+            size_t n;
+            {
+                std::lock_guard<std::mutex> lock(mutex);
+                nominal.push_back(t);
+                actual.push_back(cpm::get_time_ns());
+                n = nominal.size();
+            }
+            if (extra) extra(n);
+        };
+    }
+    size_t calls()
+    {
+        std::lock_guard<std::mutex> lock(mutex);
+        return nominal.size();
+    }
+    bool saw_ready_from(const std::string& node_id)
+    {
+        return cpm_test::wait_until([&] {
+            for (auto& r : ready.take()) {
+                if (r.source_id() == node_id) return true;
+            }
+            return false;
+        }, 10000ms);
+    }
+    void send_trigger(uint64_t next_start)
+    {
+        ASSERT_TRUE(trigger.wait_for_matched(1, 5000ms));
+        SystemTrigger t;
+        t.next_start().nanoseconds(next_start);
+        ASSERT_TRUE(trigger.write(t));
+    }
+};
+
+}  // namespace
+
+TEST_F(TimerTest, SynchronisedStartTicksAtAbsoluteMultiplesWithNominalTimes)
+{
+    auto sut = cpm::Timer::create(node, "planner", 20 * kMs, 5 * kMs, true, false);
+    sut->start_async(recorder());
+    ASSERT_TRUE(saw_ready_from("planner")) << "no ReadyStatus from the waiting timer";
+    EXPECT_EQ(calls(), 0u) << "ticked before the trigger";
+
+    const uint64_t next_start = cpm::get_time_ns() + 200 * kMs;
+    send_trigger(next_start);
+    ASSERT_TRUE(cpm_test::wait_until([&] { return calls() >= 10; }));
+    sut->stop();
+
+    std::lock_guard<std::mutex> lock(mutex);
+    EXPECT_EQ(sut->start_time() % (20 * kMs), 5 * kMs);
+    EXPECT_GE(nominal.front(), next_start);
+    EXPECT_LT(nominal.front(), next_start + 20 * kMs);
+    EXPECT_EQ(nominal.front(), sut->start_time());
+    for (size_t i = 1; i < nominal.size(); ++i) EXPECT_EQ(nominal[i] - nominal[i - 1], 20 * kMs) << "tick " << i;
+    EXPECT_GE(actual.front(), nominal.front()) << "called before its time";
+    EXPECT_LT(actual.front() - nominal.front(), 50 * kMs) << "first tick far after its nominal time";
+}
+
+TEST_F(TimerTest, OverrunningCallbackSkipsTheMissedTicksAndCountsThem)
+{
+    const uint64_t period = 30 * kMs;
+    auto sut = cpm::Timer::create(node, "slow", period, 0, false, false);
+    sut->start_async(recorder([](size_t n) {
+        if (n == 3) std::this_thread::sleep_for(75ms);   // ~2.5 periods
+        if (n == 6) std::this_thread::sleep_for(40ms);   // ~1.3 periods
+    }));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return calls() >= 10; }));
+    sut->stop();
+
+    std::lock_guard<std::mutex> lock(mutex);
+    uint64_t absent = 0;
+    for (size_t i = 1; i < nominal.size(); ++i) {
+        const uint64_t gap = nominal[i] - nominal[i - 1];
+        ASSERT_EQ(gap % period, 0u) << "ticks off the grid at " << i;
+        absent += gap / period - 1;
+    }
+    EXPECT_GE(nominal[3] - nominal[2], 3 * period) << "the tick after a 2.5-period overrun was not skipped";
+    EXPECT_GE(nominal[6] - nominal[5], 2 * period) << "the tick after a 1.3-period overrun was not skipped";
+    EXPECT_EQ(sut->missed_deadlines(), absent) << "miss count differs from the ticks skipped";
+    for (size_t i = 1; i < actual.size(); ++i) {
+        EXPECT_GE(actual[i], nominal[i]) << "tick " << i << " ran before its nominal time (catch-up burst)";
+    }
+}
+
+TEST_F(TimerTest, StopBeforeStartMeansNoCallbackEver)
+{
+    auto sut = cpm::Timer::create(node, "idle", 10 * kMs, 0, false, false);
+    sut->stop();
+    bool stopped = false;
+
+    sut->start(recorder(), [&] { stopped = true; });
+
+    EXPECT_EQ(calls(), 0u);
+    EXPECT_TRUE(stopped);
+}
+
+TEST_F(TimerTest, StopDuringTheStartWaitReturnsAtOnce)
+{
+    auto sut = cpm::Timer::create(node, "waiting", 10 * kMs, 0, true, false);
+    std::atomic<bool> stopped{false};
+    sut->start_async(recorder(), [&] { stopped = true; });
+    ASSERT_TRUE(saw_ready_from("waiting"));
+
+    const auto t0 = std::chrono::steady_clock::now();
+    sut->stop();
+    ASSERT_TRUE(cpm_test::wait_until([&] { return stopped.load(); }, 2000ms));
+    const auto took = std::chrono::steady_clock::now() - t0;
+
+    EXPECT_LT(took, 500ms) << "the start wait did not notice the stop";
+    EXPECT_EQ(calls(), 0u);
+}
+
+TEST_F(TimerTest, StopShortlyAfterStartAllowsOnlyAFewCallbacks)
+{
+    auto sut = cpm::Timer::create(node, "brief", 10 * kMs, 0, false, false);
+    sut->start_async(recorder());
+    ASSERT_TRUE(cpm_test::wait_until([&] { return calls() >= 1; }));
+
+    sut->stop();
+    const size_t at_stop = calls();
+    std::this_thread::sleep_for(50ms);  // five periods in which nothing may happen
+
+    EXPECT_LE(calls(), at_stop + 1);
+}
+
+TEST_F(TimerTest, SecondStartIsAnError)
+{
+    auto sut = cpm::Timer::create(node, "twice", 10 * kMs, 0, false, false);
+    sut->start_async(recorder());
+
+    EXPECT_THROW(sut->start_async(recorder()), cpm::Error);
+    EXPECT_THROW(sut->start(recorder()), cpm::Error);
+    sut->stop();
+}
+
+TEST_F(TimerTest, StopFromInsideTheCallbackEndsAfterThatCallback)
+{
+    auto sut = cpm::Timer::create(node, "self", 10 * kMs, 0, false, false);
+    sut->start(recorder([&](size_t n) {
+        if (n == 3) sut->stop();
+    }));
+
+    EXPECT_EQ(calls(), 3u);
+}
+
+TEST_F(TimerTest, StopTriggerEndsARunningTimer)
+{
+    auto sut = cpm::Timer::create(node, "running", 10 * kMs, 0, false, false);
+    std::atomic<bool> stopped{false};
+    sut->start_async(recorder(), [&] { stopped = true; });
+    ASSERT_TRUE(cpm_test::wait_until([&] { return calls() >= 2; }));
+
+    send_trigger(UINT64_MAX);
+
+    EXPECT_TRUE(cpm_test::wait_until([&] { return stopped.load(); }, 5000ms));
+}
+
+TEST_F(TimerTest, OffsetNotSmallerThanPeriodIsAnErrorNamingBoth)
+{
+    try {
+        cpm::Timer::create(node, "bad", 20 * kMs, 20 * kMs, false, false);
+        FAIL() << "no error";
+    } catch (const cpm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("offset_ns = 20000000"));
+        EXPECT_THAT(e.what(), HasSubstr("period_ns = 20000000"));
+    }
+    EXPECT_THROW(cpm::Timer::create(node, "zero", 0, 0, false, false), cpm::Error);
+}
