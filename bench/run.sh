@@ -9,3 +9,6 @@ echo "== bench_latency (ping-pong, cpm vs raw Fast DDS vs Cyclone ddsperf)"
 echo
 echo "== bench_throughput (1 KiB reliable, cpm vs raw Fast DDS vs Cyclone ddsperf)"
 "$bin/bench_throughput"
+echo
+echo "== bench_timer (tick jitter, cpm::Timer vs clock_nanosleep)"
+"$bin/bench_timer"

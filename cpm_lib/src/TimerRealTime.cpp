@@ -169,8 +169,9 @@ void TimerRealTime::run(const Callback& callback, const std::function<void()>& o
                 // Skip every tick that has already passed: no burst of late callbacks.
                 const uint64_t skipped = (now - deadline) / period_ns_ + 1;
                 missed_ += skipped;
-                log_error("timer '" + node_id_ + "': callback overran by " +
-                          std::to_string(double(now - (deadline - period_ns_)) * 1e-6) + " ms; skipped " +
+                log_error("timer '" + node_id_ + "': the tick at " + std::to_string(deadline - period_ns_) +
+                          " ns ended " + std::to_string(double(now - (deadline - period_ns_)) * 1e-6) +
+                          " ms after its nominal time (slow callback or late wake-up); skipped " +
                           std::to_string(skipped) + " tick(s)");
                 deadline += skipped * period_ns_;
             }
