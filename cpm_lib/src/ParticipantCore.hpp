@@ -58,4 +58,28 @@ private:
     std::map<std::string, TopicUse> topics_;
 };
 
+/// A topic held for one reader or writer: acquired on construction (throws like
+/// ParticipantCore::acquire_topic), released on destruction. Keeps the participant alive.
+class TopicLease
+{
+public:
+    TopicLease(std::shared_ptr<ParticipantCore> participant, const std::string& name, MakeTypeSupport make_type,
+               const char* role)
+        : participant_(std::move(participant)), topic_(participant_->acquire_topic(name, make_type, role)), name_(name)
+    {
+    }
+    ~TopicLease() { participant_->release_topic(topic_); }
+    TopicLease(const TopicLease&) = delete;
+    TopicLease& operator=(const TopicLease&) = delete;
+
+    ParticipantCore& participant() const { return *participant_; }
+    eprosima::fastdds::dds::Topic* topic() const { return topic_; }
+    const std::string& name() const { return name_; }
+
+private:
+    std::shared_ptr<ParticipantCore> participant_;
+    eprosima::fastdds::dds::Topic* topic_;
+    std::string name_;
+};
+
 }  // namespace cpm::detail

@@ -39,9 +39,12 @@ protected:
 
 struct ReaderCore::Impl : public dds::DataReaderListener
 {
-    std::shared_ptr<ParticipantCore> participant;
-    std::string topic_name;
-    dds::Topic* topic = nullptr;
+    Impl(std::shared_ptr<ParticipantCore> participant, const std::string& name, MakeTypeSupport make_type,
+         const char* role, Sink sink)
+        : topic(std::move(participant), name, make_type, role), on_arrival(std::move(sink))
+    {
+    }
+    TopicLease topic;
     dds::DataReader* reader = nullptr;
     Sink on_arrival;
 
@@ -71,7 +74,7 @@ struct ReaderCore::Impl : public dds::DataReaderListener
                 try {
                     sink(samples.at(i));
                 } catch (const std::exception& e) {
-                    log_error("reader on topic '" + topic_name + "': dropped a sample: " + e.what());
+                    log_error("reader on topic '" + topic.name() + "': dropped a sample: " + e.what());
                 }
                 ++n;
             }
@@ -103,19 +106,14 @@ struct ReaderCore::Impl : public dds::DataReaderListener
 
 ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
                        MakeTypeSupport make_type, const ReaderOptions& options, const char* role, Sink on_arrival)
-    : impl_(std::make_unique<Impl>())
 {
     if (topic.empty()) throw Error(std::string(role) + ": the topic name is empty");
     const dds::DataReaderQos qos = reader_qos(options, topic);
-    impl_->participant = std::move(participant);
-    impl_->topic_name = topic;
-    impl_->on_arrival = std::move(on_arrival);
-    impl_->topic = impl_->participant->acquire_topic(topic, make_type, role);
-    impl_->reader = impl_->participant->subscriber()->create_datareader(
-        impl_->topic, qos, impl_.get(),
+    impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type, role, std::move(on_arrival));
+    impl_->reader = impl_->topic.participant().subscriber()->create_datareader(
+        impl_->topic.topic(), qos, impl_.get(),
         dds::StatusMask::data_available() << dds::StatusMask::subscription_matched());
     if (impl_->reader == nullptr) {
-        impl_->participant->release_topic(impl_->topic);
         throw Error(std::string(role) + " on topic '" + topic + "': DDS refused to create the reader "
                     "(inconsistent options?)");
     }
@@ -129,8 +127,7 @@ ReaderCore::~ReaderCore()
     }
     interrupt();
     impl_->reader->set_listener(nullptr);
-    impl_->participant->subscriber()->delete_datareader(impl_->reader);
-    impl_->participant->release_topic(impl_->topic);
+    impl_->topic.participant().subscriber()->delete_datareader(impl_->reader);
 }
 
 size_t ReaderCore::drain(const Sink& sink) { return impl_->drain_from(impl_->reader, sink); }
@@ -170,6 +167,6 @@ bool ReaderCore::wait_for_matched(size_t n, std::chrono::nanoseconds timeout) co
     return impl_->matched.wait_for_at_least(n, timeout);
 }
 
-const std::string& ReaderCore::topic() const { return impl_->topic_name; }
+const std::string& ReaderCore::topic() const { return impl_->topic.name(); }
 
 }  // namespace cpm::detail

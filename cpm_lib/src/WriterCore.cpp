@@ -18,9 +18,11 @@ namespace dds = eprosima::fastdds::dds;
 
 struct WriterCore::Impl : public dds::DataWriterListener
 {
-    std::shared_ptr<ParticipantCore> participant;
-    std::string topic_name;
-    dds::Topic* topic = nullptr;
+    Impl(std::shared_ptr<ParticipantCore> participant, const std::string& name, MakeTypeSupport make_type)
+        : topic(std::move(participant), name, make_type, "Writer")
+    {
+    }
+    TopicLease topic;
     dds::DataWriter* writer = nullptr;
     MatchCounter matched;
 
@@ -32,18 +34,14 @@ struct WriterCore::Impl : public dds::DataWriterListener
 
 WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
                        MakeTypeSupport make_type, const WriterOptions& options)
-    : impl_(std::make_unique<Impl>())
 {
     if (topic.empty()) throw Error("Writer: the topic name is empty");
     const std::unique_ptr<dds::TopicDataType> type(make_type());
     const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined);
-    impl_->participant = std::move(participant);
-    impl_->topic_name = topic;
-    impl_->topic = impl_->participant->acquire_topic(topic, make_type, "Writer");
-    impl_->writer = impl_->participant->publisher()->create_datawriter(impl_->topic, qos, impl_.get(),
-                                                                      dds::StatusMask::publication_matched());
+    impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type);
+    impl_->writer = impl_->topic.participant().publisher()->create_datawriter(
+        impl_->topic.topic(), qos, impl_.get(), dds::StatusMask::publication_matched());
     if (impl_->writer == nullptr) {
-        impl_->participant->release_topic(impl_->topic);
         throw Error("Writer on topic '" + topic + "': DDS refused to create the writer (inconsistent options?)");
     }
 }
@@ -51,8 +49,7 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
 WriterCore::~WriterCore()
 {
     impl_->writer->set_listener(nullptr);
-    impl_->participant->publisher()->delete_datawriter(impl_->writer);
-    impl_->participant->release_topic(impl_->topic);
+    impl_->topic.participant().publisher()->delete_datawriter(impl_->writer);
 }
 
 bool WriterCore::write(const void* sample)
@@ -76,6 +73,6 @@ bool WriterCore::wait_for_acknowledgments(std::chrono::nanoseconds timeout)
     return impl_->writer->wait_for_acknowledgments(max_wait) == ReturnCode_t::RETCODE_OK;
 }
 
-const std::string& WriterCore::topic() const { return impl_->topic_name; }
+const std::string& WriterCore::topic() const { return impl_->topic.name(); }
 
 }  // namespace cpm::detail
