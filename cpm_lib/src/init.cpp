@@ -2,6 +2,8 @@
 
 #include <cpm/Error.hpp>
 
+#include "lab_clock.hpp"
+
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -97,6 +99,7 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
 void init(int argc, char* argv[])
 {
     InitSettings settings = parse_init_settings(argc, argv, std::getenv("CPM_DOMAIN_ID"));
+    detail::use_simulated_clock(settings.simulated_time);
     std::lock_guard<std::mutex> lock(g_settings_mutex);
     g_settings = std::move(settings);
 }

@@ -1,7 +1,9 @@
 // cpm::Timer on the real clock, with the lab's start/stop triggers over DDS.
 #include <cpm/Error.hpp>
 #include <cpm/ReaderAbstract.hpp>
+#include <cpm/TimeMaster.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/init.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm_test/Dds.hpp>
@@ -13,7 +15,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
+#include <map>
 #include <mutex>
 #include <thread>
 
@@ -31,7 +35,8 @@ protected:
     cpm::Participant lab{cpm_test::isolated_options()};
     cpm::Participant node{cpm_test::isolated_options()};
     cpm::ReaderAbstract<ReadyStatus> ready{lab, "readyStatus", {.reliable = true, .history_depth = 10}};
-    cpm::Writer<SystemTrigger> trigger{lab, "systemTrigger", {.reliable = true, .history_depth = 10}};
+    // As the lab's clock master sends them: reliable, transient-local, the latest one.
+    cpm::Writer<SystemTrigger> trigger{lab, "systemTrigger", {.reliable = true, .history_depth = 1, .transient_local = true}};
 
     std::mutex mutex;
     std::vector<uint64_t> nominal, actual;
@@ -205,4 +210,95 @@ TEST_F(TimerTest, OffsetNotSmallerThanPeriodIsAnErrorNamingBoth)
         EXPECT_THAT(e.what(), HasSubstr("period_ns = 20000000"));
     }
     EXPECT_THROW(cpm::Timer::create(node, "zero", 0, 0, false, false), cpm::Error);
+}
+
+namespace {
+
+struct Tick
+{
+    uint64_t t;
+    std::string node;
+    bool operator<(const Tick& o) const { return t != o.t ? t < o.t : node < o.node; }
+    bool operator==(const Tick& o) const { return t == o.t && node == o.node; }
+};
+
+// Three nodes (20 ms, 50 ms, 400 ms) under a simulated master for 10 simulated seconds.
+// Returns the ticks in the order they ran and the real time it took.
+std::vector<Tick> run_three_node_scenario(cpm::Participant& lab, cpm::Participant& node, double& real_seconds,
+                                          bool& clock_matched)
+{
+    std::mutex mutex;
+    std::vector<Tick> ticks;
+    clock_matched = true;
+    struct Node
+    {
+        std::string id;
+        uint64_t period;
+    };
+    const std::vector<Node> nodes{{"vehicle", 20 * kMs}, {"monitor", 50 * kMs}, {"planner", 400 * kMs}};
+    std::vector<std::shared_ptr<cpm::Timer>> timers;
+    std::atomic<int> stopped{0};
+    for (const auto& n : nodes) {
+        auto timer = cpm::Timer::create(node, n.id, n.period, 0, true, true);
+        timer->start_async(
+            [&, id = n.id](uint64_t t) {
+                std::lock_guard<std::mutex> lock(mutex);
+                ticks.push_back({t, id});
+                if (cpm::get_time_ns() != t) clock_matched = false;
+            },
+            [&] { ++stopped; });
+        timers.push_back(timer);
+    }
+    cpm::TimeMaster master(lab);
+    const auto t0 = std::chrono::steady_clock::now();
+    master.run_simulated({"vehicle", "monitor", "planner"}, 10'000 * kMs);
+    real_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    cpm_test::wait_until([&] { return stopped == 3; });
+    std::lock_guard<std::mutex> lock(mutex);
+    return ticks;
+}
+
+}  // namespace
+
+TEST_F(TimerTest, SimulatedTimeRunsThreeNodesExactlyInOrderAndRepeatably)
+{
+    const char* argv[] = {"timer_test", "--simulated_time"};
+    cpm::init(2, const_cast<char**>(argv));
+    double first_seconds = 0, second_seconds = 0;
+    bool first_clock = false, second_clock = false;
+
+    auto first = run_three_node_scenario(lab, node, first_seconds, first_clock);
+    auto second = run_three_node_scenario(lab, node, second_seconds, second_clock);
+
+    std::map<std::string, std::vector<uint64_t>> by_node;
+    for (const auto& t : first) by_node[t.node].push_back(t.t);
+    EXPECT_EQ(by_node["vehicle"].size(), 500u);
+    EXPECT_EQ(by_node["monitor"].size(), 200u);
+    EXPECT_EQ(by_node["planner"].size(), 25u);
+    for (auto& [id, times] : by_node) {
+        const uint64_t period = id == "vehicle" ? 20 * kMs : id == "monitor" ? 50 * kMs : 400 * kMs;
+        for (size_t k = 0; k < times.size(); ++k) ASSERT_EQ(times[k], k * period) << id << " tick " << k;
+    }
+    for (size_t i = 1; i < first.size(); ++i) {
+        ASSERT_GE(first[i].t, first[i - 1].t) << "a tick at " << first[i].t << " ran after one at " << first[i - 1].t;
+    }
+    EXPECT_TRUE(first_clock) << "get_time_ns() differed from the nominal time inside a callback";
+    EXPECT_TRUE(second_clock);
+    // Same-time ticks of different nodes run concurrently; the sequence of times is the same.
+    std::sort(first.begin(), first.end());
+    std::sort(second.begin(), second.end());
+    EXPECT_EQ(first, second);
+    EXPECT_LT(first_seconds, 10.0) << "10 simulated seconds took longer than 10 real seconds";
+    std::printf("10 simulated seconds took %.3f s and %.3f s of real time\n", first_seconds, second_seconds);
+}
+
+TEST_F(TimerTest, TimeMasterNamesTheNodesThatNeverAnnounce)
+{
+    cpm::TimeMaster sut(lab);
+    try {
+        sut.run_simulated({"ghost"}, 1000 * kMs, 300ms);
+        FAIL() << "no error";
+    } catch (const cpm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("'ghost'"));
+    }
 }

@@ -1,4 +1,7 @@
-#include "TimerRealTime.hpp"
+#include "LabTimer.hpp"
+
+#include "lab_clock.hpp"
+#include "lab_topics.hpp"
 
 #include "log_internal.hpp"
 
@@ -6,6 +9,7 @@
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 
@@ -17,7 +21,6 @@
 namespace cpm {
 
 namespace {
-constexpr uint64_t kStopTrigger = UINT64_MAX;
 constexpr auto kReadyAnnouncePeriod = std::chrono::seconds(1);
 }  // namespace
 
@@ -31,17 +34,19 @@ std::shared_ptr<Timer> Timer::create(const std::string& node_id, uint64_t period
 std::shared_ptr<Timer> Timer::create(Participant& participant, const std::string& node_id, uint64_t period_ns,
                                      uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed)
 {
-    if (init_settings().simulated_time && simulated_time_allowed) {
-        throw Error("Timer '" + node_id + "': simulated time is not available yet");
-    }
-    return std::make_shared<detail::TimerRealTime>(participant, node_id, period_ns, offset_ns, wait_for_start);
+    const bool simulated = init_settings().simulated_time && simulated_time_allowed;
+    return std::make_shared<detail::LabTimer>(participant, node_id, period_ns, offset_ns, wait_for_start, simulated);
 }
 
 namespace detail {
 
-TimerRealTime::TimerRealTime(Participant& participant, std::string node_id, uint64_t period_ns, uint64_t offset_ns,
-                             bool wait_for_start)
-    : node_id_(std::move(node_id)), period_ns_(period_ns), offset_ns_(offset_ns), wait_for_start_(wait_for_start)
+LabTimer::LabTimer(Participant& participant, std::string node_id, uint64_t period_ns, uint64_t offset_ns,
+                   bool wait_for_start, bool simulated)
+    : node_id_(std::move(node_id)),
+      period_ns_(period_ns),
+      offset_ns_(offset_ns),
+      wait_for_start_(wait_for_start || simulated),
+      simulated_(simulated)
 {
     if (node_id_.empty()) throw Error("Timer: node_id is empty");
     if (period_ns_ == 0) throw Error("Timer '" + node_id_ + "': period_ns must be > 0");
@@ -58,19 +63,15 @@ TimerRealTime::TimerRealTime(Participant& participant, std::string node_id, uint
     }
     // The trigger reader exists from construction on, so a trigger sent while the program
     // is still preparing is not missed; a stop trigger (UINT64_MAX) ends every timer.
-    ReaderOptions trigger_options;
-    trigger_options.reliable = true;
-    trigger_options.history_depth = 10;
-    WriterOptions ready_options;
-    ready_options.reliable = true;
-    ready_options.history_depth = 10;
-    if (wait_for_start_) ready_writer_ = std::make_unique<Writer<ReadyStatus>>(participant, "readyStatus", ready_options);
+    if (wait_for_start_) {
+        ready_writer_ = std::make_unique<Writer<ReadyStatus>>(participant, kReadyStatusTopic, lab_control_writer_options());
+    }
     trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
-        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, "systemTrigger",
-        trigger_options);
+        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, kSystemTriggerTopic,
+        lab_control_reader_options());
 }
 
-TimerRealTime::~TimerRealTime()
+LabTimer::~LabTimer()
 {
     stop();
     if (thread_.joinable()) {
@@ -85,7 +86,7 @@ TimerRealTime::~TimerRealTime()
     close(stop_fd_);
 }
 
-void TimerRealTime::on_trigger(std::vector<SystemTrigger>& triggers)
+void LabTimer::on_trigger(std::vector<SystemTrigger>& triggers)
 {
     for (const auto& trigger : triggers) {
         const uint64_t next_start = trigger.next_start().nanoseconds();
@@ -94,12 +95,14 @@ void TimerRealTime::on_trigger(std::vector<SystemTrigger>& triggers)
             continue;
         }
         std::lock_guard<std::mutex> lock(trigger_mutex_);
-        next_start_ = next_start;
+        // The lab clock only moves forward: a late-delivered older trigger must not wind it back.
+        if (trigger_count_ == 0 || next_start > next_start_) next_start_ = next_start;
+        ++trigger_count_;
     }
     trigger_changed_.notify_all();
 }
 
-void TimerRealTime::stop()
+void LabTimer::stop()
 {
     stopping_ = true;
     const uint64_t one = 1;
@@ -108,19 +111,27 @@ void TimerRealTime::stop()
     trigger_changed_.notify_all();
 }
 
-uint64_t TimerRealTime::wait_for_trigger()
+void LabTimer::announce(uint64_t next_tick_ns)
+{
+    ReadyStatus ready;
+    ready.source_id(node_id_);
+    ready.next_start_stamp().nanoseconds(next_tick_ns);
+    ready_writer_->write(ready);
+}
+
+uint64_t LabTimer::wait_for_trigger()
 {
     std::unique_lock<std::mutex> lock(trigger_mutex_);
-    while (!stopping_ && next_start_ == 0) {
-        ReadyStatus ready;
-        ready.source_id(node_id_);
-        ready_writer_->write(ready);
-        trigger_changed_.wait_for(lock, kReadyAnnouncePeriod, [&] { return stopping_ || next_start_ != 0; });
+    while (!stopping_ && trigger_count_ == 0) {
+        lock.unlock();
+        announce(0);
+        lock.lock();
+        trigger_changed_.wait_for(lock, kReadyAnnouncePeriod, [&] { return stopping_ || trigger_count_ != 0; });
     }
     return stopping_ ? 0 : next_start_;
 }
 
-bool TimerRealTime::sleep_until(uint64_t t_ns)
+bool LabTimer::sleep_until(uint64_t t_ns)
 {
     itimerspec spec{};
     spec.it_value.tv_sec = static_cast<time_t>(t_ns / 1'000'000'000ull);
@@ -147,16 +158,65 @@ bool TimerRealTime::sleep_until(uint64_t t_ns)
     return false;
 }
 
-void TimerRealTime::start(Callback callback, std::function<void()> on_stop)
+void LabTimer::start(Callback callback, std::function<void()> on_stop)
 {
     if (started_.exchange(true)) throw Error("Timer '" + node_id_ + "': start called a second time");
     run(callback, on_stop);
 }
 
-void TimerRealTime::run(const Callback& callback, const std::function<void()>& on_stop)
+void LabTimer::run(const Callback& callback, const std::function<void()>& on_stop)
 {
-    const uint64_t begin = wait_for_start_ ? wait_for_trigger() : get_time_ns();
+    if (simulated_) {
+        run_simulated(callback);
+    } else {
+        run_real_time(callback);
+    }
+    if (on_stop) on_stop();
+}
+
+void LabTimer::run_simulated(const Callback& callback)
+{
+    uint64_t next = offset_ns_;  // simulated time starts at 0
+    start_time_ = next;
+    std::unique_lock<std::mutex> lock(trigger_mutex_);
+    uint64_t seen = 0;
+    while (!stopping_) {
+        lock.unlock();
+        announce(next);
+        lock.lock();
+        // Wait for the master to move the clock; re-announce now and then (a master that
+        // appears late still finds the announcement in the transient-local history).
+        while (!stopping_ && trigger_count_ == seen) {
+            trigger_changed_.wait_for(lock, kReadyAnnouncePeriod);
+        }
+        if (stopping_) break;
+        seen = trigger_count_;
+        const uint64_t now = next_start_;
+        if (now < next) continue;  // another node's tick; ours is still ahead
+        if (now > next) {
+            // The master passed our tick: it must have missed our announcement.
+            const uint64_t skipped = (now - next + period_ns_ - 1) / period_ns_;
+            missed_ += skipped;
+            log_error("timer '" + node_id_ + "': simulated clock jumped to " + std::to_string(now) +
+                      " past our tick at " + std::to_string(next) + "; skipped " + std::to_string(skipped));
+            next += skipped * period_ns_;
+            continue;
+        }
+        // Only a ticking timer moves the process's clock: one whose tick is still ahead may
+        // see an older trigger late, and must not wind the clock back under a running tick.
+        set_simulated_now(next);
+        lock.unlock();
+        callback(next);
+        lock.lock();
+        next += period_ns_;
+    }
+}
+
+void LabTimer::run_real_time(const Callback& callback)
+{
+    uint64_t begin = wait_for_start_ ? wait_for_trigger() : get_time_ns();
     if (begin != 0 && !stopping_) {
+        begin = std::max(begin, get_time_ns());  // a start already past: join at the next tick
         // The first absolute tick k * period + offset at or after `begin`.
         uint64_t deadline = (begin / period_ns_) * period_ns_ + offset_ns_;
         if (deadline < begin) deadline += period_ns_;
@@ -177,10 +237,9 @@ void TimerRealTime::run(const Callback& callback, const std::function<void()>& o
             }
         }
     }
-    if (on_stop) on_stop();
 }
 
-void TimerRealTime::start_async(Callback callback, std::function<void()> on_stop)
+void LabTimer::start_async(Callback callback, std::function<void()> on_stop)
 {
     if (started_.exchange(true)) throw Error("Timer '" + node_id_ + "': start called a second time");
     thread_ = std::thread([this, callback = std::move(callback), on_stop = std::move(on_stop)] {

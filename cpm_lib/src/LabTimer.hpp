@@ -14,14 +14,16 @@
 
 namespace cpm::detail {
 
-/// cpm::Timer on CLOCK_REALTIME: a timerfd armed with absolute deadlines and an eventfd that
-/// stop() writes to, polled together, so a stop ends any wait at once.
-class TimerRealTime : public Timer
+/// cpm::Timer. Real time: a timerfd armed with absolute CLOCK_REALTIME deadlines and an
+/// eventfd that stop() writes to, polled together, so a stop ends any wait at once.
+/// Simulated time: announces its next nominal tick in ReadyStatus and ticks when a
+/// SystemTrigger names exactly that time (TimeMaster drives the triggers).
+class LabTimer : public Timer
 {
 public:
-    TimerRealTime(Participant& participant, std::string node_id, uint64_t period_ns, uint64_t offset_ns,
-                  bool wait_for_start);
-    ~TimerRealTime() override;
+    LabTimer(Participant& participant, std::string node_id, uint64_t period_ns, uint64_t offset_ns,
+             bool wait_for_start, bool simulated);
+    ~LabTimer() override;
 
     void start(Callback callback, std::function<void()> on_stop) override;
     void start_async(Callback callback, std::function<void()> on_stop) override;
@@ -33,8 +35,11 @@ public:
     uint64_t offset_ns() const override { return offset_ns_; }
 
 private:
-    // The timer loop: the start wait, then ticks until stopped.
+    // The timer loop until stopped, then on_stop.
     void run(const Callback& callback, const std::function<void()>& on_stop);
+    void run_real_time(const Callback& callback);
+    void run_simulated(const Callback& callback);
+    void announce(uint64_t next_tick_ns);
     // Announces readiness until a start trigger (its next_start) or a stop; 0 when stopped.
     uint64_t wait_for_trigger();
     // Waits until the absolute time t or a stop; false when stopped.
@@ -45,6 +50,7 @@ private:
     const uint64_t period_ns_;
     const uint64_t offset_ns_;
     const bool wait_for_start_;
+    const bool simulated_;
     int timer_fd_ = -1;
     int stop_fd_ = -1;
     std::atomic<bool> started_{false};
@@ -54,7 +60,8 @@ private:
 
     std::mutex trigger_mutex_;
     std::condition_variable trigger_changed_;
-    uint64_t next_start_ = 0;  // 0: none received yet
+    uint64_t next_start_ = 0;      // the latest trigger's next_start
+    uint64_t trigger_count_ = 0;   // triggers received (a simulated trigger may be 0)
 
     std::unique_ptr<Writer<ReadyStatus>> ready_writer_;
     std::unique_ptr<AsyncReader<SystemTrigger>> trigger_reader_;

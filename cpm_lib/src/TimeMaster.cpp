@@ -1,0 +1,135 @@
+#include <cpm/TimeMaster.hpp>
+
+#include "lab_topics.hpp"
+
+#include <cpm/Error.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+
+#include <ReadyStatus.h>
+#include <SystemTrigger.h>
+
+#include <algorithm>
+#include <map>
+
+namespace cpm {
+
+using namespace detail;
+
+struct TimeMaster::Impl
+{
+    explicit Impl(Participant& participant)
+        : ready(participant, kReadyStatusTopic, lab_control_reader_options()),
+          trigger(participant, kSystemTriggerTopic, lab_control_writer_options())
+    {
+    }
+
+    // The latest announcement of every node. A node's next tick only grows, so the largest
+    // value is the latest: Fast DDS was seen delivering an older announcement after a newer one.
+    void collect()
+    {
+        for (auto& r : ready.take()) {
+            uint64_t& t = announced[r.source_id()];
+            t = std::max(t, r.next_start_stamp().nanoseconds());
+        }
+    }
+    std::vector<std::string> missing(const std::vector<std::string>& nodes) const
+    {
+        std::vector<std::string> out;
+        for (const auto& n : nodes) {
+            if (!announced.count(n)) out.push_back(n);
+        }
+        return out;
+    }
+    void send(uint64_t next_start)
+    {
+        SystemTrigger t;
+        t.next_start().nanoseconds(next_start);
+        trigger.write(t);
+    }
+
+    ReaderAbstract<ReadyStatus> ready;
+    Writer<SystemTrigger> trigger;
+    std::map<std::string, uint64_t> announced;
+};
+
+namespace {
+
+std::string join(const std::vector<std::string>& names)
+{
+    std::string out;
+    for (const auto& n : names) out += (out.empty() ? "'" : ", '") + n + "'";
+    return out;
+}
+
+}  // namespace
+
+TimeMaster::TimeMaster(Participant& participant) : impl_(std::make_unique<Impl>(participant)) {}
+
+TimeMaster::~TimeMaster() = default;
+
+uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uint64_t end_ns,
+                                   std::chrono::milliseconds step_timeout)
+{
+    if (node_ids.empty()) throw Error("TimeMaster: no node ids to drive");
+    bool started = false;
+    uint64_t now = 0, steps = 0;
+    auto deadline = std::chrono::steady_clock::now() + step_timeout;
+    for (;;) {
+        impl_->collect();
+        // Every node must have announced a tick later than the current time: then all ticks
+        // at `now` are done, and the next time is the smallest announced one.
+        bool all_past_now = impl_->missing(node_ids).empty();
+        uint64_t next = UINT64_MAX;
+        for (const auto& n : node_ids) {
+            if (!all_past_now) break;
+            const uint64_t t = impl_->announced[n];
+            if (started && t <= now) all_past_now = false;
+            next = std::min(next, t);
+        }
+        if (all_past_now) {
+            if (next >= end_ns) {
+                stop_all();
+                return steps;
+            }
+            impl_->send(next);
+            now = next;
+            started = true;
+            ++steps;
+            deadline = std::chrono::steady_clock::now() + step_timeout;
+            continue;
+        }
+        const auto remaining = deadline - std::chrono::steady_clock::now();
+        if (remaining <= std::chrono::steady_clock::duration::zero()) {
+            std::vector<std::string> silent = impl_->missing(node_ids);
+            for (const auto& n : node_ids) {
+                if (impl_->announced.count(n) && started && impl_->announced[n] <= now) silent.push_back(n);
+            }
+            throw Error("TimeMaster: simulated time stuck at " + std::to_string(now) + " ns: no announcement from " +
+                        join(silent) + " within " + std::to_string(step_timeout.count()) + " ms");
+        }
+        impl_->ready.wait_for_data(std::chrono::duration_cast<std::chrono::milliseconds>(remaining) +
+                                   std::chrono::milliseconds(1));
+    }
+}
+
+uint64_t TimeMaster::start_real_time(const std::vector<std::string>& node_ids, std::chrono::milliseconds start_delay,
+                                     std::chrono::milliseconds ready_timeout)
+{
+    const auto deadline = std::chrono::steady_clock::now() + ready_timeout;
+    for (impl_->collect(); !impl_->missing(node_ids).empty(); impl_->collect()) {
+        if (std::chrono::steady_clock::now() >= deadline) {
+            throw Error("TimeMaster: not ready within " + std::to_string(ready_timeout.count()) +
+                        " ms: " + join(impl_->missing(node_ids)));
+        }
+        impl_->ready.wait_for_data(std::chrono::milliseconds(100));
+    }
+    const uint64_t start = get_time_ns() + static_cast<uint64_t>(start_delay.count()) * 1'000'000ull;
+    impl_->send(start);
+    return start;
+}
+
+void TimeMaster::stop_all() { impl_->send(kStopTrigger); }
+
+}  // namespace cpm
