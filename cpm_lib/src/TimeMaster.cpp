@@ -130,6 +130,11 @@ uint64_t TimeMaster::start_real_time(const std::vector<std::string>& node_ids, s
     return start;
 }
 
-void TimeMaster::stop_all() { impl_->send(kStopTrigger); }
+void TimeMaster::stop_all()
+{
+    impl_->send(kStopTrigger);
+    // A master that ends right after the stop must not take it along unsent.
+    impl_->trigger.wait_for_acknowledgments(std::chrono::seconds(2));
+}
 
 }  // namespace cpm

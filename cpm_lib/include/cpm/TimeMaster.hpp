@@ -36,7 +36,8 @@ public:
                              std::chrono::milliseconds start_delay = std::chrono::seconds(1),
                              std::chrono::milliseconds ready_timeout = std::chrono::seconds(30));
 
-    /// Stops every timer in the lab (SystemTrigger UINT64_MAX).
+    /// Stops every timer in the lab (SystemTrigger UINT64_MAX); waits up to 2 s until the
+    /// timers' readers acknowledged it.
     void stop_all();
 
 private:

@@ -1,0 +1,74 @@
+// `cpm lab clock` as a real process driving timers in this test process.
+#include <cpm/Timer.hpp>
+#include <cpm/init.hpp>
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <atomic>
+
+using namespace std::chrono_literals;
+using ::testing::HasSubstr;
+
+namespace {
+constexpr uint64_t kMs = 1'000'000;
+}
+
+TEST(CpmLabClock, SimulatedModeDrivesTheNamedTimersToTheEndAndStopsThem)
+{
+    const char* argv[] = {"cli_test", "--simulated_time"};
+    cpm::init(2, const_cast<char**>(argv));
+    cpm::Participant node(cpm_test::isolated_options());
+    std::atomic<int> vehicle_ticks{0}, planner_ticks{0}, stopped{0};
+    auto vehicle = cpm::Timer::create(node, "vehicle", 20 * kMs, 0, true, true);
+    auto planner = cpm::Timer::create(node, "planner", 400 * kMs, 0, true, true);
+    vehicle->start_async([&](uint64_t) { ++vehicle_ticks; }, [&] { ++stopped; });
+    planner->start_async([&](uint64_t) { ++planner_ticks; }, [&] { ++stopped; });
+
+    cpm_test::Process sut({cpm_test::built_program("cpm"), "lab", "clock", "--simulated", "--nodes",
+                           "vehicle,planner", "--until", "2s"});
+
+    ASSERT_EQ(sut.wait(30000ms), 0) << sut.output();
+    EXPECT_THAT(sut.output(), HasSubstr("simulated 2.000 s"));
+    EXPECT_TRUE(cpm_test::wait_until([&] { return stopped == 2; })) << "the timers were not stopped";
+    EXPECT_EQ(vehicle_ticks, 100);
+    EXPECT_EQ(planner_ticks, 5);
+}
+
+TEST(CpmLabClock, RealTimeModeStartsWaitingTimersTogetherAndStopsThem)
+{
+    cpm::Participant node(cpm_test::isolated_options());
+    std::atomic<uint64_t> first_a{0}, first_b{0};
+    std::atomic<int> stopped{0};
+    auto a = cpm::Timer::create(node, "a", 20 * kMs, 0, true, false);
+    auto b = cpm::Timer::create(node, "b", 50 * kMs, 10 * kMs, true, false);
+    a->start_async([&](uint64_t t) { if (!first_a) first_a = t; }, [&] { ++stopped; });
+    b->start_async([&](uint64_t t) { if (!first_b) first_b = t; }, [&] { ++stopped; });
+
+    cpm_test::Process sut({cpm_test::built_program("cpm"), "lab", "clock", "--nodes", "a,b", "--start-delay",
+                           "300ms", "--duration", "400ms"});
+
+    ASSERT_EQ(sut.wait(30000ms), 0) << sut.output();
+    EXPECT_TRUE(cpm_test::wait_until([&] { return stopped == 2; })) << "the timers were not stopped";
+    ASSERT_NE(first_a.load(), 0u);
+    ASSERT_NE(first_b.load(), 0u);
+    // Both started from the same announced start: their first ticks lie within one period of it.
+    EXPECT_LT(first_a > first_b ? first_a - first_b : first_b - first_a, 50 * kMs);
+    EXPECT_EQ(first_b % (50 * kMs), 10 * kMs);
+}
+
+TEST(CpmLabClock, BadArgumentsExitWithCode2AndNameTheProblem)
+{
+    cpm_test::test_domain_id();
+    cpm_test::Process no_nodes({cpm_test::built_program("cpm"), "lab", "clock", "--simulated", "--until", "1s"});
+    cpm_test::Process bad_duration({cpm_test::built_program("cpm"), "lab", "clock", "--nodes", "a", "--simulated",
+                                    "--until", "ten"});
+    cpm_test::Process unknown({cpm_test::built_program("cpm"), "lab", "clocks"});
+
+    EXPECT_EQ(no_nodes.wait(10000ms), 2);
+    EXPECT_EQ(bad_duration.wait(10000ms), 2);
+    EXPECT_EQ(unknown.wait(10000ms), 2);
+}

@@ -1,0 +1,183 @@
+// cpm — the lab's command line, in the style of `ros2`:
+//   cpm lab clock --nodes a,b,c [--simulated --until 10s | --start-delay 1s --duration 60s]
+// Errors go to stderr with the reason, and the exit code is non-zero.
+#include <cpm/Error.hpp>
+#include <cpm/TimeMaster.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <map>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace {
+
+constexpr int kUsageError = 2;
+
+const char* kTopHelp =
+    "usage: cpm COMMAND ...\n"
+    "\n"
+    "  lab clock    drive the lab's timers: a synchronised real-time start and stop, or a\n"
+    "               simulated clock (see `cpm lab clock --help`)\n"
+    "\n"
+    "Every command takes --dds_domain N (or CPM_DOMAIN_ID) and answers --help.\n";
+
+const char* kClockHelp =
+    "usage: cpm lab clock --nodes ID[,ID...] [--simulated --until DURATION]\n"
+    "                     [--start-delay DURATION] [--duration DURATION] [--dds_domain N]\n"
+    "\n"
+    "Real time (default): waits until every named node's timer announced it is ready, sends the\n"
+    "start (now + --start-delay, default 1s), runs for --duration (default: until Ctrl-C), then\n"
+    "stops every timer.\n"
+    "Simulated (--simulated): drives the lab clock from 0 to --until through the nodes' announced\n"
+    "ticks as fast as they compute, then stops every timer. Nodes must run with --simulated_time.\n"
+    "DURATION: a number with ns, us, ms, s or m (e.g. 500ms, 10s).\n";
+
+struct UsageError : std::runtime_error
+{
+    using std::runtime_error::runtime_error;
+};
+
+uint64_t parse_duration(const std::string& flag, const std::string& text)
+{
+    static const std::map<std::string, uint64_t> units{
+        {"ns", 1}, {"us", 1'000}, {"ms", 1'000'000}, {"s", 1'000'000'000}, {"m", 60'000'000'000}};
+    size_t end = 0;
+    double value = 0;
+    try {
+        value = std::stod(text, &end);
+    } catch (const std::exception&) {
+        end = 0;
+    }
+    const auto unit = units.find(text.substr(end));
+    if (end == 0 || unit == units.end() || value < 0) {
+        throw UsageError(flag + ": '" + text + "' is not a duration (a number with ns, us, ms, s or m, e.g. 10s)");
+    }
+    return static_cast<uint64_t>(value * double(unit->second));
+}
+
+// The command's own flags: --name value or --name=value; cpm::init's flags are skipped.
+std::map<std::string, std::string> parse_flags(const std::vector<std::string>& args,
+                                               const std::vector<std::string>& known, const std::string& command)
+{
+    std::map<std::string, std::string> flags;
+    for (size_t i = 0; i < args.size(); ++i) {
+        std::string name = args[i], value;
+        if (name.rfind("--", 0) != 0) throw UsageError(command + ": unexpected argument '" + name + "'");
+        const auto eq = name.find('=');
+        if (eq != std::string::npos) {
+            value = name.substr(eq + 1);
+            name = name.substr(0, eq);
+        }
+        if (name == "--dds_domain" || name == "--node_id" || name == "--dds_interface" ||
+            name == "--dds_initial_peer" || name == "--dds_discovery_server") {
+            if (eq == std::string::npos) ++i;  // handled by cpm::init
+            continue;
+        }
+        bool is_known = false;
+        for (const auto& k : known) is_known = is_known || k == name;
+        if (!is_known) throw UsageError(command + ": unknown flag '" + name + "' (see --help)");
+        if (name == "--simulated") {
+            flags[name] = "1";
+            continue;
+        }
+        if (eq == std::string::npos) {
+            if (i + 1 >= args.size()) throw UsageError(command + ": " + name + " needs a value");
+            value = args[++i];
+        }
+        flags[name] = value;
+    }
+    return flags;
+}
+
+std::vector<std::string> split_list(const std::string& flag, const std::string& text)
+{
+    std::vector<std::string> items;
+    std::stringstream in(text);
+    for (std::string item; std::getline(in, item, ',');) {
+        if (item.empty()) throw UsageError(flag + ": empty name in '" + text + "'");
+        items.push_back(item);
+    }
+    if (items.empty()) throw UsageError(flag + ": no names given");
+    return items;
+}
+
+std::atomic<bool> g_interrupted{false};
+
+int lab_clock(const std::vector<std::string>& args)
+{
+    const auto flags = parse_flags(args, {"--nodes", "--simulated", "--until", "--start-delay", "--duration"},
+                                   "cpm lab clock");
+    if (!flags.count("--nodes")) throw UsageError("cpm lab clock: --nodes is required (the timers' node ids)");
+    const auto nodes = split_list("--nodes", flags.at("--nodes"));
+    cpm::Participant participant;
+    cpm::TimeMaster master(participant);
+
+    if (flags.count("--simulated")) {
+        if (!flags.count("--until")) throw UsageError("cpm lab clock --simulated: --until is required");
+        const uint64_t until = parse_duration("--until", flags.at("--until"));
+        const auto t0 = std::chrono::steady_clock::now();
+        const uint64_t steps = master.run_simulated(nodes, until);
+        const double real = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        std::printf("simulated %.3f s in %.3f real s (%llu steps, %.1fx real time); stopped all timers\n",
+                    double(until) * 1e-9, real, static_cast<unsigned long long>(steps),
+                    real > 0 ? double(until) * 1e-9 / real : 0.0);
+        return 0;
+    }
+    const uint64_t delay = flags.count("--start-delay") ? parse_duration("--start-delay", flags.at("--start-delay"))
+                                                         : 1'000'000'000ull;
+    const uint64_t start =
+        master.start_real_time(nodes, std::chrono::milliseconds(delay / 1'000'000), std::chrono::seconds(30));
+    std::printf("all %zu nodes ready; start at %llu ns\n", nodes.size(), static_cast<unsigned long long>(start));
+    std::fflush(stdout);
+    std::signal(SIGINT, [](int) { g_interrupted = true; });
+    std::signal(SIGTERM, [](int) { g_interrupted = true; });
+    const uint64_t end = flags.count("--duration") ? start + parse_duration("--duration", flags.at("--duration"))
+                                                   : UINT64_MAX;
+    while (!g_interrupted && cpm::get_time_ns() < end) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    master.stop_all();
+    std::printf("stopped all timers\n");
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    std::vector<std::string> args(argv + 1, argv + argc);
+    const bool help = [&] {
+        for (const auto& a : args) {
+            if (a == "--help" || a == "-h") return true;
+        }
+        return false;
+    }();
+    try {
+        if (args.empty() || args[0] == "help" || (help && args.size() == 1)) {
+            std::fputs(kTopHelp, stdout);
+            return args.empty() ? kUsageError : 0;
+        }
+        if (args.size() >= 2 && args[0] == "lab" && args[1] == "clock") {
+            if (help) {
+                std::fputs(kClockHelp, stdout);
+                return 0;
+            }
+            cpm::init(argc, argv);
+            return lab_clock(std::vector<std::string>(args.begin() + 2, args.end()));
+        }
+        throw UsageError("unknown command '" + args[0] + (args.size() > 1 ? " " + args[1] : "") + "' (see cpm --help)");
+    } catch (const UsageError& e) {
+        std::fprintf(stderr, "cpm: %s\n", e.what());
+        return kUsageError;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "cpm: %s\n", e.what());
+        return 1;
+    }
+}
