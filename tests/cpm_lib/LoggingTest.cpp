@@ -1,0 +1,141 @@
+// cpm::Logging: stderr, CSV file and the `log` topic; LogLevel over DDS.
+#include <cpm/Logging.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+
+#include <Log.h>
+#include <LogLevel.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <fstream>
+#include <sstream>
+
+#include <fcntl.h>
+#include <unistd.h>
+
+using namespace std::chrono_literals;
+using ::testing::HasSubstr;
+
+namespace {
+
+const cpm::ReaderOptions kMonitor{.reliable = true, .history_depth = 100, .transient_local = true};
+
+class LoggingTest : public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        cpm_test::test_domain_id();  // the default participant Logging uses joins this test's domain
+        cpm::Logging::instance().set_level(cpm::Severity::info);
+    }
+    cpm::Participant monitor_side{cpm_test::isolated_options()};
+
+    // Messages on `log` whose content contains `marker`, taken until `n` arrived or 5 s passed.
+    std::vector<Log> messages_with(cpm::ReaderAbstract<Log>& reader, const std::string& marker, size_t n)
+    {
+        std::vector<Log> found;
+        cpm_test::wait_until([&] {
+            for (auto& l : reader.take()) {
+                if (l.content().find(marker) != std::string::npos) found.push_back(l);
+            }
+            return found.size() >= n;
+        });
+        return found;
+    }
+};
+
+std::string read_file(const std::string& path)
+{
+    std::ifstream in(path);
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+}  // namespace
+
+TEST_F(LoggingTest, MessageReachesStderrTheCsvFileAndTheTopic)
+{
+    cpm::ReaderAbstract<Log> monitor(monitor_side, "log", kMonitor);
+    const std::string file = "/tmp/cpm_log_test_" + std::to_string(getpid()) + ".csv";
+    const std::string err_file = file + ".stderr";
+    cpm::Logging::instance().set_file(file);
+    const uint64_t before = cpm::get_time_ns();
+
+    // Capture stderr around the call.
+    const int saved = dup(STDERR_FILENO);
+    const int err_fd = open(err_file.c_str(), O_CREAT | O_TRUNC | O_WRONLY, 0644);
+    dup2(err_fd, STDERR_FILENO);
+    CPM_LOG_WARN("vehicle %d lost \"contact\"", 3);
+    fflush(stderr);
+    dup2(saved, STDERR_FILENO);
+    close(err_fd);
+    close(saved);
+    cpm::Logging::instance().set_file("");
+
+    EXPECT_THAT(read_file(err_file), HasSubstr("[warn]"));
+    EXPECT_THAT(read_file(err_file), HasSubstr("vehicle 3 lost \"contact\""));
+    EXPECT_THAT(read_file(file), HasSubstr(",warn,\"vehicle 3 lost \"\"contact\"\"\""));
+    auto logs = messages_with(monitor, "vehicle 3 lost", 1);
+    ASSERT_EQ(logs.size(), 1u);
+    EXPECT_EQ(logs[0].log_level(), 2);
+    EXPECT_FALSE(logs[0].id().empty());
+    EXPECT_GE(logs[0].stamp().nanoseconds(), before);
+    std::remove(file.c_str());
+    std::remove(err_file.c_str());
+}
+
+TEST_F(LoggingTest, LevelFiltersAndALogLevelMessageChangesItAtRunTime)
+{
+    cpm::ReaderAbstract<Log> monitor(monitor_side, "log", kMonitor);
+    cpm::Writer<LogLevel> level_writer(monitor_side, "logLevel", {.reliable = true, .history_depth = 1, .transient_local = true});
+    // Everything received during the test: one writer's messages arrive in order.
+    std::vector<std::string> contents;
+    auto received = [&](const std::string& text) {
+        return cpm_test::wait_until([&] {
+            for (auto& l : monitor.take()) contents.push_back(l.content());
+            return std::find(contents.begin(), contents.end(), text) != contents.end();
+        });
+    };
+
+    CPM_LOG_DEBUG("hidden-debug-1");
+    CPM_LOG_INFO("shown-info-1");
+    ASSERT_TRUE(received("shown-info-1"));
+    LogLevel debug;
+    debug.log_level(4);
+    ASSERT_TRUE(level_writer.write(debug));
+    ASSERT_TRUE(cpm_test::wait_until([] { return cpm::Logging::instance().level() == cpm::Severity::debug; }))
+        << "the LogLevel message did not reach the node";
+    CPM_LOG_DEBUG("shown-debug-2");
+
+    EXPECT_TRUE(received("shown-debug-2")) << "the debug message allowed by the new level did not arrive";
+    EXPECT_EQ(std::count(contents.begin(), contents.end(), "hidden-debug-1"), 0) << "a debug message passed the info level";
+}
+
+TEST_F(LoggingTest, LateMonitorStillReceivesRecentMessages)
+{
+    CPM_LOG_ERROR("early-%d", 1);
+    CPM_LOG_ERROR("early-%d", 2);
+
+    cpm::ReaderAbstract<Log> late(monitor_side, "log", kMonitor);
+
+    EXPECT_EQ(messages_with(late, "early-", 2).size(), 2u);
+}
+
+TEST_F(LoggingTest, LongMessageArrivesWhole)
+{
+    cpm::ReaderAbstract<Log> monitor(monitor_side, "log", kMonitor);
+    const std::string text = "long-" + std::string(1000, 'x');
+
+    CPM_LOG_INFO("%s", text.c_str());
+
+    auto logs = messages_with(monitor, "long-", 1);
+    ASSERT_EQ(logs.size(), 1u) << "a 1005-character message did not reach the topic";
+    EXPECT_EQ(logs[0].content(), text);
+}
