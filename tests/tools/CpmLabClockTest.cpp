@@ -1,5 +1,6 @@
 // `cpm lab clock` as a real process driving timers in this test process.
 #include <cpm/Timer.hpp>
+#include <cpm/get_parameter.hpp>
 #include <cpm/init.hpp>
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
@@ -9,6 +10,10 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <csignal>
+#include <fstream>
+
+#include <unistd.h>
 
 using namespace std::chrono_literals;
 using ::testing::HasSubstr;
@@ -71,4 +76,28 @@ TEST(CpmLabClock, BadArgumentsExitWithCode2AndNameTheProblem)
     EXPECT_EQ(no_nodes.wait(10000ms), 2);
     EXPECT_EQ(bad_duration.wait(10000ms), 2);
     EXPECT_EQ(unknown.wait(10000ms), 2);
+}
+
+TEST(CpmParamServe, ServesAFileToClientsUntilStopped)
+{
+    cpm_test::test_domain_id();
+    const std::string file = "/tmp/cpm_param_serve_" + std::to_string(getpid()) + ".json";
+    std::ofstream(file) << R"({"max_speed": 1.5, "vehicles": [1, 3, 7]})";
+
+    cpm_test::Process sut({cpm_test::built_program("cpm"), "param", "serve", file});
+
+    EXPECT_EQ(cpm::parameter_double("max_speed", 10000ms), 1.5);
+    EXPECT_EQ(cpm::parameter_ints("vehicles"), (std::vector<int32_t>{1, 3, 7}));
+    EXPECT_THAT(sut.output(), HasSubstr("serving 2 parameters"));
+    sut.kill(SIGTERM);
+    EXPECT_EQ(sut.wait(5000ms), 0);
+    std::remove(file.c_str());
+}
+
+TEST(CpmParamServe, BadFileExitsNonZeroNamingIt)
+{
+    cpm_test::test_domain_id();
+    cpm_test::Process sut({cpm_test::built_program("cpm"), "param", "serve", "/nonexistent/params.json"});
+
+    EXPECT_EQ(sut.wait(10000ms), 1);
 }

@@ -2,6 +2,7 @@
 //   cpm lab clock --nodes a,b,c [--simulated --until 10s | --start-delay 1s --duration 60s]
 // Errors go to stderr with the reason, and the exit code is non-zero.
 #include <cpm/Error.hpp>
+#include <cpm/ParameterServer.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
@@ -27,6 +28,7 @@ const char* kTopHelp =
     "\n"
     "  lab clock    drive the lab's timers: a synchronised real-time start and stop, or a\n"
     "               simulated clock (see `cpm lab clock --help`)\n"
+    "  param serve  serve the parameters of a JSON file until Ctrl-C (see `cpm param serve --help`)\n"
     "\n"
     "Every command takes --dds_domain N (or CPM_DOMAIN_ID) and answers --help.\n";
 
@@ -40,6 +42,13 @@ const char* kClockHelp =
     "Simulated (--simulated): drives the lab clock from 0 to --until through the nodes' announced\n"
     "ticks as fast as they compute, then stops every timer. Nodes must run with --simulated_time.\n"
     "DURATION: a number with ns, us, ms, s or m (e.g. 500ms, 10s).\n";
+
+const char* kParamHelp =
+    "usage: cpm param serve FILE.json [--dds_domain N]\n"
+    "\n"
+    "Serves the file's parameters on topic 'parameter' and answers 'parameterRequest' until\n"
+    "Ctrl-C. FILE: {\"name\": value, ...} with the type taken from the value, or\n"
+    "{\"name\": {\"type\": \"bool|int|uint64|double|string|ints|doubles\", \"value\": ...}}.\n";
 
 struct UsageError : std::runtime_error
 {
@@ -148,6 +157,30 @@ int lab_clock(const std::vector<std::string>& args)
     return 0;
 }
 
+int param_serve(const std::vector<std::string>& args)
+{
+    std::string file;
+    for (size_t i = 0; i < args.size(); ++i) {
+        if (args[i].rfind("--dds_", 0) == 0 || args[i].rfind("--node_id", 0) == 0) {
+            if (args[i].find('=') == std::string::npos) ++i;  // cpm::init's flag and its value
+            continue;
+        }
+        if (args[i].rfind("--", 0) == 0) throw UsageError("cpm param serve: unknown flag '" + args[i] + "'");
+        if (!file.empty()) throw UsageError("cpm param serve: more than one file given");
+        file = args[i];
+    }
+    if (file.empty()) throw UsageError("cpm param serve: no parameter file given (see --help)");
+    cpm::Participant participant;
+    cpm::ParameterServer server(participant);
+    const size_t n = server.load_json_file(file);
+    std::printf("serving %zu parameters from %s\n", n, file.c_str());
+    std::fflush(stdout);
+    std::signal(SIGINT, [](int) { g_interrupted = true; });
+    std::signal(SIGTERM, [](int) { g_interrupted = true; });
+    while (!g_interrupted) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv)
@@ -171,6 +204,14 @@ int main(int argc, char** argv)
             }
             cpm::init(argc, argv);
             return lab_clock(std::vector<std::string>(args.begin() + 2, args.end()));
+        }
+        if (args.size() >= 2 && args[0] == "param" && args[1] == "serve") {
+            if (help) {
+                std::fputs(kParamHelp, stdout);
+                return 0;
+            }
+            cpm::init(argc, argv);
+            return param_serve(std::vector<std::string>(args.begin() + 2, args.end()));
         }
         throw UsageError("unknown command '" + args[0] + (args.size() > 1 ? " " + args[1] : "") + "' (see cpm --help)");
     } catch (const UsageError& e) {

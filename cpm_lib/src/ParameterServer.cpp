@@ -1,0 +1,248 @@
+#include <cpm/ParameterServer.hpp>
+
+#include <cpm/AsyncReader.hpp>
+#include <cpm/Error.hpp>
+#include <cpm/Writer.hpp>
+
+#include <Parameter.h>
+#include <ParameterRequest.h>
+
+#include <nlohmann/json.hpp>
+
+#include <fstream>
+#include <limits>
+#include <map>
+#include <mutex>
+
+namespace cpm {
+
+struct ParameterServer::Impl
+{
+    explicit Impl(Participant& participant)
+        : writer(participant, "parameter", writer_options()),
+          requests(
+              [this](std::vector<ParameterRequest>& batch) {
+                  for (const auto& r : batch) answer(r.name());
+              },
+              participant, "parameterRequest", request_options())
+    {
+    }
+    static WriterOptions writer_options()
+    {
+        WriterOptions o;
+        o.reliable = true;
+        o.transient_local = true;  // keyed by name: a late client gets every current value
+        o.history_depth = 1;
+        return o;
+    }
+    static ReaderOptions request_options()
+    {
+        ReaderOptions o;
+        o.reliable = true;
+        o.history_depth = 100;
+        return o;
+    }
+
+    void publish(Parameter p)
+    {
+        {
+            std::lock_guard<std::mutex> lock(mutex);
+            values[p.name()] = p;
+        }
+        writer.write(p);
+    }
+    void answer(const std::string& name)
+    {
+        Parameter reply;
+        {
+            std::lock_guard<std::mutex> lock(mutex);
+            auto found = values.find(name);
+            if (found != values.end()) {
+                reply = found->second;
+            } else {
+                reply.name(name);
+                reply.type(ParameterType_Invalid);
+            }
+        }
+        writer.write(reply);
+    }
+
+    mutable std::mutex mutex;
+    std::map<std::string, Parameter> values;
+    Writer<Parameter> writer;
+    AsyncReader<ParameterRequest> requests;  // last: its thread uses the members above
+};
+
+namespace {
+
+Parameter make(const std::string& name, ParameterType type)
+{
+    if (name.empty()) throw Error("ParameterServer: a parameter name is empty");
+    Parameter p;
+    p.name(name);
+    p.type(type);
+    return p;
+}
+
+// One parameter from a JSON value; `where` names the file and JSON path in errors.
+Parameter from_json(const std::string& name, const nlohmann::json& v, const std::string& where)
+{
+    using nlohmann::json;
+    if (v.is_object()) {
+        if (!v.contains("type") || !v.contains("value") || !v["type"].is_string()) {
+            throw Error(where + ": an object must be {\"type\": ..., \"value\": ...}");
+        }
+        const std::string type = v["type"];
+        const json& value = v["value"];
+        auto require = [&](bool ok) {
+            if (!ok) throw Error(where + ": value " + value.dump() + " is not of type " + type);
+        };
+        Parameter p = make(name, ParameterType_Invalid);
+        if (type == "bool") {
+            require(value.is_boolean());
+            p.type(ParameterType_Bool);
+            p.value_bool(value.get<bool>());
+        } else if (type == "int") {
+            require(value.is_number_integer() && value.get<int64_t>() >= std::numeric_limits<int32_t>::min() &&
+                    value.get<int64_t>() <= std::numeric_limits<int32_t>::max());
+            p.type(ParameterType_Int32);
+            p.values_int32({value.get<int32_t>()});
+        } else if (type == "uint64") {
+            require(value.is_number_unsigned());
+            p.type(ParameterType_UInt64);
+            p.values_uint64({value.get<uint64_t>()});
+        } else if (type == "double") {
+            require(value.is_number());
+            p.type(ParameterType_Double);
+            p.values_double({value.get<double>()});
+        } else if (type == "string") {
+            require(value.is_string());
+            p.type(ParameterType_String);
+            p.value_string(value.get<std::string>());
+        } else if (type == "ints" || type == "doubles") {
+            require(value.is_array());
+            for (const auto& e : value) require(type == "ints" ? e.is_number_integer() : e.is_number());
+            if (type == "ints") {
+                p.type(ParameterType_Vector_Int32);
+                p.values_int32(value.get<std::vector<int32_t>>());
+            } else {
+                p.type(ParameterType_Vector_Double);
+                p.values_double(value.get<std::vector<double>>());
+            }
+        } else {
+            throw Error(where + ": unknown type '" + type + "' (bool, int, uint64, double, string, ints, doubles)");
+        }
+        return p;
+    }
+    Parameter p = make(name, ParameterType_Invalid);
+    if (v.is_boolean()) {
+        p.type(ParameterType_Bool);
+        p.value_bool(v.get<bool>());
+    } else if (v.is_number_integer() && v.get<int64_t>() >= std::numeric_limits<int32_t>::min() &&
+               (v.is_number_unsigned() ? v.get<uint64_t>() <= uint64_t(std::numeric_limits<int32_t>::max())
+                                       : v.get<int64_t>() <= std::numeric_limits<int32_t>::max())) {
+        p.type(ParameterType_Int32);
+        p.values_int32({v.get<int32_t>()});
+    } else if (v.is_number_unsigned()) {
+        p.type(ParameterType_UInt64);
+        p.values_uint64({v.get<uint64_t>()});
+    } else if (v.is_number()) {
+        p.type(ParameterType_Double);
+        p.values_double({v.get<double>()});
+    } else if (v.is_string()) {
+        p.type(ParameterType_String);
+        p.value_string(v.get<std::string>());
+    } else if (v.is_array() && !v.empty()) {
+        bool all_int = true, all_number = true;
+        for (const auto& e : v) {
+            all_int = all_int && e.is_number_integer();
+            all_number = all_number && e.is_number();
+        }
+        if (!all_number) throw Error(where + ": a list must hold only numbers");
+        if (all_int) {
+            p.type(ParameterType_Vector_Int32);
+            p.values_int32(v.get<std::vector<int32_t>>());
+        } else {
+            p.type(ParameterType_Vector_Double);
+            p.values_double(v.get<std::vector<double>>());
+        }
+    } else {
+        throw Error(where + ": " + v.dump() + " is not a parameter value (bool, number, text or list of numbers)");
+    }
+    return p;
+}
+
+}  // namespace
+
+ParameterServer::ParameterServer(Participant& participant) : impl_(std::make_unique<Impl>(participant)) {}
+ParameterServer::~ParameterServer() = default;
+
+void ParameterServer::set_bool(const std::string& name, bool value)
+{
+    auto p = make(name, ParameterType_Bool);
+    p.value_bool(value);
+    impl_->publish(p);
+}
+void ParameterServer::set_int(const std::string& name, int32_t value)
+{
+    auto p = make(name, ParameterType_Int32);
+    p.values_int32({value});
+    impl_->publish(p);
+}
+void ParameterServer::set_uint64(const std::string& name, uint64_t value)
+{
+    auto p = make(name, ParameterType_UInt64);
+    p.values_uint64({value});
+    impl_->publish(p);
+}
+void ParameterServer::set_double(const std::string& name, double value)
+{
+    auto p = make(name, ParameterType_Double);
+    p.values_double({value});
+    impl_->publish(p);
+}
+void ParameterServer::set_string(const std::string& name, const std::string& value)
+{
+    auto p = make(name, ParameterType_String);
+    p.value_string(value);
+    impl_->publish(p);
+}
+void ParameterServer::set_ints(const std::string& name, const std::vector<int32_t>& values)
+{
+    auto p = make(name, ParameterType_Vector_Int32);
+    p.values_int32(values);
+    impl_->publish(p);
+}
+void ParameterServer::set_doubles(const std::string& name, const std::vector<double>& values)
+{
+    auto p = make(name, ParameterType_Vector_Double);
+    p.values_double(values);
+    impl_->publish(p);
+}
+
+size_t ParameterServer::load_json_file(const std::string& path)
+{
+    std::ifstream in(path);
+    if (!in) throw Error("parameter file '" + path + "': cannot be opened");
+    nlohmann::json doc;
+    try {
+        doc = nlohmann::json::parse(in);
+    } catch (const nlohmann::json::parse_error& e) {
+        throw Error("parameter file '" + path + "': not valid JSON: " + e.what());
+    }
+    if (!doc.is_object()) throw Error("parameter file '" + path + "': the top level must be an object of parameters");
+    std::vector<Parameter> loaded;  // all checked before any is published
+    for (const auto& [name, value] : doc.items()) {
+        loaded.push_back(from_json(name, value, "parameter file '" + path + "' at /" + name));
+    }
+    for (auto& p : loaded) impl_->publish(p);
+    return loaded.size();
+}
+
+size_t ParameterServer::size() const
+{
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    return impl_->values.size();
+}
+
+}  // namespace cpm

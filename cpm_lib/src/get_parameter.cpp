@@ -1,0 +1,144 @@
+#include <cpm/get_parameter.hpp>
+
+#include <cpm/AsyncReader.hpp>
+#include <cpm/Error.hpp>
+#include <cpm/Writer.hpp>
+
+#include <Parameter.h>
+#include <ParameterRequest.h>
+
+#include <condition_variable>
+#include <map>
+#include <mutex>
+
+namespace cpm {
+
+namespace {
+
+const char* type_name(ParameterType t)
+{
+    switch (t) {
+        case ParameterType_Bool: return "bool";
+        case ParameterType_Int32: return "int";
+        case ParameterType_UInt64: return "uint64";
+        case ParameterType_Double: return "double";
+        case ParameterType_String: return "string";
+        case ParameterType_Vector_Int32: return "ints";
+        case ParameterType_Vector_Double: return "doubles";
+        default: return "unknown";
+    }
+}
+
+// The values this process has seen, kept current by the server's announcements.
+class ParameterCache
+{
+public:
+    static ParameterCache& instance()
+    {
+        static ParameterCache* cache = new ParameterCache();  // never destroyed, like Logging
+        return *cache;
+    }
+
+    Parameter get(const std::string& name, ParameterType wanted, std::chrono::milliseconds timeout)
+    {
+        const auto deadline = std::chrono::steady_clock::now() + timeout;
+        std::unique_lock<std::mutex> lock(mutex_);
+        while (!values_.count(name)) {
+            // Ask (again every 500 ms, in case the server came up after our first request).
+            lock.unlock();
+            ParameterRequest request;
+            request.name(name);
+            requests_.write(request);
+            lock.lock();
+            const auto wake = std::min(deadline, std::chrono::steady_clock::now() + std::chrono::milliseconds(500));
+            changed_.wait_until(lock, wake, [&] { return values_.count(name) > 0; });
+            if (!values_.count(name) && std::chrono::steady_clock::now() >= deadline) {
+                throw Error("parameter '" + name + "': no answer from a parameter server within " +
+                            std::to_string(timeout.count()) + " ms");
+            }
+        }
+        const Parameter& p = values_.at(name);
+        if (p.type() == ParameterType_Invalid) {
+            values_.erase(name);  // it may be added to the server later
+            throw Error("parameter '" + name + "': the parameter server does not know it");
+        }
+        if (p.type() != wanted) {
+            throw Error("parameter '" + name + "' is of type " + type_name(p.type()) + ", not " + type_name(wanted));
+        }
+        return p;
+    }
+
+private:
+    ParameterCache()
+        : requests_("parameterRequest", request_options()),
+          values_reader_(
+              [this](std::vector<Parameter>& batch) {
+                  {
+                      std::lock_guard<std::mutex> lock(mutex_);
+                      for (auto& p : batch) values_[p.name()] = p;
+                  }
+                  changed_.notify_all();
+              },
+              "parameter", values_options())
+    {
+    }
+    static WriterOptions request_options()
+    {
+        WriterOptions o;
+        o.reliable = true;
+        o.history_depth = 10;
+        return o;
+    }
+    static ReaderOptions values_options()
+    {
+        ReaderOptions o;
+        o.reliable = true;
+        o.transient_local = true;
+        o.history_depth = 1;
+        return o;
+    }
+
+    std::mutex mutex_;
+    std::condition_variable changed_;
+    std::map<std::string, Parameter> values_;
+    Writer<ParameterRequest> requests_;
+    AsyncReader<Parameter> values_reader_;  // last: its thread uses the members above
+};
+
+Parameter fetch(const std::string& name, ParameterType type, std::chrono::milliseconds timeout)
+{
+    return ParameterCache::instance().get(name, type, timeout);
+}
+
+}  // namespace
+
+bool parameter_bool(const std::string& name, std::chrono::milliseconds timeout)
+{
+    return fetch(name, ParameterType_Bool, timeout).value_bool();
+}
+int32_t parameter_int(const std::string& name, std::chrono::milliseconds timeout)
+{
+    return fetch(name, ParameterType_Int32, timeout).values_int32().at(0);
+}
+uint64_t parameter_uint64_t(const std::string& name, std::chrono::milliseconds timeout)
+{
+    return fetch(name, ParameterType_UInt64, timeout).values_uint64().at(0);
+}
+double parameter_double(const std::string& name, std::chrono::milliseconds timeout)
+{
+    return fetch(name, ParameterType_Double, timeout).values_double().at(0);
+}
+std::string parameter_string(const std::string& name, std::chrono::milliseconds timeout)
+{
+    return fetch(name, ParameterType_String, timeout).value_string();
+}
+std::vector<int32_t> parameter_ints(const std::string& name, std::chrono::milliseconds timeout)
+{
+    return fetch(name, ParameterType_Vector_Int32, timeout).values_int32();
+}
+std::vector<double> parameter_doubles(const std::string& name, std::chrono::milliseconds timeout)
+{
+    return fetch(name, ParameterType_Vector_Double, timeout).values_double();
+}
+
+}  // namespace cpm
