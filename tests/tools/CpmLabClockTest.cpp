@@ -1,4 +1,5 @@
 // `cpm lab clock` as a real process driving timers in this test process.
+#include <cpm/Logging.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/get_parameter.hpp>
 #include <cpm/init.hpp>
@@ -100,4 +101,30 @@ TEST(CpmParamServe, BadFileExitsNonZeroNamingIt)
     cpm_test::Process sut({cpm_test::built_program("cpm"), "param", "serve", "/nonexistent/params.json"});
 
     EXPECT_EQ(sut.wait(10000ms), 1);
+}
+
+TEST(CpmTopicEcho, LogShowsMessagesAsTableAndJson)
+{
+    cpm_test::test_domain_id();
+    cpm::Logging::instance().set_level(cpm::Severity::info);
+    CPM_LOG_WARN("echo-check %d", 1);
+    CPM_LOG_INFO("echo-check %d", 2);
+
+    cpm_test::Process table({cpm_test::built_program("cpm"), "topic", "echo", "log", "--count", "2"});
+    cpm_test::Process json({cpm_test::built_program("cpm"), "topic", "echo", "log", "--json", "--count", "2"});
+
+    ASSERT_EQ(table.wait(10000ms), 0) << table.output();
+    ASSERT_EQ(json.wait(10000ms), 0) << json.output();
+    EXPECT_THAT(table.output(), HasSubstr("warn   echo-check 1"));
+    EXPECT_THAT(table.output(), HasSubstr("info   echo-check 2"));
+    EXPECT_THAT(json.output(), HasSubstr(R"("content":"echo-check 1")"));
+    EXPECT_THAT(json.output(), HasSubstr(R"("log_level":2)"));
+}
+
+TEST(CpmTopicEcho, UnsupportedTopicExitsWithCode2)
+{
+    cpm_test::test_domain_id();
+    cpm_test::Process sut({cpm_test::built_program("cpm"), "topic", "echo", "vehicleState"});
+
+    EXPECT_EQ(sut.wait(10000ms), 2);
 }

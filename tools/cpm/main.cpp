@@ -3,9 +3,14 @@
 // Errors go to stderr with the reason, and the exit code is non-zero.
 #include <cpm/Error.hpp>
 #include <cpm/ParameterServer.hpp>
+#include <cpm/ReaderAbstract.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
+
+#include <Log.h>
+
+#include <nlohmann/json.hpp>
 
 #include <atomic>
 #include <chrono>
@@ -29,6 +34,7 @@ const char* kTopHelp =
     "  lab clock    drive the lab's timers: a synchronised real-time start and stop, or a\n"
     "               simulated clock (see `cpm lab clock --help`)\n"
     "  param serve  serve the parameters of a JSON file until Ctrl-C (see `cpm param serve --help`)\n"
+    "  topic echo   print a topic's samples as they arrive (see `cpm topic echo --help`)\n"
     "\n"
     "Every command takes --dds_domain N (or CPM_DOMAIN_ID) and answers --help.\n";
 
@@ -49,6 +55,13 @@ const char* kParamHelp =
     "Serves the file's parameters on topic 'parameter' and answers 'parameterRequest' until\n"
     "Ctrl-C. FILE: {\"name\": value, ...} with the type taken from the value, or\n"
     "{\"name\": {\"type\": \"bool|int|uint64|double|string|ints|doubles\", \"value\": ...}}.\n";
+
+const char* kEchoHelp =
+    "usage: cpm topic echo log [--json] [--count N] [--timeout DURATION] [--dds_domain N]\n"
+    "\n"
+    "Prints the lab's log messages (topic 'log', including the recent ones sent before it started)\n"
+    "as they arrive: a table for people, or one JSON object per line with --json. Stops after N\n"
+    "messages or after --timeout without one, else on Ctrl-C. Other topics: not yet.\n";
 
 struct UsageError : std::runtime_error
 {
@@ -94,7 +107,7 @@ std::map<std::string, std::string> parse_flags(const std::vector<std::string>& a
         bool is_known = false;
         for (const auto& k : known) is_known = is_known || k == name;
         if (!is_known) throw UsageError(command + ": unknown flag '" + name + "' (see --help)");
-        if (name == "--simulated") {
+        if (name == "--simulated" || name == "--json") {
             flags[name] = "1";
             continue;
         }
@@ -157,6 +170,64 @@ int lab_clock(const std::vector<std::string>& args)
     return 0;
 }
 
+int topic_echo(const std::vector<std::string>& args)
+{
+    if (args.empty() || args[0].rfind("--", 0) == 0) throw UsageError("cpm topic echo: which topic? (see --help)");
+    if (args[0] != "log") {
+        throw UsageError("cpm topic echo: topic '" + args[0] + "' is not supported yet (supported: log)");
+    }
+    const auto flags = parse_flags(std::vector<std::string>(args.begin() + 1, args.end()),
+                                   {"--json", "--count", "--timeout"}, "cpm topic echo");
+    const bool json = flags.count("--json") > 0;
+    uint64_t count = UINT64_MAX;
+    if (flags.count("--count")) {
+        const std::string& text = flags.at("--count");
+        char* end = nullptr;
+        const unsigned long long n = std::strtoull(text.c_str(), &end, 10);
+        if (text.empty() || *end != '\0' || n == 0) throw UsageError("--count: '" + text + "' is not a positive number");
+        count = n;
+    }
+    const uint64_t timeout_ns = flags.count("--timeout") ? parse_duration("--timeout", flags.at("--timeout")) : 0;
+
+    cpm::Participant participant;
+    cpm::ReaderOptions options;
+    options.reliable = true;
+    options.transient_local = true;
+    options.history_depth = 100;
+    cpm::ReaderAbstract<Log> reader(participant, "log", options);
+    std::signal(SIGINT, [](int) { g_interrupted = true; });
+    std::signal(SIGTERM, [](int) { g_interrupted = true; });
+    static const char* levels[] = {"?", "error", "warn", "info", "debug"};
+    if (!json) std::printf("%-20s %-16s %-6s %s\n", "time_ns", "node", "level", "message");
+    uint64_t printed = 0;
+    auto last = std::chrono::steady_clock::now();
+    while (!g_interrupted && printed < count) {
+        if (timeout_ns > 0 && uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                           std::chrono::steady_clock::now() - last).count()) > timeout_ns) {
+            std::fprintf(stderr, "cpm topic echo: no message for %s\n", flags.at("--timeout").c_str());
+            return 1;
+        }
+        if (!reader.wait_for_data(std::chrono::milliseconds(100))) continue;
+        last = std::chrono::steady_clock::now();
+        for (const auto& l : reader.take()) {
+            const char* level = l.log_level() <= 4 ? levels[l.log_level()] : "?";
+            if (json) {
+                nlohmann::json line{{"topic", "log"},
+                                    {"data", {{"id", l.id()}, {"content", l.content()},
+                                              {"stamp", {{"nanoseconds", l.stamp().nanoseconds()}}},
+                                              {"log_level", l.log_level()}}}};
+                std::printf("%s\n", line.dump().c_str());
+            } else {
+                std::printf("%-20llu %-16s %-6s %s\n", static_cast<unsigned long long>(l.stamp().nanoseconds()),
+                            l.id().c_str(), level, l.content().c_str());
+            }
+            std::fflush(stdout);
+            if (++printed >= count) break;
+        }
+    }
+    return 0;
+}
+
 int param_serve(const std::vector<std::string>& args)
 {
     std::string file;
@@ -204,6 +275,14 @@ int main(int argc, char** argv)
             }
             cpm::init(argc, argv);
             return lab_clock(std::vector<std::string>(args.begin() + 2, args.end()));
+        }
+        if (args.size() >= 2 && args[0] == "topic" && args[1] == "echo") {
+            if (help) {
+                std::fputs(kEchoHelp, stdout);
+                return 0;
+            }
+            cpm::init(argc, argv);
+            return topic_echo(std::vector<std::string>(args.begin() + 2, args.end()));
         }
         if (args.size() >= 2 && args[0] == "param" && args[1] == "serve") {
             if (help) {
