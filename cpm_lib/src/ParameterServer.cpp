@@ -8,6 +8,9 @@
 #include <ParameterRequest.h>
 
 #include <nlohmann/json.hpp>
+#include <yaml-cpp/yaml.h>
+
+#include <cstdlib>
 
 #include <fstream>
 #include <limits>
@@ -172,6 +175,58 @@ Parameter from_json(const std::string& name, const nlohmann::json& v, const std:
     return p;
 }
 
+// A YAML document as JSON, so both formats share one set of type rules.
+nlohmann::json yaml_to_json(const YAML::Node& node, const std::string& where)
+{
+    switch (node.Type()) {
+        case YAML::NodeType::Map: {
+            nlohmann::json object = nlohmann::json::object();
+            for (const auto& entry : node) {
+                const std::string key = entry.first.as<std::string>();
+                object[key] = yaml_to_json(entry.second, where + "/" + key);
+            }
+            return object;
+        }
+        case YAML::NodeType::Sequence: {
+            nlohmann::json array = nlohmann::json::array();
+            for (const auto& item : node) array.push_back(yaml_to_json(item, where));
+            return array;
+        }
+        case YAML::NodeType::Scalar: {
+            const std::string text = node.Scalar();
+            if (node.Tag() == "!") return text;  // quoted: always text
+            if (text == "true" || text == "True" || text == "TRUE") return true;
+            if (text == "false" || text == "False" || text == "FALSE") return false;
+            char* end = nullptr;
+            if (!text.empty() && text.find_first_not_of("+-0123456789") == std::string::npos) {
+                if (text[0] == '-') {
+                    const long long v = std::strtoll(text.c_str(), &end, 10);
+                    if (*end == '\0') return v;
+                } else {
+                    const unsigned long long v = std::strtoull(text.c_str(), &end, 10);
+                    if (*end == '\0') return v;
+                }
+            }
+            const double d = std::strtod(text.c_str(), &end);
+            if (!text.empty() && *end == '\0') return d;
+            return text;
+        }
+        default:
+            throw Error(where + " (line " + std::to_string(node.Mark().line + 1) + "): empty value");
+    }
+}
+
+// Every parameter of a document, all checked before any is published.
+std::vector<Parameter> parameters_of(const nlohmann::json& doc, const std::string& path)
+{
+    if (!doc.is_object()) throw Error("parameter file '" + path + "': the top level must be an object of parameters");
+    std::vector<Parameter> loaded;
+    for (const auto& [name, value] : doc.items()) {
+        loaded.push_back(from_json(name, value, "parameter file '" + path + "' at /" + name));
+    }
+    return loaded;
+}
+
 }  // namespace
 
 ParameterServer::ParameterServer(Participant& participant) : impl_(std::make_unique<Impl>(participant)) {}
@@ -230,13 +285,37 @@ size_t ParameterServer::load_json_file(const std::string& path)
     } catch (const nlohmann::json::parse_error& e) {
         throw Error("parameter file '" + path + "': not valid JSON: " + e.what());
     }
-    if (!doc.is_object()) throw Error("parameter file '" + path + "': the top level must be an object of parameters");
-    std::vector<Parameter> loaded;  // all checked before any is published
-    for (const auto& [name, value] : doc.items()) {
-        loaded.push_back(from_json(name, value, "parameter file '" + path + "' at /" + name));
+    return publish_all(parameters_of(doc, path));
+}
+
+size_t ParameterServer::load_yaml_file(const std::string& path)
+{
+    YAML::Node doc;
+    try {
+        doc = YAML::LoadFile(path);
+    } catch (const YAML::BadFile&) {
+        throw Error("parameter file '" + path + "': cannot be opened");
+    } catch (const YAML::ParserException& e) {
+        throw Error("parameter file '" + path + "' line " + std::to_string(e.mark.line + 1) + ": not valid YAML: " +
+                    e.msg);
     }
-    for (auto& p : loaded) impl_->publish(p);
-    return loaded.size();
+    if (!doc.IsMap()) throw Error("parameter file '" + path + "': the top level must be a mapping of parameters");
+    return publish_all(parameters_of(yaml_to_json(doc, "parameter file '" + path + "' at "), path));
+}
+
+size_t ParameterServer::load_file(const std::string& path)
+{
+    const auto dot = path.rfind('.');
+    const std::string ext = dot == std::string::npos ? "" : path.substr(dot);
+    return ext == ".yaml" || ext == ".yml" ? load_yaml_file(path) : load_json_file(path);
+}
+
+
+
+size_t ParameterServer::publish_all(const std::vector<Parameter>& parameters)
+{
+    for (const auto& p : parameters) impl_->publish(p);
+    return parameters.size();
 }
 
 size_t ParameterServer::size() const

@@ -23,9 +23,10 @@ protected:
     void SetUp() override { cpm_test::test_domain_id(); }  // clients use the default participant
     cpm::Participant server_side{cpm_test::isolated_options()};
 
-    std::string write_file(const std::string& text)
+    std::string write_file(const std::string& text, const std::string& extension = ".json")
     {
-        const std::string path = "/tmp/cpm_params_" + std::to_string(getpid()) + "_" + std::to_string(files_++) + ".json";
+        const std::string path =
+            "/tmp/cpm_params_" + std::to_string(getpid()) + "_" + std::to_string(files_++) + extension;
         std::ofstream(path) << text;
         paths_.push_back(path);
         return path;
@@ -144,4 +145,33 @@ TEST_F(ParameterTest, BadFilesAreErrorsNamingFileAndPlaceAndLoadNothing)
     EXPECT_THAT(error_of([&] { sut.load_json_file(mixed); }), HasSubstr("at /a"));
     EXPECT_THAT(error_of([&] { sut.load_json_file("/nonexistent.json"); }), HasSubstr("cannot be opened"));
     EXPECT_EQ(sut.size(), 0u) << "a file with an error must load nothing";
+}
+
+TEST_F(ParameterTest, YamlFileReadsTheSameTypesAndKeepsQuotedTextAsText)
+{
+    cpm::ParameterServer sut(server_side);
+    const size_t n = sut.load_file(write_file("on: true\ncount: 7\nrate: 50.5\nmap: corridor\nversion: \"12\"\n"
+                                              "ids: [1, 3, 7]\ngains: [0.5, 1]\nforced:\n  type: uint64\n  value: 3\n",
+                                              ".yaml"));
+
+    EXPECT_EQ(n, 8u);
+    EXPECT_EQ(cpm::parameter_bool("on"), true);
+    EXPECT_EQ(cpm::parameter_int("count"), 7);
+    EXPECT_EQ(cpm::parameter_double("rate"), 50.5);
+    EXPECT_EQ(cpm::parameter_string("map"), "corridor");
+    EXPECT_EQ(cpm::parameter_string("version"), "12");
+    EXPECT_EQ(cpm::parameter_ints("ids"), (std::vector<int32_t>{1, 3, 7}));
+    EXPECT_EQ(cpm::parameter_doubles("gains"), (std::vector<double>{0.5, 1.0}));
+    EXPECT_EQ(cpm::parameter_uint64_t("forced"), 3u);
+}
+
+TEST_F(ParameterTest, BrokenYamlNamesFileAndLine)
+{
+    cpm::ParameterServer sut(server_side);
+    const std::string broken = write_file("a: 1\nb: [1, 2\nc: 3\n", ".yml");
+
+    const std::string message = error_of([&] { sut.load_file(broken); });
+
+    EXPECT_THAT(message, HasSubstr("'" + broken + "' line "));
+    EXPECT_EQ(sut.size(), 0u);
 }

@@ -243,7 +243,7 @@ int param_serve(const std::vector<std::string>& args)
     if (file.empty()) throw UsageError("cpm param serve: no parameter file given (see --help)");
     cpm::Participant participant;
     cpm::ParameterServer server(participant);
-    const size_t n = server.load_json_file(file);
+    const size_t n = server.load_file(file);
     std::printf("serving %zu parameters from %s\n", n, file.c_str());
     std::fflush(stdout);
     std::signal(SIGINT, [](int) { g_interrupted = true; });

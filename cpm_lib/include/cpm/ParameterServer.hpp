@@ -6,6 +6,8 @@
 
 #include <cpm/Participant.hpp>
 
+class Parameter;  // the generated IDL type
+
 namespace cpm {
 
 /// Serves named, typed values on topic `parameter` (reliable, transient-local, keyed by name:
@@ -35,10 +37,17 @@ public:
     /// Throws cpm::Error naming the file and the JSON path (or line) of what is wrong; loads
     /// nothing then. Returns the number of parameters loaded.
     size_t load_json_file(const std::string& path);
+    /// The same from YAML: a mapping of names to values (or to {type, value} mappings); quoted
+    /// scalars are text, plain ones are read as true/false, whole numbers or numbers where they
+    /// parse as such. Errors name the file and the line.
+    size_t load_yaml_file(const std::string& path);
+    /// load_yaml_file for .yaml/.yml, else load_json_file.
+    size_t load_file(const std::string& path);
 
     size_t size() const;
 
 private:
+    size_t publish_all(const std::vector<::Parameter>& parameters);
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };
