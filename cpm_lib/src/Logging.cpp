@@ -6,6 +6,8 @@
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
 
+#include "lab_topics.hpp"
+
 #include <Log.h>
 #include <LogLevel.h>
 
@@ -56,22 +58,10 @@ struct Logging::Impl
         if (const char* path = std::getenv("CPM_LOG_FILE"); path != nullptr && *path != '\0') open_file(path);
     }
 
-    static WriterOptions log_options()
-    {
-        WriterOptions o;
-        o.reliable = true;
-        o.transient_local = true;
-        o.history_depth = 100;
-        return o;
-    }
-    static ReaderOptions level_options()
-    {
-        ReaderOptions o;
-        o.reliable = true;
-        o.transient_local = true;  // a node that starts late gets the lab's current level
-        o.history_depth = 1;
-        return o;
-    }
+    // The last 100 messages stay available to monitors that start late; a node that starts
+    // late gets the lab's current level.
+    static WriterOptions log_options() { return detail::reliable_writer_options(100, true); }
+    static ReaderOptions level_options() { return detail::reliable_reader_options(1, true); }
 
     void open_file(const std::string& path)
     {

@@ -4,6 +4,8 @@
 #include <cpm/Error.hpp>
 #include <cpm/Writer.hpp>
 
+#include "lab_topics.hpp"
+
 #include <Parameter.h>
 #include <ParameterRequest.h>
 
@@ -30,21 +32,9 @@ struct ParameterServer::Impl
               participant, "parameterRequest", request_options())
     {
     }
-    static WriterOptions writer_options()
-    {
-        WriterOptions o;
-        o.reliable = true;
-        o.transient_local = true;  // keyed by name: a late client gets every current value
-        o.history_depth = 1;
-        return o;
-    }
-    static ReaderOptions request_options()
-    {
-        ReaderOptions o;
-        o.reliable = true;
-        o.history_depth = 100;
-        return o;
-    }
+    // Keyed by name and transient-local: a client that starts late gets every current value.
+    static WriterOptions writer_options() { return detail::reliable_writer_options(1, true); }
+    static ReaderOptions request_options() { return detail::reliable_reader_options(100, false); }
 
     void publish(Parameter p)
     {

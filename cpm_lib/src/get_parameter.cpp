@@ -4,6 +4,8 @@
 #include <cpm/Error.hpp>
 #include <cpm/Writer.hpp>
 
+#include "lab_topics.hpp"
+
 #include <Parameter.h>
 #include <ParameterRequest.h>
 
@@ -82,21 +84,8 @@ private:
               "parameter", values_options())
     {
     }
-    static WriterOptions request_options()
-    {
-        WriterOptions o;
-        o.reliable = true;
-        o.history_depth = 10;
-        return o;
-    }
-    static ReaderOptions values_options()
-    {
-        ReaderOptions o;
-        o.reliable = true;
-        o.transient_local = true;
-        o.history_depth = 1;
-        return o;
-    }
+    static WriterOptions request_options() { return detail::reliable_writer_options(10, false); }
+    static ReaderOptions values_options() { return detail::reliable_reader_options(1, true); }
 
     std::mutex mutex_;
     std::condition_variable changed_;

@@ -12,25 +12,29 @@ constexpr const char* kSystemTriggerTopic = "systemTrigger";
 /// A SystemTrigger with this next_start stops every timer.
 constexpr uint64_t kStopTrigger = UINT64_MAX;
 
-/// Reliable and transient-local (writers keep the latest sample per key): whoever matches late
-/// (a master started after its nodes, a node after the start) still sees the current state.
-/// Readers keep a few, and readers take the largest value: Fast DDS was seen delivering an
-/// older sample of an instance after a newer one.
-inline WriterOptions lab_control_writer_options()
+/// Reliable options with a history depth, optionally transient-local (cpm's own services).
+inline WriterOptions reliable_writer_options(int depth, bool transient_local)
 {
     WriterOptions o;
     o.reliable = true;
-    o.transient_local = true;
-    o.history_depth = 1;
+    o.transient_local = transient_local;
+    o.history_depth = depth;
     return o;
 }
-inline ReaderOptions lab_control_reader_options()
+inline ReaderOptions reliable_reader_options(int depth, bool transient_local)
 {
     ReaderOptions o;
     o.reliable = true;
-    o.transient_local = true;
-    o.history_depth = 64;
+    o.transient_local = transient_local;
+    o.history_depth = depth;
     return o;
 }
+
+/// Timer/TimeMaster control: transient-local (writers keep the latest sample per key), so
+/// whoever matches late (a master started after its nodes, a node after the start) still sees
+/// the current state. Readers keep a few and take the largest value: Fast DDS was seen
+/// delivering an older sample of an instance after a newer one.
+inline WriterOptions lab_control_writer_options() { return reliable_writer_options(1, true); }
+inline ReaderOptions lab_control_reader_options() { return reliable_reader_options(64, true); }
 
 }  // namespace cpm::detail

@@ -268,29 +268,24 @@ int main(int argc, char** argv)
             std::fputs(kTopHelp, stdout);
             return args.empty() ? kUsageError : 0;
         }
-        if (args.size() >= 2 && args[0] == "lab" && args[1] == "clock") {
+        struct Command
+        {
+            const char* group;
+            const char* verb;
+            const char* help;
+            int (*run)(const std::vector<std::string>&);
+        };
+        static const Command commands[] = {{"lab", "clock", kClockHelp, lab_clock},
+                                           {"topic", "echo", kEchoHelp, topic_echo},
+                                           {"param", "serve", kParamHelp, param_serve}};
+        for (const auto& c : commands) {
+            if (args.size() < 2 || args[0] != c.group || args[1] != c.verb) continue;
             if (help) {
-                std::fputs(kClockHelp, stdout);
+                std::fputs(c.help, stdout);
                 return 0;
             }
             cpm::init(argc, argv);
-            return lab_clock(std::vector<std::string>(args.begin() + 2, args.end()));
-        }
-        if (args.size() >= 2 && args[0] == "topic" && args[1] == "echo") {
-            if (help) {
-                std::fputs(kEchoHelp, stdout);
-                return 0;
-            }
-            cpm::init(argc, argv);
-            return topic_echo(std::vector<std::string>(args.begin() + 2, args.end()));
-        }
-        if (args.size() >= 2 && args[0] == "param" && args[1] == "serve") {
-            if (help) {
-                std::fputs(kParamHelp, stdout);
-                return 0;
-            }
-            cpm::init(argc, argv);
-            return param_serve(std::vector<std::string>(args.begin() + 2, args.end()));
+            return c.run(std::vector<std::string>(args.begin() + 2, args.end()));
         }
         throw UsageError("unknown command '" + args[0] + (args.size() > 1 ? " " + args[1] : "") + "' (see cpm --help)");
     } catch (const UsageError& e) {
