@@ -23,8 +23,10 @@ class Timer
 public:
     using Callback = std::function<void(uint64_t t_nominal_ns)>;
 
-    /// A timer on the real clock (CLOCK_REALTIME). With --simulated_time and
-    /// simulated_time_allowed the lab's simulated clock is meant; not available yet (throws).
+    /// A timer on the real clock (CLOCK_REALTIME); with --simulated_time and
+    /// simulated_time_allowed, on the lab's simulated clock: it then announces its next tick in
+    /// ReadyStatus.next_start_stamp and ticks when a SystemTrigger names exactly that time
+    /// (cpm::TimeMaster, `cpm lab clock --simulated`), whatever wait_for_start says.
     /// offset_ns must be < period_ns. The participant (default: the process's) carries the
     /// ready announcements and the start/stop triggers.
     static std::shared_ptr<Timer> create(const std::string& node_id, uint64_t period_ns, uint64_t offset_ns,
