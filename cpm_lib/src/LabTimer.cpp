@@ -184,11 +184,9 @@ void LabTimer::run_simulated(const Callback& callback)
         lock.unlock();
         announce(next);
         lock.lock();
-        // Wait for the master to move the clock; re-announce now and then (a master that
-        // appears late still finds the announcement in the transient-local history).
-        while (!stopping_ && trigger_count_ == seen) {
-            trigger_changed_.wait_for(lock, kReadyAnnouncePeriod);
-        }
+        // Wait for the master to move the clock (stop() notifies too). A master that appears
+        // late still finds the announcement in the transient-local history.
+        trigger_changed_.wait(lock, [&] { return stopping_ || trigger_count_ != seen; });
         if (stopping_) break;
         seen = trigger_count_;
         const uint64_t now = next_start_;

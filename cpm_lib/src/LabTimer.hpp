@@ -60,7 +60,7 @@ private:
 
     std::mutex trigger_mutex_;
     std::condition_variable trigger_changed_;
-    uint64_t next_start_ = 0;      // the latest trigger's next_start
+    uint64_t next_start_ = 0;      // the largest next_start received (the lab clock only advances)
     uint64_t trigger_count_ = 0;   // triggers received (a simulated trigger may be 0)
 
     std::unique_ptr<Writer<ReadyStatus>> ready_writer_;

@@ -80,15 +80,17 @@ uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uin
         impl_->collect();
         // Every node must have announced a tick later than the current time: then all ticks
         // at `now` are done, and the next time is the smallest announced one.
-        bool all_past_now = impl_->missing(node_ids).empty();
+        std::vector<std::string> waiting_for;
         uint64_t next = UINT64_MAX;
         for (const auto& n : node_ids) {
-            if (!all_past_now) break;
-            const uint64_t t = impl_->announced[n];
-            if (started && t <= now) all_past_now = false;
-            next = std::min(next, t);
+            const auto found = impl_->announced.find(n);
+            if (found == impl_->announced.end() || (started && found->second <= now)) {
+                waiting_for.push_back(n);
+            } else {
+                next = std::min(next, found->second);
+            }
         }
-        if (all_past_now) {
+        if (waiting_for.empty()) {
             if (next >= end_ns) {
                 stop_all();
                 return steps;
@@ -102,12 +104,8 @@ uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uin
         }
         const auto remaining = deadline - std::chrono::steady_clock::now();
         if (remaining <= std::chrono::steady_clock::duration::zero()) {
-            std::vector<std::string> silent = impl_->missing(node_ids);
-            for (const auto& n : node_ids) {
-                if (impl_->announced.count(n) && started && impl_->announced[n] <= now) silent.push_back(n);
-            }
             throw Error("TimeMaster: simulated time stuck at " + std::to_string(now) + " ns: no announcement from " +
-                        join(silent) + " within " + std::to_string(step_timeout.count()) + " ms");
+                        join(waiting_for) + " within " + std::to_string(step_timeout.count()) + " ms");
         }
         impl_->ready.wait_for_data(std::chrono::duration_cast<std::chrono::milliseconds>(remaining) +
                                    std::chrono::milliseconds(1));
