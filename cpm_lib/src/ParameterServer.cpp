@@ -5,6 +5,7 @@
 #include <cpm/Writer.hpp>
 
 #include "lab_topics.hpp"
+#include "parameter_types.hpp"
 
 #include <Parameter.h>
 #include <ParameterRequest.h>
@@ -20,6 +21,9 @@
 #include <mutex>
 
 namespace cpm {
+
+using detail::parameter_type_name;
+using detail::parameter_type_named;
 
 struct ParameterServer::Impl
 {
@@ -77,92 +81,89 @@ Parameter make(const std::string& name, ParameterType type)
     return p;
 }
 
-// One parameter from a JSON value; `where` names the file and JSON path in errors.
-Parameter from_json(const std::string& name, const nlohmann::json& v, const std::string& where)
+bool fits_int32(const nlohmann::json& v)
 {
-    using nlohmann::json;
-    if (v.is_object()) {
-        if (!v.contains("type") || !v.contains("value") || !v["type"].is_string()) {
-            throw Error(where + ": an object must be {\"type\": ..., \"value\": ...}");
-        }
-        const std::string type = v["type"];
-        const json& value = v["value"];
-        auto require = [&](bool ok) {
-            if (!ok) throw Error(where + ": value " + value.dump() + " is not of type " + type);
-        };
-        Parameter p = make(name, ParameterType_Invalid);
-        if (type == "bool") {
-            require(value.is_boolean());
-            p.type(ParameterType_Bool);
-            p.value_bool(value.get<bool>());
-        } else if (type == "int") {
-            require(value.is_number_integer() && value.get<int64_t>() >= std::numeric_limits<int32_t>::min() &&
-                    value.get<int64_t>() <= std::numeric_limits<int32_t>::max());
-            p.type(ParameterType_Int32);
-            p.values_int32({value.get<int32_t>()});
-        } else if (type == "uint64") {
-            require(value.is_number_unsigned());
-            p.type(ParameterType_UInt64);
-            p.values_uint64({value.get<uint64_t>()});
-        } else if (type == "double") {
-            require(value.is_number());
-            p.type(ParameterType_Double);
-            p.values_double({value.get<double>()});
-        } else if (type == "string") {
-            require(value.is_string());
-            p.type(ParameterType_String);
-            p.value_string(value.get<std::string>());
-        } else if (type == "ints" || type == "doubles") {
-            require(value.is_array());
-            for (const auto& e : value) require(type == "ints" ? e.is_number_integer() : e.is_number());
-            if (type == "ints") {
-                p.type(ParameterType_Vector_Int32);
-                p.values_int32(value.get<std::vector<int32_t>>());
-            } else {
-                p.type(ParameterType_Vector_Double);
-                p.values_double(value.get<std::vector<double>>());
-            }
-        } else {
-            throw Error(where + ": unknown type '" + type + "' (bool, int, uint64, double, string, ints, doubles)");
-        }
-        return p;
-    }
-    Parameter p = make(name, ParameterType_Invalid);
-    if (v.is_boolean()) {
-        p.type(ParameterType_Bool);
-        p.value_bool(v.get<bool>());
-    } else if (v.is_number_integer() && v.get<int64_t>() >= std::numeric_limits<int32_t>::min() &&
-               (v.is_number_unsigned() ? v.get<uint64_t>() <= uint64_t(std::numeric_limits<int32_t>::max())
-                                       : v.get<int64_t>() <= std::numeric_limits<int32_t>::max())) {
-        p.type(ParameterType_Int32);
-        p.values_int32({v.get<int32_t>()});
-    } else if (v.is_number_unsigned()) {
-        p.type(ParameterType_UInt64);
-        p.values_uint64({v.get<uint64_t>()});
-    } else if (v.is_number()) {
-        p.type(ParameterType_Double);
-        p.values_double({v.get<double>()});
-    } else if (v.is_string()) {
-        p.type(ParameterType_String);
-        p.value_string(v.get<std::string>());
-    } else if (v.is_array() && !v.empty()) {
-        bool all_int = true, all_number = true;
+    if (!v.is_number_integer()) return false;
+    if (v.is_number_unsigned()) return v.get<uint64_t>() <= uint64_t(std::numeric_limits<int32_t>::max());
+    const int64_t i = v.get<int64_t>();
+    return i >= std::numeric_limits<int32_t>::min() && i <= std::numeric_limits<int32_t>::max();
+}
+
+// The type a plain value stands for: true/false; a whole number fitting int32 -> int, larger
+// -> uint64; other numbers -> double; text; a list of int32 numbers -> ints, of numbers -> doubles.
+ParameterType inferred_type(const nlohmann::json& v, const std::string& where)
+{
+    if (v.is_boolean()) return ParameterType_Bool;
+    if (fits_int32(v)) return ParameterType_Int32;
+    if (v.is_number_unsigned()) return ParameterType_UInt64;
+    if (v.is_number()) return ParameterType_Double;
+    if (v.is_string()) return ParameterType_String;
+    if (v.is_array() && !v.empty()) {
+        bool all_int32 = true;
         for (const auto& e : v) {
-            all_int = all_int && e.is_number_integer();
-            all_number = all_number && e.is_number();
+            if (!e.is_number()) throw Error(where + ": a list must hold only numbers");
+            all_int32 = all_int32 && fits_int32(e);
         }
-        if (!all_number) throw Error(where + ": a list must hold only numbers");
-        if (all_int) {
-            p.type(ParameterType_Vector_Int32);
-            p.values_int32(v.get<std::vector<int32_t>>());
-        } else {
-            p.type(ParameterType_Vector_Double);
-            p.values_double(v.get<std::vector<double>>());
-        }
-    } else {
-        throw Error(where + ": " + v.dump() + " is not a parameter value (bool, number, text or list of numbers)");
+        return all_int32 ? ParameterType_Vector_Int32 : ParameterType_Vector_Double;
+    }
+    throw Error(where + ": " + v.dump() + " is not a parameter value (bool, number, text or list of numbers)");
+}
+
+// A parameter of the given type from a JSON value; `where` names the file and JSON path.
+Parameter typed(const std::string& name, ParameterType type, const nlohmann::json& value, const std::string& where)
+{
+    auto require = [&](bool ok) {
+        if (!ok) throw Error(where + ": value " + value.dump() + " is not of type " + parameter_type_name(type));
+    };
+    Parameter p = make(name, type);
+    switch (type) {
+        case ParameterType_Bool:
+            require(value.is_boolean());
+            p.value_bool(value.get<bool>());
+            break;
+        case ParameterType_Int32:
+            require(fits_int32(value));
+            p.values_int32({value.get<int32_t>()});
+            break;
+        case ParameterType_UInt64:
+            require(value.is_number_unsigned());
+            p.values_uint64({value.get<uint64_t>()});
+            break;
+        case ParameterType_Double:
+            require(value.is_number());
+            p.values_double({value.get<double>()});
+            break;
+        case ParameterType_String:
+            require(value.is_string());
+            p.value_string(value.get<std::string>());
+            break;
+        case ParameterType_Vector_Int32:
+            require(value.is_array());
+            for (const auto& e : value) require(fits_int32(e));  // never truncate silently
+            p.values_int32(value.get<std::vector<int32_t>>());
+            break;
+        case ParameterType_Vector_Double:
+            require(value.is_array());
+            for (const auto& e : value) require(e.is_number());
+            p.values_double(value.get<std::vector<double>>());
+            break;
+        default:
+            throw Error(where + ": no such parameter type");
     }
     return p;
+}
+
+// One parameter from a JSON value: {"type": ..., "value": ...}, or a plain value.
+Parameter from_json(const std::string& name, const nlohmann::json& v, const std::string& where)
+{
+    if (!v.is_object()) return typed(name, inferred_type(v, where), v, where);
+    if (!v.contains("type") || !v.contains("value") || !v["type"].is_string()) {
+        throw Error(where + ": an object must be {\"type\": ..., \"value\": ...}");
+    }
+    const std::string type = v["type"];
+    const auto known = parameter_type_named(type);
+    if (!known) throw Error(where + ": unknown type '" + type + "' (bool, int, uint64, double, string, ints, doubles)");
+    return typed(name, *known, v["value"], where);
 }
 
 // A YAML document as JSON, so both formats share one set of type rules.

@@ -5,6 +5,7 @@
 #include <cpm/Writer.hpp>
 
 #include "lab_topics.hpp"
+#include "parameter_types.hpp"
 
 #include <Parameter.h>
 #include <ParameterRequest.h>
@@ -16,20 +17,6 @@
 namespace cpm {
 
 namespace {
-
-const char* type_name(ParameterType t)
-{
-    switch (t) {
-        case ParameterType_Bool: return "bool";
-        case ParameterType_Int32: return "int";
-        case ParameterType_UInt64: return "uint64";
-        case ParameterType_Double: return "double";
-        case ParameterType_String: return "string";
-        case ParameterType_Vector_Int32: return "ints";
-        case ParameterType_Vector_Double: return "doubles";
-        default: return "unknown";
-    }
-}
 
 // The values this process has seen, kept current by the server's announcements.
 class ParameterCache
@@ -65,7 +52,7 @@ public:
             throw Error("parameter '" + name + "': the parameter server does not know it");
         }
         if (p.type() != wanted) {
-            throw Error("parameter '" + name + "' is of type " + type_name(p.type()) + ", not " + type_name(wanted));
+            throw Error("parameter '" + name + "' is of type " + detail::parameter_type_name(p.type()) + ", not " + detail::parameter_type_name(wanted));
         }
         return p;
     }

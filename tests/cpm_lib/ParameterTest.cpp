@@ -175,3 +175,14 @@ TEST_F(ParameterTest, BrokenYamlNamesFileAndLine)
     EXPECT_THAT(message, HasSubstr("'" + broken + "' line "));
     EXPECT_EQ(sut.size(), 0u);
 }
+
+TEST_F(ParameterTest, IntListsAreNeverTruncated)
+{
+    cpm::ParameterServer sut(server_side);
+    const std::string explicit_ints = write_file(R"({"ids": {"type": "ints", "value": [1, 5000000000]}})");
+    EXPECT_THAT(error_of([&] { sut.load_json_file(explicit_ints); }), HasSubstr("at /ids"));
+
+    sut.load_json_file(write_file(R"({"big": [1, 5000000000]})"));
+
+    EXPECT_EQ(cpm::parameter_doubles("big"), (std::vector<double>{1.0, 5e9}));
+}
