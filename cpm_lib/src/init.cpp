@@ -56,6 +56,20 @@ std::optional<std::string> flag_value(int argc, const char* const argv[], int& i
 
 }  // namespace
 
+bool is_init_flag(const std::string& flag, bool& takes_value)
+{
+    static const std::pair<const char*, bool> kFlags[] = {
+        {"--dds_domain", true},       {"--node_id", true},           {"--dds_interface", true},
+        {"--dds_initial_peer", true}, {"--dds_discovery_server", true}, {"--simulated_time", false}};
+    for (const auto& [name, value] : kFlags) {
+        if (flag == name) {
+            takes_value = value;
+            return true;
+        }
+    }
+    return false;
+}
+
 int checked_domain_id(long long domain_id, const std::string& source)
 {
     if (domain_id < 0 || domain_id > 232) {

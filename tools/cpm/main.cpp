@@ -86,38 +86,66 @@ uint64_t parse_duration(const std::string& flag, const std::string& text)
     return static_cast<uint64_t>(value * double(unit->second));
 }
 
-// The command's own flags: --name value or --name=value; cpm::init's flags are skipped.
-std::map<std::string, std::string> parse_flags(const std::vector<std::string>& args,
-                                               const std::vector<std::string>& known, const std::string& command)
+struct FlagSpec
 {
-    std::map<std::string, std::string> flags;
+    const char* name;
+    bool takes_value;  // else a switch: present or not
+};
+
+struct ParsedArgs
+{
+    std::map<std::string, std::string> flags;  // switches map to "1"
+    std::vector<std::string> positional;
+};
+
+// A command's arguments: its own flags (--name value or --name=value) and positional
+// arguments; cpm::init's flags are passed over (cpm::init reads them).
+ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<FlagSpec>& known,
+                      const std::string& command)
+{
+    ParsedArgs parsed;
     for (size_t i = 0; i < args.size(); ++i) {
         std::string name = args[i], value;
-        if (name.rfind("--", 0) != 0) throw UsageError(command + ": unexpected argument '" + name + "'");
+        if (name.rfind("--", 0) != 0) {
+            parsed.positional.push_back(name);
+            continue;
+        }
         const auto eq = name.find('=');
         if (eq != std::string::npos) {
             value = name.substr(eq + 1);
             name = name.substr(0, eq);
         }
-        if (name == "--dds_domain" || name == "--node_id" || name == "--dds_interface" ||
-            name == "--dds_initial_peer" || name == "--dds_discovery_server") {
-            if (eq == std::string::npos) ++i;  // handled by cpm::init
+        bool takes_value = false;
+        if (cpm::is_init_flag(name, takes_value)) {
+            if (takes_value && eq == std::string::npos) ++i;
             continue;
         }
-        bool is_known = false;
-        for (const auto& k : known) is_known = is_known || k == name;
-        if (!is_known) throw UsageError(command + ": unknown flag '" + name + "' (see --help)");
-        if (name == "--simulated" || name == "--json") {
-            flags[name] = "1";
+        const FlagSpec* spec = nullptr;
+        for (const auto& k : known) {
+            if (name == k.name) spec = &k;
+        }
+        if (spec == nullptr) throw UsageError(command + ": unknown flag '" + name + "' (see --help)");
+        if (!spec->takes_value) {
+            parsed.flags[name] = "1";
             continue;
         }
         if (eq == std::string::npos) {
             if (i + 1 >= args.size()) throw UsageError(command + ": " + name + " needs a value");
             value = args[++i];
         }
-        flags[name] = value;
+        parsed.flags[name] = value;
     }
-    return flags;
+    return parsed;
+}
+
+// The single positional argument a command takes (`what` names it in the error).
+std::string only_positional(const ParsedArgs& parsed, const std::string& command, const std::string& what)
+{
+    if (parsed.positional.empty()) throw UsageError(command + ": no " + what + " given (see --help)");
+    if (parsed.positional.size() > 1) {
+        throw UsageError(command + ": unexpected argument '" + parsed.positional[1] + "'");
+    }
+    return parsed.positional[0];
 }
 
 std::vector<std::string> split_list(const std::string& flag, const std::string& text)
@@ -136,8 +164,13 @@ std::atomic<bool> g_interrupted{false};
 
 int lab_clock(const std::vector<std::string>& args)
 {
-    const auto flags = parse_flags(args, {"--nodes", "--simulated", "--until", "--start-delay", "--duration"},
-                                   "cpm lab clock");
+    const auto parsed = parse_args(
+        args, {{"--nodes", true}, {"--simulated", false}, {"--until", true}, {"--start-delay", true}, {"--duration", true}},
+        "cpm lab clock");
+    if (!parsed.positional.empty()) {
+        throw UsageError("cpm lab clock: unexpected argument '" + parsed.positional[0] + "'");
+    }
+    const auto& flags = parsed.flags;
     if (!flags.count("--nodes")) throw UsageError("cpm lab clock: --nodes is required (the timers' node ids)");
     const auto nodes = split_list("--nodes", flags.at("--nodes"));
     cpm::Participant participant;
@@ -172,12 +205,12 @@ int lab_clock(const std::vector<std::string>& args)
 
 int topic_echo(const std::vector<std::string>& args)
 {
-    if (args.empty() || args[0].rfind("--", 0) == 0) throw UsageError("cpm topic echo: which topic? (see --help)");
-    if (args[0] != "log") {
-        throw UsageError("cpm topic echo: topic '" + args[0] + "' is not supported yet (supported: log)");
+    const auto parsed = parse_args(args, {{"--json", false}, {"--count", true}, {"--timeout", true}}, "cpm topic echo");
+    const std::string topic = only_positional(parsed, "cpm topic echo", "topic");
+    if (topic != "log") {
+        throw UsageError("cpm topic echo: topic '" + topic + "' is not supported yet (supported: log)");
     }
-    const auto flags = parse_flags(std::vector<std::string>(args.begin() + 1, args.end()),
-                                   {"--json", "--count", "--timeout"}, "cpm topic echo");
+    const auto& flags = parsed.flags;
     const bool json = flags.count("--json") > 0;
     uint64_t count = UINT64_MAX;
     if (flags.count("--count")) {
@@ -230,17 +263,8 @@ int topic_echo(const std::vector<std::string>& args)
 
 int param_serve(const std::vector<std::string>& args)
 {
-    std::string file;
-    for (size_t i = 0; i < args.size(); ++i) {
-        if (args[i].rfind("--dds_", 0) == 0 || args[i].rfind("--node_id", 0) == 0) {
-            if (args[i].find('=') == std::string::npos) ++i;  // cpm::init's flag and its value
-            continue;
-        }
-        if (args[i].rfind("--", 0) == 0) throw UsageError("cpm param serve: unknown flag '" + args[i] + "'");
-        if (!file.empty()) throw UsageError("cpm param serve: more than one file given");
-        file = args[i];
-    }
-    if (file.empty()) throw UsageError("cpm param serve: no parameter file given (see --help)");
+    const std::string file = only_positional(parse_args(args, {}, "cpm param serve"), "cpm param serve",
+                                             "parameter file");
     cpm::Participant participant;
     cpm::ParameterServer server(participant);
     const size_t n = server.load_file(file);

@@ -27,6 +27,11 @@ InitSettings init_settings();
 /// Parses settings without touching global state; env_domain is CPM_DOMAIN_ID or nullptr.
 InitSettings parse_init_settings(int argc, const char* const argv[], const char* env_domain);
 
+/// Whether `flag` (e.g. "--dds_domain", without "=value") is one of cpm::init's flags; then
+/// `takes_value` says whether a separate value follows it (--simulated_time stands alone).
+/// Lets programs with flags of their own pass cpm's through.
+bool is_init_flag(const std::string& flag, bool& takes_value);
+
 /// Checks a DDS domain id: Fast DDS accepts 233 and above but then never discovers anyone.
 /// `source` names where the value came from in the error message.
 int checked_domain_id(long long domain_id, const std::string& source);
