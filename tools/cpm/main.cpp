@@ -1,6 +1,7 @@
 // cpm — the lab's command line, in the style of `ros2`:
 //   cpm lab clock --nodes a,b,c [--simulated --until 10s | --start-delay 1s --duration 60s]
 // Errors go to stderr with the reason, and the exit code is non-zero.
+#include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/ParameterServer.hpp>
 #include <cpm/ReaderAbstract.hpp>
@@ -26,7 +27,13 @@
 
 namespace {
 
-constexpr int kUsageError = 2;
+using cpm::cli::FlagSpec;
+using cpm::cli::ParsedArgs;
+using cpm::cli::UsageError;
+using cpm::cli::parse_args;
+using cpm::cli::parse_duration;
+using cpm::cli::split_list;
+constexpr int kUsageError = cpm::cli::kUsageExit;
 
 const char* kTopHelp =
     "usage: cpm COMMAND ...\n"
@@ -63,81 +70,6 @@ const char* kEchoHelp =
     "as they arrive: a table for people, or one JSON object per line with --json. Stops after N\n"
     "messages or after --timeout without one, else on Ctrl-C. Other topics: not yet.\n";
 
-struct UsageError : std::runtime_error
-{
-    using std::runtime_error::runtime_error;
-};
-
-uint64_t parse_duration(const std::string& flag, const std::string& text)
-{
-    static const std::map<std::string, uint64_t> units{
-        {"ns", 1}, {"us", 1'000}, {"ms", 1'000'000}, {"s", 1'000'000'000}, {"m", 60'000'000'000}};
-    size_t end = 0;
-    double value = 0;
-    try {
-        value = std::stod(text, &end);
-    } catch (const std::exception&) {
-        end = 0;
-    }
-    const auto unit = units.find(text.substr(end));
-    if (end == 0 || unit == units.end() || value < 0) {
-        throw UsageError(flag + ": '" + text + "' is not a duration (a number with ns, us, ms, s or m, e.g. 10s)");
-    }
-    return static_cast<uint64_t>(value * double(unit->second));
-}
-
-struct FlagSpec
-{
-    const char* name;
-    bool takes_value;  // else a switch: present or not
-};
-
-struct ParsedArgs
-{
-    std::map<std::string, std::string> flags;  // switches map to "1"
-    std::vector<std::string> positional;
-};
-
-// A command's arguments: its own flags (--name value or --name=value) and positional
-// arguments; cpm::init's flags are passed over (cpm::init reads them).
-ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<FlagSpec>& known,
-                      const std::string& command)
-{
-    ParsedArgs parsed;
-    for (size_t i = 0; i < args.size(); ++i) {
-        std::string name = args[i], value;
-        if (name.rfind("--", 0) != 0) {
-            parsed.positional.push_back(name);
-            continue;
-        }
-        const auto eq = name.find('=');
-        if (eq != std::string::npos) {
-            value = name.substr(eq + 1);
-            name = name.substr(0, eq);
-        }
-        bool takes_value = false;
-        if (cpm::is_init_flag(name, takes_value)) {
-            if (takes_value && eq == std::string::npos) ++i;
-            continue;
-        }
-        const FlagSpec* spec = nullptr;
-        for (const auto& k : known) {
-            if (name == k.name) spec = &k;
-        }
-        if (spec == nullptr) throw UsageError(command + ": unknown flag '" + name + "' (see --help)");
-        if (!spec->takes_value) {
-            parsed.flags[name] = "1";
-            continue;
-        }
-        if (eq == std::string::npos) {
-            if (i + 1 >= args.size()) throw UsageError(command + ": " + name + " needs a value");
-            value = args[++i];
-        }
-        parsed.flags[name] = value;
-    }
-    return parsed;
-}
-
 // The single positional argument a command takes (`what` names it in the error).
 std::string only_positional(const ParsedArgs& parsed, const std::string& command, const std::string& what)
 {
@@ -146,18 +78,6 @@ std::string only_positional(const ParsedArgs& parsed, const std::string& command
         throw UsageError(command + ": unexpected argument '" + parsed.positional[1] + "'");
     }
     return parsed.positional[0];
-}
-
-std::vector<std::string> split_list(const std::string& flag, const std::string& text)
-{
-    std::vector<std::string> items;
-    std::stringstream in(text);
-    for (std::string item; std::getline(in, item, ',');) {
-        if (item.empty()) throw UsageError(flag + ": empty name in '" + text + "'");
-        items.push_back(item);
-    }
-    if (items.empty()) throw UsageError(flag + ": no names given");
-    return items;
 }
 
 std::atomic<bool> g_interrupted{false};
@@ -214,11 +134,7 @@ int topic_echo(const std::vector<std::string>& args)
     const bool json = flags.count("--json") > 0;
     uint64_t count = UINT64_MAX;
     if (flags.count("--count")) {
-        const std::string& text = flags.at("--count");
-        char* end = nullptr;
-        const unsigned long long n = std::strtoull(text.c_str(), &end, 10);
-        if (text.empty() || *end != '\0' || n == 0) throw UsageError("--count: '" + text + "' is not a positive number");
-        count = n;
+        count = static_cast<uint64_t>(cpm::cli::parse_integer("--count", flags.at("--count"), 1, INT64_MAX));
     }
     const uint64_t timeout_ns = flags.count("--timeout") ? parse_duration("--timeout", flags.at("--timeout")) : 0;
 
@@ -281,12 +197,7 @@ int param_serve(const std::vector<std::string>& args)
 int main(int argc, char** argv)
 {
     std::vector<std::string> args(argv + 1, argv + argc);
-    const bool help = [&] {
-        for (const auto& a : args) {
-            if (a == "--help" || a == "-h") return true;
-        }
-        return false;
-    }();
+    const bool help = cpm::cli::wants_help(args);
     try {
         if (args.empty() || args[0] == "help" || (help && args.size() == 1)) {
             std::fputs(kTopHelp, stdout);

@@ -1,0 +1,58 @@
+#pragma once
+#include <cpm/Error.hpp>
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+/// Command-line parsing shared by cpm's programs (`cpm`, `firmware_sim`, `vehicle_bridge`, …):
+/// `--name value`, `--name=value` and switches; cpm::init's own flags are passed over.
+namespace cpm::cli {
+
+/// A wrong flag or value; programs print it and exit with kUsageExit.
+class UsageError : public Error
+{
+public:
+    using Error::Error;
+};
+
+constexpr int kUsageExit = 2;
+
+struct FlagSpec
+{
+    const char* name;
+    bool takes_value;  ///< else a switch: present or not
+    bool repeatable = false;  ///< may be given more than once (values joined with '\n')
+};
+
+struct ParsedArgs
+{
+    std::map<std::string, std::string> flags;  ///< switches map to "1"
+    std::vector<std::string> positional;
+
+    bool has(const std::string& name) const { return flags.count(name) != 0; }
+    /// The flag's value, or fallback when absent.
+    std::string get(const std::string& name, const std::string& fallback = {}) const;
+};
+
+/// Parses `args` against the known flags; throws UsageError naming `command` and the flag.
+ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<FlagSpec>& known,
+                      const std::string& command);
+
+/// True when --help or -h is among the arguments.
+bool wants_help(const std::vector<std::string>& args);
+
+/// "500ms", "10s", "2m", "100ns", "20us" → nanoseconds; throws UsageError naming the flag.
+uint64_t parse_duration(const std::string& flag, const std::string& text);
+
+/// A number within [min, max]; throws UsageError naming the flag and the value.
+double parse_number(const std::string& flag, const std::string& text, double min, double max);
+
+/// A whole number within [min, max]; throws UsageError naming the flag and the value.
+long long parse_integer(const std::string& flag, const std::string& text, long long min, long long max);
+
+/// "a,b,c" → {"a", "b", "c"}; an empty item is an error.
+std::vector<std::string> split_list(const std::string& flag, const std::string& text);
+
+}  // namespace cpm::cli

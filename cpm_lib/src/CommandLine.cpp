@@ -1,0 +1,128 @@
+#include <cpm/CommandLine.hpp>
+#include <cpm/init.hpp>
+
+#include <cmath>
+#include <sstream>
+
+namespace cpm::cli {
+
+std::string ParsedArgs::get(const std::string& name, const std::string& fallback) const
+{
+    auto it = flags.find(name);
+    return it == flags.end() ? fallback : it->second;
+}
+
+ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<FlagSpec>& known,
+                      const std::string& command)
+{
+    ParsedArgs parsed;
+    for (size_t i = 0; i < args.size(); ++i) {
+        std::string name = args[i], value;
+        if (name.rfind("--", 0) != 0) {
+            parsed.positional.push_back(name);
+            continue;
+        }
+        const auto eq = name.find('=');
+        if (eq != std::string::npos) {
+            value = name.substr(eq + 1);
+            name = name.substr(0, eq);
+        }
+        bool takes_value = false;
+        if (is_init_flag(name, takes_value)) {
+            if (takes_value && eq == std::string::npos) ++i;
+            continue;
+        }
+        const FlagSpec* spec = nullptr;
+        for (const auto& k : known) {
+            if (name == k.name) spec = &k;
+        }
+        if (spec == nullptr) throw UsageError(command + ": unknown flag '" + name + "' (see --help)");
+        if (!spec->takes_value) {
+            parsed.flags[name] = "1";
+            continue;
+        }
+        if (eq == std::string::npos) {
+            if (i + 1 >= args.size()) throw UsageError(command + ": " + name + " needs a value");
+            value = args[++i];
+        }
+        auto [it, inserted] = parsed.flags.emplace(name, value);
+        if (!inserted) {
+            if (!spec->repeatable) throw UsageError(command + ": " + name + " given twice");
+            it->second += "\n" + value;
+        }
+    }
+    return parsed;
+}
+
+bool wants_help(const std::vector<std::string>& args)
+{
+    for (const auto& a : args) {
+        if (a == "--help" || a == "-h") return true;
+    }
+    return false;
+}
+
+uint64_t parse_duration(const std::string& flag, const std::string& text)
+{
+    static const std::map<std::string, uint64_t> units{
+        {"ns", 1}, {"us", 1'000}, {"ms", 1'000'000}, {"s", 1'000'000'000}, {"m", 60'000'000'000}};
+    size_t end = 0;
+    double value = 0;
+    try {
+        value = std::stod(text, &end);
+    } catch (const std::exception&) {
+        end = 0;
+    }
+    const auto unit = units.find(text.substr(end));
+    if (end == 0 || unit == units.end() || !(value >= 0)) {
+        throw UsageError(flag + ": '" + text + "' is not a duration (a number with ns, us, ms, s or m, e.g. 10s)");
+    }
+    return static_cast<uint64_t>(value * double(unit->second));
+}
+
+double parse_number(const std::string& flag, const std::string& text, double min, double max)
+{
+    size_t end = 0;
+    double value = NAN;
+    try {
+        value = std::stod(text, &end);
+    } catch (const std::exception&) {
+        end = 0;
+    }
+    if (end == 0 || end != text.size() || !(value >= min && value <= max)) {
+        std::ostringstream range;
+        range << min << ".." << max;
+        throw UsageError(flag + ": '" + text + "' is not a number in " + range.str());
+    }
+    return value;
+}
+
+long long parse_integer(const std::string& flag, const std::string& text, long long min, long long max)
+{
+    size_t end = 0;
+    long long value = 0;
+    try {
+        value = std::stoll(text, &end);
+    } catch (const std::exception&) {
+        end = 0;
+    }
+    if (end == 0 || end != text.size() || value < min || value > max) {
+        throw UsageError(flag + ": '" + text + "' is not a whole number in " + std::to_string(min) + ".." +
+                         std::to_string(max));
+    }
+    return value;
+}
+
+std::vector<std::string> split_list(const std::string& flag, const std::string& text)
+{
+    std::vector<std::string> items;
+    std::stringstream in(text);
+    for (std::string item; std::getline(in, item, ',');) {
+        if (item.empty()) throw UsageError(flag + ": empty item in '" + text + "'");
+        items.push_back(item);
+    }
+    if (items.empty()) throw UsageError(flag + ": nothing given");
+    return items;
+}
+
+}  // namespace cpm::cli

@@ -1,0 +1,97 @@
+#pragma once
+#include <cpm/SampleResult.hpp>
+#include <cpm/vehicle/Calibration.hpp>
+#include <cpm/vehicle/Controllers.hpp>
+#include <cpm/vehicle/Protocol.hpp>
+#include <cpm/vehicle/VehicleModel.hpp>
+
+#include <RangeSensors.h>
+#include <StopRequest.h>
+#include <VehicleCommandDirect.h>
+#include <VehicleCommandPathTracking.h>
+#include <VehicleCommandSpeedCurvature.h>
+#include <VehicleCommandTrajectory.h>
+#include <VehicleState.h>
+
+#include <cstdint>
+#include <deque>
+#include <optional>
+#include <string>
+
+namespace cpm::vehicle {
+
+/// The newest valid command of each kind for this vehicle, as cpm::Reader::get_sample gives them.
+struct CommandInputs
+{
+    SampleResult<VehicleCommandDirect> direct;
+    SampleResult<VehicleCommandSpeedCurvature> speed_curvature;
+    SampleResult<VehicleCommandTrajectory> trajectory;
+    SampleResult<VehicleCommandPathTracking> path_tracking;
+    std::optional<uint64_t> stop_request_ns;  ///< create_stamp of the newest StopRequest for this car (or all)
+};
+
+/// Which command drove a cycle.
+enum class ActiveCommand { None, Stopped, Direct, SpeedCurvature, Trajectory, PathTracking };
+const char* to_string(ActiveCommand command);
+
+/// What one cycle of the bridge produces.
+struct BridgeCycle
+{
+    VehicleState state;
+    RangeSensors ranges;
+    CommandPacket command;
+    ActiveCommand active = ActiveCommand::None;
+};
+
+/// vehicle_bridge without serial port or DDS: unit conversion, pose estimate (odometer + IMU,
+/// corrected by observations of the car), command selection as in cpm_lab and the on-board
+/// controllers. Not thread-safe; the node calls it from its one loop.
+class BridgeCore
+{
+public:
+    BridgeCore(uint8_t vehicle_id, const Calibration& calibration, Pose start = {});
+
+    /// One cycle for a state packet received at t_ns: the messages to publish (stamps not set)
+    /// and the command packet to send back.
+    BridgeCycle on_state_packet(const StatePacket& packet, uint64_t t_ns, const CommandInputs& commands);
+    /// An observation of this car's pose taken at t_ns (e.g. VehicleObservation): the pose
+    /// estimate is moved so that it agrees with it at that time.
+    void on_observation(const Pose& pose, uint64_t t_ns);
+    /// The serial link was reopened: the next state packet starts a new odometer baseline.
+    void link_restarted();
+
+    const Pose& pose() const { return pose_; }
+
+private:
+    struct Estimate
+    {
+        uint64_t t_ns;
+        Pose pose;
+    };
+    struct Actuation
+    {
+        double throttle = 0;   // -1..1
+        double steering = 0;   // -1..1
+        bool brake = true;
+    };
+
+    void dead_reckon(const StatePacket& packet, uint64_t t_ns);
+    Actuation choose(const CommandInputs& commands, uint64_t t_ns, double speed, double dt, ActiveCommand& active);
+    Actuation drive(const MotionRequest& request, double speed, double dt);
+    bool fresh(uint64_t age_ns, uint64_t create_ns, const CommandInputs& commands) const;
+    CommandPacket to_packet(const Actuation& actuation);
+
+    uint8_t vehicle_id_;
+    Calibration c_;
+    SpeedController speed_controller_;
+    Pose pose_;
+    double yaw_offset_ = 0;
+    std::optional<int32_t> last_steps_;
+    std::optional<uint32_t> last_tick_;
+    double distance_ = 0;
+    uint32_t command_tick_ = 0;
+    ActiveCommand last_active_ = ActiveCommand::None;
+    std::deque<Estimate> history_;
+};
+
+}  // namespace cpm::vehicle

@@ -1,0 +1,78 @@
+#pragma once
+#include <cpm/vehicle/Protocol.hpp>
+#include <cpm/vehicle/VehicleModel.hpp>
+#include <cpm/vehicle/World.hpp>
+
+#include <cstdint>
+#include <random>
+#include <vector>
+
+namespace cpm::vehicle {
+
+/// What the simulated microcontroller has seen so far.
+struct FirmwareStats
+{
+    uint64_t commands = 0;          ///< valid commands for this vehicle
+    uint64_t wrong_vehicle = 0;     ///< valid commands for another vehicle id (ignored)
+    uint64_t watchdog_stops = 0;    ///< times the watchdog braked the motor
+    uint64_t state_packets = 0;     ///< state packets produced
+    uint64_t unanswered_states = 0; ///< state packets not answered by a command before the next one
+    DecoderErrors decoder;
+};
+
+/// The car's microcontroller without its serial port or clock: the vehicle model, its
+/// sensors against the world, the command decoder and the watchdog. firmware_sim drives it
+/// in real time behind a pty; tests drive it step by step. Not thread-safe.
+class FirmwareSim
+{
+public:
+    FirmwareSim(const VehicleParameters& parameters, World world, Pose start, uint8_t vehicle_id, uint32_t seed);
+
+    /// Bytes from the host (any chunking); commands act on the model from now.
+    void receive(const uint8_t* data, size_t size);
+    /// One physics step of 1 / physics_rate seconds; runs the watchdog.
+    void step();
+    /// Samples the sensors now and returns the state packet to send.
+    StatePacket make_state_packet();
+
+    /// Other cars' poses: their bodies become obstacles for the rangers.
+    void set_other_cars(const std::vector<Pose>& poses);
+    /// Distance (m) the ranger (0 front, 1 left, 2 right) would read now, without noise.
+    double ultrasonic_range(size_t sensor) const;
+
+    const VehicleModel& model() const { return model_; }
+    const VehicleParameters& parameters() const { return p_; }
+    const World& world() const { return world_; }
+    const FirmwareStats& stats() const;
+    bool watchdog_active() const { return watchdog_active_; }
+    uint8_t vehicle_id() const { return vehicle_id_; }
+    /// A noisy copy of the true pose (observation_noise), for the indoor positioning system.
+    Pose observed_pose();
+    /// True when the next observation should be dropped (observation_dropout).
+    bool drop_observation();
+
+    /// The body outline of a car at `pose` as four segments.
+    static std::vector<Segment> body_outline(const VehicleParameters& p, const Pose& pose);
+
+private:
+    void on_command(const CommandPacket& command);
+    double noise(double sigma);
+
+    VehicleParameters p_;
+    World world_;
+    VehicleModel model_;
+    uint8_t vehicle_id_;
+    std::mt19937 rng_;
+    FrameDecoder decoder_;
+    std::vector<Segment> obstacles_;
+    mutable FirmwareStats stats_;
+    double last_command_t_ = 0;
+    bool watchdog_active_ = false;
+    bool bad_crc_ = false;
+    bool wrong_vehicle_ = false;
+    bool answered_ = true;
+    uint32_t command_tick_ = 0;
+    double imu_yaw_ = 0;
+};
+
+}  // namespace cpm::vehicle

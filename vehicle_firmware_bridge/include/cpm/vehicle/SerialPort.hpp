@@ -1,0 +1,60 @@
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+namespace cpm::vehicle {
+
+/// A serial line in raw mode (termios: 8N1, no echo, no line editing, no flow control), or a
+/// pseudo-terminal's slave side, which behaves the same. Owns its file descriptor.
+class SerialPort
+{
+public:
+    /// Opens `path` at `baud` (one of the standard rates; ignored by a pty) and discards what
+    /// was waiting in the input. Throws cpm::Error naming the path and the reason.
+    SerialPort(const std::string& path, int baud);
+    ~SerialPort();
+    SerialPort(const SerialPort&) = delete;
+    SerialPort& operator=(const SerialPort&) = delete;
+
+    /// Waits up to timeout_ms for bytes and reads what is there (at most `size`). Returns the
+    /// count, 0 on timeout, -1 when the line is gone (hang-up, device removed).
+    long read_some(uint8_t* data, size_t size, int timeout_ms);
+    /// Writes all bytes (waits briefly when the line is full); false when the line is gone.
+    bool write_all(const uint8_t* data, size_t size);
+
+    int fd() const { return fd_; }
+    /// True when the device is a pseudo-terminal (a simulated car), not real hardware.
+    bool is_pseudo_terminal() const { return pty_; }
+
+private:
+    int fd_ = -1;
+    bool pty_ = false;
+};
+
+/// A pseudo-terminal pair as firmware_sim uses it: the simulator holds the master side; the
+/// slave (device_path()) is set to raw mode at once so nothing is echoed or line-buffered.
+/// With a link path, a symlink there points to the slave (removed again on destruction).
+class PseudoTerminal
+{
+public:
+    explicit PseudoTerminal(const std::string& link_path = {});
+    ~PseudoTerminal();
+    PseudoTerminal(const PseudoTerminal&) = delete;
+    PseudoTerminal& operator=(const PseudoTerminal&) = delete;
+
+    int master_fd() const { return master_; }
+    const std::string& device_path() const { return slave_path_; }
+    /// Reads what the host wrote, without waiting; -1 on error.
+    long read_available(uint8_t* data, size_t size);
+    /// Writes a frame; drops it (returns false) when no host reads and the buffer is full.
+    bool write_frame(const uint8_t* data, size_t size);
+
+private:
+    int master_ = -1;
+    int slave_ = -1;  // held open so the master never sees a hang-up while the host reconnects
+    std::string slave_path_;
+    std::string link_path_;
+};
+
+}  // namespace cpm::vehicle

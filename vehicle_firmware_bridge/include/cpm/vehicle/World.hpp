@@ -1,0 +1,50 @@
+#pragma once
+#include <string>
+#include <vector>
+
+namespace cpm::vehicle {
+
+/// A wall: the segment from (x1, y1) to (x2, y2), metres.
+struct Segment
+{
+    double x1 = 0, y1 = 0, x2 = 0, y2 = 0;
+};
+
+/// An ArUco marker on a wall, facing along yaw (radians); size is the side in metres.
+struct Marker
+{
+    int id = 0;
+    double x = 0, y = 0, yaw = 0, size = 0.1;
+};
+
+/// The 2-D world the simulated cars drive in: walls and markers (DESIGN.md §6 map format).
+class World
+{
+public:
+    World() = default;
+    World(std::vector<Segment> walls, std::vector<Marker> markers);
+
+    /// Reads a map file `{"walls": [[x1, y1, x2, y2], ...], "markers": [...]}`. Throws
+    /// cpm::Error naming the file and the JSON path of the first wrong entry.
+    static World load(const std::string& path);
+    /// The same from JSON text; `source` names it in error messages.
+    static World parse(const std::string& json_text, const std::string& source);
+
+    const std::vector<Segment>& walls() const { return walls_; }
+    const std::vector<Marker>& markers() const { return markers_; }
+
+    /// Distance (m) from (x, y) along direction `angle` (rad) to the nearest wall or extra
+    /// segment, or max_range when nothing is closer. O(walls + extra).
+    double cast_ray(double x, double y, double angle, double max_range,
+                    const std::vector<Segment>& extra = {}) const;
+
+private:
+    std::vector<Segment> walls_;
+    std::vector<Marker> markers_;
+};
+
+/// Distance along the ray from (x, y) in direction (dx, dy) (unit vector) to the segment,
+/// or a negative value when it misses.
+double ray_segment_distance(double x, double y, double dx, double dy, const Segment& s);
+
+}  // namespace cpm::vehicle

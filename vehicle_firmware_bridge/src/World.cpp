@@ -1,0 +1,128 @@
+#include <cpm/vehicle/World.hpp>
+
+#include <cpm/Error.hpp>
+
+#include "json_members.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+
+namespace cpm::vehicle {
+namespace {
+
+using nlohmann::json;
+
+[[noreturn]] void fail(const std::string& source, const std::string& where, const std::string& what)
+{
+    throw Error(source + ": " + where + ": " + what);
+}
+
+double number_at(const json& j, const std::string& source, const std::string& where)
+{
+    if (!j.is_number()) fail(source, where, "expected a number, got " + j.dump());
+    double v = j.get<double>();
+    if (!std::isfinite(v)) fail(source, where, "expected a finite number");
+    return v;
+}
+
+std::vector<Segment> parse_walls(const json& walls, const std::string& source)
+{
+    if (!walls.is_array()) fail(source, "walls", "expected an array of [x1, y1, x2, y2]");
+    std::vector<Segment> out;
+    for (size_t i = 0; i < walls.size(); ++i) {
+        std::string where = "walls[" + std::to_string(i) + "]";
+        const json& w = walls[i];
+        if (!w.is_array() || w.size() != 4) fail(source, where, "expected [x1, y1, x2, y2], got " + w.dump());
+        Segment s{number_at(w[0], source, where + "[0]"), number_at(w[1], source, where + "[1]"),
+                  number_at(w[2], source, where + "[2]"), number_at(w[3], source, where + "[3]")};
+        if (s.x1 == s.x2 && s.y1 == s.y2) fail(source, where, "a wall of zero length");
+        out.push_back(s);
+    }
+    return out;
+}
+
+std::vector<Marker> parse_markers(const json& markers, const std::string& source)
+{
+    if (!markers.is_array()) fail(source, "markers", "expected an array of {\"id\", \"x\", \"y\", \"yaw\", \"size\"}");
+    std::vector<Marker> out;
+    for (size_t i = 0; i < markers.size(); ++i) {
+        std::string where = "markers[" + std::to_string(i) + "]";
+        const json& m = markers[i];
+        if (!m.is_object()) fail(source, where, "expected an object, got " + m.dump());
+        for (auto it = m.begin(); it != m.end(); ++it) {
+            static const char* known[] = {"id", "x", "y", "yaw", "size"};
+            bool ok = false;
+            for (auto* k : known) ok = ok || it.key() == k;
+            if (!ok) fail(source, where + "." + it.key(), "unknown member (known: id, x, y, yaw, size)");
+        }
+        Marker marker;
+        if (!m.contains("id") || !m["id"].is_number_integer()) fail(source, where + ".id", "expected an integer id");
+        marker.id = m["id"].get<int>();
+        for (auto [name, field] : {std::pair{"x", &marker.x}, {"y", &marker.y}, {"yaw", &marker.yaw}}) {
+            if (!m.contains(name)) fail(source, where + "." + name, "missing");
+            *field = number_at(m[name], source, where + "." + name);
+        }
+        if (m.contains("size")) marker.size = number_at(m["size"], source, where + ".size");
+        if (marker.size <= 0) fail(source, where + ".size", "must be > 0");
+        out.push_back(marker);
+    }
+    return out;
+}
+
+}  // namespace
+
+World::World(std::vector<Segment> walls, std::vector<Marker> markers)
+    : walls_(std::move(walls)), markers_(std::move(markers))
+{
+}
+
+World World::load(const std::string& path)
+{
+    return parse(read_text_file(path, "map file"), path);
+}
+
+World World::parse(const std::string& json_text, const std::string& source)
+{
+    json j;
+    try {
+        j = json::parse(json_text);
+    } catch (const json::parse_error& e) {
+        throw Error(source + ": not valid JSON (" + e.what() + ")");
+    }
+    if (!j.is_object()) fail(source, "$", "expected an object with \"walls\" and \"markers\"");
+    for (auto it = j.begin(); it != j.end(); ++it) {
+        if (it.key() != "walls" && it.key() != "markers") fail(source, it.key(), "unknown member (known: walls, markers)");
+    }
+    std::vector<Segment> walls = j.contains("walls") ? parse_walls(j["walls"], source) : std::vector<Segment>{};
+    std::vector<Marker> markers = j.contains("markers") ? parse_markers(j["markers"], source) : std::vector<Marker>{};
+    return World(std::move(walls), std::move(markers));
+}
+
+double ray_segment_distance(double x, double y, double dx, double dy, const Segment& s)
+{
+    // Solve (x, y) + t (dx, dy) = p1 + u (p2 - p1) for t >= 0, 0 <= u <= 1.
+    double ex = s.x2 - s.x1, ey = s.y2 - s.y1;
+    double denom = dx * ey - dy * ex;
+    if (std::abs(denom) < 1e-12) return -1;  // parallel
+    double wx = s.x1 - x, wy = s.y1 - y;
+    double t = (wx * ey - wy * ex) / denom;
+    double u = (wx * dy - wy * dx) / denom;
+    if (t < 0 || u < 0 || u > 1) return -1;
+    return t;
+}
+
+double World::cast_ray(double x, double y, double angle, double max_range, const std::vector<Segment>& extra) const
+{
+    double dx = std::cos(angle), dy = std::sin(angle);
+    double best = max_range;
+    for (const auto* list : {&walls_, &extra}) {
+        for (const auto& s : *list) {
+            double d = ray_segment_distance(x, y, dx, dy, s);
+            if (d >= 0 && d < best) best = d;
+        }
+    }
+    return best;
+}
+
+}  // namespace cpm::vehicle

@@ -1,0 +1,177 @@
+// firmware_sim: plays a car's microcontroller behind a pseudo-terminal (see README.md).
+#include <cpm/CommandLine.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Timer.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
+#include <cpm/stamp_message.hpp>
+#include <cpm/vehicle/FirmwareSim.hpp>
+#include <cpm/vehicle/SerialPort.hpp>
+
+#include <VehicleObservation.h>
+
+#include <csignal>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <string>
+#include <thread>
+
+namespace {
+
+const char* kHelp =
+    "usage: firmware_sim --vehicle_id N [--map FILE] [--params FILE] [--start X,Y,YAW]\n"
+    "                    [--link PATH] [--seed N] [--trace-pwm] [--dds_domain N]\n"
+    "\n"
+    "Plays vehicle N's microcontroller: opens a pseudo-terminal, prints its device path as\n"
+    "`device: /dev/pts/K` and then speaks the serial protocol on it (state packets at\n"
+    "state_rate, commands in; vehicle model at physics_rate; watchdog brakes after 250 ms\n"
+    "without a valid command). Publishes the true pose as VehicleObservation on\n"
+    "'vehicleObservation' and sees other simulated cars' bodies with its rangers.\n"
+    "\n"
+    "  --map FILE      world of walls (JSON, DESIGN.md §6); default: no walls\n"
+    "  --params FILE   vehicle parameters (JSON; see vehicle_firmware_bridge/README.md)\n"
+    "  --start X,Y,YAW start pose in metres and radians (default 0,0,0)\n"
+    "  --link PATH     also make PATH a symlink to the device (a stable name across restarts)\n"
+    "  --seed N        noise seed (default: the vehicle id)\n"
+    "  --trace-pwm     print `pwm T_NS MODE PWM` on stdout whenever the applied motor command changes\n"
+    "On SIGINT/SIGTERM it prints one JSON line of statistics and exits 0.\n";
+
+std::sig_atomic_t volatile g_stop = 0;
+
+cpm::vehicle::Pose parse_pose(const std::string& text)
+{
+    auto items = cpm::cli::split_list("--start", text);
+    if (items.size() != 3) throw cpm::cli::UsageError("--start: expected X,Y,YAW, got '" + text + "'");
+    return {cpm::cli::parse_number("--start", items[0], -1e6, 1e6), cpm::cli::parse_number("--start", items[1], -1e6, 1e6),
+            cpm::cli::parse_number("--start", items[2], -10, 10)};
+}
+
+int run(int argc, char** argv)
+{
+    std::vector<std::string> args(argv + 1, argv + argc);
+    auto parsed = cpm::cli::parse_args(args,
+                                       {{"--vehicle_id", true}, {"--map", true}, {"--params", true}, {"--start", true},
+                                        {"--link", true}, {"--seed", true}, {"--trace-pwm", false}},
+                                       "firmware_sim");
+    if (!parsed.positional.empty()) throw cpm::cli::UsageError("firmware_sim: unexpected argument '" + parsed.positional[0] + "'");
+    if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("firmware_sim: --vehicle_id is required");
+    auto vehicle_id = static_cast<uint8_t>(cpm::cli::parse_integer("--vehicle_id", parsed.get("--vehicle_id"), 1, 255));
+    auto parameters = parsed.has("--params") ? cpm::vehicle::VehicleParameters::load(parsed.get("--params"))
+                                             : cpm::vehicle::VehicleParameters{};
+    auto world = parsed.has("--map") ? cpm::vehicle::World::load(parsed.get("--map")) : cpm::vehicle::World{};
+    auto start = parsed.has("--start") ? parse_pose(parsed.get("--start")) : cpm::vehicle::Pose{};
+    auto seed = static_cast<uint32_t>(parsed.has("--seed") ? cpm::cli::parse_integer("--seed", parsed.get("--seed"), 0, UINT32_MAX)
+                                                           : vehicle_id);
+    bool trace_pwm = parsed.has("--trace-pwm");
+    cpm::init(argc, argv);
+
+    cpm::vehicle::FirmwareSim sim(parameters, std::move(world), start, vehicle_id, seed);
+    cpm::vehicle::PseudoTerminal pty(parsed.get("--link"));
+    std::printf("device: %s\n", pty.device_path().c_str());
+    std::fflush(stdout);
+
+    cpm::Participant& participant = cpm::Participant::default_participant();
+    cpm::Writer<VehicleObservation> observations(participant, "vehicleObservation");
+    cpm::ReaderAbstract<VehicleObservation> others(participant, "vehicleObservation", {.history_depth = 1});
+    std::map<uint8_t, std::pair<uint64_t, cpm::vehicle::Pose>> other_cars;
+
+    const auto physics_period_ns = static_cast<uint64_t>(1e9 / parameters.physics_rate);
+    const auto steps_per_state = std::max<uint64_t>(1, std::llround(parameters.physics_rate / parameters.state_rate));
+    auto timer = cpm::Timer::create(participant, "firmware_sim_" + std::to_string(vehicle_id), physics_period_ns, 0,
+                                    false, false);
+    uint64_t last_tick_ns = 0, steps = 0;
+    std::pair<cpm::vehicle::MotorMode, uint16_t> traced{cpm::vehicle::MotorMode::Brake, 0};
+
+    std::signal(SIGINT, [](int) { g_stop = 1; });
+    std::signal(SIGTERM, [](int) { g_stop = 1; });
+    timer->start([&](uint64_t t_nominal) {
+        if (g_stop) {
+            timer->stop();
+            return;
+        }
+        uint8_t buffer[512];
+        long n;
+        while ((n = pty.read_available(buffer, sizeof buffer)) > 0) sim.receive(buffer, size_t(n));
+        // Catch up on ticks the timer skipped, so model time keeps pace with real time.
+        uint64_t due = last_tick_ns == 0 ? 1 : std::min<uint64_t>((t_nominal - last_tick_ns) / physics_period_ns, 50);
+        last_tick_ns = t_nominal;
+        for (uint64_t i = 0; i < due; ++i) {
+            sim.step();
+            if (++steps % steps_per_state != 0) continue;
+            auto frame = cpm::vehicle::encode_frame(sim.make_state_packet());
+            pty.write_frame(frame.data(), frame.size());
+
+            uint64_t now = cpm::get_time_ns();
+            if (!sim.drop_observation()) {
+                VehicleObservation o;
+                cpm::stamp_message(o, now, 0);
+                o.vehicle_id(vehicle_id);
+                auto pose = sim.observed_pose();
+                o.pose().x(pose.x);
+                o.pose().y(pose.y);
+                o.pose().yaw(pose.yaw);
+                observations.write(o);
+            }
+            for (auto& o : others.take()) {
+                if (o.vehicle_id() == vehicle_id) continue;
+                other_cars[o.vehicle_id()] = {o.header().create_stamp().nanoseconds(),
+                                              {o.pose().x(), o.pose().y(), o.pose().yaw()}};
+            }
+            std::vector<cpm::vehicle::Pose> poses;
+            for (auto it = other_cars.begin(); it != other_cars.end();) {
+                // A car not seen for a second has left the world.
+                if (it->second.first + 1'000'000'000ull < now) {
+                    it = other_cars.erase(it);
+                } else {
+                    poses.push_back(it->second.second);
+                    ++it;
+                }
+            }
+            sim.set_other_cars(poses);
+        }
+        if (trace_pwm) {
+            std::pair applied{sim.model().motor_mode(), sim.model().motor_pwm()};
+            if (applied != traced) {
+                traced = applied;
+                std::printf("pwm %llu %d %u\n", static_cast<unsigned long long>(cpm::get_time_ns()),
+                            static_cast<int>(applied.first), unsigned(applied.second));
+                std::fflush(stdout);
+            }
+        }
+    });
+
+    const auto& s = sim.stats();
+    std::printf("{\"vehicle_id\": %u, \"state_packets\": %llu, \"unanswered_states\": %llu, \"commands\": %llu, "
+                "\"wrong_vehicle\": %llu, \"watchdog_stops\": %llu, \"missed_ticks\": %llu, \"decoder_errors\": {\"oversize\": %llu, "
+                "\"bad_cobs\": %llu, \"too_short\": %llu, \"bad_crc\": %llu, \"bad_packet\": %llu}}\n",
+                unsigned(vehicle_id), (unsigned long long)s.state_packets, (unsigned long long)s.unanswered_states,
+                (unsigned long long)s.commands, (unsigned long long)s.wrong_vehicle, (unsigned long long)s.watchdog_stops,
+                (unsigned long long)timer->missed_deadlines(), (unsigned long long)s.decoder.oversize,
+                (unsigned long long)s.decoder.bad_cobs, (unsigned long long)s.decoder.too_short,
+                (unsigned long long)s.decoder.bad_crc, (unsigned long long)s.decoder.bad_packet);
+    std::fflush(stdout);
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    std::vector<std::string> args(argv + 1, argv + argc);
+    if (cpm::cli::wants_help(args)) {
+        std::fputs(kHelp, stdout);
+        return 0;
+    }
+    try {
+        return run(argc, argv);
+    } catch (const cpm::cli::UsageError& e) {
+        std::fprintf(stderr, "firmware_sim: %s\n", e.what());
+        return cpm::cli::kUsageExit;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "firmware_sim: %s\n", e.what());
+        return 1;
+    }
+}
