@@ -1,0 +1,254 @@
+#include <cpm/vehicle/BridgeCore.hpp>
+#include <cpm/vehicle/FirmwareSim.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+
+using namespace cpm::vehicle;
+
+namespace {
+
+constexpr uint64_t kSecond = 1'000'000'000ull;
+constexpr uint8_t kId = 5;
+
+template <class T>
+cpm::SampleResult<T> fresh(T command, uint64_t created_ns, uint64_t now_ns)
+{
+    command.vehicle_id(kId);
+    command.header().create_stamp().nanoseconds(created_ns);
+    command.header().valid_after_stamp().nanoseconds(created_ns);
+    return {command, now_ns - created_ns, true};
+}
+
+VehicleCommandDirect direct(double throttle, double steering)
+{
+    VehicleCommandDirect c;
+    c.motor_throttle(throttle);
+    c.steering_servo(steering);
+    return c;
+}
+
+VehicleCommandSpeedCurvature speed_curvature(double speed, double curvature)
+{
+    VehicleCommandSpeedCurvature c;
+    c.speed(speed);
+    c.curvature(curvature);
+    return c;
+}
+
+TrajectoryPoint point(uint64_t t_ns, double px, double py, double vx, double vy)
+{
+    TrajectoryPoint p;
+    p.t().nanoseconds(t_ns);
+    p.px(px);
+    p.py(py);
+    p.vx(vx);
+    p.vy(vy);
+    return p;
+}
+
+StatePacket moving(uint32_t tick, double speed)
+{
+    StatePacket p;
+    p.tick = tick;
+    p.speed_mm_s = int16_t(speed * 1000);
+    return p;
+}
+
+/// The bridge core and the simulated firmware joined in-process, 50 Hz, noise-free.
+struct ClosedLoop
+{
+    VehicleParameters params = [] {
+        VehicleParameters p;
+        p.imu_yaw_rate_noise = p.imu_acceleration_noise = p.ultrasonic_noise = 0;
+        return p;
+    }();
+    FirmwareSim sim;
+    BridgeCore bridge;
+    uint64_t t_ns = 100 * kSecond;
+
+    explicit ClosedLoop(Pose start) : sim(params, World{}, start, kId, 1), bridge(kId, Calibration{}, start) {}
+
+    /// Runs for `seconds`; `inputs` gives the commands at each cycle, `each` sees the true pose.
+    void run(double seconds, const std::function<CommandInputs(uint64_t)>& inputs,
+             const std::function<void(uint64_t, const Pose&)>& each = {})
+    {
+        for (int cycle = 0; cycle < int(seconds * 50); ++cycle) {
+            for (int i = 0; i < 5; ++i) sim.step();
+            t_ns += 20'000'000;
+            bridge.on_observation(sim.model().pose(), t_ns);
+            auto out = bridge.on_state_packet(sim.make_state_packet(), t_ns, inputs(t_ns));
+            auto frame = encode_frame(out.command);
+            sim.receive(frame.data(), frame.size());
+            if (each) each(t_ns, sim.model().pose());
+        }
+    }
+};
+
+}  // namespace
+
+TEST(Controllers, HermiteInterpolationHitsThePointsAndIsEmptyOutsideThem)
+{
+    std::vector<TrajectoryPoint> points{point(1 * kSecond, 0, 0, 1, 0), point(2 * kSecond, 1, 0, 1, 0),
+                                        point(3 * kSecond, 2, 1, 0, 1)};
+    auto at = [&](uint64_t t) { return interpolate_trajectory(points, t); };
+    EXPECT_FALSE(at(kSecond - 1));
+    EXPECT_FALSE(at(3 * kSecond + 1));
+    ASSERT_TRUE(at(2 * kSecond));
+    EXPECT_NEAR(at(2 * kSecond)->x, 1.0, 1e-12);
+    EXPECT_NEAR(at(3 * kSecond)->y, 1.0, 1e-12);
+    auto mid = at(1'500'000'000);  // a straight segment at constant speed stays straight
+    EXPECT_NEAR(mid->x, 0.5, 1e-12);
+    EXPECT_NEAR(mid->y, 0.0, 1e-12);
+    EXPECT_NEAR(mid->vx, 1.0, 1e-12);
+    EXPECT_NEAR(mid->ax, 0.0, 1e-12);
+}
+
+TEST(Controllers, SteeringForCurvatureInvertsTheBicycleModel)
+{
+    Calibration c;
+    EXPECT_EQ(steering_for_curvature(c, 0.0), 0.0);
+    double curvature = 1.0 / 1.25;
+    double angle = steering_for_curvature(c, curvature) * c.max_steering_angle;
+    EXPECT_NEAR(std::tan(angle) / c.wheelbase, curvature, 1e-12);
+    EXPECT_EQ(steering_for_curvature(c, 100.0), 1.0);
+    EXPECT_EQ(steering_for_curvature(c, -100.0), -1.0);
+}
+
+TEST(BridgeCore, DirectBeatsSpeedCurvatureAndAStaleCommandIsIgnored)
+{
+    BridgeCore sut(kId, Calibration{});
+    uint64_t now = 50 * kSecond;
+    CommandInputs inputs;
+    inputs.direct = fresh(direct(0.5, -1.0), now - 100'000'000, now);
+    inputs.speed_curvature = fresh(speed_curvature(1.0, 0.5), now - 10'000'000, now);
+    auto cycle = sut.on_state_packet(moving(1000, 0.5), now, inputs);
+    EXPECT_EQ(cycle.active, ActiveCommand::Direct);
+    EXPECT_EQ(cycle.command.motor_mode, MotorMode::Forward);
+    EXPECT_EQ(cycle.command.motor_pwm, 500);
+    EXPECT_EQ(cycle.command.servo_us, 1000);
+    EXPECT_EQ(cycle.command.vehicle_id, kId);
+
+    inputs.direct = fresh(direct(0.5, -1.0), now - kSecond, now);  // exactly 1 s old: stale
+    cycle = sut.on_state_packet(moving(1020, 0.5), now, inputs);
+    EXPECT_EQ(cycle.active, ActiveCommand::SpeedCurvature);
+    EXPECT_GT(cycle.command.servo_us, 1500);  // positive curvature turns left
+
+    inputs.speed_curvature = fresh(speed_curvature(1.0, 0.5), now - 2 * kSecond, now);
+    cycle = sut.on_state_packet(moving(1040, 0.5), now, inputs);
+    EXPECT_EQ(cycle.active, ActiveCommand::None);
+    EXPECT_EQ(cycle.command.motor_mode, MotorMode::Brake);
+}
+
+TEST(BridgeCore, StopRequestBrakesUntilANewerCommandArrives)
+{
+    BridgeCore sut(kId, Calibration{});
+    uint64_t now = 50 * kSecond;
+    CommandInputs inputs;
+    inputs.direct = fresh(direct(0.5, 0.0), now - 100'000'000, now);
+    inputs.stop_request_ns = now - 50'000'000;
+    auto cycle = sut.on_state_packet(moving(1000, 0.5), now, inputs);
+    EXPECT_EQ(cycle.active, ActiveCommand::Stopped);
+    EXPECT_EQ(cycle.command.motor_mode, MotorMode::Brake);
+    inputs.direct = fresh(direct(0.5, 0.0), now - 10'000'000, now);
+    cycle = sut.on_state_packet(moving(1020, 0.5), now, inputs);
+    EXPECT_EQ(cycle.active, ActiveCommand::Direct);
+}
+
+TEST(BridgeCore, PublishesStateAndRangesInLabUnits)
+{
+    BridgeCore sut(kId, Calibration{}, {1.0, 2.0, 0.0});
+    StatePacket p = moving(1000, -0.25);
+    p.battery_mv = 7900;
+    p.us_front_mm = 1234;
+    p.us_left_mm = 20;
+    p.us_right_mm = 3000;
+    p.odometer_steps = 100;
+    sut.on_state_packet(p, kSecond, {});
+    p.odometer_steps = 100 + 300;  // 0.5 m at 600 ticks per metre
+    auto cycle = sut.on_state_packet(p, 2 * kSecond, {});
+    EXPECT_EQ(cycle.state.vehicle_id(), kId);
+    EXPECT_DOUBLE_EQ(cycle.state.speed(), -0.25);
+    EXPECT_DOUBLE_EQ(cycle.state.battery_voltage(), 7.9);
+    EXPECT_DOUBLE_EQ(cycle.state.odometer_distance(), 0.5);
+    EXPECT_DOUBLE_EQ(cycle.state.pose().x(), 1.5);
+    EXPECT_DOUBLE_EQ(cycle.state.pose().y(), 2.0);
+    EXPECT_DOUBLE_EQ(cycle.ranges.front(), 1.234);
+    EXPECT_DOUBLE_EQ(cycle.ranges.left(), 0.02);
+    EXPECT_DOUBLE_EQ(cycle.ranges.right(), 3.0);
+    EXPECT_DOUBLE_EQ(cycle.ranges.hall_distance(), 0.5);
+}
+
+TEST(BridgeCore, SpeedControllerReachesTheCommandedSpeedInClosedLoop)
+{
+    ClosedLoop loop({0, 0, 0});
+    loop.run(3.0, [&](uint64_t t) {
+        CommandInputs in;
+        in.speed_curvature = fresh(speed_curvature(1.2, 0.0), t - 5'000'000, t);
+        return in;
+    });
+    EXPECT_NEAR(loop.sim.model().speed(), 1.2, 0.02);
+    EXPECT_NEAR(loop.sim.model().pose().y, 0.0, 1e-6);
+}
+
+TEST(BridgeCore, FollowsALineThenAnArcWithinFiveCentimetres)
+{
+    ClosedLoop loop({0, 0, 0});
+    uint64_t t0 = loop.t_ns + kSecond / 2;
+    // Accelerate at 1 m/s^2 for 1 s, run straight to x = 2 m, then a left arc of radius 1 m.
+    auto s_of = [](double t) { return t < 1 ? 0.5 * t * t : 0.5 + (t - 1); };
+    auto v_of = [](double t) { return t < 1 ? t : 1.0; };
+    std::vector<TrajectoryPoint> points;
+    double end = 1.0 + 1.5 + M_PI / 2;
+    for (double t = 0; t <= end + 1e-9; t += 0.1) {
+        double s = s_of(t), v = v_of(t);
+        uint64_t stamp = t0 + uint64_t(t * 1e9);
+        if (s <= 2.0) {
+            points.push_back(point(stamp, s, 0, v, 0));
+        } else {
+            double phi = s - 2.0;
+            points.push_back(point(stamp, 2 + std::sin(phi), 1 - std::cos(phi), v * std::cos(phi), v * std::sin(phi)));
+        }
+    }
+    VehicleCommandTrajectory trajectory;
+    trajectory.trajectory_points(points);
+    double worst = 0;
+    loop.run(end + 0.5, [&](uint64_t t) {
+        CommandInputs in;
+        in.trajectory = fresh(trajectory, t - 5'000'000, t);
+        return in;
+    }, [&](uint64_t t, const Pose& pose) {
+        if (t < t0 || t > t0 + uint64_t(end * 1e9)) return;
+        double error = pose.x <= 2.0 ? std::abs(pose.y) : std::abs(std::hypot(pose.x - 2, pose.y - 1) - 1.0);
+        worst = std::max(worst, error);
+    });
+    EXPECT_LT(worst, 0.05);
+    EXPECT_NEAR(loop.sim.model().pose().x, 3.0, 0.1);
+    EXPECT_NEAR(loop.sim.model().pose().y, 1.0, 0.15);
+    std::printf("worst cross-track error %.1f mm\n", worst * 1000);
+}
+
+TEST(BridgeCore, PathTrackingConvergesOntoThePathAndStopsAtItsEnd)
+{
+    ClosedLoop loop({0, 0.3, 0});  // 30 cm off the path
+    VehicleCommandPathTracking command;
+    std::vector<PathPoint> path;
+    for (int i = 0; i <= 40; ++i) {
+        PathPoint p;
+        p.pose().x(i * 0.1);
+        p.s(i * 0.1);
+        path.push_back(p);
+    }
+    command.path(path);
+    command.speed(1.0);
+    loop.run(8.0, [&](uint64_t t) {
+        CommandInputs in;
+        in.path_tracking = fresh(command, t - 5'000'000, t);
+        return in;
+    });
+    EXPECT_NEAR(loop.sim.model().pose().y, 0.0, 0.02);
+    EXPECT_NEAR(loop.sim.model().pose().x, 4.0, 0.1);
+    EXPECT_NEAR(loop.sim.model().speed(), 0.0, 0.01);
+}
