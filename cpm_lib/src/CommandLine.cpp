@@ -29,7 +29,8 @@ ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<Fl
         }
         bool takes_value = false;
         if (is_init_flag(name, takes_value)) {
-            if (takes_value && eq == std::string::npos) ++i;
+            parsed.init_args.push_back(args[i]);
+            if (takes_value && eq == std::string::npos && i + 1 < args.size()) parsed.init_args.push_back(args[++i]);
             continue;
         }
         const FlagSpec* spec = nullptr;

@@ -1,6 +1,8 @@
 // cpm — the lab's command line, in the style of `ros2`:
 //   cpm lab clock --nodes a,b,c [--simulated --until 10s | --start-delay 1s --duration 60s]
 // Errors go to stderr with the reason, and the exit code is non-zero.
+#include "vehicle_sim.hpp"
+
 #include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/ParameterServer.hpp>
@@ -42,6 +44,8 @@ const char* kTopHelp =
     "               simulated clock (see `cpm lab clock --help`)\n"
     "  param serve  serve the parameters of a JSON file until Ctrl-C (see `cpm param serve --help`)\n"
     "  topic echo   print a topic's samples as they arrive (see `cpm topic echo --help`)\n"
+    "  vehicle sim  start simulated cars: firmware simulator + vehicle bridge over a pty\n"
+    "               (see `cpm vehicle sim --help`)\n"
     "\n"
     "Every command takes --dds_domain N (or CPM_DOMAIN_ID) and answers --help.\n";
 
@@ -212,7 +216,8 @@ int main(int argc, char** argv)
         };
         static const Command commands[] = {{"lab", "clock", kClockHelp, lab_clock},
                                            {"topic", "echo", kEchoHelp, topic_echo},
-                                           {"param", "serve", kParamHelp, param_serve}};
+                                           {"param", "serve", kParamHelp, param_serve},
+                                           {"vehicle", "sim", kVehicleSimHelp, vehicle_sim}};
         for (const auto& c : commands) {
             if (args.size() < 2 || args[0] != c.group || args[1] != c.verb) continue;
             if (help) {

@@ -47,6 +47,7 @@ void FirmwareSim::on_command(const CommandPacket& command)
     last_command_t_ = model_.time();
     command_tick_ = command.tick;
     watchdog_active_ = false;
+    motor_command_ = {command.motor_mode, command.motor_pwm};
     model_.command(model_.time(), command.motor_mode, command.motor_pwm, command.servo_us);
 }
 
@@ -58,6 +59,7 @@ void FirmwareSim::step()
     if (!watchdog_active_ && model_.time() - last_command_t_ > p_.watchdog_timeout) {
         watchdog_active_ = true;
         ++stats_.watchdog_stops;
+        motor_command_ = {MotorMode::Brake, 0};
         model_.command(model_.time(), MotorMode::Brake, 0, 1500);
     }
 }

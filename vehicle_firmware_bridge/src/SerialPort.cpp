@@ -53,7 +53,11 @@ SerialPort::SerialPort(const std::string& path, int baud)
 {
     speed_t speed = baud_constant(baud, path);
     fd_ = ::open(path.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
-    if (fd_ < 0) throw Error(path + ": cannot open the serial device (" + std::strerror(errno) + ")");
+    if (fd_ < 0) {
+        std::string message = path + ": cannot open the serial device (" + std::strerror(errno) + ")";
+        if (errno == ENOENT || errno == ENODEV || errno == ENXIO || errno == EIO) throw DeviceMissing(message);
+        throw Error(message);
+    }
     try {
         make_raw(fd_, speed, path);
     } catch (...) {
@@ -65,6 +69,8 @@ SerialPort::SerialPort(const std::string& path, int baud)
     // UNIX 98 pty slaves have major numbers 136..143 (Documentation/admin-guide/devices.txt).
     pty_ = fstat(fd_, &st) == 0 && S_ISCHR(st.st_mode) && major(st.st_rdev) >= 136 && major(st.st_rdev) <= 143;
 }
+
+void SerialPort::check_baud(int baud, const std::string& path) { baud_constant(baud, path); }
 
 SerialPort::~SerialPort()
 {

@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <map>
 #include <memory>
+#include <random>
 #include <string>
 #include <thread>
 
@@ -23,7 +24,7 @@ namespace {
 
 const char* kHelp =
     "usage: firmware_sim --vehicle_id N [--map FILE] [--params FILE] [--start X,Y,YAW]\n"
-    "                    [--link PATH] [--seed N] [--trace-pwm] [--dds_domain N]\n"
+    "                    [--link PATH] [--seed N] [--trace-pwm] [--corrupt-rate P] [--dds_domain N]\n"
     "\n"
     "Plays vehicle N's microcontroller: opens a pseudo-terminal, prints its device path as\n"
     "`device: /dev/pts/K` and then speaks the serial protocol on it (state packets at\n"
@@ -36,7 +37,9 @@ const char* kHelp =
     "  --start X,Y,YAW start pose in metres and radians (default 0,0,0)\n"
     "  --link PATH     also make PATH a symlink to the device (a stable name across restarts)\n"
     "  --seed N        noise seed (default: the vehicle id)\n"
-    "  --trace-pwm     print `pwm T_NS MODE PWM` on stdout whenever the applied motor command changes\n"
+    "  --trace-pwm     print `pwm T_NS MODE PWM` on stdout whenever the motor command the controller\n"
+    "                  holds changes (a new command, or the watchdog's brake; MODE 0 brake, 1 fwd, 2 rev)\n"
+    "  --corrupt-rate P  flip one random byte in a state frame with probability P (tests the link)\n"
     "On SIGINT/SIGTERM it prints one JSON line of statistics and exits 0.\n";
 
 std::sig_atomic_t volatile g_stop = 0;
@@ -54,7 +57,8 @@ int run(int argc, char** argv)
     std::vector<std::string> args(argv + 1, argv + argc);
     auto parsed = cpm::cli::parse_args(args,
                                        {{"--vehicle_id", true}, {"--map", true}, {"--params", true}, {"--start", true},
-                                        {"--link", true}, {"--seed", true}, {"--trace-pwm", false}},
+                                        {"--link", true}, {"--seed", true}, {"--trace-pwm", false},
+                                        {"--corrupt-rate", true}},
                                        "firmware_sim");
     if (!parsed.positional.empty()) throw cpm::cli::UsageError("firmware_sim: unexpected argument '" + parsed.positional[0] + "'");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("firmware_sim: --vehicle_id is required");
@@ -66,6 +70,8 @@ int run(int argc, char** argv)
     auto seed = static_cast<uint32_t>(parsed.has("--seed") ? cpm::cli::parse_integer("--seed", parsed.get("--seed"), 0, UINT32_MAX)
                                                            : vehicle_id);
     bool trace_pwm = parsed.has("--trace-pwm");
+    double corrupt_rate = cpm::cli::parse_number("--corrupt-rate", parsed.get("--corrupt-rate", "0"), 0, 1);
+    std::mt19937 corruption(seed);
     cpm::init(argc, argv);
 
     cpm::vehicle::FirmwareSim sim(parameters, std::move(world), start, vehicle_id, seed);
@@ -84,6 +90,14 @@ int run(int argc, char** argv)
                                     false, false);
     uint64_t last_tick_ns = 0, steps = 0;
     std::pair<cpm::vehicle::MotorMode, uint16_t> traced{cpm::vehicle::MotorMode::Brake, 0};
+    auto trace = [&](uint64_t now) {
+        auto held = sim.motor_command();
+        if (held == traced) return;
+        traced = held;
+        std::printf("pwm %llu %d %u\n", static_cast<unsigned long long>(now), static_cast<int>(held.first),
+                    unsigned(held.second));
+        std::fflush(stdout);
+    };
 
     std::signal(SIGINT, [](int) { g_stop = 1; });
     std::signal(SIGTERM, [](int) { g_stop = 1; });
@@ -94,7 +108,10 @@ int run(int argc, char** argv)
         }
         uint8_t buffer[512];
         long n;
-        while ((n = pty.read_available(buffer, sizeof buffer)) > 0) sim.receive(buffer, size_t(n));
+        while ((n = pty.read_available(buffer, sizeof buffer)) > 0) {
+            sim.receive(buffer, size_t(n));
+            if (trace_pwm) trace(cpm::get_time_ns());
+        }
         // Catch up on ticks the timer skipped, so model time keeps pace with real time.
         uint64_t due = last_tick_ns == 0 ? 1 : std::min<uint64_t>((t_nominal - last_tick_ns) / physics_period_ns, 50);
         last_tick_ns = t_nominal;
@@ -102,6 +119,9 @@ int run(int argc, char** argv)
             sim.step();
             if (++steps % steps_per_state != 0) continue;
             auto frame = cpm::vehicle::encode_frame(sim.make_state_packet());
+            if (corrupt_rate > 0 && std::uniform_real_distribution<double>(0, 1)(corruption) < corrupt_rate) {
+                frame[corruption() % frame.size()] ^= uint8_t(1 + corruption() % 255);
+            }
             pty.write_frame(frame.data(), frame.size());
 
             uint64_t now = cpm::get_time_ns();
@@ -132,15 +152,7 @@ int run(int argc, char** argv)
             }
             sim.set_other_cars(poses);
         }
-        if (trace_pwm) {
-            std::pair applied{sim.model().motor_mode(), sim.model().motor_pwm()};
-            if (applied != traced) {
-                traced = applied;
-                std::printf("pwm %llu %d %u\n", static_cast<unsigned long long>(cpm::get_time_ns()),
-                            static_cast<int>(applied.first), unsigned(applied.second));
-                std::fflush(stdout);
-            }
-        }
+        if (trace_pwm) trace(cpm::get_time_ns());
     });
 
     const auto& s = sim.stats();

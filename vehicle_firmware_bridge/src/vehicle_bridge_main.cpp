@@ -101,6 +101,11 @@ int run(int argc, char** argv)
     auto id = static_cast<uint8_t>(cpm::cli::parse_integer("--vehicle_id", parsed.get("--vehicle_id"), 1, 255));
     const std::string device = parsed.get("--device");
     int baud = int(cpm::cli::parse_integer("--baud", parsed.get("--baud", "115200"), 1, 4'000'000));
+    try {
+        cpm::vehicle::SerialPort::check_baud(baud, device);
+    } catch (const cpm::Error& e) {
+        throw cpm::cli::UsageError(std::string("--baud: ") + e.what());
+    }
     auto calibration = parsed.has("--calibration") ? cpm::vehicle::Calibration::load(parsed.get("--calibration"))
                                                    : cpm::vehicle::Calibration{};
     auto start = parsed.has("--start") ? parse_pose(parsed.get("--start")) : cpm::vehicle::Pose{};
@@ -128,7 +133,8 @@ int run(int argc, char** argv)
                 decoder = cpm::vehicle::FrameDecoder{};
                 last_packet_ns = cpm::get_time_ns();
                 silent_logged = waiting_logged = false;
-            } catch (const cpm::Error& e) {
+            } catch (const cpm::vehicle::DeviceMissing& e) {
+                // Not there yet or unplugged: keep trying. Any other error is the user's to fix.
                 if (!waiting_logged) CPM_LOG_WARN("vehicle %u: %s; retrying every 200 ms", unsigned(id), e.what());
                 waiting_logged = true;
                 std::this_thread::sleep_for(std::chrono::milliseconds(200));

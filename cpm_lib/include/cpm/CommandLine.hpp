@@ -30,6 +30,7 @@ struct ParsedArgs
 {
     std::map<std::string, std::string> flags;  ///< switches map to "1"
     std::vector<std::string> positional;
+    std::vector<std::string> init_args;  ///< cpm::init's flags as given (to pass on to child processes)
 
     bool has(const std::string& name) const { return flags.count(name) != 0; }
     /// The flag's value, or fallback when absent.

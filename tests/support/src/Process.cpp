@@ -25,6 +25,10 @@ Process::Process(std::vector<std::string> argv, std::vector<std::string> env)
     const int out_fd = ::mkstemp(tmpl);
     if (out_fd < 0) throw std::runtime_error("mkstemp failed");
     out_path_ = tmpl;
+    char err_tmpl[] = "/tmp/cpm_test_err_XXXXXX";
+    const int err_fd = ::mkstemp(err_tmpl);
+    if (err_fd < 0) throw std::runtime_error("mkstemp failed");
+    err_path_ = err_tmpl;
 
     std::vector<char*> args;
     for (auto& a : argv) args.push_back(a.data());
@@ -40,12 +44,14 @@ Process::Process(std::vector<std::string> argv, std::vector<std::string> env)
     if (pid_ < 0) throw std::runtime_error("fork failed");
     if (pid_ == 0) {
         ::dup2(out_fd, STDOUT_FILENO);
+        ::dup2(err_fd, STDERR_FILENO);
         ::setpgid(0, 0);
         ::execve(args[0], args.data(), envp.data());
         std::fprintf(stderr, "cannot start %s: errno %d\n", args[0], errno);
         ::_exit(127);
     }
     ::close(out_fd);
+    ::close(err_fd);
 }
 
 Process::~Process()
@@ -58,6 +64,7 @@ Process::~Process()
         }
     }
     ::unlink(out_path_.c_str());
+    ::unlink(err_path_.c_str());
 }
 
 int Process::wait(std::chrono::milliseconds timeout)
@@ -75,13 +82,21 @@ int Process::wait(std::chrono::milliseconds timeout)
     return WIFEXITED(status_) ? WEXITSTATUS(status_) : -1;
 }
 
-std::string Process::output() const
+namespace {
+
+std::string file_text(const std::string& path)
 {
-    std::ifstream in(out_path_);
+    std::ifstream in(path);
     std::stringstream ss;
     ss << in.rdbuf();
     return ss.str();
 }
+
+}  // namespace
+
+std::string Process::output() const { return file_text(out_path_); }
+
+std::string Process::errors() const { return file_text(err_path_); }
 
 void Process::kill(int signal)
 {

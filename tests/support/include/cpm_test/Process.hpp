@@ -5,7 +5,7 @@
 
 namespace cpm_test {
 
-/// A child process started by a test, with its stdout captured to a file. The destructor
+/// A child process started by a test, with its stdout and stderr captured to files. The destructor
 /// kills it (SIGTERM, then SIGKILL) and reaps it, so a failing test never leaves it behind.
 class Process
 {
@@ -20,6 +20,8 @@ public:
     int wait(std::chrono::milliseconds timeout);
     /// Everything it has written to stdout so far.
     std::string output() const;
+    /// Everything it has written to stderr so far.
+    std::string errors() const;
     void kill(int signal);
     int pid() const { return pid_; }
 
@@ -28,6 +30,7 @@ private:
     bool reaped_ = false;
     int status_ = 0;
     std::string out_path_;
+    std::string err_path_;
 };
 
 /// The path of a program built next to the tests (set by CMake as CPM_BIN_DIR).

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <random>
+#include <utility>
 #include <vector>
 
 namespace cpm::vehicle {
@@ -45,6 +46,9 @@ public:
     const World& world() const { return world_; }
     const FirmwareStats& stats() const;
     bool watchdog_active() const { return watchdog_active_; }
+    /// The motor command the controller holds now (the last valid command, or the watchdog's
+    /// brake); the model feels it input_delay later.
+    std::pair<MotorMode, uint16_t> motor_command() const { return motor_command_; }
     uint8_t vehicle_id() const { return vehicle_id_; }
     /// A noisy copy of the true pose (observation_noise), for the indoor positioning system.
     Pose observed_pose();
@@ -72,6 +76,7 @@ private:
     bool wrong_vehicle_ = false;
     bool answered_ = true;
     uint32_t command_tick_ = 0;
+    std::pair<MotorMode, uint16_t> motor_command_{MotorMode::Brake, 0};
     double imu_yaw_ = 0;
 };
 

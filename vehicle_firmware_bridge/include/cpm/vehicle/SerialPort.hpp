@@ -1,9 +1,18 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <cpm/Error.hpp>
+
 #include <string>
 
 namespace cpm::vehicle {
+
+/// The serial device is not there (yet): not plugged in, or the simulator not started.
+class DeviceMissing : public Error
+{
+public:
+    using Error::Error;
+};
 
 /// A serial line in raw mode (termios: 8N1, no echo, no line editing, no flow control), or a
 /// pseudo-terminal's slave side, which behaves the same. Owns its file descriptor.
@@ -11,7 +20,8 @@ class SerialPort
 {
 public:
     /// Opens `path` at `baud` (one of the standard rates; ignored by a pty) and discards what
-    /// was waiting in the input. Throws cpm::Error naming the path and the reason.
+    /// was waiting in the input. Throws DeviceMissing when there is no such device, else
+    /// cpm::Error naming the path and the reason (not a terminal, no permission, bad baud).
     SerialPort(const std::string& path, int baud);
     ~SerialPort();
     SerialPort(const SerialPort&) = delete;
@@ -22,6 +32,9 @@ public:
     long read_some(uint8_t* data, size_t size, int timeout_ms);
     /// Writes all bytes (waits briefly when the line is full); false when the line is gone.
     bool write_all(const uint8_t* data, size_t size);
+
+    /// Throws cpm::Error naming the rate when `baud` is not one SerialPort can set.
+    static void check_baud(int baud, const std::string& path);
 
     int fd() const { return fd_; }
     /// True when the device is a pseudo-terminal (a simulated car), not real hardware.

@@ -1,0 +1,431 @@
+// firmware_sim and vehicle_bridge as real processes joined by a real pseudo-terminal; the test
+// commands the car over DDS and checks where it really went (VehicleObservation).
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/stamp_message.hpp>
+
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+
+#include <VehicleCommandDirect.h>
+#include <VehicleCommandSpeedCurvature.h>
+#include <VehicleCommandTrajectory.h>
+#include <VehicleObservation.h>
+#include <VehicleState.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <csignal>
+#include <fcntl.h>
+#include <memory>
+#include <mutex>
+#include <random>
+#include <sstream>
+#include <thread>
+#include <unistd.h>
+
+namespace {
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+using cpm_test::Process;
+constexpr uint8_t kId = 7;
+constexpr uint64_t kSecond = 1'000'000'000ull;
+
+/// One simulated car: firmware_sim on a pty, vehicle_bridge on its device.
+struct Car
+{
+    std::unique_ptr<Process> sim;
+    std::unique_ptr<Process> bridge;
+    std::string device;
+
+    explicit Car(std::vector<std::string> sim_flags = {}, bool start_bridge = true)
+    {
+        start_sim(std::move(sim_flags));
+        if (start_bridge) this->start_bridge();
+    }
+    void start_sim(std::vector<std::string> flags)
+    {
+        std::vector<std::string> argv{built_program("firmware_sim"), "--vehicle_id", std::to_string(kId)};
+        argv.insert(argv.end(), flags.begin(), flags.end());
+        sim = std::make_unique<Process>(argv);
+        EXPECT_TRUE(cpm_test::wait_until([&] { return sim->output().find('\n') != std::string::npos; }))
+            << sim->errors();
+        auto out = sim->output();
+        device = out.rfind("device: ", 0) == 0 ? out.substr(8, out.find('\n') - 8) : "";
+        ASSERT_FALSE(device.empty()) << out << sim->errors();
+    }
+    void start_bridge(const std::string& path = {})
+    {
+        bridge = std::make_unique<Process>(std::vector<std::string>{
+            built_program("vehicle_bridge"), "--vehicle_id", std::to_string(kId), "--device", path.empty() ? device : path});
+    }
+    /// The sim's `pwm T MODE PWM` trace lines after time t (ns): (time, mode) pairs.
+    std::vector<std::pair<uint64_t, int>> pwm_trace_after(uint64_t t) const
+    {
+        return pwm_trace_after(t, -1);
+    }
+    /// The same, only the lines with this mode (0 brake, 1 forward, 2 reverse; -1 any).
+    std::vector<std::pair<uint64_t, int>> pwm_trace_after(uint64_t t, int only_mode) const
+    {
+        std::vector<std::pair<uint64_t, int>> out;
+        std::istringstream in(sim->output());
+        for (std::string word; in >> word;) {
+            if (word != "pwm") continue;
+            unsigned long long time = 0;
+            int mode = 0, pwm = 0;
+            in >> time >> mode >> pwm;
+            if (time > t && (only_mode < 0 || mode == only_mode)) out.emplace_back(time, mode);
+        }
+        return out;
+    }
+};
+
+/// Collects every VehicleObservation and VehicleState of the car as it arrives.
+class Watcher
+{
+public:
+    explicit Watcher(cpm::Participant& p)
+        : observations_(p, "vehicleObservation", {.keep_all = true}), states_(p, "vehicleState", {.keep_all = true}),
+          thread_([this] { run(); })
+    {
+    }
+    ~Watcher()
+    {
+        stop_ = true;
+        thread_.join();
+    }
+    std::vector<VehicleObservation> observations() const
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return observation_log_;
+    }
+    std::vector<VehicleState> states() const
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return state_log_;
+    }
+    /// Observations created in [t0, t1).
+    std::vector<VehicleObservation> observations_between(uint64_t t0, uint64_t t1) const
+    {
+        std::vector<VehicleObservation> out;
+        for (auto& o : observations()) {
+            uint64_t t = o.header().create_stamp().nanoseconds();
+            if (t >= t0 && t < t1) out.push_back(o);
+        }
+        return out;
+    }
+    bool wait_for_states(size_t n, std::chrono::milliseconds timeout = 10s) const
+    {
+        return cpm_test::wait_until([&] { return states().size() >= n; }, timeout);
+    }
+
+private:
+    void run()
+    {
+        while (!stop_) {
+            auto o = observations_.take();
+            auto s = states_.take();
+            {
+                std::lock_guard<std::mutex> lock(mutex_);
+                observation_log_.insert(observation_log_.end(), o.begin(), o.end());
+                state_log_.insert(state_log_.end(), s.begin(), s.end());
+            }
+            std::this_thread::sleep_for(2ms);
+        }
+    }
+
+    cpm::ReaderAbstract<VehicleObservation> observations_;
+    cpm::ReaderAbstract<VehicleState> states_;
+    mutable std::mutex mutex_;
+    std::vector<VehicleObservation> observation_log_;
+    std::vector<VehicleState> state_log_;
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+/// Writes a command for the car at 20 Hz from a thread of the test until destroyed.
+template <class T>
+class Repeater
+{
+public:
+    Repeater(cpm::Participant& p, const std::string& topic, T command)
+        : writer_(p, topic), command_(std::move(command)), thread_([this] { run(); })
+    {
+    }
+    ~Repeater()
+    {
+        stop_ = true;
+        thread_.join();
+    }
+
+private:
+    void run()
+    {
+        command_.vehicle_id(kId);
+        while (!stop_) {
+            cpm::stamp_message(command_, cpm::get_time_ns(), 0);
+            writer_.write(command_);
+            std::this_thread::sleep_for(50ms);
+        }
+    }
+    cpm::Writer<T> writer_;
+    T command_;
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+VehicleCommandSpeedCurvature speed_curvature(double speed, double curvature)
+{
+    VehicleCommandSpeedCurvature c;
+    c.speed(speed);
+    c.curvature(curvature);
+    return c;
+}
+
+/// Radius of the circle through the points (Kåsa's algebraic least-squares fit).
+double fitted_radius(const std::vector<VehicleObservation>& points)
+{
+    double n = double(points.size()), sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0, sxz = 0, syz = 0, sz = 0;
+    for (auto& o : points) {
+        double x = o.pose().x(), y = o.pose().y(), z = x * x + y * y;
+        sx += x, sy += y, sxx += x * x, syy += y * y, sxy += x * y, sxz += x * z, syz += y * z, sz += z;
+    }
+    // Solve [sxx sxy sx; sxy syy sy; sx sy n] [a b c] = [sxz syz sz] for x^2+y^2 = a x + b y + c.
+    double m[3][4] = {{sxx, sxy, sx, sxz}, {sxy, syy, sy, syz}, {sx, sy, n, sz}};
+    for (int i = 0; i < 3; ++i) {
+        for (int j = i + 1; j < 3; ++j) {
+            double f = m[j][i] / m[i][i];
+            for (int k = i; k < 4; ++k) m[j][k] -= f * m[i][k];
+        }
+    }
+    double c = m[2][3] / m[2][2];
+    double b = (m[1][3] - m[1][2] * c) / m[1][1];
+    double a = (m[0][3] - m[0][1] * b - m[0][2] * c) / m[0][0];
+    return std::sqrt(c + a * a / 4 + b * b / 4);
+}
+
+double speed_between(const VehicleObservation& a, const VehicleObservation& b)
+{
+    double dt = double(b.header().create_stamp().nanoseconds() - a.header().create_stamp().nanoseconds()) * 1e-9;
+    return std::hypot(b.pose().x() - a.pose().x(), b.pose().y() - a.pose().y()) / dt;
+}
+
+class VehicleEndToEnd : public ::testing::Test
+{
+protected:
+    cpm::Participant participant{cpm_test::isolated_options()};
+};
+
+}  // namespace
+
+TEST_F(VehicleEndToEnd, SpeedCurvatureCommandDrivesACircleOfTheCommandedRadius)
+{
+    Watcher watch(participant);
+    Car car;
+    ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    Repeater<VehicleCommandSpeedCurvature> command(participant, "vehicleCommandSpeedCurvature", speed_curvature(1.0, 1 / 0.8));
+    std::this_thread::sleep_for(1500ms);  // let speed and steering settle
+    uint64_t t0 = cpm::get_time_ns();
+    std::this_thread::sleep_for(3s);
+    auto points = watch.observations_between(t0, cpm::get_time_ns());
+    ASSERT_GT(points.size(), 100u);
+    EXPECT_NEAR(fitted_radius(points), 0.8, 0.08);
+    EXPECT_NEAR(speed_between(points.front(), points[10]), 1.0, 0.1);
+}
+
+TEST_F(VehicleEndToEnd, DirectCommandOverridesATrajectoryUntilItIsStale)
+{
+    Watcher watch(participant);
+    Car car;
+    ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    // A trajectory that holds the car where it stands for 10 s (steering straight) ...
+    uint64_t now = cpm::get_time_ns();
+    VehicleCommandTrajectory trajectory;
+    std::vector<TrajectoryPoint> points;
+    for (int i = 0; i <= 100; ++i) {
+        TrajectoryPoint p;
+        p.t().nanoseconds(now + uint64_t(i) * kSecond / 10);
+        points.push_back(p);
+    }
+    trajectory.trajectory_points(points);
+    auto follow = std::make_unique<Repeater<VehicleCommandTrajectory>>(participant, "vehicleCommandTrajectory", trajectory);
+    // ... and a direct command hard right, which wins.
+    VehicleCommandDirect direct;
+    direct.motor_throttle(0.2);
+    direct.steering_servo(-1.0);
+    auto override_ = std::make_unique<Repeater<VehicleCommandDirect>>(participant, "vehicleCommandDirect", direct);
+    std::this_thread::sleep_for(2s);
+    auto states = watch.states();
+    ASSERT_FALSE(states.empty());
+    EXPECT_DOUBLE_EQ(states.back().motor_throttle(), 0.2);
+    EXPECT_DOUBLE_EQ(states.back().steering_servo(), -1.0);
+    auto observed = watch.observations();
+    ASSERT_FALSE(observed.empty());
+    EXPECT_LT(observed.back().pose().yaw(), -0.3);  // turned right
+
+    override_.reset();
+    std::this_thread::sleep_for(1500ms);  // the direct command is stale after 1 s
+    EXPECT_EQ(watch.states().back().steering_servo(), 0.0);  // the trajectory's again
+}
+
+TEST_F(VehicleEndToEnd, TrajectoryLineThenArcIsFollowedWithinFiveCentimetres)
+{
+    Watcher watch(participant);
+    Car car;
+    ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    uint64_t t0 = cpm::get_time_ns() + kSecond;
+    // Accelerate at 1 m/s^2 for 1 s, straight on to x = 2 m, then a left arc of radius 1 m.
+    double end = 1.0 + 1.5 + M_PI / 2;
+    std::vector<TrajectoryPoint> points;
+    for (double t = 0; t <= end + 1e-9; t += 0.1) {
+        double s = t < 1 ? 0.5 * t * t : 0.5 + (t - 1), v = std::min(t, 1.0);
+        TrajectoryPoint p;
+        p.t().nanoseconds(t0 + uint64_t(t * 1e9));
+        double phi = std::max(0.0, s - 2.0);
+        p.px(s <= 2.0 ? s : 2 + std::sin(phi));
+        p.py(s <= 2.0 ? 0.0 : 1 - std::cos(phi));
+        p.vx(v * std::cos(phi));
+        p.vy(v * std::sin(phi));
+        points.push_back(p);
+    }
+    VehicleCommandTrajectory trajectory;
+    trajectory.trajectory_points(points);
+    Repeater<VehicleCommandTrajectory> command(participant, "vehicleCommandTrajectory", trajectory);
+    std::this_thread::sleep_for(std::chrono::milliseconds(int((end + 1.5) * 1000)));
+
+    auto driven = watch.observations_between(t0, t0 + uint64_t(end * 1e9));
+    ASSERT_GT(driven.size(), 150u);
+    double worst = 0;
+    for (auto& o : driven) {
+        double x = o.pose().x(), y = o.pose().y();
+        worst = std::max(worst, x <= 2.0 ? std::abs(y) : std::abs(std::hypot(x - 2, y - 1) - 1.0));
+    }
+    EXPECT_LT(worst, 0.05);
+    EXPECT_NEAR(driven.back().pose().x(), 3.0, 0.15);
+    EXPECT_NEAR(driven.back().pose().y(), 1.0, 0.15);
+    std::printf("worst cross-track error %.1f mm over %zu observations\n", worst * 1000, driven.size());
+}
+
+TEST_F(VehicleEndToEnd, KillingTheCommandWriterBrakesTheCarWithinOneSecond)
+{
+    Watcher watch(participant);
+    Car car({"--trace-pwm"});
+    Process writer({built_program("vehicle_command_writer"), std::to_string(kId), "0.5", "0"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return !car.pwm_trace_after(0).empty() && car.pwm_trace_after(0).back().second == 1; }, 10s))
+        << car.sim->output() << car.bridge->errors();
+    std::this_thread::sleep_for(500ms);
+    uint64_t killed = cpm::get_time_ns();
+    writer.kill(SIGKILL);
+    ASSERT_TRUE(cpm_test::wait_until([&] { return !car.pwm_trace_after(killed, 0).empty(); }, 3s)) << car.sim->output();
+    uint64_t braked = car.pwm_trace_after(killed, 0).front().first;
+    double after = double(braked - killed) * 1e-9;
+    // Commands go stale 1 s after their creation (the last one up to 50 ms before the kill);
+    // the next bridge cycle (within 20 ms) sends the brake.
+    EXPECT_GT(after, 0.8);
+    EXPECT_LT(after, 1.1);
+    std::printf("braked %.0f ms after the command writer was killed\n", after * 1000);
+}
+
+TEST_F(VehicleEndToEnd, KillingTheBridgeLetsTheWatchdogBrakeWithin250ms)
+{
+    Watcher watch(participant);
+    Car car({"--trace-pwm"});
+    Repeater<VehicleCommandSpeedCurvature> command(participant, "vehicleCommandSpeedCurvature", speed_curvature(0.5, 0));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return !car.pwm_trace_after(0).empty() && car.pwm_trace_after(0).back().second == 1; }, 10s))
+        << car.sim->output() << car.bridge->errors();
+    std::this_thread::sleep_for(500ms);
+    uint64_t killed = cpm::get_time_ns();
+    car.bridge->kill(SIGKILL);
+    ASSERT_TRUE(cpm_test::wait_until([&] { return !car.pwm_trace_after(killed, 0).empty(); }, 3s)) << car.sim->output();
+    uint64_t braked = car.pwm_trace_after(killed, 0).front().first;
+    double after = double(braked - killed) * 1e-9;
+    // The watchdog fires 250 ms after the last command, which came up to one cycle (20 ms)
+    // before the kill; the simulator's 4 ms ticks and a busy machine may add a few ms.
+    EXPECT_GT(after, 0.2);
+    EXPECT_LT(after, 0.3);
+    car.sim->kill(SIGTERM);
+    ASSERT_EQ(car.sim->wait(5s), 0);
+    EXPECT_NE(car.sim->output().find("\"watchdog_stops\": 1"), std::string::npos) << car.sim->output();
+    std::printf("watchdog braked %.0f ms after the bridge was killed\n", after * 1000);
+}
+
+TEST_F(VehicleEndToEnd, CorruptBytesOnTheLineAreSurvivedBothWays)
+{
+    Watcher watch(participant);
+    Car car({"--corrupt-rate", "0.2"});  // one state frame in five corrupted on its way to the bridge
+    ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    Repeater<VehicleCommandSpeedCurvature> command(participant, "vehicleCommandSpeedCurvature", speed_curvature(0.5, 0));
+    // Garbage into the line towards the simulator, between the bridge's commands.
+    int line = ::open(car.device.c_str(), O_WRONLY | O_NOCTTY);
+    ASSERT_GE(line, 0);
+    std::mt19937 rng(7);
+    for (int burst = 0; burst < 40; ++burst) {
+        uint8_t junk[37];
+        for (auto& b : junk) b = uint8_t(rng());
+        junk[10] = 0;
+        ASSERT_EQ(::write(line, junk, sizeof junk), ssize_t(sizeof junk));
+        std::this_thread::sleep_for(50ms);
+    }
+    ::close(line);
+    size_t states_before = watch.states().size();
+    std::this_thread::sleep_for(1s);
+    EXPECT_GT(watch.states().size(), states_before + 30);  // still publishing at about 40 Hz (80 % of 50)
+    auto recent = watch.observations_between(cpm::get_time_ns() - kSecond / 2, cpm::get_time_ns());
+    ASSERT_GT(recent.size(), 10u);
+    EXPECT_NEAR(speed_between(recent.front(), recent.back()), 0.5, 0.1);  // and still driving
+
+    car.bridge->kill(SIGTERM);
+    car.sim->kill(SIGTERM);
+    ASSERT_EQ(car.bridge->wait(5s), 0);
+    ASSERT_EQ(car.sim->wait(5s), 0);
+    auto bridge_stats = car.bridge->output();
+    auto sim_stats = car.sim->output();
+    EXPECT_EQ(bridge_stats.find("\"decoder_errors\": 0}"), std::string::npos) << bridge_stats;
+    EXPECT_EQ(sim_stats.find("\"bad_cobs\": 0, \"too_short\": 0, \"bad_crc\": 0"), std::string::npos) << sim_stats;
+}
+
+TEST_F(VehicleEndToEnd, BridgeStopsPublishingWhenTheLinkIsLostAndReconnects)
+{
+    Watcher watch(participant);
+    std::string link = "/tmp/cpm_vehicle_test_" + std::to_string(::getpid()) + ".tty";
+    Car car({"--link", link}, false);
+    car.start_bridge(link);
+    ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    car.sim->kill(SIGKILL);
+    car.sim->wait(5s);
+    std::this_thread::sleep_for(300ms);
+    size_t during = watch.states().size();
+    std::this_thread::sleep_for(700ms);
+    EXPECT_EQ(watch.states().size(), during);  // nothing fresh while the car is gone
+    EXPECT_NE(car.bridge->errors().find("serial link to " + link + " lost"), std::string::npos) << car.bridge->errors();
+
+    car.start_sim({"--link", link});
+    EXPECT_TRUE(watch.wait_for_states(during + 20)) << car.bridge->errors();
+    EXPECT_EQ(car.bridge->wait(0ms), -1);  // the same bridge process, still running
+    ::unlink(link.c_str());
+}
+
+TEST_F(VehicleEndToEnd, WrongFilesAndFlagsAreNamedAndExitNonZero)
+{
+    Process no_map({built_program("firmware_sim"), "--vehicle_id", "1", "--map", "/nonexistent/map.json"});
+    EXPECT_EQ(no_map.wait(10s), 1);
+    EXPECT_NE(no_map.errors().find("/nonexistent/map.json: cannot open the map file"), std::string::npos) << no_map.errors();
+    Process bad_start({built_program("firmware_sim"), "--vehicle_id", "1", "--start", "1,2"});
+    EXPECT_EQ(bad_start.wait(10s), 2);
+    EXPECT_NE(bad_start.errors().find("--start: expected X,Y,YAW"), std::string::npos) << bad_start.errors();
+    Process no_device({built_program("vehicle_bridge"), "--vehicle_id", "1"});
+    EXPECT_EQ(no_device.wait(10s), 2);
+    EXPECT_NE(no_device.errors().find("--device is required"), std::string::npos) << no_device.errors();
+    Process bad_baud({built_program("vehicle_bridge"), "--vehicle_id", "1", "--device", "/dev/null", "--baud", "12345"});
+    EXPECT_EQ(bad_baud.wait(10s), 2);
+    EXPECT_NE(bad_baud.errors().find("unsupported baud rate 12345"), std::string::npos) << bad_baud.errors();
+    Process not_a_tty({built_program("vehicle_bridge"), "--vehicle_id", "1", "--device", "/dev/null"});
+    EXPECT_EQ(not_a_tty.wait(10s), 1);
+    EXPECT_NE(not_a_tty.errors().find("/dev/null: not a terminal device"), std::string::npos) << not_a_tty.errors();
+}
