@@ -12,3 +12,6 @@ echo "== bench_throughput (1 KiB reliable, cpm vs raw Fast DDS vs Cyclone ddsper
 echo
 echo "== bench_timer (tick jitter, cpm::Timer vs clock_nanosleep)"
 "$bin/bench_timer"
+echo
+echo "== bench_vehicle (simulated cars: bridge cycle cost, command latency, fleet capacity)"
+"$bin/bench_vehicle"

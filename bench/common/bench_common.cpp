@@ -66,7 +66,8 @@ void print_machine(const std::string& settings)
                 u.sysname, u.release, settings.c_str());
 }
 
-int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path)
+int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path,
+          const std::string& err_path)
 {
     std::vector<std::string> args = argv, envs;
     for (char** e = environ; *e; ++e) envs.emplace_back(*e);
@@ -76,6 +77,10 @@ int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& 
         if (!out_path.empty()) {
             const int fd = open(out_path.c_str(), O_CREAT | O_TRUNC | O_WRONLY, 0644);
             dup2(fd, STDOUT_FILENO);
+        }
+        if (!err_path.empty()) {
+            const int fd = open(err_path.c_str(), O_CREAT | O_TRUNC | O_WRONLY, 0644);
+            dup2(fd, STDERR_FILENO);
         }
         std::vector<char*> a, e;
         for (auto& s : args) a.push_back(s.data());

@@ -26,8 +26,10 @@ void print_machine(const std::string& settings);
 
 /// Starts this program again (via /proc/self/exe) with `args`; returns the pid.
 int spawn_self(const std::vector<std::string>& args);
-/// Starts a program with args and extra environment, stdout to `out_path`; returns the pid.
-int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path);
+/// Starts a program with args and extra environment, stdout to `out_path` (and stderr to
+/// `err_path` when given); returns the pid.
+int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path,
+          const std::string& err_path = "");
 /// Waits for a child; returns its exit code (-1 if killed). Kills it after timeout_s.
 int wait_child(int pid, double timeout_s);
 

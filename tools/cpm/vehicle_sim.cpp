@@ -164,11 +164,16 @@ int vehicle_sim(const std::vector<std::string>& args)
         }
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
-    for (auto& c : children) {
-        if (c.pid > 0) kill(c.pid, SIGTERM);
-    }
-    for (auto& c : children) {
-        if (c.pid > 0) waitpid(c.pid, nullptr, 0);
+    // Bridges first, so that none of them reports its simulator's end as a lost link.
+    for (int pass = 0; pass < 2; ++pass) {
+        for (auto& c : children) {
+            bool bridge = c.name.rfind("vehicle_bridge", 0) == 0;
+            if (c.pid > 0 && bridge == (pass == 0)) kill(c.pid, SIGTERM);
+        }
+        for (auto& c : children) {
+            bool bridge = c.name.rfind("vehicle_bridge", 0) == 0;
+            if (c.pid > 0 && bridge == (pass == 0)) waitpid(c.pid, nullptr, 0);
+        }
     }
     for (auto& t : copiers) t.join();
     return exit_code;

@@ -1,0 +1,329 @@
+// The simulated car's loop, measured:
+//  1. one car (firmware_sim + vehicle_bridge over a pty): the bridge's CPU per 50 Hz cycle next
+//     to the simulator's, and the command latency from a VehicleCommandDirect written to the
+//     motor PWM the simulator's controller holds (its --trace-pwm);
+//  2. capacity: N cars at once (`cpm vehicle sim --count N`), every car commanded; a cycle
+//     counts as missed when a car's VehicleState stream skips a 20 ms slot.
+//
+//   bench_vehicle [--seconds 10] [--cars 2,4,6,8,10,12] [--domain 210]
+#include "bench_common.hpp"
+
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/stamp_message.hpp>
+
+#include <VehicleCommandDirect.h>
+#include <VehicleCommandSpeedCurvature.h>
+#include <VehicleState.h>
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <set>
+#include <random>
+#include <sstream>
+#include <thread>
+#include <unistd.h>
+
+namespace {
+
+using namespace std::chrono_literals;
+
+std::string bin_dir()
+{
+    char self[4096];
+    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+    std::string path(self, size_t(n > 0 ? n : 0));
+    return path.substr(0, path.rfind('/'));
+}
+
+std::string file_text(const std::string& path)
+{
+    std::ifstream in(path);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+
+/// utime + stime of a process in microseconds (from /proc/PID/stat).
+double process_cpu_us(int pid)
+{
+    std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    std::istringstream fields(text.substr(text.rfind(')') + 2));
+    std::string f;
+    unsigned long long utime = 0, stime = 0;
+    for (int i = 3; i <= 15 && fields >> f; ++i) {
+        if (i == 14) utime = std::stoull(f);
+        if (i == 15) stime = std::stoull(f);
+    }
+    return double(utime + stime) * 1e6 / double(sysconf(_SC_CLK_TCK));
+}
+
+/// Busy fraction of all cores over an interval (from /proc/stat).
+struct CpuMeter
+{
+    unsigned long long busy = 0, total = 0;
+    void sample(unsigned long long& b, unsigned long long& t)
+    {
+        std::ifstream in("/proc/stat");
+        std::string cpu;
+        in >> cpu;
+        unsigned long long v, idle = 0;
+        b = t = 0;
+        for (int i = 0; i < 8 && in >> v; ++i) {
+            t += v;
+            if (i == 3 || i == 4) idle += v;
+        }
+        b = t - idle;
+    }
+    void start() { sample(busy, total); }
+    double stop()
+    {
+        unsigned long long b, t;
+        sample(b, t);
+        return double(b - busy) / double(std::max(1ull, t - total));
+    }
+};
+
+std::vector<nlohmann::json> json_lines(const std::string& text)
+{
+    std::vector<nlohmann::json> out;
+    std::istringstream in(text);
+    for (std::string line; std::getline(in, line);) {
+        if (line.empty() || line[0] != '{') continue;
+        try {
+            out.push_back(nlohmann::json::parse(line));
+        } catch (const nlohmann::json::exception&) {
+        }
+    }
+    return out;
+}
+
+bool wait_for_line(const std::string& path, const std::string& prefix, std::string& line_out, std::chrono::seconds timeout)
+{
+    auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+        std::istringstream in(file_text(path));
+        for (std::string line; std::getline(in, line);) {
+            if (line.rfind(prefix, 0) == 0) {
+                line_out = line;
+                return true;
+            }
+        }
+        std::this_thread::sleep_for(10ms);
+    }
+    return false;
+}
+
+void one_car(cpm::Participant& participant, const std::vector<std::string>& env, int seconds)
+{
+    const std::string dir = bin_dir();
+    const std::string sim_out = "/tmp/bench_vehicle_sim.out", bridge_out = "/tmp/bench_vehicle_bridge.out";
+    int sim = bench::spawn({dir + "/firmware_sim", "--vehicle_id", "1", "--trace-pwm"}, env, sim_out, "/tmp/bench_vehicle_sim.err");
+    std::string device;
+    if (!wait_for_line(sim_out, "device: ", device, 10s)) {
+        std::fprintf(stderr, "bench_vehicle: firmware_sim did not start\n");
+        std::exit(1);
+    }
+    int bridge = bench::spawn({dir + "/vehicle_bridge", "--vehicle_id", "1", "--device", device.substr(8)}, env, bridge_out,
+                              "/tmp/bench_vehicle_bridge.err");
+    cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState");
+    cpm::Writer<VehicleCommandDirect> writer(participant, "vehicleCommandDirect");
+    states.wait_for_data(10s);
+    writer.wait_for_matched(1, 10s);
+    std::this_thread::sleep_for(500ms);
+
+    // A new throttle every 100-120 ms (random phase against the car's 20 ms cycle), never the
+    // same PWM twice in a row.
+    std::mt19937 rng(1);
+    std::vector<std::pair<uint64_t, int>> writes;  // (time, pwm)
+    VehicleCommandDirect command;
+    command.vehicle_id(1);
+    double cpu_sim0 = process_cpu_us(sim), cpu_bridge0 = process_cpu_us(bridge);
+    auto t_end = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
+    for (int k = 0; std::chrono::steady_clock::now() < t_end; ++k) {
+        int pwm = 100 + (k % 2) * 100 + (k % 50) * 4;
+        command.motor_throttle(pwm / 1000.0);
+        uint64_t now = cpm::get_time_ns();
+        cpm::stamp_message(command, now, 0);
+        writer.write(command);
+        writes.emplace_back(now, pwm);
+        std::this_thread::sleep_for(100ms + std::chrono::microseconds(rng() % 20'000));
+    }
+    double cpu_sim = process_cpu_us(sim) - cpu_sim0, cpu_bridge = process_cpu_us(bridge) - cpu_bridge0;
+    kill(bridge, SIGTERM);
+    kill(sim, SIGTERM);
+    bench::wait_child(bridge, 10);
+    bench::wait_child(sim, 10);
+
+    // Match each write with the first trace line after it that shows its PWM.
+    std::vector<std::pair<uint64_t, int>> trace;
+    std::istringstream in(file_text(sim_out));
+    for (std::string word; in >> word;) {
+        if (word != "pwm") continue;
+        unsigned long long t;
+        int mode, pwm;
+        in >> t >> mode >> pwm;
+        trace.emplace_back(t, pwm);
+    }
+    std::vector<double> latency_us;
+    size_t lost = 0;
+    for (auto [t, pwm] : writes) {
+        auto it = std::find_if(trace.begin(), trace.end(), [&](auto& e) { return e.first > t && e.second == pwm; });
+        if (it == trace.end() || it->first - t > 200'000'000ull) {
+            ++lost;
+            continue;
+        }
+        latency_us.push_back(double(it->first - t) * 1e-3);
+    }
+    auto bridge_stats = json_lines(file_text(bridge_out));
+    auto sim_stats = json_lines(file_text(sim_out));
+    if (bridge_stats.empty() || sim_stats.empty()) {
+        std::fprintf(stderr, "bench_vehicle: no statistics from the car's processes\n");
+        std::exit(1);
+    }
+    double cycles = bridge_stats[0]["cycles"].get<double>();
+    std::printf("\n-- one car, %d s: cost per 50 Hz cycle (µs of CPU)\n", seconds);
+    std::printf("%-44s %9s %9s\n", "", "p50", "p99");
+    std::printf("%-44s %9.1f %9.1f\n", "vehicle_bridge loop thread (per cycle)", bridge_stats[0]["cycle_cpu_us_p50"].get<double>(),
+                bridge_stats[0]["cycle_cpu_us_p99"].get<double>());
+    std::printf("%-44s %9.1f  (all threads, DDS included)\n", "vehicle_bridge process, mean per cycle", cpu_bridge / cycles);
+    std::printf("%-44s %9.1f  (reference: 5 model steps, 3 rangers, 1 DDS write)\n",
+                "firmware_sim process, mean per cycle", cpu_sim / double(sim_stats[0]["state_packets"].get<double>()));
+    std::printf("\n-- command latency: VehicleCommandDirect written -> PWM held by the simulated controller (µs)\n");
+    bench::print_header("");
+    bench::print_row("cpm (DDS + wait for the next 50 Hz cycle + pty)", bench::stats_of(latency_us));
+    std::printf("%-44s %9.1f  (a uniform wait for the next cycle alone: p50 10000, p99 19800)\n", "cycle period / 2", 10000.0);
+    std::printf("commands written %zu, not seen within 200 ms: %zu\n", writes.size(), lost);
+}
+
+struct CapacityResult
+{
+    double missed_fraction = 0, cpu_busy = 0;
+    uint64_t expected = 0, received = 0, missed = 0;
+    double worst_gap_ms = 0;
+};
+
+CapacityResult capacity(cpm::Participant& participant, const std::vector<std::string>& env, int cars, int seconds)
+{
+    const std::string out = "/tmp/bench_vehicle_fleet.out";
+    int fleet = bench::spawn({bin_dir() + "/cpm", "vehicle", "sim", "--id", "1", "--count", std::to_string(cars)}, env, out,
+                             "/tmp/bench_vehicle_fleet.err");
+    cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});
+    cpm::Writer<VehicleCommandSpeedCurvature> writer(participant, "vehicleCommandSpeedCurvature");
+    std::map<int, std::vector<uint64_t>> stamps;
+    std::atomic<bool> stop{false};
+    std::thread commander([&] {
+        VehicleCommandSpeedCurvature c;
+        c.speed(0.3);
+        c.curvature(1.0);
+        while (!stop) {
+            for (int id = 1; id <= cars; ++id) {
+                c.vehicle_id(uint8_t(id));
+                cpm::stamp_message(c, cpm::get_time_ns(), 0);
+                writer.write(c);
+            }
+            std::this_thread::sleep_for(50ms);
+        }
+    });
+    // Wait until every car publishes, then measure a window.
+    auto deadline = std::chrono::steady_clock::now() + 30s;
+    std::map<int, bool> seen;
+    while (int(seen.size()) < cars && std::chrono::steady_clock::now() < deadline) {
+        for (auto& s : states.take()) seen[s.vehicle_id()] = true;
+        std::this_thread::sleep_for(10ms);
+    }
+    std::this_thread::sleep_for(2s);
+    states.take();
+    CpuMeter cpu;
+    cpu.start();
+    uint64_t t0 = cpm::get_time_ns(), t1 = t0 + uint64_t(seconds) * 1'000'000'000ull;
+    while (cpm::get_time_ns() < t1 + 200'000'000ull) {
+        for (auto& s : states.take()) stamps[s.vehicle_id()].push_back(s.header().create_stamp().nanoseconds());
+        std::this_thread::sleep_for(5ms);
+    }
+    CapacityResult r;
+    r.cpu_busy = cpu.stop();
+    stop = true;
+    commander.join();
+    kill(fleet, SIGINT);
+    bench::wait_child(fleet, 20);
+
+    const uint64_t period = 20'000'000;
+    for (int id = 1; id <= cars; ++id) {
+        auto& v = stamps[id];
+        std::sort(v.begin(), v.end());
+        std::vector<uint64_t> in_window;
+        for (auto t : v) {
+            if (t >= t0 && t < t1) in_window.push_back(t);
+        }
+        r.expected += uint64_t(seconds) * 50;
+        r.received += in_window.size();
+        if (in_window.empty()) {
+            r.missed += uint64_t(seconds) * 50;
+            continue;
+        }
+        // The car's cycle phase (its simulator ticks at fixed times); a cycle is missed when no
+        // state lands within half a period of its slot.
+        std::vector<uint64_t> phases;
+        for (auto t : in_window) phases.push_back(t % period);
+        std::nth_element(phases.begin(), phases.begin() + long(phases.size() / 2), phases.end());
+        const uint64_t phase = phases[phases.size() / 2];
+        std::set<uint64_t> slots;
+        for (auto t : in_window) slots.insert((t - phase + period / 2) / period);
+        const uint64_t first = (t0 - phase + period - 1) / period, last = (t1 - phase - 1) / period;
+        uint64_t hit = 0;
+        for (auto k : slots) hit += (k >= first && k <= last);
+        r.missed += (last - first + 1) - hit;
+        for (size_t i = 1; i < in_window.size(); ++i) {
+            r.worst_gap_ms = std::max(r.worst_gap_ms, double(in_window[i] - in_window[i - 1]) * 1e-6);
+        }
+    }
+    r.missed_fraction = double(r.missed) / double(std::max<uint64_t>(1, r.expected));
+    return r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "10"));
+    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "210"));
+    std::vector<int> fleet_sizes;
+    std::istringstream list(bench::arg(argc, argv, "--cars", "2,4,6,8,10,12"));
+    for (std::string item; std::getline(list, item, ',');) fleet_sizes.push_back(std::stoi(item));
+
+    bench::print_machine("50 Hz state packets, 250 Hz model, " + std::to_string(seconds) + " s per case, domain " +
+                         std::to_string(domain));
+    const std::vector<std::string> env{"CPM_DOMAIN_ID=" + std::to_string(domain)};
+    cpm::ParticipantOptions options;
+    options.domain_id = domain;
+    options.name = "bench_vehicle";
+    cpm::Participant participant(options);
+
+    one_car(participant, env, seconds);
+
+    std::printf("\n-- capacity: N simulated cars (firmware_sim + vehicle_bridge each), all commanded\n");
+    std::printf("(missed: a 20 ms slot of a car without its VehicleState; stderr of the cars in /tmp/bench_vehicle_fleet.err)\n");
+    std::printf("%6s %10s %10s %8s %10s %12s %10s\n", "cars", "expected", "received", "missed", "missed %", "worst gap ms",
+                "CPU busy");
+    int best = 0;
+    for (int cars : fleet_sizes) {
+        auto r = capacity(participant, env, cars, seconds);
+        std::printf("%6d %10llu %10llu %8llu %9.3f%% %12.1f %9.0f%%\n", cars, (unsigned long long)r.expected,
+                    (unsigned long long)r.received, (unsigned long long)r.missed, r.missed_fraction * 100, r.worst_gap_ms,
+                    r.cpu_busy * 100);
+        std::fflush(stdout);
+        if (r.missed_fraction < 0.01) best = cars;
+    }
+    std::printf("largest fleet with < 1 %% missed cycles: %d cars (target: >= 10)\n", best);
+    return 0;
+}
