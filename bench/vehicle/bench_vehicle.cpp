@@ -198,8 +198,7 @@ void one_car(cpm::Participant& participant, const std::vector<std::string>& env,
     std::printf("%-44s %9.1f  (all threads, DDS included)\n", "vehicle_bridge process, mean per cycle", cpu_bridge / cycles);
     std::printf("%-44s %9.1f  (reference: 5 model steps, 3 rangers, 1 DDS write)\n",
                 "firmware_sim process, mean per cycle", cpu_sim / double(sim_stats[0]["state_packets"].get<double>()));
-    std::printf("\n-- command latency: VehicleCommandDirect written -> PWM held by the simulated controller (µs)\n");
-    bench::print_header("");
+    bench::print_header("-- command latency: VehicleCommandDirect written -> PWM held by the simulated controller (µs)");
     bench::print_row("cpm (DDS + wait for the next 50 Hz cycle + pty)", bench::stats_of(latency_us));
     std::printf("%-44s %9.1f  (a uniform wait for the next cycle alone: p50 10000, p99 19800)\n", "cycle period / 2", 10000.0);
     std::printf("commands written %zu, not seen within 200 ms: %zu\n", writes.size(), lost);

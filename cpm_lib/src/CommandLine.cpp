@@ -2,6 +2,7 @@
 #include <cpm/init.hpp>
 
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 namespace cpm::cli {
@@ -124,6 +125,23 @@ std::vector<std::string> split_list(const std::string& flag, const std::string& 
     }
     if (items.empty()) throw UsageError(flag + ": nothing given");
     return items;
+}
+
+int run_main(int argc, char** argv, const char* program, const char* help, const std::function<int(int, char**)>& run)
+{
+    if (wants_help(std::vector<std::string>(argv + 1, argv + argc))) {
+        std::fputs(help, stdout);
+        return 0;
+    }
+    try {
+        return run(argc, argv);
+    } catch (const UsageError& e) {
+        std::fprintf(stderr, "%s: %s\n", program, e.what());
+        return kUsageExit;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "%s: %s\n", program, e.what());
+        return 1;
+    }
 }
 
 }  // namespace cpm::cli

@@ -17,16 +17,17 @@
 #include <cstdio>
 #include <thread>
 
-int main(int argc, char** argv)
+namespace {
+
+const char* kHelp =
+    "usage: vehicle_drive --vehicle_id N [--speed M_PER_S] [--curvature PER_M] [--seconds S] [--dds_domain D]\n"
+    "Commands the car at this speed and curvature (20 Hz) and prints its state and ranges 4x a second;\n"
+    "then stops commanding, so the car brakes once the last command is 1 s old.\n";
+
+int run(int argc, char** argv)
 {
     std::vector<std::string> args(argv + 1, argv + argc);
-    if (cpm::cli::wants_help(args)) {
-        std::puts("usage: vehicle_drive --vehicle_id N [--speed M_PER_S] [--curvature PER_M] [--seconds S] [--dds_domain D]\n"
-                  "Commands the car at this speed and curvature (20 Hz) and prints its state and ranges 4x a second;\n"
-                  "then lets the command go stale, so the car brakes.");
-        return 0;
-    }
-    try {
+    {
         auto parsed = cpm::cli::parse_args(
             args, {{"--vehicle_id", true}, {"--speed", true}, {"--curvature", true}, {"--seconds", true}}, "vehicle_drive");
         if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("vehicle_drive: --vehicle_id is required");
@@ -69,11 +70,9 @@ int main(int argc, char** argv)
             return 1;
         }
         return 0;
-    } catch (const cpm::cli::UsageError& e) {
-        std::fprintf(stderr, "%s\n", e.what());
-        return cpm::cli::kUsageExit;
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "vehicle_drive: %s\n", e.what());
-        return 1;
     }
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "vehicle_drive", kHelp, run); }

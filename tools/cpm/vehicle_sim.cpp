@@ -2,6 +2,7 @@
 #include "vehicle_sim.hpp"
 
 #include <cpm/CommandLine.hpp>
+#include <cpm/vehicle/VehicleModel.hpp>
 
 #include <atomic>
 #include <cerrno>
@@ -97,11 +98,8 @@ int vehicle_sim(const std::vector<std::string>& args)
     long long first = cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255);
     long long count = cpm::cli::parse_integer("--count", parsed.get("--count", "1"), 1, 256 - first);
     double spacing = cpm::cli::parse_number("--spacing", parsed.get("--spacing", "0.6"), 0, 100);
-    auto start = cpm::cli::split_list("--start", parsed.get("--start", "0,0,0"));
-    if (start.size() != 3) throw cpm::cli::UsageError("--start: expected X,Y,YAW, got '" + parsed.get("--start") + "'");
-    double x0 = cpm::cli::parse_number("--start", start[0], -1e6, 1e6);
-    double y0 = cpm::cli::parse_number("--start", start[1], -1e6, 1e6);
-    double yaw = cpm::cli::parse_number("--start", start[2], -10, 10);
+    auto start = cpm::vehicle::parse_pose("--start", parsed.get("--start", "0,0,0"));
+    double x0 = start.x, y0 = start.y, yaw = start.yaw;
 
     const std::string dir = program_dir();
     std::vector<Child> children;

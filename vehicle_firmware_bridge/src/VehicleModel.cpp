@@ -1,5 +1,6 @@
 #include <cpm/vehicle/VehicleModel.hpp>
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
 
 #include "json_members.hpp"
@@ -52,6 +53,14 @@ VehicleParameters VehicleParameters::parse(const std::string& json_text, const s
     if (p.physics_rate < p.state_rate) throw Error(source + ": physics_rate must be >= state_rate");
     if (p.ultrasonic_min_range >= p.ultrasonic_max_range) throw Error(source + ": ultrasonic_min_range must be < ultrasonic_max_range");
     return p;
+}
+
+Pose parse_pose(const std::string& flag, const std::string& text)
+{
+    auto items = cli::split_list(flag, text);
+    if (items.size() != 3) throw cli::UsageError(flag + ": expected X,Y,YAW, got '" + text + "'");
+    return {cli::parse_number(flag, items[0], -1e6, 1e6), cli::parse_number(flag, items[1], -1e6, 1e6),
+            cli::parse_number(flag, items[2], -10, 10)};
 }
 
 double wrap_angle(double a)

@@ -24,7 +24,8 @@ namespace {
 
 const char* kHelp =
     "usage: firmware_sim --vehicle_id N [--map FILE] [--params FILE] [--start X,Y,YAW]\n"
-    "                    [--link PATH] [--seed N] [--trace-pwm] [--corrupt-rate P] [--dds_domain N]\n"
+    "                    [--link PATH | --device TTY [--baud B]] [--seed N] [--trace-pwm]\n"
+    "                    [--corrupt-rate P] [--dds_domain N]\n"
     "\n"
     "Plays vehicle N's microcontroller: opens a pseudo-terminal, prints its device path as\n"
     "`device: /dev/pts/K` and then speaks the serial protocol on it (state packets at\n"
@@ -36,6 +37,8 @@ const char* kHelp =
     "  --params FILE   vehicle parameters (JSON; see vehicle_firmware_bridge/README.md)\n"
     "  --start X,Y,YAW start pose in metres and radians (default 0,0,0)\n"
     "  --link PATH     also make PATH a symlink to the device (a stable name across restarts)\n"
+    "  --device TTY    speak on this existing serial device instead of a new pty (e.g. one end of\n"
+    "                  a null-modem cable to a bridge on another computer); --baud B (115200)\n"
     "  --seed N        noise seed (default: the vehicle id)\n"
     "  --trace-pwm     print `pwm T_NS MODE PWM` on stdout whenever the motor command the controller\n"
     "                  holds changes (a new command, or the watchdog's brake; MODE 0 brake, 1 fwd, 2 rev)\n"
@@ -44,21 +47,13 @@ const char* kHelp =
 
 std::sig_atomic_t volatile g_stop = 0;
 
-cpm::vehicle::Pose parse_pose(const std::string& text)
-{
-    auto items = cpm::cli::split_list("--start", text);
-    if (items.size() != 3) throw cpm::cli::UsageError("--start: expected X,Y,YAW, got '" + text + "'");
-    return {cpm::cli::parse_number("--start", items[0], -1e6, 1e6), cpm::cli::parse_number("--start", items[1], -1e6, 1e6),
-            cpm::cli::parse_number("--start", items[2], -10, 10)};
-}
-
 int run(int argc, char** argv)
 {
     std::vector<std::string> args(argv + 1, argv + argc);
     auto parsed = cpm::cli::parse_args(args,
                                        {{"--vehicle_id", true}, {"--map", true}, {"--params", true}, {"--start", true},
                                         {"--link", true}, {"--seed", true}, {"--trace-pwm", false},
-                                        {"--corrupt-rate", true}},
+                                        {"--corrupt-rate", true}, {"--device", true}, {"--baud", true}},
                                        "firmware_sim");
     if (!parsed.positional.empty()) throw cpm::cli::UsageError("firmware_sim: unexpected argument '" + parsed.positional[0] + "'");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("firmware_sim: --vehicle_id is required");
@@ -66,7 +61,7 @@ int run(int argc, char** argv)
     auto parameters = parsed.has("--params") ? cpm::vehicle::VehicleParameters::load(parsed.get("--params"))
                                              : cpm::vehicle::VehicleParameters{};
     auto world = parsed.has("--map") ? cpm::vehicle::World::load(parsed.get("--map")) : cpm::vehicle::World{};
-    auto start = parsed.has("--start") ? parse_pose(parsed.get("--start")) : cpm::vehicle::Pose{};
+    auto start = parsed.has("--start") ? cpm::vehicle::parse_pose("--start", parsed.get("--start")) : cpm::vehicle::Pose{};
     auto seed = static_cast<uint32_t>(parsed.has("--seed") ? cpm::cli::parse_integer("--seed", parsed.get("--seed"), 0, UINT32_MAX)
                                                            : vehicle_id);
     bool trace_pwm = parsed.has("--trace-pwm");
@@ -74,9 +69,27 @@ int run(int argc, char** argv)
     std::mt19937 corruption(seed);
     cpm::init(argc, argv);
 
+    if (parsed.has("--device") && parsed.has("--link")) {
+        throw cpm::cli::UsageError("firmware_sim: --link names a new pty; it cannot go with --device");
+    }
+    int baud = int(cpm::cli::parse_integer("--baud", parsed.get("--baud", "115200"), 1, 4'000'000));
+
     cpm::vehicle::FirmwareSim sim(parameters, std::move(world), start, vehicle_id, seed);
-    cpm::vehicle::PseudoTerminal pty(parsed.get("--link"));
-    std::printf("device: %s\n", pty.device_path().c_str());
+    // The line to the host: a new pseudo-terminal, or a serial device that already exists.
+    std::unique_ptr<cpm::vehicle::PseudoTerminal> pty;
+    std::unique_ptr<cpm::vehicle::SerialPort> port;
+    if (parsed.has("--device")) {
+        port = std::make_unique<cpm::vehicle::SerialPort>(parsed.get("--device"), baud);
+    } else {
+        pty = std::make_unique<cpm::vehicle::PseudoTerminal>(parsed.get("--link"));
+    }
+    auto read_line = [&](uint8_t* data, size_t size) {
+        return pty ? pty->read_available(data, size) : port->read_some(data, size, 0);
+    };
+    auto write_line = [&](const std::vector<uint8_t>& frame) {
+        return pty ? pty->write_frame(frame.data(), frame.size()) : port->write_all(frame.data(), frame.size());
+    };
+    std::printf("device: %s\n", pty ? pty->device_path().c_str() : parsed.get("--device").c_str());
     std::fflush(stdout);
 
     cpm::Participant& participant = cpm::Participant::default_participant();
@@ -108,7 +121,7 @@ int run(int argc, char** argv)
         }
         uint8_t buffer[512];
         long n;
-        while ((n = pty.read_available(buffer, sizeof buffer)) > 0) {
+        while ((n = read_line(buffer, sizeof buffer)) > 0) {
             sim.receive(buffer, size_t(n));
             if (trace_pwm) trace(cpm::get_time_ns());
         }
@@ -122,7 +135,7 @@ int run(int argc, char** argv)
             if (corrupt_rate > 0 && std::uniform_real_distribution<double>(0, 1)(corruption) < corrupt_rate) {
                 frame[corruption() % frame.size()] ^= uint8_t(1 + corruption() % 255);
             }
-            pty.write_frame(frame.data(), frame.size());
+            write_line(frame);
 
             uint64_t now = cpm::get_time_ns();
             if (!sim.drop_observation()) {
@@ -170,20 +183,4 @@ int run(int argc, char** argv)
 
 }  // namespace
 
-int main(int argc, char** argv)
-{
-    std::vector<std::string> args(argv + 1, argv + argc);
-    if (cpm::cli::wants_help(args)) {
-        std::fputs(kHelp, stdout);
-        return 0;
-    }
-    try {
-        return run(argc, argv);
-    } catch (const cpm::cli::UsageError& e) {
-        std::fprintf(stderr, "firmware_sim: %s\n", e.what());
-        return cpm::cli::kUsageExit;
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "firmware_sim: %s\n", e.what());
-        return 1;
-    }
-}
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "firmware_sim", kHelp, run); }

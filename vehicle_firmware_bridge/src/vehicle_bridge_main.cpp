@@ -81,14 +81,6 @@ struct LabTopics
     cpm::Writer<RangeSensors> ranges{"rangeSensors"};
 };
 
-cpm::vehicle::Pose parse_pose(const std::string& text)
-{
-    auto items = cpm::cli::split_list("--start", text);
-    if (items.size() != 3) throw cpm::cli::UsageError("--start: expected X,Y,YAW, got '" + text + "'");
-    return {cpm::cli::parse_number("--start", items[0], -1e6, 1e6), cpm::cli::parse_number("--start", items[1], -1e6, 1e6),
-            cpm::cli::parse_number("--start", items[2], -10, 10)};
-}
-
 int run(int argc, char** argv)
 {
     std::vector<std::string> args(argv + 1, argv + argc);
@@ -108,7 +100,7 @@ int run(int argc, char** argv)
     }
     auto calibration = parsed.has("--calibration") ? cpm::vehicle::Calibration::load(parsed.get("--calibration"))
                                                    : cpm::vehicle::Calibration{};
-    auto start = parsed.has("--start") ? parse_pose(parsed.get("--start")) : cpm::vehicle::Pose{};
+    auto start = parsed.has("--start") ? cpm::vehicle::parse_pose("--start", parsed.get("--start")) : cpm::vehicle::Pose{};
     cpm::init(argc, argv);
 
     LabTopics lab(id);
@@ -209,20 +201,4 @@ int run(int argc, char** argv)
 
 }  // namespace
 
-int main(int argc, char** argv)
-{
-    std::vector<std::string> args(argv + 1, argv + argc);
-    if (cpm::cli::wants_help(args)) {
-        std::fputs(kHelp, stdout);
-        return 0;
-    }
-    try {
-        return run(argc, argv);
-    } catch (const cpm::cli::UsageError& e) {
-        std::fprintf(stderr, "vehicle_bridge: %s\n", e.what());
-        return cpm::cli::kUsageExit;
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "vehicle_bridge: %s\n", e.what());
-        return 1;
-    }
-}
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "vehicle_bridge", kHelp, run); }

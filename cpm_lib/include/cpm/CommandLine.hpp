@@ -2,6 +2,7 @@
 #include <cpm/Error.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -55,5 +56,11 @@ long long parse_integer(const std::string& flag, const std::string& text, long l
 
 /// "a,b,c" → {"a", "b", "c"}; an empty item is an error.
 std::vector<std::string> split_list(const std::string& flag, const std::string& text);
+
+/// A program's main: prints `help` for --help/-h (exit 0), else returns run(argc, argv); a
+/// UsageError is printed as "program: message" with exit code kUsageExit, any other exception
+/// with exit code 1.
+int run_main(int argc, char** argv, const char* program, const char* help,
+             const std::function<int(int, char**)>& run);
 
 }  // namespace cpm::cli

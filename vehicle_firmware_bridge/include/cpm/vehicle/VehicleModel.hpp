@@ -58,6 +58,9 @@ struct Pose
     double x = 0, y = 0, yaw = 0;
 };
 
+/// "X,Y,YAW" (metres, radians) from a command-line flag; throws cpm::cli::UsageError naming it.
+Pose parse_pose(const std::string& flag, const std::string& text);
+
 /// Kinematic bicycle model (reference point: rear axle) with first-order speed and steering
 /// responses and an input delay. Deterministic; not thread-safe.
 class VehicleModel
