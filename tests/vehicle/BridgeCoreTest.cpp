@@ -181,6 +181,21 @@ TEST(BridgeCore, PublishesStateAndRangesInLabUnits)
     EXPECT_DOUBLE_EQ(cycle.ranges.hall_distance(), 0.5);
 }
 
+TEST(BridgeCore, StampsStatesWithTheControllersMeasurementTimeNotTheirArrival)
+{
+    BridgeCore sut(kId, Calibration{});
+    const uint64_t t0 = 1000 * kSecond;
+    // Ticks every 20 ms; the transfer takes 2 ms, except one packet that waited 15 ms in a buffer.
+    EXPECT_EQ(sut.on_state_packet(moving(5000, 0), t0 + 2'000'000, {}).measured_ns, t0 + 2'000'000);
+    EXPECT_EQ(sut.on_state_packet(moving(5020, 0), t0 + 22'000'000, {}).measured_ns, t0 + 22'000'000);
+    EXPECT_EQ(sut.on_state_packet(moving(5040, 0), t0 + 57'000'000, {}).measured_ns, t0 + 42'000'000);
+    // A faster packet lowers the offset for all that follow.
+    EXPECT_EQ(sut.on_state_packet(moving(5060, 0), t0 + 61'000'000, {}).measured_ns, t0 + 61'000'000);
+    EXPECT_EQ(sut.on_state_packet(moving(5080, 0), t0 + 83'000'000, {}).measured_ns, t0 + 81'000'000);
+    // A controller that restarted (its tick went back) starts a new mapping.
+    EXPECT_EQ(sut.on_state_packet(moving(10, 0), t0 + 200'000'000, {}).measured_ns, t0 + 200'000'000);
+}
+
 TEST(BridgeCore, SpeedControllerReachesTheCommandedSpeedInClosedLoop)
 {
     ClosedLoop loop({0, 0, 0});

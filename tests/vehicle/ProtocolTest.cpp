@@ -13,6 +13,7 @@ StatePacket full_state(uint32_t tick)
 {
     StatePacket p;
     p.tick = tick;
+    p.vehicle_id = 200;
     p.odometer_steps = -123456;
     p.speed_mm_s = -1500;
     p.imu_yaw_e4 = 31415;

@@ -43,15 +43,17 @@ struct Car
     std::unique_ptr<Process> sim;
     std::unique_ptr<Process> bridge;
     std::string device;
+    uint8_t id = kId;
 
-    explicit Car(std::vector<std::string> sim_flags = {}, bool start_bridge = true)
+    explicit Car(std::vector<std::string> sim_flags = {}, bool start_bridge = true, uint8_t vehicle_id = kId)
+        : id(vehicle_id)
     {
         start_sim(std::move(sim_flags));
         if (start_bridge) this->start_bridge();
     }
     void start_sim(std::vector<std::string> flags)
     {
-        std::vector<std::string> argv{built_program("firmware_sim"), "--vehicle_id", std::to_string(kId)};
+        std::vector<std::string> argv{built_program("firmware_sim"), "--vehicle_id", std::to_string(id)};
         argv.insert(argv.end(), flags.begin(), flags.end());
         sim = std::make_unique<Process>(argv);
         EXPECT_TRUE(cpm_test::wait_until([&] { return sim->output().find('\n') != std::string::npos; }))
@@ -60,10 +62,11 @@ struct Car
         device = out.rfind("device: ", 0) == 0 ? out.substr(8, out.find('\n') - 8) : "";
         ASSERT_FALSE(device.empty()) << out << sim->errors();
     }
-    void start_bridge(const std::string& path = {})
+    void start_bridge(const std::string& path = {}, int bridge_id = -1)
     {
-        bridge = std::make_unique<Process>(std::vector<std::string>{
-            built_program("vehicle_bridge"), "--vehicle_id", std::to_string(kId), "--device", path.empty() ? device : path});
+        bridge = std::make_unique<Process>(std::vector<std::string>{built_program("vehicle_bridge"), "--vehicle_id",
+                                                                    std::to_string(bridge_id < 0 ? id : bridge_id),
+                                                                    "--device", path.empty() ? device : path});
     }
     /// The sim's `pwm T MODE PWM` trace lines after time t (ns): (time, mode) pairs.
     std::vector<std::pair<uint64_t, int>> pwm_trace_after(uint64_t t) const
@@ -109,6 +112,13 @@ public:
     {
         std::lock_guard<std::mutex> lock(mutex_);
         return state_log_;
+    }
+    /// States created at or after t.
+    size_t states_created_after(uint64_t t) const
+    {
+        size_t n = 0;
+        for (auto& s : states()) n += s.header().create_stamp().nanoseconds() >= t;
+        return n;
     }
     /// Observations created in [t0, t1).
     std::vector<VehicleObservation> observations_between(uint64_t t0, uint64_t t1) const
@@ -394,21 +404,48 @@ TEST_F(VehicleEndToEnd, BridgeStopsPublishingWhenTheLinkIsLostAndReconnects)
 {
     Watcher watch(participant);
     std::string link = "/tmp/cpm_vehicle_test_" + std::to_string(::getpid()) + ".tty";
-    Car car({"--link", link}, false);
+    Car car({"--link", link}, false, 21);
     car.start_bridge(link);
     ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    const uint64_t killed = cpm::get_time_ns();
     car.sim->kill(SIGKILL);
     car.sim->wait(5s);
-    std::this_thread::sleep_for(300ms);
-    size_t during = watch.states().size();
-    std::this_thread::sleep_for(700ms);
-    EXPECT_EQ(watch.states().size(), during);  // nothing fresh while the car is gone
+    std::this_thread::sleep_for(1s);
+    // Nothing measured after the car was gone is published (what was still in the line is
+    // published with its real, older time).
+    EXPECT_EQ(watch.states_created_after(killed + 25'000'000), 0u);
     EXPECT_NE(car.bridge->errors().find("serial link to " + link + " lost"), std::string::npos) << car.bridge->errors();
 
+    const uint64_t restarted = cpm::get_time_ns();
     car.start_sim({"--link", link});
-    EXPECT_TRUE(watch.wait_for_states(during + 20)) << car.bridge->errors();
+    EXPECT_TRUE(cpm_test::wait_until([&] { return watch.states_created_after(restarted) >= 20; }, 10s))
+        << car.bridge->errors();
     EXPECT_EQ(car.bridge->wait(0ms), -1);  // the same bridge process, still running
     ::unlink(link.c_str());
+}
+
+TEST_F(VehicleEndToEnd, ABridgeLeavesALineWhoseControllerBelongsToAnotherVehicle)
+{
+    Watcher watch(participant);
+    Car car({}, false);  // vehicle 7's controller
+    car.start_bridge({}, 9);
+    EXPECT_TRUE(cpm_test::wait_until([&] { return car.bridge->errors().find("belongs to vehicle 7") != std::string::npos; }))
+        << car.bridge->errors();
+    EXPECT_TRUE(watch.states().empty());
+}
+
+TEST_F(VehicleEndToEnd, ASecondBridgeOnTheSameLineIsRefusedAndTheFirstKeepsDriving)
+{
+    Watcher watch(participant);
+    Car car;
+    ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    Process second({built_program("vehicle_bridge"), "--vehicle_id", std::to_string(kId), "--device", car.device});
+    EXPECT_TRUE(cpm_test::wait_until([&] { return second.errors().find("in use by another program") != std::string::npos; }))
+        << second.errors();
+    const uint64_t t = cpm::get_time_ns();
+    std::this_thread::sleep_for(1s);
+    EXPECT_GE(watch.states_created_after(t), 45u);  // still 50 Hz, from the first bridge only
+    EXPECT_LE(watch.states_created_after(t), 51u);
 }
 
 TEST_F(VehicleEndToEnd, WrongFilesAndFlagsAreNamedAndExitNonZero)

@@ -27,6 +27,27 @@ void BridgeCore::link_restarted()
 {
     last_steps_.reset();
     last_tick_.reset();
+    offsets_.clear();
+    tick_epoch_ms_ = 0;
+}
+
+uint64_t BridgeCore::measured_time(uint32_t tick, uint64_t received_ns)
+{
+    if (last_tick_ && tick < *last_tick_) {
+        if (*last_tick_ - tick > 0x80000000u) {
+            tick_epoch_ms_ += 0x100000000ull;  // wrapped
+        } else {
+            offsets_.clear();  // the controller restarted: its clock began anew
+            tick_epoch_ms_ = 0;
+        }
+    }
+    const uint64_t tick_ns = (tick_epoch_ms_ + tick) * 1'000'000ull;
+    const int64_t offset = int64_t(received_ns) - int64_t(tick_ns);
+    // A monotonic queue: the front is the smallest offset within the window.
+    while (!offsets_.empty() && offsets_.back().second >= offset) offsets_.pop_back();
+    offsets_.emplace_back(received_ns, offset);
+    while (offsets_.front().first + 5'000'000'000ull < received_ns) offsets_.pop_front();
+    return uint64_t(int64_t(tick_ns) + offsets_.front().second);
 }
 
 void BridgeCore::dead_reckon(const StatePacket& packet, uint64_t t_ns)
@@ -145,11 +166,12 @@ CommandPacket BridgeCore::to_packet(const Actuation& a)
 BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns, const CommandInputs& commands)
 {
     double dt = last_tick_ ? std::clamp((packet.tick - *last_tick_) * 1e-3, 1e-3, 0.1) : 0.02;
+    BridgeCycle out;
+    out.measured_ns = measured_time(packet.tick, t_ns);
     last_tick_ = packet.tick;
     dead_reckon(packet, t_ns);
     double speed = packet.speed_mm_s * 1e-3;
 
-    BridgeCycle out;
     Actuation a = choose(commands, t_ns, speed, dt, out.active);
     if (out.active != last_active_) speed_controller_.reset();
     last_active_ = out.active;

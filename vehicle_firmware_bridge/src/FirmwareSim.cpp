@@ -113,6 +113,7 @@ StatePacket FirmwareSim::make_state_packet()
 
     StatePacket packet;
     packet.tick = static_cast<uint32_t>(std::llround(model_.time() * 1000.0));
+    packet.vehicle_id = vehicle_id_;
     packet.odometer_steps = saturate<int32_t>(std::floor(model_.distance() * p_.ticks_per_metre));
     packet.speed_mm_s = saturate<int16_t>(model_.speed() * 1000.0);
     packet.imu_yaw_e4 = saturate<int16_t>(imu_yaw_ * 1e4);

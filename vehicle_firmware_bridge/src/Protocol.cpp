@@ -7,7 +7,7 @@ namespace {
 
 enum PacketKind : uint8_t { kKindState = 0x01, kKindCommand = 0x02 };
 
-constexpr size_t kStatePayloadSize = 2 + 4 + 4 + 2 * 6 + 2 * 5 + 1 + 4;
+constexpr size_t kStatePayloadSize = 2 + 4 + 1 + 4 + 2 * 6 + 2 * 5 + 1 + 4;
 constexpr size_t kCommandPayloadSize = 2 + 4 + 1 + 1 + 2 + 2;
 
 /// Appends integers little-endian, one byte at a time (independent of the host's order).
@@ -52,7 +52,7 @@ private:
 std::vector<uint8_t> serialize_state(const StatePacket& p)
 {
     ByteWriter w(kKindState);
-    w.put(p.tick).put(p.odometer_steps).put(p.speed_mm_s).put(p.imu_yaw_e4).put(p.imu_yaw_rate_e3);
+    w.put(p.tick).put(p.vehicle_id).put(p.odometer_steps).put(p.speed_mm_s).put(p.imu_yaw_e4).put(p.imu_yaw_rate_e3);
     w.put(p.accel_forward_mm_s2).put(p.accel_left_mm_s2).put(p.accel_up_mm_s2);
     w.put(p.battery_mv).put(p.motor_current_ma).put(p.us_front_mm).put(p.us_left_mm).put(p.us_right_mm);
     w.put(p.status).put(p.command_tick);
@@ -70,6 +70,7 @@ StatePacket parse_state(ByteReader r)
 {
     StatePacket p;
     p.tick = r.get<uint32_t>();
+    p.vehicle_id = r.get<uint8_t>();
     p.odometer_steps = r.get<int32_t>();
     p.speed_mm_s = r.get<int16_t>();
     p.imu_yaw_e4 = r.get<int16_t>();

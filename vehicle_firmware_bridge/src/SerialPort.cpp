@@ -7,6 +7,7 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <stdlib.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
 #include <termios.h>
@@ -55,7 +56,7 @@ SerialPort::SerialPort(const std::string& path, int baud)
     fd_ = ::open(path.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
     if (fd_ < 0) {
         std::string message = path + ": cannot open the serial device (" + std::strerror(errno) + ")";
-        if (errno == ENOENT || errno == ENODEV || errno == ENXIO || errno == EIO) throw DeviceMissing(message);
+        if (errno == ENOENT || errno == ENODEV || errno == ENXIO || errno == EIO) throw DeviceUnavailable(message);
         throw Error(message);
     }
     try {
@@ -63,6 +64,10 @@ SerialPort::SerialPort(const std::string& path, int baud)
     } catch (...) {
         ::close(fd_);
         throw;
+    }
+    if (flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+        ::close(fd_);
+        throw DeviceUnavailable(path + ": in use by another program (it holds the device's lock)");
     }
     tcflush(fd_, TCIOFLUSH);
     struct stat st{};

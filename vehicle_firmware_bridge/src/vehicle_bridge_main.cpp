@@ -37,6 +37,8 @@ const char* kHelp =
     "PathTracking, fresh = younger than 1 s; none fresh or a StopRequest → brake). The pose is\n"
     "dead-reckoned from odometer and IMU and corrected by 'vehicleObservation' when present.\n"
     "When the link is lost it stops publishing, logs it and reopens the device when it is back.\n"
+    "It holds an exclusive lock on the device and leaves a line whose controller belongs to\n"
+    "another vehicle. Samples are stamped with when the controller measured them.\n"
     "\n"
     "  --calibration FILE  units and controller gains (JSON; see vehicle_firmware_bridge/README.md)\n"
     "  --start X,Y,YAW     initial pose estimate (metres, radians) before any observation\n"
@@ -112,6 +114,7 @@ int run(int argc, char** argv)
     cpm::vehicle::FrameDecoder decoder;
     std::optional<uint64_t> stop_request_ns;
     uint64_t last_observation_ns = 0, last_packet_ns = 0, link_losses = 0, cycles = 0, controller_bad_crc = 0;
+    uint64_t superseded = 0, foreign = 0;
     bool silent_logged = false, waiting_logged = false;
     std::vector<uint64_t> cycle_cpu_ns;
 
@@ -125,8 +128,8 @@ int run(int argc, char** argv)
                 decoder = cpm::vehicle::FrameDecoder{};
                 last_packet_ns = cpm::get_time_ns();
                 silent_logged = waiting_logged = false;
-            } catch (const cpm::vehicle::DeviceMissing& e) {
-                // Not there yet or unplugged: keep trying. Any other error is the user's to fix.
+            } catch (const cpm::vehicle::DeviceUnavailable& e) {
+                // Not there yet, unplugged or busy: keep trying. Any other error is the user's to fix.
                 if (!waiting_logged) CPM_LOG_WARN("vehicle %u: %s; retrying every 200 ms", unsigned(id), e.what());
                 waiting_logged = true;
                 std::this_thread::sleep_for(std::chrono::milliseconds(200));
@@ -153,48 +156,63 @@ int run(int argc, char** argv)
             if (s.vehicle_id() != 0 && s.vehicle_id() != id) continue;
             stop_request_ns = std::max(stop_request_ns.value_or(0), s.header().create_stamp().nanoseconds());
         }
+        // Only the newest state counts: older ones in the same read waited in a buffer.
+        std::optional<cpm::vehicle::StatePacket> newest;
         decoder.feed(buffer, size_t(n), [&](const cpm::vehicle::Packet& packet) {
-            const auto* state = std::get_if<cpm::vehicle::StatePacket>(&packet);
-            if (!state) return;
-            uint64_t cpu0 = thread_cpu_ns();
-            if (silent_logged) CPM_LOG_INFO("vehicle %u: state packets again", unsigned(id));
-            silent_logged = false;
-            last_packet_ns = t_received;
-            if (state->status & cpm::vehicle::kStatusBadCrc) ++controller_bad_crc;
-
-            auto observation = lab.observation.get_sample(t_received);
-            uint64_t observed_ns = observation.sample.header().create_stamp().nanoseconds();
-            if (observation.valid && observed_ns > last_observation_ns) {
-                last_observation_ns = observed_ns;
-                const auto& p = observation.sample.pose();
-                core.on_observation({p.x(), p.y(), p.yaw()}, observed_ns);
+            if (const auto* state = std::get_if<cpm::vehicle::StatePacket>(&packet)) {
+                if (newest) ++superseded;
+                newest = *state;
             }
-            cpm::vehicle::CommandInputs inputs{lab.direct.get_sample(t_received), lab.speed_curvature.get_sample(t_received),
-                                               lab.trajectory.get_sample(t_received),
-                                               lab.path_tracking.get_sample(t_received), stop_request_ns};
-            auto cycle = core.on_state_packet(*state, t_received, inputs);
-            auto frame = cpm::vehicle::encode_frame(cycle.command);
-            port->write_all(frame.data(), frame.size());
-
-            // valid_after = measurement + the delay until publication + the expected delivery.
-            uint64_t t_publish = cpm::get_time_ns();
-            uint64_t delay = t_publish - t_received + uint64_t(calibration.publish_delay * 1e9);
-            cycle.state.is_real(!port->is_pseudo_terminal());
-            cpm::stamp_message(cycle.state, t_received, delay);
-            cpm::stamp_message(cycle.ranges, t_received, delay);
-            lab.state.write(cycle.state);
-            lab.ranges.write(cycle.ranges);
-            ++cycles;
-            if (cycle_cpu_ns.size() < 1'000'000) cycle_cpu_ns.push_back(thread_cpu_ns() - cpu0);
         });
+        if (!newest) continue;
+        if (newest->vehicle_id != id) {
+            ++foreign;
+            CPM_LOG_ERROR("vehicle %u: the controller on %s belongs to vehicle %u; leaving the line", unsigned(id),
+                          device.c_str(), unsigned(newest->vehicle_id));
+            port.reset();
+            std::this_thread::sleep_for(std::chrono::milliseconds(200));
+            continue;
+        }
+        const uint64_t cpu0 = thread_cpu_ns();
+        if (silent_logged) CPM_LOG_INFO("vehicle %u: state packets again", unsigned(id));
+        silent_logged = false;
+        last_packet_ns = t_received;
+        if (newest->status & cpm::vehicle::kStatusBadCrc) ++controller_bad_crc;
+
+        auto observation = lab.observation.get_sample(t_received);
+        uint64_t observed_ns = observation.sample.header().create_stamp().nanoseconds();
+        if (observation.valid && observed_ns > last_observation_ns) {
+            last_observation_ns = observed_ns;
+            const auto& p = observation.sample.pose();
+            core.on_observation({p.x(), p.y(), p.yaw()}, observed_ns);
+        }
+        cpm::vehicle::CommandInputs inputs{lab.direct.get_sample(t_received), lab.speed_curvature.get_sample(t_received),
+                                           lab.trajectory.get_sample(t_received), lab.path_tracking.get_sample(t_received),
+                                           stop_request_ns};
+        auto cycle = core.on_state_packet(*newest, t_received, inputs);
+        auto frame = cpm::vehicle::encode_frame(cycle.command);
+        port->write_all(frame.data(), frame.size());
+
+        // create = when the controller measured; valid_after = when it is published plus the
+        // expected delivery, so a sample's age says how old the measurement really is.
+        const uint64_t t_publish = cpm::get_time_ns();
+        const uint64_t delay = t_publish - std::min(cycle.measured_ns, t_publish) + uint64_t(calibration.publish_delay * 1e9);
+        cycle.state.is_real(!port->is_pseudo_terminal());
+        cpm::stamp_message(cycle.state, cycle.measured_ns, delay);
+        cpm::stamp_message(cycle.ranges, cycle.measured_ns, delay);
+        lab.state.write(cycle.state);
+        lab.ranges.write(cycle.ranges);
+        ++cycles;
+        if (cycle_cpu_ns.size() < 1'000'000) cycle_cpu_ns.push_back(thread_cpu_ns() - cpu0);
     }
 
     const auto& e = decoder.errors();
     std::printf("{\"vehicle_id\": %u, \"cycles\": %llu, \"cycle_cpu_us_p50\": %.1f, \"cycle_cpu_us_p99\": %.1f, "
-                "\"link_losses\": %llu, \"controller_reported_bad_crc\": %llu, \"decoder_errors\": %llu}\n",
+                "\"link_losses\": %llu, \"superseded_states\": %llu, \"foreign_controller\": %llu, "
+                "\"controller_reported_bad_crc\": %llu, \"decoder_errors\": %llu}\n",
                 unsigned(id), (unsigned long long)cycles, percentile(cycle_cpu_ns, 0.5) / 1e3,
-                percentile(cycle_cpu_ns, 0.99) / 1e3, (unsigned long long)link_losses,
-                (unsigned long long)controller_bad_crc, (unsigned long long)e.total());
+                percentile(cycle_cpu_ns, 0.99) / 1e3, (unsigned long long)link_losses, (unsigned long long)superseded,
+                (unsigned long long)foreign, (unsigned long long)controller_bad_crc, (unsigned long long)e.total());
     std::fflush(stdout);
     return 0;
 }

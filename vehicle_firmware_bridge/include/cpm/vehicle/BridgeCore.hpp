@@ -41,6 +41,7 @@ struct BridgeCycle
     RangeSensors ranges;
     CommandPacket command;
     ActiveCommand active = ActiveCommand::None;
+    uint64_t measured_ns = 0;  ///< when the controller measured the state, in host time
 };
 
 /// vehicle_bridge without serial port or DDS: unit conversion, pose estimate (odometer + IMU,
@@ -51,8 +52,11 @@ class BridgeCore
 public:
     BridgeCore(uint8_t vehicle_id, const Calibration& calibration, Pose start = {});
 
-    /// One cycle for a state packet received at t_ns: the messages to publish (stamps not set)
-    /// and the command packet to send back.
+    /// One cycle for a state packet received at t_ns: the messages to publish (stamps not set),
+    /// the command packet to send back and when the state was measured. The measurement time
+    /// is the packet's tick mapped to host time through the smallest host − controller offset
+    /// of the last 5 s (the least delayed packet), so a packet that waited in a buffer keeps
+    /// its real, older time.
     BridgeCycle on_state_packet(const StatePacket& packet, uint64_t t_ns, const CommandInputs& commands);
     /// An observation of this car's pose taken at t_ns (e.g. VehicleObservation): the pose
     /// estimate is moved so that it agrees with it at that time.
@@ -76,6 +80,7 @@ private:
     };
 
     void dead_reckon(const StatePacket& packet, uint64_t t_ns);
+    uint64_t measured_time(uint32_t tick, uint64_t received_ns);
     Actuation choose(const CommandInputs& commands, uint64_t t_ns, double speed, double dt, ActiveCommand& active);
     Actuation drive(const MotionRequest& request, double speed, double dt);
     bool fresh(uint64_t age_ns, uint64_t create_ns, const CommandInputs& commands) const;
@@ -92,6 +97,8 @@ private:
     uint32_t command_tick_ = 0;
     ActiveCommand last_active_ = ActiveCommand::None;
     std::deque<Estimate> history_;
+    uint64_t tick_epoch_ms_ = 0;  // controller ticks are 32-bit ms; they wrap after 49 days
+    std::deque<std::pair<uint64_t, int64_t>> offsets_;  // (received, offset), offsets increasing
 };
 
 }  // namespace cpm::vehicle

@@ -26,6 +26,7 @@ enum class MotorMode : uint8_t { Brake = 0, Forward = 1, Reverse = 2 };
 struct StatePacket
 {
     uint32_t tick = 0;                 ///< controller time, ms since its start
+    uint8_t vehicle_id = 0;            ///< the car this controller belongs to
     int32_t odometer_steps = 0;        ///< hall ticks, signed (reverse counts down)
     int16_t speed_mm_s = 0;            ///< mm/s, signed
     int16_t imu_yaw_e4 = 0;            ///< 1e-4 rad, in (-pi, pi]

@@ -7,8 +7,9 @@
 
 namespace cpm::vehicle {
 
-/// The serial device is not there (yet): not plugged in, or the simulator not started.
-class DeviceMissing : public Error
+/// The serial device cannot be used now, but may be later: not there (not plugged in, the
+/// simulator not started) or held by another program.
+class DeviceUnavailable : public Error
 {
 public:
     using Error::Error;
@@ -20,8 +21,10 @@ class SerialPort
 {
 public:
     /// Opens `path` at `baud` (one of the standard rates; ignored by a pty) and discards what
-    /// was waiting in the input. Throws DeviceMissing when there is no such device, else
-    /// cpm::Error naming the path and the reason (not a terminal, no permission, bad baud).
+    /// was waiting in the input. Takes an exclusive flock on the device, so two bridges never
+    /// share one line. Throws DeviceUnavailable when there is no such device or another
+    /// program holds it, else cpm::Error naming the path and the reason (not a terminal, no
+    /// permission, bad baud).
     SerialPort(const std::string& path, int baud);
     ~SerialPort();
     SerialPort(const SerialPort&) = delete;
