@@ -3,7 +3,9 @@
 //     to the simulator's, and the command latency from a VehicleCommandDirect written to the
 //     motor PWM the simulator's controller holds (its --trace-pwm);
 //  2. capacity: N cars at once (`cpm vehicle sim --count N`), every car commanded; a cycle
-//     counts as missed when a car's VehicleState stream skips a 20 ms slot.
+//     counts as missed when a car published no VehicleState for a 20 ms slot (its
+//     create_stamp is the controller's measurement time), or published it more than half a
+//     period after the measurement (valid_after_stamp - create_stamp - 1 ms of expected delivery).
 //
 //   bench_vehicle [--seconds 10] [--cars 2,4,6,8,10,12] [--domain 210]
 #include "bench_common.hpp"
@@ -207,8 +209,8 @@ void one_car(cpm::Participant& participant, const std::vector<std::string>& env,
 struct CapacityResult
 {
     double missed_fraction = 0, cpu_busy = 0;
-    uint64_t expected = 0, received = 0, missed = 0;
-    double worst_gap_ms = 0;
+    uint64_t expected = 0, received = 0, absent = 0, late = 0;
+    std::vector<double> publish_delay_us;
 };
 
 CapacityResult capacity(cpm::Participant& participant, const std::vector<std::string>& env, int cars, int seconds)
@@ -219,6 +221,7 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
     cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});
     cpm::Writer<VehicleCommandSpeedCurvature> writer(participant, "vehicleCommandSpeedCurvature");
     std::map<int, std::vector<uint64_t>> stamps;
+    std::vector<std::pair<uint64_t, uint64_t>> delays;  // (create, valid_after - create)
     std::atomic<bool> stop{false};
     std::thread commander([&] {
         VehicleCommandSpeedCurvature c;
@@ -246,7 +249,11 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
     cpu.start();
     uint64_t t0 = cpm::get_time_ns(), t1 = t0 + uint64_t(seconds) * 1'000'000'000ull;
     while (cpm::get_time_ns() < t1 + 200'000'000ull) {
-        for (auto& s : states.take()) stamps[s.vehicle_id()].push_back(s.header().create_stamp().nanoseconds());
+        for (auto& s : states.take()) {
+            uint64_t created = s.header().create_stamp().nanoseconds();
+            stamps[s.vehicle_id()].push_back(created);
+            delays.emplace_back(created, s.header().valid_after_stamp().nanoseconds() - created);
+        }
         std::this_thread::sleep_for(5ms);
     }
     CapacityResult r;
@@ -256,7 +263,13 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
     kill(fleet, SIGINT);
     bench::wait_child(fleet, 20);
 
-    const uint64_t period = 20'000'000;
+    const uint64_t period = 20'000'000, expected_delivery = 1'000'000;
+    for (auto [created, delay] : delays) {
+        if (created < t0 || created >= t1) continue;
+        uint64_t publish = delay > expected_delivery ? delay - expected_delivery : 0;
+        r.publish_delay_us.push_back(double(publish) * 1e-3);
+        r.late += publish > period / 2;
+    }
     for (int id = 1; id <= cars; ++id) {
         auto& v = stamps[id];
         std::sort(v.begin(), v.end());
@@ -267,7 +280,7 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
         r.expected += uint64_t(seconds) * 50;
         r.received += in_window.size();
         if (in_window.empty()) {
-            r.missed += uint64_t(seconds) * 50;
+            r.absent += uint64_t(seconds) * 50;
             continue;
         }
         // The car's cycle phase (its simulator ticks at fixed times); a cycle is missed when no
@@ -281,12 +294,9 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
         const uint64_t first = (t0 - phase + period - 1) / period, last = (t1 - phase - 1) / period;
         uint64_t hit = 0;
         for (auto k : slots) hit += (k >= first && k <= last);
-        r.missed += (last - first + 1) - hit;
-        for (size_t i = 1; i < in_window.size(); ++i) {
-            r.worst_gap_ms = std::max(r.worst_gap_ms, double(in_window[i] - in_window[i - 1]) * 1e-6);
-        }
+        r.absent += (last - first + 1) - hit;
     }
-    r.missed_fraction = double(r.missed) / double(std::max<uint64_t>(1, r.expected));
+    r.missed_fraction = double(r.absent + r.late) / double(std::max<uint64_t>(1, r.expected));
     return r;
 }
 
@@ -311,15 +321,17 @@ int main(int argc, char** argv)
     one_car(participant, env, seconds);
 
     std::printf("\n-- capacity: N simulated cars (firmware_sim + vehicle_bridge each), all commanded\n");
-    std::printf("(missed: a 20 ms slot of a car without its VehicleState; stderr of the cars in /tmp/bench_vehicle_fleet.err)\n");
-    std::printf("%6s %10s %10s %8s %10s %12s %10s\n", "cars", "expected", "received", "missed", "missed %", "worst gap ms",
-                "CPU busy");
+    std::printf("(absent: a 20 ms slot of a car without its VehicleState; late: published > 10 ms after the\n"
+                " controller measured it; delay: measurement -> publication, µs; the cars' stderr: /tmp/bench_vehicle_fleet.err)\n");
+    std::printf("%6s %9s %9s %7s %6s %9s %11s %11s %9s\n", "cars", "expected", "received", "absent", "late", "missed %",
+                "delay p50", "delay p99", "CPU busy");
     int best = 0;
     for (int cars : fleet_sizes) {
         auto r = capacity(participant, env, cars, seconds);
-        std::printf("%6d %10llu %10llu %8llu %9.3f%% %12.1f %9.0f%%\n", cars, (unsigned long long)r.expected,
-                    (unsigned long long)r.received, (unsigned long long)r.missed, r.missed_fraction * 100, r.worst_gap_ms,
-                    r.cpu_busy * 100);
+        auto delay = bench::stats_of(r.publish_delay_us);
+        std::printf("%6d %9llu %9llu %7llu %6llu %8.3f%% %11.0f %11.0f %8.0f%%\n", cars, (unsigned long long)r.expected,
+                    (unsigned long long)r.received, (unsigned long long)r.absent, (unsigned long long)r.late,
+                    r.missed_fraction * 100, delay.p50, delay.p99, r.cpu_busy * 100);
         std::fflush(stdout);
         if (r.missed_fraction < 0.01) best = cars;
     }

@@ -14,6 +14,7 @@
 #include <cstring>
 #include <string>
 #include <thread>
+#include <sys/prctl.h>
 #include <unistd.h>
 #include <sys/wait.h>
 #include <vector>
@@ -46,6 +47,7 @@ Child spawn(const std::string& name, const std::vector<std::string>& argv, bool 
     pid_t pid = fork();
     if (pid < 0) throw cpm::Error("cannot start " + name + " (" + std::strerror(errno) + ")");
     if (pid == 0) {
+        prctl(PR_SET_PDEATHSIG, SIGTERM);  // never outlive this launcher, even if it is killed
         if (capture) {
             dup2(fds[1], STDOUT_FILENO);
             close(fds[0]);

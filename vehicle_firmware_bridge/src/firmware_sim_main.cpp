@@ -101,7 +101,8 @@ int run(int argc, char** argv)
     const auto steps_per_state = std::max<uint64_t>(1, std::llround(parameters.physics_rate / parameters.state_rate));
     auto timer = cpm::Timer::create(participant, "firmware_sim_" + std::to_string(vehicle_id), physics_period_ns, 0,
                                     false, false);
-    uint64_t last_tick_ns = 0, steps = 0;
+    uint64_t last_tick_ns = 0, steps = 0, skipped_steps = 0;
+    const uint64_t max_catch_up = std::max<uint64_t>(1, uint64_t(parameters.physics_rate));  // 1 s of model time
     std::pair<cpm::vehicle::MotorMode, uint16_t> traced{cpm::vehicle::MotorMode::Brake, 0};
     auto trace = [&](uint64_t now) {
         auto held = sim.motor_command();
@@ -125,56 +126,67 @@ int run(int argc, char** argv)
             sim.receive(buffer, size_t(n));
             if (trace_pwm) trace(cpm::get_time_ns());
         }
-        // Catch up on ticks the timer skipped, so model time keeps pace with real time.
-        uint64_t due = last_tick_ns == 0 ? 1 : std::min<uint64_t>((t_nominal - last_tick_ns) / physics_period_ns, 50);
+        // Catch up on ticks the timer skipped (up to 1 s), so model time keeps pace with real
+        // time; but send only one state packet however many fell due: a controller that fell
+        // behind must not flood its host (it would only use the newest anyway).
+        uint64_t due = last_tick_ns == 0 ? 1 : (t_nominal - last_tick_ns) / physics_period_ns;
+        if (due > max_catch_up) {
+            skipped_steps += due - max_catch_up;
+            due = max_catch_up;
+        }
         last_tick_ns = t_nominal;
+        bool state_due = false;
         for (uint64_t i = 0; i < due; ++i) {
             sim.step();
-            if (++steps % steps_per_state != 0) continue;
-            auto frame = cpm::vehicle::encode_frame(sim.make_state_packet());
-            if (corrupt_rate > 0 && std::uniform_real_distribution<double>(0, 1)(corruption) < corrupt_rate) {
-                frame[corruption() % frame.size()] ^= uint8_t(1 + corruption() % 255);
-            }
-            write_line(frame);
-
-            uint64_t now = cpm::get_time_ns();
-            if (!sim.drop_observation()) {
-                VehicleObservation o;
-                cpm::stamp_message(o, now, 0);
-                o.vehicle_id(vehicle_id);
-                auto pose = sim.observed_pose();
-                o.pose().x(pose.x);
-                o.pose().y(pose.y);
-                o.pose().yaw(pose.yaw);
-                observations.write(o);
-            }
-            for (auto& o : others.take()) {
-                if (o.vehicle_id() == vehicle_id) continue;
-                other_cars[o.vehicle_id()] = {o.header().create_stamp().nanoseconds(),
-                                              {o.pose().x(), o.pose().y(), o.pose().yaw()}};
-            }
-            std::vector<cpm::vehicle::Pose> poses;
-            for (auto it = other_cars.begin(); it != other_cars.end();) {
-                // A car not seen for a second has left the world.
-                if (it->second.first + 1'000'000'000ull < now) {
-                    it = other_cars.erase(it);
-                } else {
-                    poses.push_back(it->second.second);
-                    ++it;
-                }
-            }
-            sim.set_other_cars(poses);
+            state_due = state_due || ++steps % steps_per_state == 0;
         }
+        if (!state_due) {
+            if (trace_pwm) trace(cpm::get_time_ns());
+            return;
+        }
+        auto frame = cpm::vehicle::encode_frame(sim.make_state_packet());
+        if (corrupt_rate > 0 && std::uniform_real_distribution<double>(0, 1)(corruption) < corrupt_rate) {
+            frame[corruption() % frame.size()] ^= uint8_t(1 + corruption() % 255);
+        }
+        write_line(frame);
+
+        uint64_t now = cpm::get_time_ns();
+        if (!sim.drop_observation()) {
+            VehicleObservation o;
+            cpm::stamp_message(o, now, 0);
+            o.vehicle_id(vehicle_id);
+            auto pose = sim.observed_pose();
+            o.pose().x(pose.x);
+            o.pose().y(pose.y);
+            o.pose().yaw(pose.yaw);
+            observations.write(o);
+        }
+        for (auto& o : others.take()) {
+            if (o.vehicle_id() == vehicle_id) continue;
+            other_cars[o.vehicle_id()] = {o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()}};
+        }
+        std::vector<cpm::vehicle::Pose> poses;
+        for (auto it = other_cars.begin(); it != other_cars.end();) {
+            // A car not seen for a second has left the world.
+            if (it->second.first + 1'000'000'000ull < now) {
+                it = other_cars.erase(it);
+            } else {
+                poses.push_back(it->second.second);
+                ++it;
+            }
+        }
+        sim.set_other_cars(poses);
         if (trace_pwm) trace(cpm::get_time_ns());
     });
 
     const auto& s = sim.stats();
     std::printf("{\"vehicle_id\": %u, \"state_packets\": %llu, \"unanswered_states\": %llu, \"commands\": %llu, "
-                "\"wrong_vehicle\": %llu, \"watchdog_stops\": %llu, \"missed_ticks\": %llu, \"decoder_errors\": {\"oversize\": %llu, "
+                "\"wrong_vehicle\": %llu, \"watchdog_stops\": %llu, \"missed_ticks\": %llu, \"model_steps_dropped\": %llu, \"decoder_errors\": {\"oversize\": %llu, "
                 "\"bad_cobs\": %llu, \"too_short\": %llu, \"bad_crc\": %llu, \"bad_packet\": %llu}}\n",
                 unsigned(vehicle_id), (unsigned long long)s.state_packets, (unsigned long long)s.unanswered_states,
                 (unsigned long long)s.commands, (unsigned long long)s.wrong_vehicle, (unsigned long long)s.watchdog_stops,
-                (unsigned long long)timer->missed_deadlines(), (unsigned long long)s.decoder.oversize,
+                (unsigned long long)timer->missed_deadlines(), (unsigned long long)skipped_steps,
+                (unsigned long long)s.decoder.oversize,
                 (unsigned long long)s.decoder.bad_cobs, (unsigned long long)s.decoder.too_short,
                 (unsigned long long)s.decoder.bad_crc, (unsigned long long)s.decoder.bad_packet);
     std::fflush(stdout);
