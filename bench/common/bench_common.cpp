@@ -82,6 +82,7 @@ int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& 
             const int fd = open(err_path.c_str(), O_CREAT | O_TRUNC | O_WRONLY, 0644);
             dup2(fd, STDERR_FILENO);
         }
+        close_range(3, ~0u, 0);  // keep our DDS shared-memory lock files out of the child
         std::vector<char*> a, e;
         for (auto& s : args) a.push_back(s.data());
         a.push_back(nullptr);

@@ -129,6 +129,8 @@ void one_car(cpm::Participant& participant, const std::vector<std::string>& env,
 {
     const std::string dir = bin_dir();
     const std::string sim_out = "/tmp/bench_vehicle_sim.out", bridge_out = "/tmp/bench_vehicle_bridge.out";
+    std::remove(sim_out.c_str());  // never read the device line of an earlier run
+    std::remove(bridge_out.c_str());
     int sim = bench::spawn({dir + "/firmware_sim", "--vehicle_id", "1", "--trace-pwm"}, env, sim_out, "/tmp/bench_vehicle_sim.err");
     std::string device;
     if (!wait_for_line(sim_out, "device: ", device, 10s)) {
@@ -216,6 +218,7 @@ struct CapacityResult
 CapacityResult capacity(cpm::Participant& participant, const std::vector<std::string>& env, int cars, int seconds)
 {
     const std::string out = "/tmp/bench_vehicle_fleet.out";
+    std::remove(out.c_str());
     int fleet = bench::spawn({bin_dir() + "/cpm", "vehicle", "sim", "--id", "1", "--count", std::to_string(cars)}, env, out,
                              "/tmp/bench_vehicle_fleet.err");
     cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});

@@ -6,7 +6,9 @@
 
 #include <VehicleCommandSpeedCurvature.h>
 
+#include <atomic>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <thread>
@@ -24,9 +26,12 @@ int main(int argc, char** argv)
     command.curvature(std::atof(argv[3]));
     std::printf("writing\n");
     std::fflush(stdout);
-    for (;;) {
+    static std::atomic<bool> stop{false};
+    std::signal(SIGTERM, [](int) { stop = true; });  // a clean exit frees its shared memory
+    while (!stop) {
         cpm::stamp_message(command, cpm::get_time_ns(), 0);
         writer.write(command);
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
+    return 0;
 }

@@ -53,6 +53,9 @@ Child spawn(const std::string& name, const std::vector<std::string>& argv, bool 
             close(fds[0]);
             close(fds[1]);
         }
+        // Nothing of ours leaks into the child (Fast DDS's shared-memory lock files included,
+        // which would make its ports look held by the wrong process).
+        close_range(3, ~0u, 0);
         std::vector<char*> args;
         for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
         args.push_back(nullptr);

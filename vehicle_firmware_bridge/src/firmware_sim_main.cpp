@@ -138,7 +138,7 @@ int run(int argc, char** argv)
         bool state_due = false;
         for (uint64_t i = 0; i < due; ++i) {
             sim.step();
-            state_due = state_due || ++steps % steps_per_state == 0;
+            if (++steps % steps_per_state == 0) state_due = true;
         }
         if (!state_due) {
             if (trace_pwm) trace(cpm::get_time_ns());

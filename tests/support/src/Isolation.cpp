@@ -1,7 +1,11 @@
 #include <cpm_test/Isolation.hpp>
 
 #include <atomic>
+#include <cctype>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <set>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -12,6 +16,49 @@
 #include <unistd.h>
 
 namespace cpm_test {
+namespace {
+
+// Every /dev/shm path some running process has open or mapped.
+std::set<std::string> shm_paths_in_use()
+{
+    std::set<std::string> used;
+    std::error_code ec;
+    for (const auto& proc : std::filesystem::directory_iterator("/proc", ec)) {
+        const std::string pid = proc.path().filename();
+        if (pid.empty() || !std::isdigit(static_cast<unsigned char>(pid[0]))) continue;
+        for (const auto& fd : std::filesystem::directory_iterator(proc.path() / "fd", ec)) {
+            auto target = std::filesystem::read_symlink(fd.path(), ec);
+            if (!ec && target.string().rfind("/dev/shm/", 0) == 0) used.insert(target.string());
+        }
+        std::ifstream maps(proc.path() / "maps");
+        for (std::string line; std::getline(maps, line);) {
+            const auto at = line.find("/dev/shm/");
+            if (at != std::string::npos) used.insert(line.substr(at));
+        }
+    }
+    return used;
+}
+
+// A process killed with SIGKILL (some tests do that on purpose) can leave a Fast DDS
+// shared-memory port of its domain behind with its mutex locked; a participant that later
+// picks that port waits forever. No other test holds this domain now, so every port file of
+// it that no process uses is such a leftover.
+void remove_stale_shared_memory(int domain)
+{
+    const int first_port = 7400 + 250 * domain, last_port = first_port + 249;
+    const auto used = shm_paths_in_use();
+    std::error_code ec;
+    for (const auto& entry : std::filesystem::directory_iterator("/dev/shm", ec)) {
+        const std::string name = entry.path().filename();
+        const auto at = name.find("fastrtps_port");
+        if (at != 0 && name.rfind("sem.fastrtps_port", 0) != 0) continue;
+        const int port = std::atoi(name.c_str() + name.find("port") + 4);
+        if (port < first_port || port > last_port || used.count(entry.path().string())) continue;
+        std::filesystem::remove(entry.path(), ec);
+    }
+}
+
+}  // namespace
 
 int test_domain_id()
 {
@@ -27,6 +74,7 @@ int test_domain_id()
             if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
                 // Kept open (and locked) for the life of the process.
                 ::setenv("CPM_DOMAIN_ID", std::to_string(candidate).c_str(), 1);
+                remove_stale_shared_memory(candidate);
                 return candidate;
             }
             ::close(fd);

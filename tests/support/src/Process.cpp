@@ -46,6 +46,7 @@ Process::Process(std::vector<std::string> argv, std::vector<std::string> env)
         ::dup2(out_fd, STDOUT_FILENO);
         ::dup2(err_fd, STDERR_FILENO);
         ::setpgid(0, 0);
+        ::close_range(3, ~0u, 0);  // keep the test's DDS shared-memory lock files out of the child
         ::execve(args[0], args.data(), envp.data());
         std::fprintf(stderr, "cannot start %s: errno %d\n", args[0], errno);
         ::_exit(127);
