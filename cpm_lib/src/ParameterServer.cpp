@@ -305,6 +305,11 @@ size_t ParameterServer::load_file(const std::string& path)
 
 size_t ParameterServer::publish_all(const std::vector<Parameter>& parameters)
 {
+    // Known to requests all at once, before any is announced.
+    {
+        std::lock_guard<std::mutex> lock(impl_->mutex);
+        for (const auto& p : parameters) impl_->values[p.name()] = p;
+    }
     for (const auto& p : parameters) impl_->publish(p);
     return parameters.size();
 }

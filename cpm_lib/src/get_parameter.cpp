@@ -31,9 +31,33 @@ public:
     Parameter get(const std::string& name, ParameterType wanted, std::chrono::milliseconds timeout)
     {
         const auto deadline = std::chrono::steady_clock::now() + timeout;
+        // "Unknown" answers within the first second are asked again: a server that is still
+        // loading its file answers before it knows everything.
+        const auto grace_end = std::min(deadline, std::chrono::steady_clock::now() + std::chrono::seconds(1));
         std::unique_lock<std::mutex> lock(mutex_);
+        for (;;) {
+            wait_for_answer(lock, name, deadline, timeout);
+            if (values_.at(name).type() != ParameterType_Invalid) break;
+            values_.erase(name);  // it may be added to the server later
+            if (std::chrono::steady_clock::now() >= grace_end) {
+                throw Error("parameter '" + name + "': the parameter server does not know it");
+            }
+            changed_.wait_until(lock, std::min(grace_end, std::chrono::steady_clock::now() + std::chrono::milliseconds(100)));
+        }
+        const Parameter& p = values_.at(name);
+        if (p.type() != wanted) {
+            throw Error("parameter '" + name + "' is of type " + detail::parameter_type_name(p.type()) + ", not " + detail::parameter_type_name(wanted));
+        }
+        return p;
+    }
+
+private:
+    // Until a value (or an "unknown") for name is cached: asks, and again every 500 ms in case
+    // the server came up after the first request. Throws at the deadline.
+    void wait_for_answer(std::unique_lock<std::mutex>& lock, const std::string& name,
+                         std::chrono::steady_clock::time_point deadline, std::chrono::milliseconds timeout)
+    {
         while (!values_.count(name)) {
-            // Ask (again every 500 ms, in case the server came up after our first request).
             lock.unlock();
             ParameterRequest request;
             request.name(name);
@@ -46,18 +70,8 @@ public:
                             std::to_string(timeout.count()) + " ms");
             }
         }
-        const Parameter& p = values_.at(name);
-        if (p.type() == ParameterType_Invalid) {
-            values_.erase(name);  // it may be added to the server later
-            throw Error("parameter '" + name + "': the parameter server does not know it");
-        }
-        if (p.type() != wanted) {
-            throw Error("parameter '" + name + "' is of type " + detail::parameter_type_name(p.type()) + ", not " + detail::parameter_type_name(wanted));
-        }
-        return p;
     }
 
-private:
     ParameterCache()
         : requests_("parameterRequest", request_options()),
           values_reader_(

@@ -8,7 +8,8 @@ namespace cpm {
 
 /// Reads a parameter from the lab's parameter server (topics `parameter`/`parameterRequest`).
 /// Blocks until the value is known, at most `timeout`; then throws cpm::Error naming the
-/// parameter. Also throws when the server does not know the name, and when the parameter has
+/// parameter. Also throws when the server still does not know the name after asking for a
+/// second (a server still loading its file may answer "unknown" first), and when the parameter has
 /// another type (naming both types). Values the server changes later reach later calls.
 /// Thread-safe. Uses the default participant.
 bool parameter_bool(const std::string& name, std::chrono::milliseconds timeout = std::chrono::seconds(5));
