@@ -10,6 +10,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 
+#include <RangeSensors.h>
 #include <VehicleCommandDirect.h>
 #include <VehicleCommandSpeedCurvature.h>
 #include <VehicleCommandTrajectory.h>
@@ -22,6 +23,7 @@
 #include <cmath>
 #include <csignal>
 #include <fcntl.h>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <random>
@@ -465,4 +467,27 @@ TEST_F(VehicleEndToEnd, WrongFilesAndFlagsAreNamedAndExitNonZero)
     Process not_a_tty({built_program("vehicle_bridge"), "--vehicle_id", "1", "--device", "/dev/null"});
     EXPECT_EQ(not_a_tty.wait(10s), 1);
     EXPECT_NE(not_a_tty.errors().find("/dev/null: not a terminal device"), std::string::npos) << not_a_tty.errors();
+}
+
+TEST_F(VehicleEndToEnd, CpmVehicleSimStartsCarsThatSeeEachOther)
+{
+    cpm::ReaderAbstract<RangeSensors> ranges(participant, "rangeSensors", {.keep_all = true});
+    // Car 7 at the origin, car 8 one metre behind it; both face +x in an empty world.
+    Process sut({built_program("cpm"), "vehicle", "sim", "--id", "7", "--count", "2", "--spacing", "1.0"});
+    std::map<int, double> front;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        for (auto& r : ranges.take()) front[r.vehicle_id()] = r.front();
+        return front.size() == 2 && front[8] < 1.0;
+    }, 10s)) << sut.output() << sut.errors();
+    // Car 8's front ranger (0.30 m ahead of its rear axle, at x = -0.70) sees car 7's rear
+    // (0.07 m behind its rear axle, at x = -0.07); nothing is in front of car 7.
+    EXPECT_NEAR(front[8], 0.63, 0.02);
+    EXPECT_EQ(front[7], 3.0);
+    sut.kill(SIGINT);
+    EXPECT_EQ(sut.wait(10s), 0) << sut.errors();
+    auto out = sut.output();
+    for (const char* line : {"\"vehicle_id\": 7, \"cycles\"", "\"vehicle_id\": 8, \"cycles\"",
+                             "\"vehicle_id\": 7, \"state_packets\"", "\"vehicle_id\": 8, \"state_packets\""}) {
+        EXPECT_NE(out.find(line), std::string::npos) << line << "\n" << out;
+    }
 }
