@@ -1,0 +1,417 @@
+#include "Elements.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace cpm::fsm::detail {
+namespace {
+
+double clamp1(double v) { return std::clamp(v, -1.0, 1.0); }
+double side_range(const Inputs& in, const std::string& side) { return side == "left" ? in.left : in.right; }
+double side_sign(const std::string& side) { return side == "left" ? 1.0 : -1.0; }
+
+class Idle : public State
+{
+public:
+    using State::State;
+    Output tick(const Inputs&, double) override { return {}; }
+};
+
+/// Brakes and stays.
+class Stop : public State
+{
+public:
+    using State::State;
+    Output tick(const Inputs&, double) override { return {0.0, 0.0, true}; }
+};
+
+class Motor : public State
+{
+public:
+    Motor(int id, const Params& p, const Settings& s)
+        : State(id, "Motor"), throttle_(p["speed"].get<double>() * s.throttle_per_speed),
+          steering_(p["steering"].get<double>()), distance_(p["distance"].get<double>())
+    {
+    }
+    Output tick(const Inputs& in, double) override
+    {
+        done_ = distance_ > 0 && distance_since_entry(in) >= distance_;
+        return {clamp1(throttle_), clamp1(steering_)};
+    }
+    bool can_finish() const override { return true; }
+    bool finished() const override { return done_; }
+
+private:
+    double throttle_, steering_, distance_;
+    bool done_ = false;
+};
+
+/// The wall follower of the original car: y = p e + esum i PID_S + d (e - eold) PID_INVS, with
+/// e = measured - clearance on the followed side; y steers towards the wall when too far.
+class BasicFollowWall : public State
+{
+public:
+    BasicFollowWall(int id, const std::string& type, const Params& p, const Settings& s)
+        : State(id, type), side_(p["side"].get<std::string>()), clearance_(p["clearance"].get<double>()),
+          throttle_(p["speed"].get<double>() * s.throttle_per_speed), p_(p["p"].get<double>()),
+          i_(p["i"].get<double>()), d_(p["d"].get<double>()), pid_s_(s.tick_period)
+    {
+    }
+    void on_enter(const Inputs& in) override
+    {
+        State::on_enter(in);
+        esum_ = 0;
+        eold_.reset();
+        last_range_ = side_range(in, side_);
+    }
+    Output tick(const Inputs& in, double) override { return control(in, measured(in)); }
+
+protected:
+    virtual double measured(const Inputs& in) { return side_range(in, side_); }
+    Output control(const Inputs& in, double range)
+    {
+        (void)in;
+        double e = range - clearance_;
+        if (!eold_) eold_ = e;
+        esum_ += e;
+        double y = p_ * e + esum_ * i_ * pid_s_ + d_ * (e - *eold_) / pid_s_;
+        eold_ = e;
+        return {clamp1(throttle_), clamp1(side_sign(side_) * y)};
+    }
+
+    std::string side_;
+    double clearance_, throttle_, p_, i_, d_, pid_s_;
+    double esum_ = 0;
+    std::optional<double> eold_;
+    double last_range_ = 0;
+};
+
+/// BasicFollowWall that ignores range jumps over 2 cm (door frames, niches).
+class FollowWall : public BasicFollowWall
+{
+public:
+    FollowWall(int id, const Params& p, const Settings& s) : BasicFollowWall(id, "FollowWall", p, s) {}
+
+protected:
+    double measured(const Inputs& in) override
+    {
+        double r = side_range(in, side_);
+        if (std::abs(r - last_range_) <= 0.02) last_range_ = r;
+        return last_range_;
+    }
+};
+
+/// Clearance changes linearly from the one at entry to target_clearance over `distance`.
+class FollowWallRamp : public BasicFollowWall
+{
+public:
+    FollowWallRamp(int id, const Params& p, const Settings& s)
+        : BasicFollowWall(id, "FollowWallRamp", p, s), target_clearance_(p["target_clearance"].get<double>()),
+          distance_(p["distance"].get<double>())
+    {
+    }
+    void on_enter(const Inputs& in) override
+    {
+        BasicFollowWall::on_enter(in);
+        start_clearance_ = side_range(in, side_);
+        done_ = false;
+    }
+    Output tick(const Inputs& in, double) override
+    {
+        double s = distance_since_entry(in);
+        done_ = s >= distance_;
+        double f = distance_ > 0 ? std::clamp(s / distance_, 0.0, 1.0) : 1.0;
+        clearance_ = start_clearance_ + (target_clearance_ - start_clearance_) * f;
+        return control(in, side_range(in, side_));
+    }
+    bool can_finish() const override { return true; }
+    bool finished() const override { return done_; }
+    bool can_take_target() const override { return true; }
+    /// The target's lateral offset moves the clearance (towards the left is + y), its forward
+    /// offset becomes the ramp's length.
+    void set_target(const Target& t) override
+    {
+        target_clearance_ = start_clearance_ - side_sign(side_) * t.y;
+        distance_ = std::max(0.01, t.x);
+    }
+
+private:
+    double target_clearance_, distance_, start_clearance_ = 0;
+    bool done_ = false;
+};
+
+/// Drives to a point given in the car's frame at entry (dead reckoning from odometer and IMU
+/// yaw), steering proportionally to the bearing; finishes within `tolerance`.
+class ApproachPoint : public State
+{
+public:
+    ApproachPoint(int id, const Params& p, const Settings& s)
+        : State(id, "ApproachPoint"), tx_(p["x"].get<double>()), ty_(p["y"].get<double>()),
+          tolerance_(p["tolerance"].get<double>()), throttle_(p["speed"].get<double>() * s.throttle_per_speed),
+          gain_(p["steering_gain"].get<double>())
+    {
+    }
+    void on_enter(const Inputs& in) override
+    {
+        State::on_enter(in);
+        x_ = y_ = 0;
+        yaw0_ = in.yaw;
+        odo_ = in.odometer;
+        done_ = false;
+    }
+    Output tick(const Inputs& in, double) override
+    {
+        double ds = in.odometer - odo_;
+        odo_ = in.odometer;
+        double heading = in.yaw - yaw0_;
+        x_ += ds * std::cos(heading);
+        y_ += ds * std::sin(heading);
+        double dx = tx_ - x_, dy = ty_ - y_;
+        done_ = std::hypot(dx, dy) <= tolerance_;
+        if (done_) return {};
+        double bearing = std::remainder(std::atan2(dy, dx) - heading, 2 * M_PI);
+        return {clamp1(throttle_), clamp1(gain_ * bearing)};
+    }
+    bool can_finish() const override { return true; }
+    bool finished() const override { return done_; }
+    bool can_take_target() const override { return true; }
+    void set_target(const Target& t) override
+    {
+        tx_ = t.x;
+        ty_ = t.y;
+    }
+
+private:
+    double tx_, ty_, tolerance_, throttle_, gain_;
+    double x_ = 0, y_ = 0, yaw0_ = 0, odo_ = 0;
+    bool done_ = false;
+};
+
+/// The centre of the gate formed by markers a and b (-1: any two markers), if both are seen.
+std::optional<Target> gate_centre(const Inputs& in, int a, int b, double range)
+{
+    const MarkerSighting* first = nullptr;
+    const MarkerSighting* second = nullptr;
+    for (const auto& m : in.markers) {
+        if (m.distance > range) continue;
+        bool is_a = a < 0 || m.id == a, is_b = b < 0 || m.id == b;
+        if (!first && is_a) first = &m;
+        else if (!second && is_b && &m != first) second = &m;
+    }
+    if (!first || !second) return std::nullopt;
+    return Target{(first->x + second->x) / 2, (first->y + second->y) / 2, (first->yaw + second->yaw) / 2};
+}
+
+/// Turns (full lock, at `speed`) until the car faces the gate's centre; finishes when aligned.
+class ArucoGateCenter : public State
+{
+public:
+    ArucoGateCenter(int id, const Params& p, const Settings& s)
+        : State(id, "ArucoGateCenter"), a_(p["marker_a"].get<int>()), b_(p["marker_b"].get<int>()),
+          tolerance_(p["tolerance"].get<double>()), throttle_(p["speed"].get<double>() * s.throttle_per_speed)
+    {
+    }
+    void on_enter(const Inputs& in) override
+    {
+        State::on_enter(in);
+        done_ = false;
+    }
+    Output tick(const Inputs& in, double) override
+    {
+        if (auto c = gate_centre(in, a_, b_, 1e9)) {
+            double bearing = std::atan2(c->y, c->x);
+            done_ = std::abs(bearing) <= tolerance_;
+            direction_ = bearing >= 0 ? 1.0 : -1.0;
+        }
+        if (done_) return {clamp1(throttle_), 0.0};
+        return {clamp1(throttle_), direction_};
+    }
+    bool can_finish() const override { return true; }
+    bool finished() const override { return done_; }
+
+private:
+    int a_, b_;
+    double tolerance_, throttle_, direction_ = 1.0;
+    bool done_ = false;
+};
+
+/// A nested machine; finishes when it reaches a state marked "final".
+class NestedMachine : public State
+{
+public:
+    NestedMachine(int id, std::unique_ptr<Machine> nested) : State(id, "FSMState"), nested_(std::move(nested)) {}
+    void on_enter(const Inputs& in) override
+    {
+        State::on_enter(in);
+        nested_->start(in);
+    }
+    Output tick(const Inputs& in, double dt) override { return nested_->tick(in, dt); }
+    bool can_finish() const override { return true; }
+    bool finished() const override { return nested_->in_final_state(); }
+
+private:
+    std::unique_ptr<Machine> nested_;
+};
+
+// ---- transitions ----
+
+class Always : public Transition
+{
+public:
+    using Transition::Transition;
+    bool fires(const Inputs&, const State&) override { return true; }
+};
+
+class Distance : public Transition
+{
+public:
+    Distance(int id, int from, int to, const Params& p) : Transition(id, "Distance", from, to), distance_(p["distance"].get<double>()) {}
+    bool fires(const Inputs& in, const State& owner) override { return owner.distance_since_entry(in) >= distance_; }
+
+private:
+    double distance_;
+};
+
+class Finished : public Transition
+{
+public:
+    using Transition::Transition;
+    bool fires(const Inputs&, const State& owner) override { return owner.finished(); }
+};
+
+class SensorLevel : public Transition
+{
+public:
+    SensorLevel(int id, int from, int to, const Params& p)
+        : Transition(id, "SensorLevel", from, to), sensor_(p["sensor"].get<std::string>()),
+          above_(p["direction"].get<std::string>() == "above"), level_(p["level"].get<double>()),
+          debounce_(p["debounce"].get<int>())
+    {
+    }
+    void reset() override { count_ = 0; }
+    bool fires(const Inputs& in, const State&) override
+    {
+        double r = sensor_ == "front" ? in.front : sensor_ == "left" ? in.left : in.right;
+        bool crossed = above_ ? r > level_ : r < level_;
+        count_ = crossed ? count_ + 1 : 0;
+        return count_ >= debounce_;
+    }
+
+private:
+    std::string sensor_;
+    bool above_;
+    double level_;
+    int debounce_, count_ = 0;
+};
+
+class ArucoGateFound : public Transition
+{
+public:
+    ArucoGateFound(int id, int from, int to, const Params& p)
+        : Transition(id, "ArucoGateFound", from, to), a_(p["marker_a"].get<int>()), b_(p["marker_b"].get<int>()),
+          range_(p["range"].get<double>())
+    {
+    }
+    bool fires(const Inputs& in, const State&) override
+    {
+        target_ = gate_centre(in, a_, b_, range_);
+        return target_.has_value();
+    }
+    std::optional<Target> target() const override { return target_; }
+
+private:
+    int a_, b_;
+    double range_;
+    std::optional<Target> target_;
+};
+
+class Timeout : public Transition
+{
+public:
+    Timeout(int id, int from, int to, const Params& p) : Transition(id, "Timeout", from, to), seconds_(p["seconds"].get<double>()) {}
+    bool fires(const Inputs& in, const State& owner) override { return owner.time_since_entry(in) >= seconds_; }
+
+private:
+    double seconds_;
+};
+
+const std::vector<ParameterInfo> kWallParams{
+    {"side", "side", "right", "wall to follow: left or right"},
+    {"clearance", "number", "0.4", "distance to keep to the wall, m"},
+    {"speed", "number", "0.5", "m/s"},
+    {"p", "number", "4", "steering per m of error"},
+    {"i", "number", "0", "steering per m·s of summed error"},
+    {"d", "number", "3", "steering per m/s of error change"}};
+
+std::vector<ParameterInfo> with(std::vector<ParameterInfo> base, std::vector<ParameterInfo> more)
+{
+    base.insert(base.end(), more.begin(), more.end());
+    return base;
+}
+
+}  // namespace
+
+const std::vector<StateFactory>& state_factories()
+{
+    static const std::vector<StateFactory> factories{
+        {{"Idle", true, false, false, {}}, [](int id, const Params&, const Settings&) { return std::make_unique<Idle>(id, "Idle"); }},
+        {{"Stop", true, false, false, {}}, [](int id, const Params&, const Settings&) { return std::make_unique<Stop>(id, "Stop"); }},
+        {{"Motor", true, true, false,
+          {{"speed", "number", "0.5", "m/s"}, {"steering", "number", "0", "-1..1, + turns left"},
+           {"distance", "number", "0", "finishes after this many m (0: never)"}}},
+         [](int id, const Params& p, const Settings& s) { return std::make_unique<Motor>(id, p, s); }},
+        {{"BasicFollowWall", true, false, false, kWallParams},
+         [](int id, const Params& p, const Settings& s) { return std::make_unique<BasicFollowWall>(id, "BasicFollowWall", p, s); }},
+        {{"FollowWall", true, false, false, kWallParams},
+         [](int id, const Params& p, const Settings& s) { return std::make_unique<FollowWall>(id, p, s); }},
+        {{"FollowWallRamp", true, true, true,
+          with(kWallParams, {{"target_clearance", "number", "", "clearance at the ramp's end, m"},
+                             {"distance", "number", "", "length of the ramp, m; finishes there"}})},
+         [](int id, const Params& p, const Settings& s) { return std::make_unique<FollowWallRamp>(id, p, s); }},
+        {{"ApproachPoint", true, true, true,
+          {{"x", "number", "0", "point ahead in the car's frame at entry, m"}, {"y", "number", "0", "point to the left, m"},
+           {"tolerance", "number", "0.1", "finishes within this distance, m"}, {"speed", "number", "0.4", "m/s"},
+           {"steering_gain", "number", "2", "steering per rad of bearing"}}},
+         [](int id, const Params& p, const Settings& s) { return std::make_unique<ApproachPoint>(id, p, s); }},
+        {{"ArucoGateCenter", true, true, false,
+          {{"marker_a", "integer", "-1", "marker id (-1: any)"}, {"marker_b", "integer", "-1", "marker id (-1: any)"},
+           {"tolerance", "number", "0.05", "aligned within this bearing, rad"}, {"speed", "number", "0.3", "m/s"}}},
+         [](int id, const Params& p, const Settings& s) { return std::make_unique<ArucoGateCenter>(id, p, s); }},
+        {{"FSMState", true, true, false,
+          {{"machine", "machine", "", "a nested machine: an object like this file's, or \"file\": a path"},
+           {"file", "file", "", "a JSON file with the nested machine, relative to this one"}}},
+         nullptr},
+    };
+    return factories;
+}
+
+const std::vector<TransitionFactory>& transition_factories()
+{
+    static const std::vector<TransitionFactory> factories{
+        {{"Always", false, false, false, {}},
+         [](int id, int from, int to, const Params&) { return std::make_unique<Always>(id, "Always", from, to); }},
+        {{"Distance", false, false, false, {{"distance", "number", "", "m driven since the owner was entered"}}},
+         [](int id, int from, int to, const Params& p) { return std::make_unique<Distance>(id, from, to, p); }},
+        {{"Finished", false, false, false, {}},
+         [](int id, int from, int to, const Params&) { return std::make_unique<Finished>(id, "Finished", from, to); }},
+        {{"SensorLevel", false, false, false,
+          {{"sensor", "sensor", "", "front, left or right"}, {"level", "number", "", "threshold, m"},
+           {"direction", "direction", "above", "above or below the level"},
+           {"debounce", "integer", "1", "consecutive ticks the condition must hold"}}},
+         [](int id, int from, int to, const Params& p) { return std::make_unique<SensorLevel>(id, from, to, p); }},
+        {{"ArucoGateFound", false, false, false,
+          {{"marker_a", "integer", "-1", "marker id (-1: any)"}, {"marker_b", "integer", "-1", "marker id (-1: any)"},
+           {"range", "number", "2.0", "both markers nearer than this, m"}}},
+         [](int id, int from, int to, const Params& p) { return std::make_unique<ArucoGateFound>(id, from, to, p); }},
+        {{"Timeout", false, false, false, {{"seconds", "number", "", "time in the owner, s"}}},
+         [](int id, int from, int to, const Params& p) { return std::make_unique<Timeout>(id, from, to, p); }},
+    };
+    return factories;
+}
+
+std::unique_ptr<State> make_nested_state(int id, std::unique_ptr<Machine> nested)
+{
+    return std::make_unique<NestedMachine>(id, std::move(nested));
+}
+
+}  // namespace cpm::fsm::detail

@@ -1,0 +1,347 @@
+#include <cpm/fsm/Loader.hpp>
+
+#include "Elements.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace cpm::fsm {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+const std::set<std::string> kTopLevel{"root", "states", "transitions", "tick_period", "throttle_per_speed", "name"};
+
+struct Context
+{
+    std::string source;              // file name for diagnostics
+    fs::path base_dir;               // nested files are relative to it
+    std::vector<std::string> stack;  // files being loaded (cycle check)
+    LoadResult* out;
+    void error(const std::string& path, const std::string& message) { out->errors.push_back({source + ": " + path, message}); }
+    void warning(const std::string& path, const std::string& message) { out->warnings.push_back({source + ": " + path, message}); }
+};
+
+std::string kind_error(const std::string& kind)
+{
+    if (kind == "side") return "expected \"left\" or \"right\"";
+    if (kind == "sensor") return "expected \"front\", \"left\" or \"right\"";
+    if (kind == "direction") return "expected \"above\" or \"below\"";
+    return "expected " + std::string(kind == "integer" ? "an integer" : kind == "bool" ? "true or false" : "a " + kind);
+}
+
+bool kind_ok(const std::string& kind, const json& v)
+{
+    if (kind == "number") return v.is_number();
+    if (kind == "integer") return v.is_number_integer();
+    if (kind == "bool") return v.is_boolean();
+    if (kind == "side") return v.is_string() && (v == "left" || v == "right");
+    if (kind == "sensor") return v.is_string() && (v == "front" || v == "left" || v == "right");
+    if (kind == "direction") return v.is_string() && (v == "above" || v == "below");
+    if (kind == "machine") return v.is_object();
+    if (kind == "file") return v.is_string();
+    return false;
+}
+
+json default_value(const ParameterInfo& p)
+{
+    if (p.kind == "number") return std::stod(p.fallback);
+    if (p.kind == "integer") return std::stoi(p.fallback);
+    return p.fallback;
+}
+
+/// Checks an element's parameters against its type; fills in defaults. False on an error.
+bool check_parameters(Context& ctx, const json& element, const std::string& path, const TypeInfo& info,
+                      const std::set<std::string>& structural, detail::Params& params)
+{
+    bool ok = true;
+    params = json::object();
+    for (auto it = element.begin(); it != element.end(); ++it) {
+        if (structural.count(it.key())) continue;
+        auto p = std::find_if(info.parameters.begin(), info.parameters.end(), [&](auto& q) { return q.name == it.key(); });
+        if (p == info.parameters.end()) {
+            std::string known;
+            for (auto& q : info.parameters) known += (known.empty() ? "" : ", ") + q.name;
+            ctx.error(path + "." + it.key(), "unknown parameter of " + info.type + (known.empty() ? " (it takes none)" : " (known: " + known + ")"));
+            ok = false;
+        } else if (!kind_ok(p->kind, it.value())) {
+            ctx.error(path + "." + it.key(), kind_error(p->kind) + ", got " + it.value().dump());
+            ok = false;
+        } else {
+            params[it.key()] = it.value();
+        }
+    }
+    for (const auto& p : info.parameters) {
+        if (params.contains(p.name) || p.kind == "machine" || p.kind == "file") continue;
+        if (p.fallback.empty()) {
+            ctx.error(path, info.type + " needs parameter \"" + p.name + "\" (" + p.meaning + ")");
+            ok = false;
+        } else {
+            params[p.name] = default_value(p);
+        }
+    }
+    return ok;
+}
+
+std::optional<int> integer_member(Context& ctx, const json& e, const std::string& path, const char* name)
+{
+    if (!e.contains(name)) {
+        ctx.error(path, std::string("missing \"") + name + "\"");
+        return std::nullopt;
+    }
+    if (!e[name].is_number_integer()) {
+        ctx.error(path + "." + name, "expected an integer, got " + e[name].dump());
+        return std::nullopt;
+    }
+    return e[name].get<int>();
+}
+
+std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::string& at);
+
+/// FSMState: the nested machine, inline or from a file.
+std::unique_ptr<Machine> load_nested(Context& ctx, const json& e, const std::string& path)
+{
+    bool inline_machine = e.contains("machine"), from_file = e.contains("file");
+    if (inline_machine == from_file) {
+        ctx.error(path, "FSMState needs exactly one of \"machine\" (inline) or \"file\"");
+        return nullptr;
+    }
+    if (inline_machine) return load_machine(ctx, e["machine"], path + ".machine");
+    fs::path file = ctx.base_dir / e["file"].get<std::string>();
+    std::error_code ec;
+    auto canonical = fs::weakly_canonical(file, ec).string();
+    if (!fs::exists(file)) {
+        ctx.error(path + ".file", "nested machine file " + file.string() + " does not exist");
+        return nullptr;
+    }
+    if (std::find(ctx.stack.begin(), ctx.stack.end(), canonical) != ctx.stack.end()) {
+        ctx.error(path + ".file", "nested machine file " + file.string() + " includes itself (cycle)");
+        return nullptr;
+    }
+    std::ifstream in(file);
+    std::stringstream text;
+    text << in.rdbuf();
+    json nested;
+    try {
+        nested = json::parse(text.str());
+    } catch (const json::parse_error& err) {
+        ctx.error(path + ".file", file.string() + " is not valid JSON (" + err.what() + ")");
+        return nullptr;
+    }
+    Context inner{file.string(), file.parent_path(), ctx.stack, ctx.out};
+    inner.stack.push_back(canonical);
+    return load_machine(inner, nested, "$");
+}
+
+std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::string& at)
+{
+    const size_t errors_before = ctx.out->errors.size();
+    if (!j.is_object()) {
+        ctx.error(at, "expected an object with \"root\", \"states\" and \"transitions\"");
+        return nullptr;
+    }
+    for (auto it = j.begin(); it != j.end(); ++it) {
+        if (!kTopLevel.count(it.key())) ctx.error(at + "." + it.key(), "unknown member (known: root, states, transitions, tick_period, throttle_per_speed, name)");
+    }
+    detail::Settings settings;
+    if (j.contains("tick_period")) {
+        if (!j["tick_period"].is_number() || j["tick_period"].get<double>() <= 0) ctx.error(at + ".tick_period", "expected a number > 0 (s)");
+        else settings.tick_period = j["tick_period"].get<double>();
+    }
+    if (j.contains("throttle_per_speed")) {
+        if (!j["throttle_per_speed"].is_number()) ctx.error(at + ".throttle_per_speed", "expected a number");
+        else settings.throttle_per_speed = j["throttle_per_speed"].get<double>();
+    }
+    auto root = integer_member(ctx, j, at, "root");
+
+    // States.
+    std::vector<std::unique_ptr<State>> states;
+    std::map<int, const TypeInfo*> state_types;
+    std::map<int, bool> final_states;
+    if (!j.contains("states") || !j["states"].is_array()) {
+        ctx.error(at + ".states", "expected an array of states");
+    } else {
+        for (size_t k = 0; k < j["states"].size(); ++k) {
+            const json& e = j["states"][k];
+            std::string path = at + ".states[" + std::to_string(k) + "]";
+            if (!e.is_object()) {
+                ctx.error(path, "expected an object");
+                continue;
+            }
+            auto id = integer_member(ctx, e, path, "id");
+            if (!e.contains("type") || !e["type"].is_string()) {
+                ctx.error(path, "missing \"type\" (a state type name)");
+                continue;
+            }
+            const std::string type = e["type"];
+            auto& factories = detail::state_factories();
+            auto f = std::find_if(factories.begin(), factories.end(), [&](auto& x) { return x.info.type == type; });
+            if (f == factories.end()) {
+                std::string known;
+                for (auto& x : factories) known += (known.empty() ? "" : ", ") + x.info.type;
+                ctx.error(path + ".type", "unknown state type \"" + type + "\" (known: " + known + ")");
+                continue;
+            }
+            if (e.contains("final") && !e["final"].is_boolean()) ctx.error(path + ".final", "expected true or false");
+            detail::Params params;
+            bool params_ok = check_parameters(ctx, e, path, f->info, {"id", "type", "final"}, params);
+            if (!id) continue;
+            if (state_types.count(*id)) {
+                ctx.error(path + ".id", "duplicate state id " + std::to_string(*id));
+                continue;
+            }
+            state_types[*id] = &f->info;
+            final_states[*id] = e.value("final", false) == true;
+            std::unique_ptr<State> state;
+            if (type == "FSMState") {
+                auto nested = load_nested(ctx, e, path);
+                if (nested) {
+                    bool has_final = false;
+                    for (auto& s : nested->states()) has_final = has_final || s->is_final();
+                    if (!has_final) ctx.error(path, "the nested machine has no state marked \"final\": true, so this FSMState can never finish");
+                    state = detail::make_nested_state(*id, std::move(nested));
+                }
+            } else if (params_ok) {
+                state = f->make(*id, params, settings);
+            }
+            if (state) {
+                state->set_final(final_states[*id]);
+                states.push_back(std::move(state));
+            }
+        }
+    }
+    if (root && !state_types.empty() && !state_types.count(*root)) ctx.error(at + ".root", "state " + std::to_string(*root) + " does not exist");
+
+    // Transitions.
+    std::vector<std::unique_ptr<Transition>> transitions;
+    std::set<int> transition_ids;
+    std::multimap<int, int> edges;
+    if (j.contains("transitions") && !j["transitions"].is_array()) ctx.error(at + ".transitions", "expected an array of transitions");
+    const json empty = json::array();
+    const json& list = j.contains("transitions") && j["transitions"].is_array() ? j["transitions"] : empty;
+    for (size_t k = 0; k < list.size(); ++k) {
+        const json& e = list[k];
+        std::string path = at + ".transitions[" + std::to_string(k) + "]";
+        if (!e.is_object()) {
+            ctx.error(path, "expected an object");
+            continue;
+        }
+        auto id = integer_member(ctx, e, path, "id");
+        auto from = integer_member(ctx, e, path, "from");
+        auto to = integer_member(ctx, e, path, "to");
+        if (!e.contains("type") || !e["type"].is_string()) {
+            ctx.error(path, "missing \"type\" (a transition type name)");
+            continue;
+        }
+        const std::string type = e["type"];
+        auto& factories = detail::transition_factories();
+        auto f = std::find_if(factories.begin(), factories.end(), [&](auto& x) { return x.info.type == type; });
+        if (f == factories.end()) {
+            std::string known;
+            for (auto& x : factories) known += (known.empty() ? "" : ", ") + x.info.type;
+            ctx.error(path + ".type", "unknown transition type \"" + type + "\" (known: " + known + ")");
+            continue;
+        }
+        detail::Params params;
+        bool params_ok = check_parameters(ctx, e, path, f->info, {"id", "type", "from", "to"}, params);
+        if (id && !transition_ids.insert(*id).second) ctx.error(path + ".id", "duplicate transition id " + std::to_string(*id));
+        if (from && !state_types.count(*from)) ctx.error(path + ".from", "state " + std::to_string(*from) + " does not exist");
+        if (to && !state_types.count(*to)) ctx.error(path + ".to", "state " + std::to_string(*to) + " does not exist");
+        if (!id || !from || !to || !state_types.count(*from) || !state_types.count(*to)) continue;
+        if (type == "Finished" && !state_types[*from]->finishable) {
+            ctx.error(path, "Finished from state " + std::to_string(*from) + " (" + state_types[*from]->type + "), which never finishes");
+        }
+        if (type == "ArucoGateFound" && !state_types[*to]->targetable) {
+            ctx.error(path, "ArucoGateFound into state " + std::to_string(*to) + " (" + state_types[*to]->type + "), which cannot take a target");
+        }
+        edges.emplace(*from, *to);
+        if (params_ok) transitions.push_back(f->make(*id, *from, *to, params));
+    }
+
+    // Warnings: unreachable states, states with no way out.
+    if (root && state_types.count(*root)) {
+        std::set<int> seen{*root};
+        std::vector<int> todo{*root};
+        while (!todo.empty()) {
+            int s = todo.back();
+            todo.pop_back();
+            auto range = edges.equal_range(s);
+            for (auto it = range.first; it != range.second; ++it) {
+                if (seen.insert(it->second).second) todo.push_back(it->second);
+            }
+        }
+        for (auto& [id, info] : state_types) {
+            if (!seen.count(id)) ctx.warning(at + ".states", "state " + std::to_string(id) + " (" + info->type + ") cannot be reached from the root");
+            bool way_out = edges.count(id) > 0;
+            if (!way_out && !final_states[id] && info->type != "Stop" && info->type != "Idle") {
+                ctx.warning(at + ".states", "state " + std::to_string(id) + " (" + info->type + ") has no way out and is not marked final");
+            }
+        }
+    }
+    if (ctx.out->errors.size() != errors_before || !root) return nullptr;
+    return std::make_unique<Machine>(std::move(states), std::move(transitions), *root);
+}
+
+}  // namespace
+
+LoadResult load_json(const std::string& json_text, const std::string& source, const std::string& base_dir)
+{
+    LoadResult result;
+    json j;
+    try {
+        j = json::parse(json_text);
+    } catch (const json::parse_error& e) {
+        result.errors.push_back({source, std::string("not valid JSON (") + e.what() + ")"});
+        return result;
+    }
+    Context ctx{source, base_dir, {}, &result};
+    auto machine = load_machine(ctx, j, "$");
+    if (result.errors.empty()) result.machine = std::move(machine);
+    return result;
+}
+
+LoadResult load_file(const std::string& path)
+{
+    std::ifstream in(path);
+    if (!in) {
+        LoadResult result;
+        result.errors.push_back({path, "cannot open the file"});
+        return result;
+    }
+    std::stringstream text;
+    text << in.rdbuf();
+    std::error_code ec;
+    auto result_dir = fs::path(path).parent_path();
+    LoadResult result;
+    json j;
+    try {
+        j = json::parse(text.str());
+    } catch (const json::parse_error& e) {
+        result.errors.push_back({path, std::string("not valid JSON (") + e.what() + ")"});
+        return result;
+    }
+    Context ctx{path, result_dir.empty() ? fs::path(".") : result_dir, {fs::weakly_canonical(path, ec).string()}, &result};
+    auto machine = load_machine(ctx, j, "$");
+    if (result.errors.empty()) result.machine = std::move(machine);
+    return result;
+}
+
+const std::vector<TypeInfo>& known_types()
+{
+    static const std::vector<TypeInfo> types = [] {
+        std::vector<TypeInfo> all;
+        for (auto& f : detail::state_factories()) all.push_back(f.info);
+        for (auto& f : detail::transition_factories()) all.push_back(f.info);
+        return all;
+    }();
+    return types;
+}
+
+}  // namespace cpm::fsm

@@ -1,0 +1,152 @@
+#include <cpm/fsm/Loader.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+using namespace cpm::fsm;
+
+namespace {
+
+std::unique_ptr<Machine> machine(const std::string& json)
+{
+    auto result = load_json(json, "test.json");
+    std::string errors;
+    for (auto& d : result.errors) errors += d.text() + "\n";
+    EXPECT_TRUE(result.ok()) << errors;
+    return std::move(result.machine);
+}
+
+Inputs at(double t, double odometer, double right = 0.4, double front = 3.0, double left = 0.6)
+{
+    Inputs in;
+    in.t = t;
+    in.odometer = odometer;
+    in.right = right;
+    in.front = front;
+    in.left = left;
+    return in;
+}
+
+}  // namespace
+
+TEST(FsmEngine, TicksTheActiveStateThenSwitchesOnTheFirstTransitionThatFires)
+{
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "Motor", "speed": 0.6, "steering": 0.25},
+                   {"id": 1, "type": "Stop"}, {"id": 2, "type": "Idle"}],
+        "transitions": [{"id": 5, "type": "Distance", "from": 0, "to": 1, "distance": 1.0},
+                        {"id": 6, "type": "Always", "from": 0, "to": 2}]})");
+    // Distance is checked first but has not fired; Always fires.
+    auto out = sut->tick(at(0, 0), 0.0125);
+    EXPECT_NEAR(out.throttle, 0.2, 1e-12);  // 0.6 m/s at 1/3 throttle per m/s
+    EXPECT_EQ(out.steering, 0.25);
+    EXPECT_EQ(sut->active().id(), 2);
+    EXPECT_EQ(sut->last_transition(), 6);
+
+    auto second = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "Motor"}, {"id": 1, "type": "Stop"}],
+        "transitions": [{"id": 5, "type": "Distance", "from": 0, "to": 1, "distance": 1.0}]})");
+    second->tick(at(10, 3.0), 0.0125);  // entered at odometer 3.0
+    second->tick(at(11, 3.9), 0.0125);
+    EXPECT_EQ(second->active().id(), 0);
+    second->tick(at(12, 4.0), 0.0125);
+    EXPECT_EQ(second->active().id(), 1);
+    EXPECT_EQ(second->last_transition(), 5);
+    EXPECT_EQ(second->entered_t(), 12);
+}
+
+TEST(FsmEngine, BasicFollowWallIsTheOriginalPidLaw)
+{
+    auto sut = machine(R"({"root": 0, "tick_period": 0.0125,
+        "states": [{"id": 0, "type": "BasicFollowWall", "side": "right", "clearance": 0.4, "p": 2, "i": 1, "d": 0.5}],
+        "transitions": []})");
+    // y = p e + esum i PID_S + d (e - eold) PID_INVS; steering = -y when following the right wall.
+    sut->tick(at(0, 0, 0.40), 0.0125);                  // e = 0
+    auto out = sut->tick(at(0.0125, 0.01, 0.45), 0.0125);  // e = 0.05, esum = 0.05, eold = 0
+    double y = 2 * 0.05 + 0.05 * 1 * 0.0125 + 0.5 * 0.05 / 0.0125;
+    EXPECT_NEAR(out.steering, -std::min(y, 1.0), 1e-12);
+    out = sut->tick(at(0.025, 0.02, 0.41), 0.0125);  // e = 0.01, esum = 0.06, eold = 0.05
+    y = 2 * 0.01 + 0.06 * 1 * 0.0125 + 0.5 * (0.01 - 0.05) / 0.0125;
+    EXPECT_NEAR(out.steering, -std::clamp(y, -1.0, 1.0), 1e-12);
+}
+
+TEST(FsmEngine, FollowWallIgnoresRangeJumpsOverTwoCentimetres)
+{
+    const char* json = R"({"root": 0, "states": [{"id": 0, "type": "%s", "side": "right", "clearance": 0.4, "p": 2, "d": 0}], "transitions": []})";
+    char text[256];
+    std::snprintf(text, sizeof text, json, "FollowWall");
+    auto sut = machine(text);
+    std::snprintf(text, sizeof text, json, "BasicFollowWall");
+    auto basic = machine(text);
+    for (auto* m : {sut.get(), basic.get()}) m->tick(at(0, 0, 0.40), 0.0125);
+    // A door niche: the range jumps from 0.40 to 0.65.
+    EXPECT_NEAR(sut->tick(at(0.0125, 0.01, 0.65), 0.0125).steering, 0.0, 1e-12);
+    EXPECT_NEAR(basic->tick(at(0.0125, 0.01, 0.65), 0.0125).steering, -0.5, 1e-12);
+    // Small changes are followed.
+    EXPECT_NEAR(sut->tick(at(0.025, 0.02, 0.41), 0.0125).steering, -0.02, 1e-12);
+}
+
+TEST(FsmEngine, SensorLevelWaitsForItsDebounceCountAndTimeoutForItsSeconds)
+{
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "Motor"}, {"id": 1, "type": "Motor"}, {"id": 2, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "SensorLevel", "from": 0, "to": 1, "sensor": "front", "level": 1.0, "direction": "below", "debounce": 3},
+                        {"id": 1, "type": "Timeout", "from": 1, "to": 2, "seconds": 2}]})");
+    sut->tick(at(0, 0, 0.4, 0.9), 0.0125);
+    sut->tick(at(0.1, 0, 0.4, 0.9), 0.0125);
+    sut->tick(at(0.2, 0, 0.4, 1.5), 0.0125);  // a reading above: the count starts over
+    sut->tick(at(0.3, 0, 0.4, 0.9), 0.0125);
+    sut->tick(at(0.4, 0, 0.4, 0.9), 0.0125);
+    EXPECT_EQ(sut->active().id(), 0);
+    sut->tick(at(0.5, 0, 0.4, 0.9), 0.0125);
+    EXPECT_EQ(sut->active().id(), 1);
+    sut->tick(at(2.4, 0), 0.0125);
+    EXPECT_EQ(sut->active().id(), 1);
+    sut->tick(at(2.5, 0), 0.0125);
+    EXPECT_EQ(sut->active().id(), 2);
+}
+
+TEST(FsmEngine, ArucoGateFoundHandsTheGateCentreToATargetableState)
+{
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "Motor", "speed": 0.3},
+                   {"id": 1, "type": "ApproachPoint", "speed": 0.3, "tolerance": 0.05},
+                   {"id": 2, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "ArucoGateFound", "from": 0, "to": 1, "marker_a": 3, "marker_b": 4, "range": 2.0},
+                        {"id": 1, "type": "Finished", "from": 1, "to": 2}]})");
+    Inputs in = at(0, 0);
+    in.markers = {{3, 2.5, 0.5, 0, 2.55}, {4, 2.5, -0.5, 0, 2.55}};  // too far
+    sut->tick(in, 0.0125);
+    EXPECT_EQ(sut->active().id(), 0);
+    in.markers = {{3, 1.0, 0.7, 0, 1.2}, {4, 1.0, -0.1, 0, 1.0}};  // centre (1.0, 0.3)
+    sut->tick(in, 0.0125);
+    ASSERT_EQ(sut->active().id(), 1);
+    // Approaching along x (odometer only, yaw 0): steering turns left towards y = 0.3.
+    auto out = sut->tick(at(0.1, 0.0), 0.0125);
+    EXPECT_GT(out.steering, 0.0);
+    // At the point: finished, then Stop.
+    Inputs there = at(0.2, 0.0);
+    there.odometer = 0;
+    there.yaw = std::atan2(0.3, 1.0);
+    sut->tick(there, 0.0125);
+    there.t = 0.3;
+    there.odometer = std::hypot(1.0, 0.3);
+    sut->tick(there, 0.0125);
+    EXPECT_EQ(sut->active().id(), 2);
+}
+
+TEST(FsmEngine, NestedMachineFinishesWhenItReachesAFinalState)
+{
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "FSMState", "machine": {"root": 0,
+                      "states": [{"id": 0, "type": "Motor"}, {"id": 1, "type": "Idle", "final": true}],
+                      "transitions": [{"id": 0, "type": "Distance", "from": 0, "to": 1, "distance": 0.5}]}},
+                   {"id": 1, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "Finished", "from": 0, "to": 1}]})");
+    EXPECT_GT(sut->tick(at(0, 0), 0.0125).throttle, 0.0);  // the nested Motor drives
+    sut->tick(at(1, 0.3), 0.0125);
+    EXPECT_EQ(sut->active().id(), 0);
+    sut->tick(at(2, 0.5), 0.0125);  // nested: Motor -> Idle (final); outer: Finished fires
+    EXPECT_EQ(sut->active().id(), 1);
+}
