@@ -105,6 +105,25 @@ std::optional<int> integer_member(Context& ctx, const json& e, const std::string
 
 std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::string& at);
 
+/// The factory for the element's "type"; null (and an error naming the known types) if none.
+template <class Factory>
+const Factory* find_factory(Context& ctx, const std::vector<Factory>& factories, const json& e, const std::string& path,
+                            const std::string& what)
+{
+    if (!e.contains("type") || !e["type"].is_string()) {
+        ctx.error(path, "missing \"type\" (a " + what + " type name)");
+        return nullptr;
+    }
+    const std::string type = e["type"];
+    for (const auto& f : factories) {
+        if (f.info.type == type) return &f;
+    }
+    std::string known;
+    for (const auto& f : factories) known += (known.empty() ? "" : ", ") + f.info.type;
+    ctx.error(path + ".type", "unknown " + what + " type \"" + type + "\" (known: " + known + ")");
+    return nullptr;
+}
+
 /// FSMState: the nested machine, inline or from a file.
 std::unique_ptr<Machine> load_nested(Context& ctx, const json& e, const std::string& path)
 {
@@ -176,19 +195,9 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
                 continue;
             }
             auto id = integer_member(ctx, e, path, "id");
-            if (!e.contains("type") || !e["type"].is_string()) {
-                ctx.error(path, "missing \"type\" (a state type name)");
-                continue;
-            }
-            const std::string type = e["type"];
-            auto& factories = detail::state_factories();
-            auto f = std::find_if(factories.begin(), factories.end(), [&](auto& x) { return x.info.type == type; });
-            if (f == factories.end()) {
-                std::string known;
-                for (auto& x : factories) known += (known.empty() ? "" : ", ") + x.info.type;
-                ctx.error(path + ".type", "unknown state type \"" + type + "\" (known: " + known + ")");
-                continue;
-            }
+            const auto* f = find_factory(ctx, detail::state_factories(), e, path, "state");
+            if (!f) continue;
+            const std::string type = f->info.type;
             if (e.contains("final") && !e["final"].is_boolean()) ctx.error(path + ".final", "expected true or false");
             detail::Params params;
             bool params_ok = check_parameters(ctx, e, path, f->info, {"id", "type", "final"}, params);
@@ -236,19 +245,9 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
         auto id = integer_member(ctx, e, path, "id");
         auto from = integer_member(ctx, e, path, "from");
         auto to = integer_member(ctx, e, path, "to");
-        if (!e.contains("type") || !e["type"].is_string()) {
-            ctx.error(path, "missing \"type\" (a transition type name)");
-            continue;
-        }
-        const std::string type = e["type"];
-        auto& factories = detail::transition_factories();
-        auto f = std::find_if(factories.begin(), factories.end(), [&](auto& x) { return x.info.type == type; });
-        if (f == factories.end()) {
-            std::string known;
-            for (auto& x : factories) known += (known.empty() ? "" : ", ") + x.info.type;
-            ctx.error(path + ".type", "unknown transition type \"" + type + "\" (known: " + known + ")");
-            continue;
-        }
+        const auto* f = find_factory(ctx, detail::transition_factories(), e, path, "transition");
+        if (!f) continue;
+        const std::string type = f->info.type;
         detail::Params params;
         bool params_ok = check_parameters(ctx, e, path, f->info, {"id", "type", "from", "to"}, params);
         if (id && !transition_ids.insert(*id).second) ctx.error(path + ".id", "duplicate transition id " + std::to_string(*id));
