@@ -184,6 +184,8 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
     std::vector<std::unique_ptr<State>> states;
     std::map<int, const TypeInfo*> state_types;
     std::map<int, bool> final_states;
+    std::set<int> untyped_ids;
+    auto exists = [&](int id) { return state_types.count(id) || untyped_ids.count(id); };
     if (!j.contains("states") || !j["states"].is_array()) {
         ctx.error(at + ".states", "expected an array of states");
     } else {
@@ -196,7 +198,10 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
             }
             auto id = integer_member(ctx, e, path, "id");
             const auto* f = find_factory(ctx, detail::state_factories(), e, path, "state");
-            if (!f) continue;
+            if (!f) {
+                if (id) untyped_ids.insert(*id);  // it exists; its type was already reported
+                continue;
+            }
             const std::string type = f->info.type;
             if (e.contains("final") && !e["final"].is_boolean()) ctx.error(path + ".final", "expected true or false");
             detail::Params params;
@@ -226,7 +231,7 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
             }
         }
     }
-    if (root && !state_types.empty() && !state_types.count(*root)) ctx.error(at + ".root", "state " + std::to_string(*root) + " does not exist");
+    if (root && !state_types.empty() && !exists(*root)) ctx.error(at + ".root", "state " + std::to_string(*root) + " does not exist");
 
     // Transitions.
     std::vector<std::unique_ptr<Transition>> transitions;
@@ -251,8 +256,8 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
         detail::Params params;
         bool params_ok = check_parameters(ctx, e, path, f->info, {"id", "type", "from", "to"}, params);
         if (id && !transition_ids.insert(*id).second) ctx.error(path + ".id", "duplicate transition id " + std::to_string(*id));
-        if (from && !state_types.count(*from)) ctx.error(path + ".from", "state " + std::to_string(*from) + " does not exist");
-        if (to && !state_types.count(*to)) ctx.error(path + ".to", "state " + std::to_string(*to) + " does not exist");
+        if (from && !exists(*from)) ctx.error(path + ".from", "state " + std::to_string(*from) + " does not exist");
+        if (to && !exists(*to)) ctx.error(path + ".to", "state " + std::to_string(*to) + " does not exist");
         if (!id || !from || !to || !state_types.count(*from) || !state_types.count(*to)) continue;
         if (type == "Finished" && !state_types[*from]->finishable) {
             ctx.error(path, "Finished from state " + std::to_string(*from) + " (" + state_types[*from]->type + "), which never finishes");

@@ -1,0 +1,87 @@
+// fsm_node as a real process driving a simulated car (cpm vehicle sim: firmware_sim +
+// vehicle_bridge over a pty) through the shipped corridor with the shipped machine.
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+
+#include <FsmStatus.h>
+#include <VehicleObservation.h>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <csignal>
+#include <fstream>
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+using cpm_test::Process;
+
+TEST(FsmNodeEndToEnd, DrivesTheCorridorFollowsTheWallTakesTheCornerAndStops)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
+    cpm::ReaderAbstract<FsmStatus> status(participant, "fsmStatus", {.reliable = true, .keep_all = true});
+    const std::string root = CPM_SOURCE_DIR;
+    Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", root + "/scenarios/maps/corridor.json",
+                 "--start", "0,0.05,0"});
+    Process sut({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", root + "/scenarios/fsm/corridor.json"});
+
+    std::vector<VehicleObservation> track;
+    std::vector<int> states;
+    const bool stopped = cpm_test::wait_until([&] {
+        for (auto& o : observations.take()) track.push_back(o);
+        for (auto& s : status.take()) states.push_back(s.state_id());
+        return sut.wait(0ms) == 0;
+    }, 60s, 20ms);
+    ASSERT_TRUE(stopped) << sut.output() << sut.errors();
+    std::this_thread::sleep_for(1s);  // the car comes to rest
+    for (auto& o : observations.take()) track.push_back(o);
+    for (auto& s : status.take()) states.push_back(s.state_id());
+
+    EXPECT_EQ(states, (std::vector<int>{0, 1, 2, 3})) << sut.output();
+    EXPECT_NE(sut.output().find("ended in state 3 (Stop)"), std::string::npos) << sut.output();
+    ASSERT_GT(track.size(), 300u);
+    // Along the first leg (clear of the start and the corner) the car keeps to the right wall:
+    // clearance 0.40 m from the right sensor (9 cm right of centre) is y = -0.01.
+    double worst = 0;
+    for (auto& o : track) {
+        if (o.pose().x() > 1.0 && o.pose().x() < 3.5) worst = std::max(worst, std::abs(o.pose().y() + 0.01));
+    }
+    EXPECT_LT(worst, 0.10);
+    const auto& end = track.back().pose();
+    EXPECT_GT(end.x(), 4.5);  // in the second leg, between its walls
+    EXPECT_LT(end.x(), 5.5);
+    EXPECT_GT(end.y(), 2.5);  // and stopped before its end wall (y = 4)
+    EXPECT_LT(end.y(), 3.9);
+    std::printf("largest deviation on the first leg %.0f mm; stopped at (%.2f, %.2f, %.2f)\n", worst * 1000, end.x(),
+                end.y(), end.yaw());
+    car.kill(SIGINT);
+    EXPECT_EQ(car.wait(10s), 0);
+}
+
+TEST(FsmNodeEndToEnd, WithoutACarItBrakesAndSaysWhy)
+{
+    cpm_test::test_domain_id();
+    Process sut({built_program("fsm_node"), "--vehicle_id", "6", "--fsm", std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json"});
+    EXPECT_TRUE(cpm_test::wait_until([&] { return sut.errors().find("vehicle 6: no VehicleState; braking") != std::string::npos; }))
+        << sut.errors();
+    sut.kill(SIGTERM);
+    EXPECT_EQ(sut.wait(5s), 0);
+}
+
+TEST(FsmNodeEndToEnd, AMachineWithErrorsIsNotStartedAndEveryErrorIsListed)
+{
+    cpm_test::test_domain_id();
+    const std::string file = "/tmp/cpm_fsm_bad_" + std::to_string(::getpid()) + ".json";
+    std::ofstream(file) << R"({"root": 0, "states": [{"id": 0, "type": "FollowWal"}, {"id": 1, "type": "Motor", "speed": "x"}], "transitions": []})";
+    Process sut({built_program("fsm_node"), "--vehicle_id", "6", "--fsm", file});
+    EXPECT_EQ(sut.wait(10s), 1);
+    EXPECT_NE(sut.errors().find(file + ": $.states[0].type: unknown state type \"FollowWal\""), std::string::npos) << sut.errors();
+    EXPECT_NE(sut.errors().find(file + ": $.states[1].speed: expected a number"), std::string::npos) << sut.errors();
+    EXPECT_NE(sut.errors().find("2 error(s)"), std::string::npos) << sut.errors();
+    std::remove(file.c_str());
+}
