@@ -85,3 +85,23 @@ TEST(FsmNodeEndToEnd, AMachineWithErrorsIsNotStartedAndEveryErrorIsListed)
     EXPECT_NE(sut.errors().find("2 error(s)"), std::string::npos) << sut.errors();
     std::remove(file.c_str());
 }
+
+TEST(CpmFsmCheck, ReportsAGoodFileAsOkAndABadOneWithEveryErrorAndExitCode1)
+{
+    cpm_test::test_domain_id();
+    Process good({built_program("cpm"), "fsm", "check", std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json"});
+    EXPECT_EQ(good.wait(10s), 0) << good.output() << good.errors();
+    EXPECT_NE(good.output().find("corridor.json: ok (4 states, 3 transitions, 0 warning(s))"), std::string::npos) << good.output();
+
+    const std::string file = "/tmp/cpm_fsm_check_" + std::to_string(::getpid()) + ".json";
+    std::ofstream(file) << R"({"root": 0, "states": [{"id": 0, "type": "Motor", "distance": 1}, {"id": 1, "type": "Idle"}],
+        "transitions": [{"id": 0, "type": "Finished", "from": 1, "to": 0}, {"id": 1, "type": "Distance", "from": 0, "to": 2}]})";
+    Process bad({built_program("cpm"), "fsm", "check", file});
+    EXPECT_EQ(bad.wait(10s), 1);
+    const std::string out = bad.output();
+    EXPECT_NE(out.find("error: " + file + ": $.transitions[0]: Finished from state 1 (Idle), which never finishes"), std::string::npos) << out;
+    EXPECT_NE(out.find("error: " + file + ": $.transitions[1].to: state 2 does not exist"), std::string::npos) << out;
+    EXPECT_NE(out.find("error: " + file + ": $.transitions[1]: Distance needs parameter \"distance\""), std::string::npos) << out;
+    EXPECT_NE(out.find(file + ": 3 error(s)"), std::string::npos) << out;
+    std::remove(file.c_str());
+}

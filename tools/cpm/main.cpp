@@ -8,6 +8,7 @@
 #include <cpm/ParameterServer.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/TimeMaster.hpp>
+#include <cpm/fsm/Loader.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
 
@@ -44,6 +45,7 @@ const char* kTopHelp =
     "               simulated clock (see `cpm lab clock --help`)\n"
     "  param serve  serve the parameters of a JSON file until Ctrl-C (see `cpm param serve --help`)\n"
     "  topic echo   print a topic's samples as they arrive (see `cpm topic echo --help`)\n"
+    "  fsm check    check a state machine file: every error and warning with its JSON path\n"
     "  vehicle sim  start simulated cars: firmware simulator + vehicle bridge over a pty\n"
     "               (see `cpm vehicle sim --help`)\n"
     "\n"
@@ -66,6 +68,13 @@ const char* kParamHelp =
     "Serves the file's parameters on topic 'parameter' and answers 'parameterRequest' until\n"
     "Ctrl-C. FILE: {\"name\": value, ...} with the type taken from the value, or\n"
     "{\"name\": {\"type\": \"bool|int|uint64|double|string|ints|doubles\", \"value\": ...}}.\n";
+
+const char* kFsmCheckHelp =
+    "usage: cpm fsm check FILE.json\n"
+    "\n"
+    "Loads and checks a state machine as fsm_node would, and prints every error and warning with\n"
+    "its file and JSON path. Exit code 0 when it has no errors (warnings allowed), 1 otherwise.\n"
+    "The state and transition types and their parameters: fsm_node/README.md.\n";
 
 const char* kEchoHelp =
     "usage: cpm topic echo log [--json] [--count N] [--timeout DURATION] [--dds_domain N]\n"
@@ -181,6 +190,21 @@ int topic_echo(const std::vector<std::string>& args)
     return 0;
 }
 
+int fsm_check(const std::vector<std::string>& args)
+{
+    const std::string file = only_positional(parse_args(args, {}, "cpm fsm check"), "cpm fsm check", "machine file");
+    auto result = cpm::fsm::load_file(file);
+    for (const auto& e : result.errors) std::printf("error: %s\n", e.text().c_str());
+    for (const auto& w : result.warnings) std::printf("warning: %s\n", w.text().c_str());
+    if (!result.ok()) {
+        std::printf("%s: %zu error(s), %zu warning(s)\n", file.c_str(), result.errors.size(), result.warnings.size());
+        return 1;
+    }
+    std::printf("%s: ok (%zu states, %zu transitions, %zu warning(s))\n", file.c_str(), result.machine->states().size(),
+                result.machine->transitions().size(), result.warnings.size());
+    return 0;
+}
+
 int param_serve(const std::vector<std::string>& args)
 {
     const std::string file = only_positional(parse_args(args, {}, "cpm param serve"), "cpm param serve",
@@ -217,7 +241,8 @@ int main(int argc, char** argv)
         static const Command commands[] = {{"lab", "clock", kClockHelp, lab_clock},
                                            {"topic", "echo", kEchoHelp, topic_echo},
                                            {"param", "serve", kParamHelp, param_serve},
-                                           {"vehicle", "sim", kVehicleSimHelp, vehicle_sim}};
+                                           {"vehicle", "sim", kVehicleSimHelp, vehicle_sim},
+                                           {"fsm", "check", kFsmCheckHelp, fsm_check}};
         for (const auto& c : commands) {
             if (args.size() < 2 || args[0] != c.group || args[1] != c.verb) continue;
             if (help) {
