@@ -24,7 +24,8 @@ TEST(FsmNodeEndToEnd, DrivesTheCorridorFollowsTheWallTakesTheCornerAndStops)
 {
     cpm::Participant participant(cpm_test::isolated_options());
     cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
-    cpm::ReaderAbstract<FsmStatus> status(participant, "fsmStatus", {.reliable = true, .keep_all = true});
+    // Transient-local: the status of state 0 may be published before this reader is matched.
+    cpm::ReaderAbstract<FsmStatus> status(participant, "fsmStatus", {.reliable = true, .keep_all = true, .transient_local = true});
     const std::string root = CPM_SOURCE_DIR;
     Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", root + "/scenarios/maps/corridor.json",
                  "--start", "0,0.05,0"});
