@@ -2,6 +2,10 @@
 
 #include "Elements.hpp"
 
+#include <cpm/fsm/Uxf.hpp>
+
+#include <cstring>
+
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -311,6 +315,35 @@ LoadResult load_json(const std::string& json_text, const std::string& source, co
     return result;
 }
 
+namespace {
+
+/// A .uxf drawing: converted, then checked like JSON; diagnostics name the drawing's elements.
+LoadResult load_uxf(const std::string& path, const std::string& text)
+{
+    auto conversion = convert_uxf(text, path);
+    LoadResult result;
+    if (!conversion.errors.empty()) {
+        result.errors = conversion.errors;
+        return result;
+    }
+    auto dir = fs::path(path).parent_path();
+    result = load_json(conversion.json, path, dir.empty() ? "." : dir.string());
+    auto name_element = [&](Diagnostic& d) {
+        for (auto [list, origins] : {std::pair{"$.states[", &conversion.state_origin},
+                                     std::pair{"$.transitions[", &conversion.transition_origin}}) {
+            auto at = d.where.find(list);
+            if (at == std::string::npos) continue;
+            size_t k = std::strtoul(d.where.c_str() + at + std::strlen(list), nullptr, 10);
+            if (k < origins->size()) d.where += " = " + (*origins)[k];
+        }
+    };
+    for (auto& d : result.errors) name_element(d);
+    for (auto& d : result.warnings) name_element(d);
+    return result;
+}
+
+}  // namespace
+
 LoadResult load_file(const std::string& path)
 {
     std::ifstream in(path);
@@ -321,6 +354,7 @@ LoadResult load_file(const std::string& path)
     }
     std::stringstream text;
     text << in.rdbuf();
+    if (fs::path(path).extension() == ".uxf") return load_uxf(path, text.str());
     std::error_code ec;
     auto result_dir = fs::path(path).parent_path();
     LoadResult result;

@@ -9,6 +9,7 @@
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/fsm/Loader.hpp>
+#include <cpm/fsm/Uxf.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
 
@@ -22,6 +23,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <map>
 #include <sstream>
 #include <string>
@@ -45,7 +47,8 @@ const char* kTopHelp =
     "               simulated clock (see `cpm lab clock --help`)\n"
     "  param serve  serve the parameters of a JSON file until Ctrl-C (see `cpm param serve --help`)\n"
     "  topic echo   print a topic's samples as they arrive (see `cpm topic echo --help`)\n"
-    "  fsm check    check a state machine file: every error and warning with its JSON path\n"
+    "  fsm check    check a state machine file (.json or UMLet .uxf): every error and warning\n"
+    "  fsm convert  print a UMLet drawing's state machine as JSON\n"
     "  vehicle sim  start simulated cars: firmware simulator + vehicle bridge over a pty\n"
     "               (see `cpm vehicle sim --help`)\n"
     "\n"
@@ -75,6 +78,12 @@ const char* kFsmCheckHelp =
     "Loads and checks a state machine as fsm_node would, and prints every error and warning with\n"
     "its file and JSON path. Exit code 0 when it has no errors (warnings allowed), 1 otherwise.\n"
     "The state and transition types and their parameters: fsm_node/README.md.\n";
+
+const char* kFsmConvertHelp =
+    "usage: cpm fsm convert FILE.uxf\n"
+    "\n"
+    "Prints the state machine of a UMLet drawing as JSON (the format fsm_node reads), after the\n"
+    "same check as `cpm fsm check`; errors name the drawing's element. Exit code 1 on errors.\n";
 
 const char* kEchoHelp =
     "usage: cpm topic echo log [--json] [--count N] [--timeout DURATION] [--dds_domain N]\n"
@@ -205,6 +214,23 @@ int fsm_check(const std::vector<std::string>& args)
     return 0;
 }
 
+int fsm_convert(const std::vector<std::string>& args)
+{
+    const std::string file = only_positional(parse_args(args, {}, "cpm fsm convert"), "cpm fsm convert", ".uxf file");
+    std::ifstream in(file);
+    if (!in) throw std::runtime_error(file + ": cannot open the file");
+    std::stringstream text;
+    text << in.rdbuf();
+    auto conversion = cpm::fsm::convert_uxf(text.str(), file);
+    auto checked = conversion.errors.empty() ? cpm::fsm::load_file(file) : cpm::fsm::LoadResult{};
+    const auto& errors = conversion.errors.empty() ? checked.errors : conversion.errors;
+    for (const auto& e : errors) std::fprintf(stderr, "error: %s\n", e.text().c_str());
+    for (const auto& w : checked.warnings) std::fprintf(stderr, "warning: %s\n", w.text().c_str());
+    if (!errors.empty()) return 1;
+    std::printf("%s\n", conversion.json.c_str());
+    return 0;
+}
+
 int param_serve(const std::vector<std::string>& args)
 {
     const std::string file = only_positional(parse_args(args, {}, "cpm param serve"), "cpm param serve",
@@ -242,7 +268,8 @@ int main(int argc, char** argv)
                                            {"topic", "echo", kEchoHelp, topic_echo},
                                            {"param", "serve", kParamHelp, param_serve},
                                            {"vehicle", "sim", kVehicleSimHelp, vehicle_sim},
-                                           {"fsm", "check", kFsmCheckHelp, fsm_check}};
+                                           {"fsm", "check", kFsmCheckHelp, fsm_check},
+                                           {"fsm", "convert", kFsmConvertHelp, fsm_convert}};
         for (const auto& c : commands) {
             if (args.size() < 2 || args[0] != c.group || args[1] != c.verb) continue;
             if (help) {
