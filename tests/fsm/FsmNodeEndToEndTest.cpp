@@ -11,10 +11,12 @@
 #include <VehicleObservation.h>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <csignal>
 #include <fstream>
+#include <sstream>
 
 using namespace std::chrono_literals;
 using cpm_test::built_program;
@@ -107,4 +109,39 @@ TEST(CpmFsmCheck, ReportsAGoodFileAsOkAndABadOneWithEveryErrorAndExitCode1)
     EXPECT_NE(out.find("error: " + file + ": $.transitions[1]: Distance needs parameter \"distance\""), std::string::npos) << out;
     EXPECT_NE(out.find(file + ": 3 error(s)"), std::string::npos) << out;
     std::remove(file.c_str());
+}
+
+TEST(CpmFsmConvertAndRender, TheDrawingConvertsToTheJsonAndRendersItsStatesAndTransitions)
+{
+    cpm_test::test_domain_id();
+    const std::string dir = std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/";
+    Process convert({built_program("cpm"), "fsm", "convert", dir + "corridor.uxf"});
+    ASSERT_EQ(convert.wait(10s), 0) << convert.errors();
+    std::ifstream json_file(dir + "corridor.json");
+    std::stringstream expected;
+    expected << json_file.rdbuf();
+    EXPECT_EQ(nlohmann::json::parse(convert.output()), nlohmann::json::parse(expected.str()));
+
+    const std::string svg = "/tmp/cpm_fsm_render_" + std::to_string(::getpid()) + ".svg";
+    Process render({built_program("cpm"), "fsm", "render", dir + "corridor.uxf", "-o", svg});
+    ASSERT_EQ(render.wait(20s), 0) << render.errors();
+    std::ifstream in(svg);
+    std::stringstream text;
+    text << in.rdbuf();
+    const std::string s = text.str();
+    auto count = [&](const std::string& what) {
+        size_t n = 0;
+        for (size_t at = s.find(what); at != std::string::npos; at = s.find(what, at + 1)) ++n;
+        return n;
+    };
+    EXPECT_EQ(count("class=\"node\""), 4u);
+    EXPECT_EQ(count("class=\"edge\""), 3u);
+    for (const char* label : {"0: FollowWall (root)", "1: Motor", "2: FollowWall", "3: Stop", "1: Finished", "2: SensorLevel"}) {
+        EXPECT_NE(s.find(label), std::string::npos) << label;
+    }
+    std::remove(svg.c_str());
+
+    Process wrong({built_program("cpm"), "fsm", "render", dir + "corridor.json", "-o", "/tmp/x.gif"});
+    EXPECT_EQ(wrong.wait(10s), 2);
+    EXPECT_NE(wrong.errors().find("must end in .svg, .png or .dot"), std::string::npos) << wrong.errors();
 }

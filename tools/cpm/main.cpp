@@ -9,6 +9,7 @@
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/fsm/Loader.hpp>
+#include <cpm/fsm/Render.hpp>
 #include <cpm/fsm/Uxf.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
@@ -30,6 +31,8 @@
 #include <thread>
 #include <vector>
 
+#include <sys/wait.h>
+
 namespace {
 
 using cpm::cli::FlagSpec;
@@ -49,6 +52,7 @@ const char* kTopHelp =
     "  topic echo   print a topic's samples as they arrive (see `cpm topic echo --help`)\n"
     "  fsm check    check a state machine file (.json or UMLet .uxf): every error and warning\n"
     "  fsm convert  print a UMLet drawing's state machine as JSON\n"
+    "  fsm render   draw a state machine with Graphviz (-o OUT.svg|png|dot)\n"
     "  vehicle sim  start simulated cars: firmware simulator + vehicle bridge over a pty\n"
     "               (see `cpm vehicle sim --help`)\n"
     "\n"
@@ -84,6 +88,13 @@ const char* kFsmConvertHelp =
     "\n"
     "Prints the state machine of a UMLet drawing as JSON (the format fsm_node reads), after the\n"
     "same check as `cpm fsm check`; errors name the drawing's element. Exit code 1 on errors.\n";
+
+const char* kFsmRenderHelp =
+    "usage: cpm fsm render FILE.json|FILE.uxf -o|--output OUT.svg|OUT.png|OUT.dot\n"
+    "\n"
+    "Draws a checked state machine with Graphviz (`dot`, Debian package graphviz): states as\n"
+    "boxes with id, type and parameters (the root bold, final states double-framed),\n"
+    "transitions as arrows labelled with id, type and condition. Exit code 1 on errors.\n";
 
 const char* kEchoHelp =
     "usage: cpm topic echo log [--json] [--count N] [--timeout DURATION] [--dds_domain N]\n"
@@ -231,6 +242,38 @@ int fsm_convert(const std::vector<std::string>& args)
     return 0;
 }
 
+int fsm_render(const std::vector<std::string>& args)
+{
+    std::vector<std::string> spelled = args;
+    for (auto& a : spelled) {
+        if (a == "-o") a = "--output";  // the short form, as in dot and cc
+    }
+    const auto parsed = parse_args(spelled, {{"--output", true}}, "cpm fsm render");
+    const std::string file = only_positional(parsed, "cpm fsm render", "machine file");
+    const std::string out = parsed.get("--output");
+    if (out.empty()) throw UsageError("cpm fsm render: -o OUT.svg|OUT.png|OUT.dot is required");
+    const std::string format = out.substr(out.rfind('.') == std::string::npos ? out.size() : out.rfind('.') + 1);
+    if (format != "svg" && format != "png" && format != "dot") {
+        throw UsageError("cpm fsm render: -o " + out + ": the name must end in .svg, .png or .dot");
+    }
+    auto result = cpm::fsm::machine_to_dot(file);
+    for (const auto& e : result.errors) std::fprintf(stderr, "error: %s\n", e.text().c_str());
+    if (!result.errors.empty()) return 1;
+    if (format == "dot") {
+        std::ofstream(out) << result.dot;
+    } else {
+        const std::string command = "dot -T" + format + " -o '" + out + "'";
+        FILE* pipe = popen(command.c_str(), "w");
+        if (!pipe) throw std::runtime_error("cannot run Graphviz's dot (install the Debian package graphviz)");
+        std::fputs(result.dot.c_str(), pipe);
+        const int status = pclose(pipe);
+        if (status != 0) throw std::runtime_error("Graphviz's dot failed (exit " + std::to_string(WEXITSTATUS(status)) +
+                                                  "; is the Debian package graphviz installed?)");
+    }
+    std::printf("%s: wrote %s\n", file.c_str(), out.c_str());
+    return 0;
+}
+
 int param_serve(const std::vector<std::string>& args)
 {
     const std::string file = only_positional(parse_args(args, {}, "cpm param serve"), "cpm param serve",
@@ -269,7 +312,8 @@ int main(int argc, char** argv)
                                            {"param", "serve", kParamHelp, param_serve},
                                            {"vehicle", "sim", kVehicleSimHelp, vehicle_sim},
                                            {"fsm", "check", kFsmCheckHelp, fsm_check},
-                                           {"fsm", "convert", kFsmConvertHelp, fsm_convert}};
+                                           {"fsm", "convert", kFsmConvertHelp, fsm_convert},
+                                           {"fsm", "render", kFsmRenderHelp, fsm_render}};
         for (const auto& c : commands) {
             if (args.size() < 2 || args[0] != c.group || args[1] != c.verb) continue;
             if (help) {
