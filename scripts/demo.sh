@@ -2,8 +2,8 @@
 # ./lab demo, part 1: a writer publishes 4 simulated vehicles' VehicleState at 50 Hz (valid
 # 60 ms after creation); a monitor reads them with one MultiVehicleReader and prints each
 # vehicle's newest valid state and its age once a second. Both stop by themselves after ~5 s.
-# Part 2: one simulated car (firmware_sim + vehicle_bridge over a pty) drives 6 s down the
-# corridor map; vehicle_drive commands it and prints its pose and ultrasonic ranges.
+# Part 2: the closed loop: a simulated car (firmware_sim + vehicle_bridge over a pty) in the
+# corridor, driven by fsm_node; it prints each transition and a short report.
 set -euo pipefail
 build="$1"; shift || true
 bin="$build/bin"
@@ -30,23 +30,27 @@ echo "demo: the monitor saw every vehicle's newest valid state. Each sample beco
 echo "      after it was created, so 'since created' is 60..80 ms and the age (time since it became"
 echo "      valid) stays within one 20 ms period: newer samples exist but are not valid yet."
 
-# Part 2: a simulated car (firmware simulator + bridge over a pseudo-terminal) in the corridor.
+# Part 2: the closed loop. A simulated car (firmware simulator + bridge over a pseudo-terminal)
+# in the corridor, driven by fsm_node running scenarios/fsm/corridor.json.
 echo
-echo "demo: simulated car 1 in scenarios/maps/corridor.json, driving straight at 0.5 m/s for 6 s"
 root="$(cd "$(dirname "$0")/.." && pwd)"
-"$bin/cpm" vehicle sim --id 1 --map "$root/scenarios/maps/corridor.json" --start 0,0,0 > /tmp/cpm_demo_sim.$$.out 2>&1 &
+echo "demo: simulated car 5 in scenarios/maps/corridor.json, driven by fsm_node with scenarios/fsm/corridor.json"
+"$bin/cpm" fsm check "$root/scenarios/fsm/corridor.json"
+"$bin/cpm" vehicle sim --id 5 --map "$root/scenarios/maps/corridor.json" --start 0,-0.01,0 > /tmp/cpm_demo_sim.$$.out 2>&1 &
 sim=$!
 trap 'kill $monitor $writer $sim 2>/dev/null || true' EXIT INT TERM
-"$bin/vehicle_drive" --vehicle_id 1 --speed 0.5 --seconds 6 || status=$?
+timeout 60 "$bin/fsm_node" --vehicle_id 5 --fsm "$root/scenarios/fsm/corridor.json" --report 2>/dev/null || status=$?
 kill -INT $sim 2>/dev/null || true
 wait $sim 2>/dev/null || true
 echo
 if [ $status -eq 0 ]; then
-  echo "demo: the car's rangers read 0.41 m to either wall (the sensors sit 9 cm off the centre);"
-  echo "      passing the door niche at x = 2.0..2.8 m the right range opens to ~0.66 m; the front"
-  echo "      range falls from its 3 m maximum as the corridor's far wall (x = 5.5 m) comes in range."
+  echo "demo: the car followed the right wall at 0.40 m (past the door niche, whose jump FollowWall"
+  echo "      ignores), turned left at the corner when the end wall came within 0.9 m, followed"
+  echo "      the new right wall and stopped 0.6 m before the corridor's end. Draw the machine with"
+  echo "      'build/bin/cpm fsm render scenarios/fsm/corridor.json -o corridor.svg'. (Querying the"
+  echo "      run afterwards needs cpm_history, which is not built yet.)"
 else
-  echo "demo: the simulated car FAILED (exit $status); its log: /tmp/cpm_demo_sim.$$.out" >&2
+  echo "demo: the closed loop FAILED (exit $status); the car's log: /tmp/cpm_demo_sim.$$.out" >&2
 fi
 rm -f /tmp/cpm_demo_sim.$$.out
 exit $status

@@ -18,14 +18,20 @@
 #include <VehicleCommandDirect.h>
 #include <VehicleState.h>
 
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
 #include <csignal>
+#include <fstream>
+#include <map>
 #include <cstdio>
 #include <string>
 
 namespace {
 
 const char* kHelp =
-    "usage: fsm_node --vehicle_id N --fsm FILE.json [--rate 80] [--max-age 200ms] [--dds_domain N]\n"
+    "usage: fsm_node --vehicle_id N --fsm FILE.json|FILE.uxf [--rate 80] [--max-age 200ms] [--report] [--dds_domain N]\n"
     "\n"
     "Loads and checks the state machine (all errors at once, exit 1), then looks at --rate Hz\n"
     "(cpm::Timer) for a new RangeSensors sample of vehicle N and ticks the machine once per\n"
@@ -34,15 +40,66 @@ const char* kHelp =
     "ArucoMarkers, when present), writes VehicleCommandDirect for vehicle N, publishes FsmStatus\n"
     "on every state change and prints each transition. Stop states and missing or stale input\n"
     "(older than --max-age) brake the car with a StopRequest; the reason is logged.\n"
-    "Ends on SIGINT/SIGTERM (braking the car) or when the machine stops in a final Stop state.\n";
+    "Ends on SIGINT/SIGTERM (braking the car) or when the machine stops in a final Stop state.\n"
+    "--report: at the end, print the distance driven, the heading change and, for each wall\n"
+    "following state of a JSON machine, the followed range's mean and largest deviation.\n";
 
 std::sig_atomic_t volatile g_stop = 0;
+
+/// What --report prints at the end: distance, heading change, and per wall-following state the
+/// followed range against its clearance.
+class RunReport
+{
+public:
+    void add(const cpm::fsm::Inputs& in, int state, const std::string&)
+    {
+        if (!started_) {
+            start_odometer_ = in.odometer;
+            start_yaw_ = in.yaw;
+            started_ = true;
+        }
+        odometer_ = in.odometer;
+        yaw_ = in.yaw;
+        ranges_[state].push_back({in.left, in.right});
+    }
+    void print() const;
+    void set_walls(std::map<int, std::pair<std::string, double>> walls) { walls_ = std::move(walls); }
+
+private:
+    bool started_ = false;
+    double start_odometer_ = 0, start_yaw_ = 0, odometer_ = 0, yaw_ = 0;
+    std::map<int, std::vector<std::pair<double, double>>> ranges_;
+    std::map<int, std::pair<std::string, double>> walls_;  // state -> (side, clearance)
+};
+
+void RunReport::print() const
+{
+    double turned = std::remainder(yaw_ - start_yaw_, 2 * M_PI) * 180 / M_PI;
+    std::printf("report: driven %.2f m, heading changed by %.0f deg\n", odometer_ - start_odometer_, turned);
+    for (const auto& [state, samples] : ranges_) {
+        auto wall = walls_.find(state);
+        if (wall == walls_.end() || samples.empty()) continue;
+        double sum = 0;
+        std::vector<double> deviation;
+        for (const auto& [left, right] : samples) {
+            double r = wall->second.first == "left" ? left : right;
+            sum += r;
+            deviation.push_back(std::abs(r - wall->second.second));
+        }
+        std::sort(deviation.begin(), deviation.end());
+        auto at = [&](double q) { return deviation[std::min(deviation.size() - 1, size_t(q * double(deviation.size())))]; };
+        std::printf("report: state %d, %s wall at %.2f m, %zu ticks: reading mean %.3f m; |reading - clearance| "
+                    "median %.3f, 90 %% %.3f, max %.3f m (raw ranger readings: door niche and corner included)\n",
+                    state, wall->second.first.c_str(), wall->second.second, samples.size(), sum / double(samples.size()),
+                    at(0.5), at(0.9), deviation.back());
+    }
+}
 
 int run(int argc, char** argv)
 {
     std::vector<std::string> args(argv + 1, argv + argc);
     auto parsed = cpm::cli::parse_args(
-        args, {{"--vehicle_id", true}, {"--fsm", true}, {"--rate", true}, {"--max-age", true}}, "fsm_node");
+        args, {{"--vehicle_id", true}, {"--fsm", true}, {"--rate", true}, {"--max-age", true}, {"--report", false}}, "fsm_node");
     if (!parsed.positional.empty()) throw cpm::cli::UsageError("fsm_node: unexpected argument '" + parsed.positional[0] + "'");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("fsm_node: --vehicle_id is required");
     if (!parsed.has("--fsm")) throw cpm::cli::UsageError("fsm_node: --fsm is required (a machine's JSON file)");
@@ -58,6 +115,16 @@ int run(int argc, char** argv)
         return 1;
     }
     cpm::fsm::Machine& machine = *loaded.machine;
+    std::map<int, std::pair<std::string, double>> walls;  // for --report: which states follow which wall
+    if (parsed.get("--fsm").size() > 5 && parsed.get("--fsm").substr(parsed.get("--fsm").size() - 5) == ".json") {
+        std::ifstream file(parsed.get("--fsm"));
+        auto j = nlohmann::json::parse(file, nullptr, false);
+        for (const auto& st : j.value("states", nlohmann::json::array())) {
+            if (st.value("type", "").find("FollowWall") != std::string::npos) {
+                walls[st["id"].get<int>()] = {st.value("side", "right"), st.value("clearance", 0.4)};
+            }
+        }
+    }
     cpm::init(argc, argv);
 
     cpm::Reader<VehicleState> states("vehicleState", {.vehicle_id = id});
@@ -69,6 +136,8 @@ int run(int argc, char** argv)
 
     const auto period_ns = static_cast<uint64_t>(1e9 / rate);
     auto timer = cpm::Timer::create("fsm_node_" + std::to_string(id), period_ns, 0, false, false);
+    RunReport report;
+    report.set_walls(walls);
     std::string stale_reason;
     uint64_t last_range_stamp = 0;
     uint64_t last_stop_sent = 0;
@@ -138,7 +207,9 @@ int run(int argc, char** argv)
                 in.markers.push_back({m.id(), m.pose().x(), m.pose().y(), m.pose().yaw(), m.distance()});
             }
         }
+        const int ticked_state = machine.active().id();
         auto out = machine.tick(in, dt);
+        report.add(in, ticked_state, machine.active().type());
         if (machine.active().id() != last_state) {
             if (last_state >= 0) {
                 std::printf("%.3f vehicle %u: state %d -> %d (%s) by transition %d at %.2f m driven; front %.2f left %.2f right %.2f\n",
@@ -163,6 +234,7 @@ int run(int argc, char** argv)
         commands.write(c);
     });
     brake(cpm::get_time_ns(), true);  // leave the car braked
+    if (parsed.has("--report")) report.print();
     std::printf("fsm_node: vehicle %u ended in state %d (%s)\n", unsigned(id), machine.active().id(),
                 machine.active().type().c_str());
     return 0;
