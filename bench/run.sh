@@ -15,3 +15,6 @@ echo "== bench_timer (tick jitter, cpm::Timer vs clock_nanosleep)"
 echo
 echo "== bench_vehicle (simulated cars: bridge cycle cost, command latency, fleet capacity)"
 "$bin/bench_vehicle"
+echo
+echo "== bench_fsm (state-machine tick cost; fsm_node command latency vs a plain DDS relay)"
+"$bin/bench_fsm"
