@@ -150,3 +150,34 @@ TEST(FsmEngine, NestedMachineFinishesWhenItReachesAFinalState)
     sut->tick(at(2, 0.5), 0.0125);  // nested: Motor -> Idle (final); outer: Finished fires
     EXPECT_EQ(sut->active().id(), 1);
 }
+
+TEST(FsmEngine, FollowWallRampIsHalfwayAtHalfTheDistanceAndFinishesAtIt)
+{
+    auto sut = machine(R"({"root": 0, "tick_period": 0.02,
+        "states": [{"id": 0, "type": "FollowWallRamp", "side": "right", "target_clearance": 0.8, "distance": 2.0, "p": 1, "d": 0}],
+        "transitions": []})");
+    sut->tick(at(0, 10.0, 0.5), 0.02);  // entered 0.5 m from the wall at odometer 10
+    // Halfway (1 m driven) the clearance is 0.65 m: reading 0.65 means no error, no steering.
+    EXPECT_NEAR(sut->tick(at(1, 11.0, 0.65), 0.02).steering, 0.0, 1e-12);
+    EXPECT_FALSE(sut->active().finished());
+    // Reading 0.55 there is 0.10 m too close: with p = 1 it steers away from the right wall (+).
+    EXPECT_NEAR(sut->tick(at(1.02, 11.0, 0.55), 0.02).steering, 0.10, 1e-12);
+    sut->tick(at(2, 12.0, 0.8), 0.02);
+    EXPECT_TRUE(sut->active().finished());
+}
+
+TEST(FsmEngine, SensorLevelFiresOnlyPastTheLevelAndDistanceExactlyAtIt)
+{
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "Motor"}, {"id": 1, "type": "Motor"}, {"id": 2, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "SensorLevel", "from": 0, "to": 1, "sensor": "right", "level": 0.5, "direction": "above"},
+                        {"id": 1, "type": "Distance", "from": 1, "to": 2, "distance": 0.25}]})");
+    sut->tick(at(0, 0, 0.5), 0.02);  // exactly at the level: not above
+    EXPECT_EQ(sut->active().id(), 0);
+    sut->tick(at(0.02, 0, 0.5001), 0.02);
+    EXPECT_EQ(sut->active().id(), 1);  // entered at odometer 0
+    sut->tick(at(0.04, 0.2499), 0.02);
+    EXPECT_EQ(sut->active().id(), 1);
+    sut->tick(at(0.06, 0.25), 0.02);
+    EXPECT_EQ(sut->active().id(), 2);
+}
