@@ -2,6 +2,7 @@
 #include <cpm/init.hpp>
 
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <sstream>
 
@@ -126,6 +127,18 @@ std::vector<std::string> split_list(const std::string& flag, const std::string& 
     if (items.empty()) throw UsageError(flag + ": nothing given");
     return items;
 }
+
+namespace {
+volatile std::sig_atomic_t g_stop_requested = 0;
+}  // namespace
+
+void stop_on_signals()
+{
+    std::signal(SIGINT, [](int) { g_stop_requested = 1; });
+    std::signal(SIGTERM, [](int) { g_stop_requested = 1; });
+}
+
+bool stop_requested() { return g_stop_requested != 0; }
 
 int run_main(int argc, char** argv, const char* program, const char* help, const std::function<int(int, char**)>& run)
 {

@@ -12,22 +12,24 @@ constexpr const char* kSystemTriggerTopic = "systemTrigger";
 /// A SystemTrigger with this next_start stops every timer.
 constexpr uint64_t kStopTrigger = UINT64_MAX;
 
-/// Reliable options with a history depth, optionally transient-local (cpm's own services).
-inline WriterOptions reliable_writer_options(int depth, bool transient_local)
+/// Reliable options (WriterOptions or ReaderOptions) with a history depth, optionally
+/// transient-local (cpm's own services).
+template <class Options>
+Options reliable_options(int depth, bool transient_local)
 {
-    WriterOptions o;
+    Options o;
     o.reliable = true;
     o.transient_local = transient_local;
     o.history_depth = depth;
     return o;
 }
+inline WriterOptions reliable_writer_options(int depth, bool transient_local)
+{
+    return reliable_options<WriterOptions>(depth, transient_local);
+}
 inline ReaderOptions reliable_reader_options(int depth, bool transient_local)
 {
-    ReaderOptions o;
-    o.reliable = true;
-    o.transient_local = transient_local;
-    o.history_depth = depth;
-    return o;
+    return reliable_options<ReaderOptions>(depth, transient_local);
 }
 
 /// Timer/TimeMaster control: transient-local (writers keep the latest sample per key), so

@@ -62,15 +62,13 @@ public:
         State::on_enter(in);
         esum_ = 0;
         eold_.reset();
-        last_range_ = side_range(in, side_);
     }
-    Output tick(const Inputs& in, double) override { return control(in, measured(in)); }
+    Output tick(const Inputs& in, double) override { return control(measured(in)); }
 
 protected:
     virtual double measured(const Inputs& in) { return side_range(in, side_); }
-    Output control(const Inputs& in, double range)
+    Output control(double range)
     {
-        (void)in;
         double e = range - clearance_;
         if (!eold_) eold_ = e;
         esum_ += e;
@@ -83,7 +81,6 @@ protected:
     double clearance_, throttle_, p_, i_, d_, pid_s_;
     double esum_ = 0;
     std::optional<double> eold_;
-    double last_range_ = 0;
 };
 
 /// BasicFollowWall that ignores range jumps over 2 cm (door frames, niches).
@@ -91,6 +88,11 @@ class FollowWall : public BasicFollowWall
 {
 public:
     FollowWall(int id, const Params& p, const Settings& s) : BasicFollowWall(id, "FollowWall", p, s) {}
+    void on_enter(const Inputs& in) override
+    {
+        BasicFollowWall::on_enter(in);
+        last_range_ = side_range(in, side_);
+    }
 
 protected:
     double measured(const Inputs& in) override
@@ -99,6 +101,9 @@ protected:
         if (std::abs(r - last_range_) <= 0.02) last_range_ = r;
         return last_range_;
     }
+
+private:
+    double last_range_ = 0;
 };
 
 /// Clearance changes linearly from the one at entry to target_clearance over `distance`.
@@ -122,7 +127,7 @@ public:
         done_ = s >= distance_;
         double f = distance_ > 0 ? std::clamp(s / distance_, 0.0, 1.0) : 1.0;
         clearance_ = start_clearance_ + (target_clearance_ - start_clearance_) * f;
-        return control(in, side_range(in, side_));
+        return control(side_range(in, side_));
     }
     bool can_finish() const override { return true; }
     bool finished() const override { return done_; }

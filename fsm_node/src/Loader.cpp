@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -109,6 +110,15 @@ std::optional<int> integer_member(Context& ctx, const json& e, const std::string
 
 std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::string& at);
 
+std::optional<std::string> read_file(const fs::path& path)
+{
+    std::ifstream in(path);
+    if (!in) return std::nullopt;
+    std::stringstream text;
+    text << in.rdbuf();
+    return text.str();
+}
+
 /// The factory for the element's "type"; null (and an error naming the known types) if none.
 template <class Factory>
 const Factory* find_factory(Context& ctx, const std::vector<Factory>& factories, const json& e, const std::string& path,
@@ -148,12 +158,9 @@ std::unique_ptr<Machine> load_nested(Context& ctx, const json& e, const std::str
         ctx.error(path + ".file", "nested machine file " + file.string() + " includes itself (cycle)");
         return nullptr;
     }
-    std::ifstream in(file);
-    std::stringstream text;
-    text << in.rdbuf();
     json nested;
     try {
-        nested = json::parse(text.str());
+        nested = json::parse(read_file(file).value_or(""));
     } catch (const json::parse_error& err) {
         ctx.error(path + ".file", file.string() + " is not valid JSON (" + err.what() + ")");
         return nullptr;
@@ -299,35 +306,37 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
 
 }  // namespace
 
-LoadResult load_json(const std::string& json_text, const std::string& source, const std::string& base_dir)
+namespace {
+
+/// Checks a machine's JSON text; `stack` holds the files being loaded (for the cycle check).
+LoadResult check_text(const std::string& text, const std::string& source, const fs::path& base_dir,
+                      std::vector<std::string> stack)
 {
     LoadResult result;
     json j;
     try {
-        j = json::parse(json_text);
+        j = json::parse(text);
     } catch (const json::parse_error& e) {
         result.errors.push_back({source, std::string("not valid JSON (") + e.what() + ")"});
         return result;
     }
-    Context ctx{source, base_dir, {}, &result};
+    Context ctx{source, base_dir, std::move(stack), &result};
     auto machine = load_machine(ctx, j, "$");
     if (result.errors.empty()) result.machine = std::move(machine);
+    result.json = text;
     return result;
 }
 
-namespace {
-
 /// A .uxf drawing: converted, then checked like JSON; diagnostics name the drawing's elements.
-LoadResult load_uxf(const std::string& path, const std::string& text)
+LoadResult load_uxf(const std::string& path, const std::string& text, const fs::path& dir, const std::string& canonical)
 {
     auto conversion = convert_uxf(text, path);
-    LoadResult result;
     if (!conversion.errors.empty()) {
+        LoadResult result;
         result.errors = conversion.errors;
         return result;
     }
-    auto dir = fs::path(path).parent_path();
-    result = load_json(conversion.json, path, dir.empty() ? "." : dir.string());
+    LoadResult result = check_text(conversion.json, path, dir, {canonical});
     auto name_element = [&](Diagnostic& d) {
         for (auto [list, origins] : {std::pair{"$.states[", &conversion.state_origin},
                                      std::pair{"$.transitions[", &conversion.transition_origin}}) {
@@ -344,31 +353,24 @@ LoadResult load_uxf(const std::string& path, const std::string& text)
 
 }  // namespace
 
+LoadResult load_json(const std::string& json_text, const std::string& source, const std::string& base_dir)
+{
+    return check_text(json_text, source, base_dir, {});
+}
+
 LoadResult load_file(const std::string& path)
 {
-    std::ifstream in(path);
-    if (!in) {
+    auto text = read_file(path);
+    if (!text) {
         LoadResult result;
         result.errors.push_back({path, "cannot open the file"});
         return result;
     }
-    std::stringstream text;
-    text << in.rdbuf();
-    if (fs::path(path).extension() == ".uxf") return load_uxf(path, text.str());
     std::error_code ec;
-    auto result_dir = fs::path(path).parent_path();
-    LoadResult result;
-    json j;
-    try {
-        j = json::parse(text.str());
-    } catch (const json::parse_error& e) {
-        result.errors.push_back({path, std::string("not valid JSON (") + e.what() + ")"});
-        return result;
-    }
-    Context ctx{path, result_dir.empty() ? fs::path(".") : result_dir, {fs::weakly_canonical(path, ec).string()}, &result};
-    auto machine = load_machine(ctx, j, "$");
-    if (result.errors.empty()) result.machine = std::move(machine);
-    return result;
+    const fs::path dir = fs::path(path).parent_path().empty() ? fs::path(".") : fs::path(path).parent_path();
+    const std::string canonical = fs::weakly_canonical(path, ec).string();
+    if (fs::path(path).extension() == ".uxf") return load_uxf(path, *text, dir, canonical);
+    return check_text(*text, path, dir, {canonical});
 }
 
 const std::vector<TypeInfo>& known_types()

@@ -1,10 +1,7 @@
 #include <cpm/fsm/Render.hpp>
-#include <cpm/fsm/Uxf.hpp>
 
 #include <nlohmann/json.hpp>
 
-#include <filesystem>
-#include <fstream>
 #include <sstream>
 
 namespace cpm::fsm {
@@ -50,11 +47,7 @@ DotResult machine_to_dot(const std::string& path)
         result.errors = checked.errors;
         return result;
     }
-    std::ifstream in(path);
-    std::stringstream text;
-    text << in.rdbuf();
-    json j = std::filesystem::path(path).extension() == ".uxf" ? json::parse(convert_uxf(text.str(), path).json)
-                                                                : json::parse(text.str());
+    const json j = json::parse(checked.json);
     std::ostringstream dot;
     dot << "digraph fsm {\n  rankdir=LR;\n  node [shape=box, style=rounded, fontname=\"Helvetica\"];\n"
         << "  edge [fontname=\"Helvetica\", fontsize=10];\n";

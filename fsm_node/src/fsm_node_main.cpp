@@ -23,7 +23,6 @@
 #include <algorithm>
 #include <cmath>
 #include <csignal>
-#include <fstream>
 #include <map>
 #include <cstdio>
 #include <string>
@@ -42,16 +41,14 @@ const char* kHelp =
     "(older than --max-age) brake the car with a StopRequest; the reason is logged.\n"
     "Ends on SIGINT/SIGTERM (braking the car) or when the machine stops in a final Stop state.\n"
     "--report: at the end, print the distance driven, the heading change and, for each wall\n"
-    "following state of a JSON machine, the followed range's mean and largest deviation.\n";
-
-std::sig_atomic_t volatile g_stop = 0;
+    "following state, the followed range's mean and deviation from its clearance.\n";
 
 /// What --report prints at the end: distance, heading change, and per wall-following state the
 /// followed range against its clearance.
 class RunReport
 {
 public:
-    void add(const cpm::fsm::Inputs& in, int state, const std::string&)
+    void add(const cpm::fsm::Inputs& in, int state)
     {
         if (!started_) {
             start_odometer_ = in.odometer;
@@ -116,13 +113,9 @@ int run(int argc, char** argv)
     }
     cpm::fsm::Machine& machine = *loaded.machine;
     std::map<int, std::pair<std::string, double>> walls;  // for --report: which states follow which wall
-    if (parsed.get("--fsm").size() > 5 && parsed.get("--fsm").substr(parsed.get("--fsm").size() - 5) == ".json") {
-        std::ifstream file(parsed.get("--fsm"));
-        auto j = nlohmann::json::parse(file, nullptr, false);
-        for (const auto& st : j.value("states", nlohmann::json::array())) {
-            if (st.value("type", "").find("FollowWall") != std::string::npos) {
-                walls[st["id"].get<int>()] = {st.value("side", "right"), st.value("clearance", 0.4)};
-            }
+    for (const auto& st : nlohmann::json::parse(loaded.json)["states"]) {
+        if (st["type"].get<std::string>().find("FollowWall") != std::string::npos) {
+            walls[st["id"].get<int>()] = {st.value("side", "right"), st.value("clearance", 0.4)};
         }
     }
     cpm::init(argc, argv);
@@ -161,10 +154,9 @@ int run(int argc, char** argv)
         status.write(s);
     };
 
-    std::signal(SIGINT, [](int) { g_stop = 1; });
-    std::signal(SIGTERM, [](int) { g_stop = 1; });
+    cpm::cli::stop_on_signals();
     timer->start([&](uint64_t) {
-        if (g_stop) {
+        if (cpm::cli::stop_requested()) {
             timer->stop();
             return;
         }
@@ -209,7 +201,7 @@ int run(int argc, char** argv)
         }
         const int ticked_state = machine.active().id();
         auto out = machine.tick(in, dt);
-        report.add(in, ticked_state, machine.active().type());
+        report.add(in, ticked_state);
         if (machine.active().id() != last_state) {
             if (last_state >= 0) {
                 std::printf("%.3f vehicle %u: state %d -> %d (%s) by transition %d at %.2f m driven; front %.2f left %.2f right %.2f\n",

@@ -10,7 +10,6 @@
 #include <cpm/TimeMaster.hpp>
 #include <cpm/fsm/Loader.hpp>
 #include <cpm/fsm/Render.hpp>
-#include <cpm/fsm/Uxf.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
 
@@ -113,8 +112,6 @@ std::string only_positional(const ParsedArgs& parsed, const std::string& command
     return parsed.positional[0];
 }
 
-std::atomic<bool> g_interrupted{false};
-
 int lab_clock(const std::vector<std::string>& args)
 {
     const auto parsed = parse_args(
@@ -146,11 +143,10 @@ int lab_clock(const std::vector<std::string>& args)
         master.start_real_time(nodes, std::chrono::milliseconds(delay / 1'000'000), std::chrono::seconds(30));
     std::printf("all %zu nodes ready; start at %llu ns\n", nodes.size(), static_cast<unsigned long long>(start));
     std::fflush(stdout);
-    std::signal(SIGINT, [](int) { g_interrupted = true; });
-    std::signal(SIGTERM, [](int) { g_interrupted = true; });
+    cpm::cli::stop_on_signals();
     const uint64_t end = flags.count("--duration") ? start + parse_duration("--duration", flags.at("--duration"))
                                                    : UINT64_MAX;
-    while (!g_interrupted && cpm::get_time_ns() < end) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    while (!cpm::cli::stop_requested() && cpm::get_time_ns() < end) std::this_thread::sleep_for(std::chrono::milliseconds(20));
     master.stop_all();
     std::printf("stopped all timers\n");
     return 0;
@@ -177,13 +173,12 @@ int topic_echo(const std::vector<std::string>& args)
     options.transient_local = true;
     options.history_depth = 100;
     cpm::ReaderAbstract<Log> reader(participant, "log", options);
-    std::signal(SIGINT, [](int) { g_interrupted = true; });
-    std::signal(SIGTERM, [](int) { g_interrupted = true; });
+    cpm::cli::stop_on_signals();
     static const char* levels[] = {"?", "error", "warn", "info", "debug"};
     if (!json) std::printf("%-20s %-16s %-6s %s\n", "time_ns", "node", "level", "message");
     uint64_t printed = 0;
     auto last = std::chrono::steady_clock::now();
-    while (!g_interrupted && printed < count) {
+    while (!cpm::cli::stop_requested() && printed < count) {
         if (timeout_ns > 0 && uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
                                            std::chrono::steady_clock::now() - last).count()) > timeout_ns) {
             std::fprintf(stderr, "cpm topic echo: no message for %s\n", flags.at("--timeout").c_str());
@@ -228,17 +223,11 @@ int fsm_check(const std::vector<std::string>& args)
 int fsm_convert(const std::vector<std::string>& args)
 {
     const std::string file = only_positional(parse_args(args, {}, "cpm fsm convert"), "cpm fsm convert", ".uxf file");
-    std::ifstream in(file);
-    if (!in) throw std::runtime_error(file + ": cannot open the file");
-    std::stringstream text;
-    text << in.rdbuf();
-    auto conversion = cpm::fsm::convert_uxf(text.str(), file);
-    auto checked = conversion.errors.empty() ? cpm::fsm::load_file(file) : cpm::fsm::LoadResult{};
-    const auto& errors = conversion.errors.empty() ? checked.errors : conversion.errors;
-    for (const auto& e : errors) std::fprintf(stderr, "error: %s\n", e.text().c_str());
+    auto checked = cpm::fsm::load_file(file);
+    for (const auto& e : checked.errors) std::fprintf(stderr, "error: %s\n", e.text().c_str());
     for (const auto& w : checked.warnings) std::fprintf(stderr, "warning: %s\n", w.text().c_str());
-    if (!errors.empty()) return 1;
-    std::printf("%s\n", conversion.json.c_str());
+    if (!checked.ok()) return 1;
+    std::printf("%s\n", checked.json.c_str());
     return 0;
 }
 
@@ -283,9 +272,8 @@ int param_serve(const std::vector<std::string>& args)
     const size_t n = server.load_file(file);
     std::printf("serving %zu parameters from %s\n", n, file.c_str());
     std::fflush(stdout);
-    std::signal(SIGINT, [](int) { g_interrupted = true; });
-    std::signal(SIGTERM, [](int) { g_interrupted = true; });
-    while (!g_interrupted) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    cpm::cli::stop_on_signals();
+    while (!cpm::cli::stop_requested()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
     return 0;
 }
 

@@ -21,8 +21,6 @@
 
 namespace {
 
-std::atomic<bool> g_stop{false};
-
 std::string program_dir()
 {
     char path[PATH_MAX];
@@ -111,8 +109,7 @@ int vehicle_sim(const std::vector<std::string>& args)
     auto stop_all = [&] {
         for (auto& c : children) kill(c.pid, SIGTERM);
     };
-    std::signal(SIGINT, [](int) { g_stop = true; });
-    std::signal(SIGTERM, [](int) { g_stop = true; });
+    cpm::cli::stop_on_signals();
     std::vector<std::thread> copiers;
     try {
         for (long long k = 0; k < count; ++k) {
@@ -152,7 +149,7 @@ int vehicle_sim(const std::vector<std::string>& args)
     }
 
     int exit_code = 0;
-    while (!g_stop) {
+    while (!cpm::cli::stop_requested()) {
         int status = 0;
         pid_t pid = waitpid(-1, &status, WNOHANG);
         if (pid > 0) {

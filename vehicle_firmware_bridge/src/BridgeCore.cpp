@@ -193,7 +193,6 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     s.motor_current(packet.motor_current_ma * 1e-3);
     s.motor_throttle(a.brake ? 0.0 : a.throttle);
     s.steering_servo(a.steering);
-    s.is_real(true);
 
     RangeSensors& r = out.ranges;
     r.vehicle_id(vehicle_id_);

@@ -138,10 +138,11 @@ StatePacket FirmwareSim::make_state_packet()
     return packet;
 }
 
-const FirmwareStats& FirmwareSim::stats() const
+FirmwareStats FirmwareSim::stats() const
 {
-    stats_.decoder = decoder_.errors();
-    return stats_;
+    FirmwareStats s = stats_;
+    s.decoder = decoder_.errors();
+    return s;
 }
 
 Pose FirmwareSim::observed_pose()

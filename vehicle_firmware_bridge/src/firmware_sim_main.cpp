@@ -45,8 +45,6 @@ const char* kHelp =
     "  --corrupt-rate P  flip one random byte in a state frame with probability P (tests the link)\n"
     "On SIGINT/SIGTERM it prints one JSON line of statistics and exits 0.\n";
 
-std::sig_atomic_t volatile g_stop = 0;
-
 int run(int argc, char** argv)
 {
     std::vector<std::string> args(argv + 1, argv + argc);
@@ -113,10 +111,9 @@ int run(int argc, char** argv)
         std::fflush(stdout);
     };
 
-    std::signal(SIGINT, [](int) { g_stop = 1; });
-    std::signal(SIGTERM, [](int) { g_stop = 1; });
+    cpm::cli::stop_on_signals();
     timer->start([&](uint64_t t_nominal) {
-        if (g_stop) {
+        if (cpm::cli::stop_requested()) {
             timer->stop();
             return;
         }
@@ -179,7 +176,7 @@ int run(int argc, char** argv)
         if (trace_pwm) trace(cpm::get_time_ns());
     });
 
-    const auto& s = sim.stats();
+    const auto s = sim.stats();
     std::printf("{\"vehicle_id\": %u, \"state_packets\": %llu, \"unanswered_states\": %llu, \"commands\": %llu, "
                 "\"wrong_vehicle\": %llu, \"watchdog_stops\": %llu, \"missed_ticks\": %llu, \"model_steps_dropped\": %llu, \"decoder_errors\": {\"oversize\": %llu, "
                 "\"bad_cobs\": %llu, \"too_short\": %llu, \"bad_crc\": %llu, \"bad_packet\": %llu}}\n",

@@ -44,8 +44,6 @@ const char* kHelp =
     "  --start X,Y,YAW     initial pose estimate (metres, radians) before any observation\n"
     "On SIGINT/SIGTERM it prints one JSON line of statistics and exits 0.\n";
 
-std::sig_atomic_t volatile g_stop = 0;
-
 uint64_t thread_cpu_ns()
 {
     timespec ts{};
@@ -107,8 +105,7 @@ int run(int argc, char** argv)
 
     LabTopics lab(id);
     cpm::vehicle::BridgeCore core(id, calibration, start);
-    std::signal(SIGINT, [](int) { g_stop = 1; });
-    std::signal(SIGTERM, [](int) { g_stop = 1; });
+    cpm::cli::stop_on_signals();
 
     std::unique_ptr<cpm::vehicle::SerialPort> port;
     cpm::vehicle::FrameDecoder decoder;
@@ -118,7 +115,7 @@ int run(int argc, char** argv)
     bool silent_logged = false, waiting_logged = false;
     std::vector<uint64_t> cycle_cpu_ns;
 
-    while (!g_stop) {
+    while (!cpm::cli::stop_requested()) {
         if (!port) {
             try {
                 port = std::make_unique<cpm::vehicle::SerialPort>(device, baud);

@@ -57,6 +57,12 @@ long long parse_integer(const std::string& flag, const std::string& text, long l
 /// "a,b,c" → {"a", "b", "c"}; an empty item is an error.
 std::vector<std::string> split_list(const std::string& flag, const std::string& text);
 
+/// From now on SIGINT and SIGTERM only set the flag stop_requested() reads (the program then
+/// ends its loop and cleans up: DDS shared memory is only freed by a normal exit).
+void stop_on_signals();
+/// True once SIGINT or SIGTERM arrived after stop_on_signals(). Async-signal-safe to set.
+bool stop_requested();
+
 /// A program's main: prints `help` for --help/-h (exit 0), else returns run(argc, argv); a
 /// UsageError is printed as "program: message" with exit code kUsageExit, any other exception
 /// with exit code 1.

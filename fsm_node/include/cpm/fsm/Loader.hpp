@@ -21,6 +21,7 @@ struct LoadResult
     std::unique_ptr<Machine> machine;
     std::vector<Diagnostic> errors;
     std::vector<Diagnostic> warnings;
+    std::string json;  ///< the machine as JSON text: the file itself, or the drawing converted
     bool ok() const { return errors.empty(); }
 };
 

@@ -52,7 +52,8 @@ class BridgeCore
 public:
     BridgeCore(uint8_t vehicle_id, const Calibration& calibration, Pose start = {});
 
-    /// One cycle for a state packet received at t_ns: the messages to publish (stamps not set),
+    /// One cycle for a state packet received at t_ns: the messages to publish (stamps and
+    /// VehicleState::is_real not set: the caller knows the device),
     /// the command packet to send back and when the state was measured. The measurement time
     /// is the packet's tick mapped to host time through the smallest host − controller offset
     /// of the last 5 s (the least delayed packet), so a packet that waited in a buffer keeps

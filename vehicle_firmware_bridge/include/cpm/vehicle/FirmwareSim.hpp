@@ -44,7 +44,7 @@ public:
     const VehicleModel& model() const { return model_; }
     const VehicleParameters& parameters() const { return p_; }
     const World& world() const { return world_; }
-    const FirmwareStats& stats() const;
+    FirmwareStats stats() const;
     bool watchdog_active() const { return watchdog_active_; }
     /// The motor command the controller holds now (the last valid command, or the watchdog's
     /// brake); the model feels it input_delay later.
@@ -69,7 +69,7 @@ private:
     std::mt19937 rng_;
     FrameDecoder decoder_;
     std::vector<Segment> obstacles_;
-    mutable FirmwareStats stats_;
+    FirmwareStats stats_;  // all but the decoder's errors, which stats() adds
     double last_command_t_ = 0;
     bool watchdog_active_ = false;
     bool bad_crc_ = false;
