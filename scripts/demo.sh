@@ -44,7 +44,7 @@ kill -INT $sim 2>/dev/null || true
 wait $sim 2>/dev/null || true
 echo
 if [ $status -eq 0 ]; then
-  echo "demo: the car followed the right wall at 0.40 m (past the door niche, whose jump FollowWall"
+  echo "demo: the car followed the right wall at 0.50 m (past the door niche, whose jump FollowWall"
   echo "      ignores), turned left at the corner when the end wall came within 0.9 m, followed"
   echo "      the new right wall and stopped 0.6 m before the corridor's end. Draw the machine with"
   echo "      'build/bin/cpm fsm render scenarios/fsm/corridor.json -o corridor.svg'. (Querying the"

@@ -1,5 +1,5 @@
-// The engine driving the simulated car (FirmwareSim, its vehicle model and rangers in the
-// shipped corridor) through the bridge's command path, in-process at 50 Hz.
+// The shipped machines driving the simulated car (FirmwareSim, its vehicle model and rangers in
+// the shipped corridor) through the bridge's command path, in-process at 50 Hz, noise off.
 #include <cpm/fsm/Loader.hpp>
 #include <cpm/vehicle/BridgeCore.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
@@ -10,31 +10,35 @@
 
 using namespace cpm;
 
-TEST(FsmClosedLoop, FollowsTheCorridorWallPastTheNicheAndTakesTheCorner)
+namespace {
+
+struct Step
+{
+    vehicle::Pose pose;
+    int state = 0;
+    double steering = 0;
+    double clearance = 0;  ///< ground truth: the right ranger's distance to the first leg's right wall (y = -0.6)
+};
+
+/// Runs the machine file for `seconds` with the car starting at (0, -0.01, 0), where the right
+/// ranger is 0.5 m from the right wall.
+std::vector<Step> drive(const std::string& machine_file, double seconds)
 {
     auto world = vehicle::World::load(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json");
     vehicle::VehicleParameters params;
     params.imu_yaw_rate_noise = params.imu_acceleration_noise = params.ultrasonic_noise = 0;
-    vehicle::FirmwareSim car(params, world, {0, 0.05, 0}, 1, 1);
-    vehicle::BridgeCore bridge(1, vehicle::Calibration{}, {0, 0.05, 0});
-    // Follow the right wall at 0.40 m; when the end wall comes within 0.9 m, turn left for 0.9 m;
-    // then follow the (new) right wall again and stop when the corridor's end is 0.6 m ahead.
-    auto loaded = fsm::load_json(R"({"root": 0, "tick_period": 0.02,
-        "states": [{"id": 0, "type": "FollowWall", "side": "right", "clearance": 0.40, "speed": 0.5, "p": 4, "d": 3},
-                   {"id": 1, "type": "Motor", "speed": 0.4, "steering": 1.0, "distance": 0.9},
-                   {"id": 2, "type": "FollowWall", "side": "right", "clearance": 0.40, "speed": 0.5, "p": 4, "d": 3},
-                   {"id": 3, "type": "Stop"}],
-        "transitions": [{"id": 0, "type": "SensorLevel", "from": 0, "to": 1, "sensor": "front", "level": 0.9, "direction": "below", "debounce": 2},
-                        {"id": 1, "type": "Finished", "from": 1, "to": 2},
-                        {"id": 2, "type": "SensorLevel", "from": 2, "to": 3, "sensor": "front", "level": 0.6, "direction": "below", "debounce": 2}]})",
-                                 "corridor_test.json");
-    ASSERT_TRUE(loaded.ok()) << (loaded.errors.empty() ? "" : loaded.errors[0].text());
+    const vehicle::Pose start{0, -0.01, 0};
+    vehicle::FirmwareSim car(params, world, start, 1, 1);
+    vehicle::BridgeCore bridge(1, vehicle::Calibration{}, start);
+    auto loaded = fsm::load_file(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/" + machine_file);
+    EXPECT_TRUE(loaded.ok()) << (loaded.errors.empty() ? "" : loaded.errors[0].text());
+    if (!loaded.ok()) return {};
     auto& machine = *loaded.machine;
+    const auto& mount = params.ultrasonic[2];
 
+    std::vector<Step> trace;
     uint64_t t_ns = 1'000'000'000;
-    double worst_straight = 0, worst_niche = 0;
-    std::vector<int> visited{0};
-    for (int cycle = 0; cycle < 50 * 25; ++cycle) {
+    for (int cycle = 0; cycle < int(seconds * 50); ++cycle) {
         for (int i = 0; i < 5; ++i) car.step();
         t_ns += 20'000'000;
         auto packet = car.make_state_packet();
@@ -47,7 +51,6 @@ TEST(FsmClosedLoop, FollowsTheCorridorWallPastTheNicheAndTakesTheCorner)
         in.left = packet.us_left_mm * 1e-3;
         in.right = packet.us_right_mm * 1e-3;
         auto out = machine.tick(in, 0.02);
-        if (machine.active().id() != visited.back()) visited.push_back(machine.active().id());
 
         vehicle::CommandInputs commands;
         VehicleCommandDirect direct;
@@ -56,28 +59,70 @@ TEST(FsmClosedLoop, FollowsTheCorridorWallPastTheNicheAndTakesTheCorner)
         direct.steering_servo(out.steering);
         direct.header().create_stamp().nanoseconds(t_ns);
         commands.direct = {direct, 0, true};
-        auto cycle_out = bridge.on_state_packet(packet, t_ns, commands);
-        auto frame = vehicle::encode_frame(cycle_out.command);
+        auto frame = vehicle::encode_frame(bridge.on_state_packet(packet, t_ns, commands).command);
         car.receive(frame.data(), frame.size());
 
         const auto& pose = car.model().pose();
-        if (std::getenv("FSM_TRACE") && cycle % 10 == 0) std::printf("t %.1f state %d pose %.2f %.3f %.2f right %.3f front %.2f steer %.2f\n", cycle * 0.02, machine.active().id(), pose.x, pose.y, pose.yaw, in.right, in.front, out.steering);
-        // Right sensor 9 cm right of the centre line: clearance 0.40 puts the car at y = -0.01.
-        if (pose.x > 0.8 && pose.x < 1.9) worst_straight = std::max(worst_straight, std::abs(pose.y + 0.01));
-        if (pose.x > 1.9 && pose.x < 3.2 && machine.active().id() == 0) worst_niche = std::max(worst_niche, std::abs(pose.y + 0.01));
+        const double sensor_y = pose.y + std::sin(pose.yaw) * mount.x + std::cos(pose.yaw) * mount.y;
+        trace.push_back({pose, machine.active().id(), out.steering, sensor_y + 0.6});
+        if (std::getenv("FSM_TRACE") && cycle % 10 == 0) {
+            std::printf("t %.1f state %d pose %.2f %.3f %.2f clearance %.3f right %.3f front %.2f steer %.2f\n", cycle * 0.02,
+                        machine.active().id(), pose.x, pose.y, pose.yaw, trace.back().clearance, in.right, in.front, out.steering);
+        }
+        if (machine.in_final_state() && std::abs(car.model().speed()) < 1e-3) break;
     }
-    const auto& pose = car.model().pose();
+    return trace;
+}
+
+}  // namespace
+
+TEST(FsmClosedLoop, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCornerAndStops)
+{
+    auto trace = drive("corridor.json", 40);
+    ASSERT_FALSE(trace.empty());
+    std::vector<int> visited{trace.front().state};
+    double worst = 0, steer_straight = 0, steer_niche = 0;
+    for (const auto& s : trace) {
+        if (s.state != visited.back()) visited.push_back(s.state);
+        if (s.state != 0 || s.pose.x < 1.0) continue;  // settled after the first metre
+        worst = std::max(worst, std::abs(s.clearance - 0.5));
+        (s.pose.x > 2.3 && s.pose.x < 3.6 ? steer_niche : steer_straight) =
+            std::max(s.pose.x > 2.3 && s.pose.x < 3.6 ? steer_niche : steer_straight, std::abs(s.steering));
+    }
+    const auto& end = trace.back();
     EXPECT_EQ(visited, (std::vector<int>{0, 1, 2, 3}));
-    EXPECT_LT(worst_straight, 0.03);
-    EXPECT_LT(worst_niche, 0.05);  // the door niche does not make it swerve
-    // Around the corner: heading up the second leg (+y), between its walls (x = 4.5 .. 5.5),
-    // stopped before its end wall (y = 4).
-    EXPECT_NEAR(pose.yaw, M_PI / 2, 0.2);
-    EXPECT_GT(pose.x, 4.6);
-    EXPECT_LT(pose.x, 5.4);
-    EXPECT_GT(pose.y, 2.8);
-    EXPECT_LT(pose.y, 3.7);
-    EXPECT_NEAR(car.model().speed(), 0.0, 0.01);
-    std::printf("straight %.1f mm, niche %.1f mm, end pose (%.2f, %.2f, %.2f)\n", worst_straight * 1000, worst_niche * 1000,
-                pose.x, pose.y, pose.yaw);
+    EXPECT_LT(worst, 0.02);
+    EXPECT_LT(steer_niche, 0.1);  // the door niche does not make it swerve
+    // Around the corner: heading up the second leg (+y), between its walls (x = 6.4 .. 8.0),
+    // stopped before its end wall (y = 5).
+    EXPECT_NEAR(end.pose.yaw, M_PI / 2, 0.1);
+    EXPECT_NEAR(end.pose.x, 7.41, 0.05);
+    EXPECT_GT(end.pose.y, 3.8);
+    EXPECT_LT(end.pose.y, 4.6);
+    std::printf("first leg: clearance within %.1f mm of 0.5 m; |steering| up to %.3f on the straight, %.3f at the niche; "
+                "end pose (%.2f, %.2f, %.2f)\n", worst * 1000, steer_straight, steer_niche, end.pose.x, end.pose.y, end.pose.yaw);
+}
+
+TEST(FsmClosedLoop, RampsTheClearanceFromHalfAMetreToPointEightOverTwoMetres)
+{
+    auto trace = drive("lane_change.json", 30);
+    ASSERT_FALSE(trace.empty());
+    std::vector<int> visited{trace.front().state};
+    const Step* ramp_start = nullptr;
+    const Step* ramp_end = nullptr;
+    for (const auto& s : trace) {
+        if (s.state != visited.back()) {
+            visited.push_back(s.state);
+            if (s.state == 1) ramp_start = &s;
+            if (s.state == 2) ramp_end = &s;
+        }
+    }
+    EXPECT_EQ(visited, (std::vector<int>{0, 1, 2, 3}));
+    ASSERT_TRUE(ramp_start && ramp_end);
+    EXPECT_NEAR(ramp_start->clearance, 0.5, 0.02);
+    EXPECT_NEAR(ramp_end->pose.x - ramp_start->pose.x, 2.0, 0.05);
+    EXPECT_NEAR(ramp_end->clearance, 0.8, 0.05);
+    EXPECT_NEAR(trace.back().clearance, 0.8, 0.02);
+    std::printf("ramp from x %.2f (clearance %.3f) to x %.2f (clearance %.3f); at rest %.3f\n", ramp_start->pose.x,
+                ramp_start->clearance, ramp_end->pose.x, ramp_end->clearance, trace.back().clearance);
 }

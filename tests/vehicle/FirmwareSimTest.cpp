@@ -127,9 +127,9 @@ TEST(World, ShippedCorridorLoads)
 {
     auto world = World::load(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json");
     EXPECT_GE(world.walls().size(), 8u);
-    // In the corridor at the start, the walls are 0.5 m to either side.
-    EXPECT_NEAR(world.cast_ray(0, 0, M_PI / 2, 3.0), 0.5, 1e-9);
-    EXPECT_NEAR(world.cast_ray(0, 0, -M_PI / 2, 3.0), 0.5, 1e-9);
+    // In the corridor at the start, the left wall is 1.0 m away, the right one 0.6 m.
+    EXPECT_NEAR(world.cast_ray(0, 0, M_PI / 2, 3.0), 1.0, 1e-9);
+    EXPECT_NEAR(world.cast_ray(0, 0, -M_PI / 2, 3.0), 0.6, 1e-9);
 }
 
 TEST(FirmwareSim, UltrasonicRangesToAWallAtKnownPoses)
