@@ -1,0 +1,291 @@
+// bench_history_store: the in-process store (cpm::rtdb) against SQLite doing the same work in
+// the same run — an in-memory table with indexes on (object, commit) and (object, data) and
+// prepared statements, the storage rosbag2 used. 10 objects, 10,000 samples of 150 bytes each
+// held per object; data times arrive slightly out of order (every 10th is 3 cycles late).
+//
+// Google Benchmark gives the mean per operation; a second pass times single calls and prints
+// p50/p99 and the ratios the issue names (at: p50 <= 200 ns and >= 50x SQLite; append >= 20x).
+#include <cpm/rtdb/Store.hpp>
+
+#include <benchmark/benchmark.h>
+#include <sqlite3.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace {
+
+constexpr int kObjects = 10;
+constexpr int kSamples = 10'000;
+constexpr size_t kPayload = 150;
+constexpr uint64_t kCycle = 10'000'000;  // 100 Hz per object, in ns
+
+uint64_t data_time(uint64_t i) { return i * kCycle - (i % 10 == 0 ? 3 * kCycle : 0); }
+
+/// The store, filled: object k's sample i has commit time i * kCycle + k and data time
+/// data_time(i). The window holds exactly kSamples per object.
+struct StoreWork
+{
+    cpm::rtdb::Store store{cpm::rtdb::StoreOptions{{uint64_t(kSamples - 1) * kCycle, 1ull << 32}, 1ull << 34}};
+    std::vector<cpm::rtdb::Oid> oids;
+    std::vector<uint8_t> payload = std::vector<uint8_t>(kPayload, 0x5a);
+    uint64_t next = 1;
+
+    StoreWork()
+    {
+        for (int k = 0; k < kObjects; ++k) oids.push_back(store.add_object({.topic = "vehicleState", .key = std::to_string(k)}));
+        for (; next <= kSamples; ++next) append();
+    }
+    void append()
+    {
+        for (int k = 0; k < kObjects; ++k) {
+            store.commit(oids[k], {data_time(next), data_time(next), 0, payload.data(), payload.size()}, next * kCycle + k);
+        }
+    }
+};
+
+void check(int rc, sqlite3* db, const char* what)
+{
+    if (rc != SQLITE_OK && rc != SQLITE_DONE && rc != SQLITE_ROW) throw std::runtime_error(std::string(what) + ": " + sqlite3_errmsg(db));
+}
+
+struct SqliteWork
+{
+    sqlite3* db = nullptr;
+    sqlite3_stmt *insert = nullptr, *at_commit = nullptr, *at_data = nullptr, *range = nullptr;
+    std::vector<uint8_t> payload = std::vector<uint8_t>(kPayload, 0x5a);
+    uint64_t next = 1;
+
+    SqliteWork()
+    {
+        check(sqlite3_open(":memory:", &db), db, "open");
+        check(sqlite3_exec(db,
+                           "CREATE TABLE samples(object INTEGER, commit_ns INTEGER, data_ns INTEGER, valid_after_ns INTEGER,"
+                           " source_ns INTEGER, payload BLOB);"
+                           "CREATE INDEX by_commit ON samples(object, commit_ns);"
+                           "CREATE INDEX by_data ON samples(object, data_ns);",
+                           nullptr, nullptr, nullptr),
+              db, "schema");
+        prepare("INSERT INTO samples VALUES(?1, ?2, ?3, ?3, 0, ?4)", &insert);
+        prepare("SELECT commit_ns, data_ns, valid_after_ns, source_ns, payload FROM samples WHERE object = ?1 AND commit_ns <= ?2"
+                " ORDER BY commit_ns DESC LIMIT 1", &at_commit);
+        prepare("SELECT commit_ns, data_ns, valid_after_ns, source_ns, payload FROM samples WHERE object = ?1 AND data_ns <= ?2"
+                " ORDER BY data_ns DESC, commit_ns DESC LIMIT 1", &at_data);
+        prepare("SELECT commit_ns, data_ns, valid_after_ns, source_ns, payload FROM samples WHERE object = ?1 AND commit_ns >= ?2"
+                " AND commit_ns < ?3 ORDER BY commit_ns LIMIT 10000", &range);
+        check(sqlite3_exec(db, "BEGIN", nullptr, nullptr, nullptr), db, "begin");
+        for (; next <= kSamples; ++next) append();
+        check(sqlite3_exec(db, "COMMIT", nullptr, nullptr, nullptr), db, "commit");
+    }
+    ~SqliteWork()
+    {
+        for (auto* s : {insert, at_commit, at_data, range}) sqlite3_finalize(s);
+        sqlite3_close(db);
+    }
+    void prepare(const char* sql, sqlite3_stmt** s) { check(sqlite3_prepare_v2(db, sql, -1, s, nullptr), db, sql); }
+    void append()
+    {
+        for (int k = 0; k < kObjects; ++k) {
+            sqlite3_bind_int64(insert, 1, k);
+            sqlite3_bind_int64(insert, 2, int64_t(next * kCycle + k));
+            sqlite3_bind_int64(insert, 3, int64_t(data_time(next)));
+            sqlite3_bind_blob(insert, 4, payload.data(), int(payload.size()), SQLITE_STATIC);
+            check(sqlite3_step(insert), db, "insert");
+            sqlite3_reset(insert);
+        }
+    }
+    /// Reads rows the way the store answers: times and a copy of the payload.
+    size_t query(sqlite3_stmt* s, int object, uint64_t t0, uint64_t t1 = 0)
+    {
+        sqlite3_bind_int64(s, 1, object);
+        sqlite3_bind_int64(s, 2, int64_t(t0));
+        if (t1) sqlite3_bind_int64(s, 3, int64_t(t1));
+        size_t rows = 0;
+        std::vector<cpm::rtdb::StoredSample> out;
+        while (sqlite3_step(s) == SQLITE_ROW) {
+            cpm::rtdb::StoredSample x{uint64_t(sqlite3_column_int64(s, 0)), uint64_t(sqlite3_column_int64(s, 1)),
+                                      uint64_t(sqlite3_column_int64(s, 2)), uint64_t(sqlite3_column_int64(s, 3)), {}};
+            auto* b = static_cast<const uint8_t*>(sqlite3_column_blob(s, 4));
+            x.payload.assign(b, b + sqlite3_column_bytes(s, 4));
+            out.push_back(std::move(x));
+            ++rows;
+        }
+        sqlite3_reset(s);
+        return rows;
+    }
+};
+
+StoreWork& store_work()
+{
+    static StoreWork w;
+    return w;
+}
+SqliteWork& sqlite_work()
+{
+    static SqliteWork w;
+    return w;
+}
+
+/// Appends go to their own store and database, so the query fixtures keep their window.
+StoreWork& append_store()
+{
+    static StoreWork w;
+    return w;
+}
+SqliteWork& append_sqlite()
+{
+    static SqliteWork w;
+    return w;
+}
+
+/// Query times spread over the held window, object by object.
+struct Times
+{
+    std::mt19937_64 rng{42};
+    /// A time between the 100th oldest and the 100th newest of next - 1 samples.
+    uint64_t t(uint64_t next) { return (next - 1) * kCycle - kCycle * (100 + rng() % (kSamples - 200)); }
+};
+
+void BM_Store_Append(benchmark::State& state)
+{
+    auto& w = append_store();
+    for (auto _ : state) {
+        w.store.commit(w.oids[0], {data_time(w.next), data_time(w.next), 0, w.payload.data(), w.payload.size()}, w.next * kCycle);
+        ++w.next;
+    }
+}
+void BM_Sqlite_Append(benchmark::State& state)
+{
+    auto& w = append_sqlite();
+    for (auto _ : state) {
+        sqlite3_bind_int64(w.insert, 1, 0);
+        sqlite3_bind_int64(w.insert, 2, int64_t(w.next * kCycle));
+        sqlite3_bind_int64(w.insert, 3, int64_t(data_time(w.next)));
+        sqlite3_bind_blob(w.insert, 4, w.payload.data(), int(w.payload.size()), SQLITE_STATIC);
+        sqlite3_step(w.insert);
+        sqlite3_reset(w.insert);
+        ++w.next;
+    }
+}
+template <cpm::rtdb::By by>
+void BM_Store_At(benchmark::State& state)
+{
+    auto& w = store_work();
+    Times times;
+    int k = 0;
+    for (auto _ : state) {
+        auto f = w.store.at(w.oids[k], times.t(w.next), by);
+        benchmark::DoNotOptimize(f);
+        k = (k + 1) % kObjects;
+    }
+}
+template <bool by_data>
+void BM_Sqlite_At(benchmark::State& state)
+{
+    auto& w = sqlite_work();
+    Times times;
+    int k = 0;
+    for (auto _ : state) {
+        benchmark::DoNotOptimize(w.query(by_data ? w.at_data : w.at_commit, k, times.t(w.next)));
+        k = (k + 1) % kObjects;
+    }
+}
+void BM_Store_Range100(benchmark::State& state)
+{
+    auto& w = store_work();
+    Times times;
+    for (auto _ : state) {
+        const uint64_t t0 = times.t(w.next);
+        auto r = w.store.range(w.oids[1], t0, t0 + 100 * kCycle);
+        if (r.samples.size() != 100) state.SkipWithError("range did not return 100 samples");
+    }
+}
+void BM_Sqlite_Range100(benchmark::State& state)
+{
+    auto& w = sqlite_work();
+    Times times;
+    for (auto _ : state) {
+        const uint64_t t0 = times.t(w.next);
+        if (w.query(w.range, 1, t0, t0 + 100 * kCycle) != 100) state.SkipWithError("range did not return 100 rows");
+    }
+}
+
+BENCHMARK(BM_Store_Append);
+BENCHMARK(BM_Sqlite_Append);
+BENCHMARK(BM_Store_At<cpm::rtdb::By::commit>)->Name("BM_Store_AtCommit");
+BENCHMARK(BM_Sqlite_At<false>)->Name("BM_Sqlite_AtCommit");
+BENCHMARK(BM_Store_At<cpm::rtdb::By::data>)->Name("BM_Store_AtData");
+BENCHMARK(BM_Sqlite_At<true>)->Name("BM_Sqlite_AtData");
+BENCHMARK(BM_Store_Range100);
+BENCHMARK(BM_Sqlite_Range100);
+
+/// Single calls timed one by one (clock overhead included): p50 and p99 in ns.
+template <typename F>
+std::pair<double, double> percentiles(F&& op, int n = 200'000)
+{
+    std::vector<double> ns(n);
+    for (int i = 0; i < n; ++i) {
+        const auto t0 = std::chrono::steady_clock::now();
+        op();
+        ns[i] = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
+    }
+    std::sort(ns.begin(), ns.end());
+    return {ns[n / 2], ns[n * 99 / 100]};
+}
+
+void print_percentiles()
+{
+    auto& s = store_work();
+    auto& q = sqlite_work();
+    auto& sa = append_store();
+    auto& qa = append_sqlite();
+    Times times;
+    int k = 0;
+    auto line = [](const char* what, std::pair<double, double> store, std::pair<double, double> sqlite) {
+        std::printf("%-12s store p50 %8.0f ns  p99 %8.0f ns | sqlite p50 %8.0f ns  p99 %8.0f ns | sqlite/store at p50 %6.1fx\n",
+                    what, store.first, store.second, sqlite.first, sqlite.second, sqlite.first / store.first);
+    };
+    line("append", percentiles([&] {
+             sa.store.commit(sa.oids[2], {data_time(sa.next), data_time(sa.next), 0, sa.payload.data(), sa.payload.size()}, sa.next * kCycle);
+             ++sa.next;
+         }),
+         percentiles([&] {
+             sqlite3_bind_int64(qa.insert, 1, 2);
+             sqlite3_bind_int64(qa.insert, 2, int64_t(qa.next * kCycle));
+             sqlite3_bind_int64(qa.insert, 3, int64_t(data_time(qa.next)));
+             sqlite3_bind_blob(qa.insert, 4, qa.payload.data(), int(qa.payload.size()), SQLITE_STATIC);
+             sqlite3_step(qa.insert);
+             sqlite3_reset(qa.insert);
+             ++qa.next;
+         }));
+    line("at commit", percentiles([&] { benchmark::DoNotOptimize(s.store.at(s.oids[k = (k + 1) % kObjects], times.t(s.next))); }),
+         percentiles([&] { q.query(q.at_commit, k = (k + 1) % kObjects, times.t(q.next)); }));
+    line("at data", percentiles([&] { benchmark::DoNotOptimize(s.store.at(s.oids[k = (k + 1) % kObjects], times.t(s.next), cpm::rtdb::By::data)); }),
+         percentiles([&] { q.query(q.at_data, k = (k + 1) % kObjects, times.t(q.next)); }));
+    line("range 100", percentiles([&] { const uint64_t t0 = times.t(s.next); s.store.range(s.oids[1], t0, t0 + 100 * kCycle); }, 20'000),
+         percentiles([&] { const uint64_t t0 = times.t(q.next); q.query(q.range, 1, t0, t0 + 100 * kCycle); }, 20'000));
+    const auto clock = percentiles([] {});
+    std::printf("(each figure includes reading the clock around the call: p50 %.0f ns for an empty call)\n", clock.first);
+    auto st = s.store.stats();
+    std::printf("store holds %llu samples, %llu payload bytes\n", (unsigned long long)st.samples, (unsigned long long)st.bytes);
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    benchmark::Initialize(&argc, argv);
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+    std::printf("bench_history_store: %d objects x %d samples of %zu bytes held; store vs SQLite (in-memory, indexed, prepared)\n",
+                kObjects, kSamples, kPayload);
+    benchmark::RunSpecifiedBenchmarks();
+    print_percentiles();
+    return 0;
+}

@@ -1,0 +1,218 @@
+#pragma once
+// cpm::rtdb — the KogMo-RTDB style time-indexed store (DESIGN.md §4), usable in-process.
+//
+// An object is one instance (topic + key) of a topic, or a process (participant). Each stored
+// sample keeps its commit time (when the store received it; strictly increasing per object, a
+// tie gets +1 ns), its data time (create_stamp), valid_after_stamp, the writer's source
+// timestamp and the payload bytes as received. Both times are indexed.
+//
+// Data time need not be monotone. Data-time queries answer over the samples held, ordered by
+// (data time, commit time): "at" is the held sample with the greatest data time <= t (among
+// equal data times the one committed last), "older"/"younger" the greatest below / smallest
+// above t, "range" lists in data-time order. When no held sample qualifies the answer says
+// why: not_found when t lies before every data time ever stored for the object, evicted when
+// samples at or before t were stored but are gone (out of the window), not_yet when asking
+// past the newest.
+//
+// Concurrency: one ingest path (commit/mark_deleted/expire), any number of readers. Each
+// object has its own reader/writer lock; readers copy what they return under it, so they never
+// see a torn sample. snapshot() holds every asked object's lock at once, so no commit can slip
+// in between its answers.
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <shared_mutex>
+#include <string>
+#include <vector>
+
+namespace cpm::rtdb {
+
+using Oid = uint64_t;
+constexpr Oid kNoOid = 0;
+
+enum class Status { ok, not_found, evicted, not_yet, timeout, gap, unknown_object };
+const char* to_string(Status s);
+
+/// Which of a sample's two indexed times a query goes by.
+enum class By { commit, data };
+
+struct StoredSample
+{
+    uint64_t commit_ns = 0;
+    uint64_t data_ns = 0;         ///< create_stamp
+    uint64_t valid_after_ns = 0;  ///< valid_after_stamp
+    uint64_t source_ns = 0;       ///< the writer's source timestamp (0 if unknown)
+    std::vector<uint8_t> payload; ///< serialized as received
+};
+
+struct Found
+{
+    Status status = Status::not_found;
+    StoredSample sample;  ///< meaningful when status == ok
+    bool ok() const { return status == Status::ok; }
+};
+
+struct Range
+{
+    Status status = Status::not_found;
+    std::vector<StoredSample> samples;
+    bool truncated = false;  ///< more matched than the limit
+};
+
+/// What a new sample brings; the payload is copied.
+struct Incoming
+{
+    uint64_t data_ns = 0;
+    uint64_t valid_after_ns = 0;
+    uint64_t source_ns = 0;
+    const uint8_t* data = nullptr;
+    size_t size = 0;
+};
+
+enum class ObjectKind { instance, process };
+
+/// The info block of an object (DESIGN.md §4).
+struct ObjectInfo
+{
+    Oid oid = kNoOid;
+    ObjectKind kind = ObjectKind::instance;
+    std::string name;      ///< "topic", "topic/key" or, for a process, the participant's name
+    std::string topic;     ///< empty for processes
+    std::string key;       ///< the instance key as text (the vehicle id), empty if unkeyed
+    std::string type_name; ///< the DDS type name; "participant" for processes
+    Oid parent = kNoOid;   ///< the creating process's object, if known
+    std::string creator;   ///< creating participant's name
+    std::string creator_guid;
+    uint64_t created_ts = 0;
+    uint64_t deleted_ts = 0;  ///< 0 while alive
+    uint64_t history_interval_ns = 0;
+    // Filled in by info()/search():
+    uint64_t samples_held = 0;
+    uint64_t bytes_held = 0;
+    uint64_t samples_total = 0;     ///< ever committed
+    uint64_t newest_commit_ns = 0;
+    double avg_cycle_s = 0;         ///< observed mean time between commits
+    double max_cycle_s = 0;
+};
+
+/// Object search: the AND of the criteria given.
+struct Criteria
+{
+    std::optional<std::string> name_regex;  ///< ECMAScript, case-insensitive, searched within the name
+    std::optional<std::string> type_name;
+    std::optional<Oid> parent;
+    std::optional<std::string> creator;     ///< participant name or GUID
+    std::optional<uint64_t> alive_at;       ///< created at or before and not deleted by then
+    std::optional<ObjectKind> kind;
+};
+
+struct Retention
+{
+    uint64_t window_ns = 10'000'000'000ull;  ///< history_interval
+    uint64_t max_bytes = 64ull << 20;        ///< payload bytes per topic
+};
+
+struct StoreOptions
+{
+    Retention default_retention;
+    uint64_t max_bytes_total = 512ull << 20;  ///< payload bytes across all topics
+};
+
+struct StoreStats
+{
+    uint64_t objects = 0, alive = 0, samples = 0, bytes = 0, evicted = 0, purged_objects = 0;
+};
+
+/// What changed since a point: objects created or deleted after it.
+struct Changes
+{
+    std::vector<ObjectInfo> created;
+    std::vector<ObjectInfo> deleted;
+};
+
+class Store
+{
+public:
+    explicit Store(StoreOptions options = {});
+    ~Store();
+    Store(const Store&) = delete;
+    Store& operator=(const Store&) = delete;
+
+    /// Retention of one topic (objects created afterwards and those already there).
+    void set_retention(const std::string& topic, Retention r);
+    Retention retention(const std::string& topic) const;
+
+    // ---- ingest (one thread) ------------------------------------------------------------
+    /// Registers an object; info.oid, created_ts (if 0: now) and history_interval are filled
+    /// in. Returns the new oid.
+    Oid add_object(ObjectInfo info);
+    /// Stores a sample; returns its commit time (max(now_ns, previous + 1)).
+    uint64_t commit(Oid oid, const Incoming& in, uint64_t now_ns);
+    /// Marks an object deleted at t: it stays readable for its history_interval, then expire()
+    /// purges it.
+    void mark_deleted(Oid oid, uint64_t t_ns);
+    /// Evicts samples older than each topic's window and purges deleted objects whose window
+    /// has passed. Call it periodically (the service does, 10 times a second).
+    void expire(uint64_t now_ns);
+
+    // ---- queries (any thread) -----------------------------------------------------------
+    Found latest(Oid oid) const;
+    Found at(Oid oid, uint64_t t, By by = By::commit) const;
+    Found older(Oid oid, uint64_t t, By by = By::commit) const;
+    Found younger(Oid oid, uint64_t t, By by = By::commit) const;
+    /// Samples with time in [t0, t1), oldest first, at most `limit`.
+    Range range(Oid oid, uint64_t t0, uint64_t t1, By by = By::commit, size_t limit = 10000) const;
+    /// The newest sample committed after `after`, waiting up to `timeout` for one.
+    Found wait_next(Oid oid, uint64_t after, std::chrono::nanoseconds timeout) const;
+    /// Exactly the sample committed next after `after` (waiting up to `timeout`), or gap when
+    /// it was evicted.
+    Found successor(Oid oid, uint64_t after, std::chrono::nanoseconds timeout) const;
+    /// Each object's sample at t, in one consistent cut.
+    std::vector<Found> snapshot(uint64_t t, const std::vector<Oid>& oids, By by = By::commit) const;
+
+    // ---- registry -----------------------------------------------------------------------
+    std::optional<ObjectInfo> info(Oid oid) const;
+    /// Objects (alive, or deleted and still held) matching all criteria, by oid.
+    std::vector<ObjectInfo> search(const Criteria& c) const;
+    /// Waits up to `timeout` for a matching object to exist.
+    std::optional<ObjectInfo> wait_for_object(const Criteria& c, std::chrono::nanoseconds timeout) const;
+    /// The object of topic + key, if held (not purged).
+    std::optional<Oid> find(const std::string& topic, const std::string& key) const;
+    Changes changes_since(uint64_t t_ns) const;
+    StoreStats stats() const;
+
+private:
+    struct Object;
+    std::shared_ptr<Object> object(Oid oid) const;
+    /// Runs f(const Object*) (nullptr if unknown or purged) under the registry's and the
+    /// object's shared locks.
+    template <typename F>
+    auto read(Oid oid, F&& f) const;
+    static Range range_of(const Object& o, uint64_t t0, uint64_t t1, By by, size_t limit);
+    void evict_for_budget(const std::string& topic, uint64_t needed);
+    void notify();
+    Found wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout, bool exact) const;
+
+    StoreOptions options_;
+    mutable std::shared_mutex registry_mutex_;
+    std::map<Oid, std::shared_ptr<Object>> objects_;
+    std::vector<Object*> by_oid_;  ///< index oid -> object (nullptr once purged), for lookups
+    std::map<std::string, Retention> retention_;
+    std::map<std::string, uint64_t> topic_bytes_;
+    Oid next_oid_ = 1;
+    uint64_t total_bytes_ = 0;
+    std::atomic<uint64_t> evicted_{0}, purged_{0};
+
+    mutable std::mutex wait_mutex_;
+    mutable std::condition_variable wait_cv_;
+    mutable int waiters_ = 0;
+    uint64_t version_ = 0;  ///< under wait_mutex_: bumped on every change a waiter may want
+};
+
+}  // namespace cpm::rtdb

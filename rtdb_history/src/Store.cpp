@@ -1,0 +1,672 @@
+#include <cpm/rtdb/Store.hpp>
+
+#include <algorithm>
+#include <cstring>
+#include <limits>
+#include <regex>
+
+namespace cpm::rtdb {
+
+const char* to_string(Status s)
+{
+    switch (s) {
+    case Status::ok: return "ok";
+    case Status::not_found: return "not found";
+    case Status::evicted: return "evicted";
+    case Status::not_yet: return "not yet";
+    case Status::timeout: return "timeout";
+    case Status::gap: return "gap";
+    case Status::unknown_object: return "unknown object";
+    }
+    return "?";
+}
+
+namespace {
+
+constexpr uint64_t kNever = std::numeric_limits<uint64_t>::max();
+
+/// A sample's times and where its payload sits in the object's byte ring: 48 bytes.
+struct Record
+{
+    uint64_t commit, data, valid_after, source;
+    uint64_t pos;  ///< absolute position of the payload in the ring
+    uint32_t size;
+};
+
+/// The data-time index entry: 16 bytes, kept sorted by (data, seq).
+struct DataKey
+{
+    uint64_t data, seq;
+    bool operator<(const DataKey& o) const { return data != o.data ? data < o.data : seq < o.seq; }
+};
+
+/// Payload bytes of one object, first in first out, in one power-of-two circular buffer.
+class ByteRing
+{
+public:
+    uint64_t push(const uint8_t* data, size_t size)
+    {
+        if (tail_ - head_ + size > buf_.size()) grow(tail_ - head_ + size);
+        const uint64_t pos = tail_;
+        copy(data, size, pos, true);
+        tail_ += size;
+        return pos;
+    }
+    void pop(size_t size) { head_ += size; }
+    void read(uint64_t pos, size_t size, uint8_t* out) const { const_cast<ByteRing*>(this)->copy(out, size, pos, false); }
+    /// Gives memory back after a flood has passed.
+    void shrink()
+    {
+        const uint64_t used = tail_ - head_;
+        if (buf_.size() > 4096 && used < buf_.size() / 4) resize(std::max<size_t>(4096, next_pow2(used * 2)));
+    }
+    size_t capacity() const { return buf_.size(); }
+
+private:
+    static size_t next_pow2(size_t n)
+    {
+        size_t c = 256;
+        while (c < n) c *= 2;
+        return c;
+    }
+    void grow(size_t needed) { resize(next_pow2(std::max(needed, buf_.size() * 2))); }
+    void resize(size_t capacity)
+    {
+        std::vector<uint8_t> next(capacity);
+        const uint64_t used = tail_ - head_;
+        for (uint64_t i = 0; i < used;) {  // copy the live bytes in at most two pieces
+            const size_t at = (head_ + i) & (buf_.size() - 1);
+            const size_t n = std::min<uint64_t>(used - i, buf_.size() - at);
+            std::memcpy(next.data() + ((head_ + i) & (capacity - 1)), buf_.data() + at, n);
+            i += n;
+        }
+        buf_.swap(next);
+    }
+    /// Copies between `bytes` and the ring at `pos`, wrapping around; into the ring if `in`.
+    void copy(const uint8_t* bytes, size_t size, uint64_t pos, bool in) { copy(const_cast<uint8_t*>(bytes), size, pos, in); }
+    void copy(uint8_t* bytes, size_t size, uint64_t pos, bool in)
+    {
+        size_t done = 0;
+        while (done < size) {
+            const size_t at = (pos + done) & (buf_.size() - 1);
+            const size_t n = std::min(size - done, buf_.size() - at);
+            if (in) std::memcpy(buf_.data() + at, bytes + done, n);
+            else std::memcpy(bytes + done, buf_.data() + at, n);
+            done += n;
+        }
+    }
+
+    std::vector<uint8_t> buf_;
+    uint64_t head_ = 0, tail_ = 0;
+};
+
+/// Index of the first of n sorted keys with key > t (inclusive) or >= t (!inclusive); n if none.
+/// Samples mostly come periodically, so it first guesses by interpolation between the ends and
+/// then gallops out from the guess: a few neighbouring probes instead of log2(n) scattered
+/// cache misses; O(log n) at worst.
+template <typename Key>
+size_t search_sorted(size_t n, Key key, uint64_t t, bool inclusive)
+{
+    auto left_of = [&](size_t i) { return inclusive ? key(i) <= t : key(i) < t; };  // the answer is right of i
+    if (n == 0 || !left_of(0)) return 0;
+    if (left_of(n - 1)) return n;
+    // Now key(0) is left of the answer and key(n - 1) is not: the answer is in (0, n - 1].
+    const uint64_t k0 = key(0), k1 = key(n - 1);
+    size_t guess = k1 > k0 ? size_t(double(t - std::min(t, k0)) / double(k1 - k0) * double(n - 1)) : 0;
+    guess = std::min(guess, n - 2);
+    size_t lo, hi;  // left_of(lo) holds, left_of(hi) does not
+    if (left_of(guess)) {
+        lo = guess;
+        size_t step = 1;
+        while (lo + step < n - 1 && left_of(lo + step)) {
+            lo += step;
+            step *= 2;
+        }
+        hi = std::min(n - 1, lo + step);
+    } else {
+        hi = guess;
+        size_t step = 1;
+        while (hi >= step && !left_of(hi - step)) {
+            hi -= step;
+            step *= 2;
+        }
+        lo = hi >= step ? hi - step : 0;
+    }
+    while (hi - lo > 1) {
+        const size_t mid = lo + (hi - lo) / 2;
+        (left_of(mid) ? lo : hi) = mid;
+    }
+    return hi;
+}
+
+/// Records of one object, oldest first, in one power-of-two circular buffer (contiguous, so
+/// lookups by index are a mask, not a deque's block walk).
+class RecordRing
+{
+public:
+    size_t size() const { return n_; }
+    bool empty() const { return n_ == 0; }
+    const Record& operator[](size_t i) const { return buf_[(head_ + i) & (buf_.size() - 1)]; }
+    const Record& front() const { return (*this)[0]; }
+    const Record& back() const { return (*this)[n_ - 1]; }
+    void push_back(const Record& r)
+    {
+        if (n_ == buf_.size()) {
+            std::vector<Record> next(std::max<size_t>(16, buf_.size() * 2));
+            for (size_t i = 0; i < n_; ++i) next[i] = (*this)[i];
+            buf_.swap(next);
+            head_ = 0;
+        }
+        buf_[(head_ + n_) & (buf_.size() - 1)] = r;
+        ++n_;
+    }
+    void pop_front()
+    {
+        head_ = (head_ + 1) & (buf_.size() - 1);
+        --n_;
+    }
+    /// Index of the first record with commit > t (inclusive) or >= t (!inclusive); size() if none.
+    size_t first_after(uint64_t t, bool inclusive) const
+    {
+        return search_sorted(n_, [this](size_t i) { return (*this)[i].commit; }, t, inclusive);
+    }
+    void shrink()
+    {
+        if (buf_.size() > 64 && n_ < buf_.size() / 4) {
+            std::vector<Record> next(std::max<size_t>(16, buf_.size() / 2));
+            for (size_t i = 0; i < n_; ++i) next[i] = (*this)[i];
+            buf_.swap(next);
+            head_ = 0;
+        }
+    }
+
+private:
+    std::vector<Record> buf_;
+    size_t head_ = 0, n_ = 0;
+};
+
+}  // namespace
+
+struct Store::Object
+{
+    mutable std::shared_mutex mutex;
+    ObjectInfo info;  // deleted_ts and the counters change under mutex
+    Retention retention;
+    RecordRing records;  // by commit time; records[i] has sequence head_seq + i
+    uint64_t head_seq = 0;
+    std::deque<DataKey> by_data;
+    ByteRing bytes;
+    uint64_t bytes_held = 0;
+    uint64_t samples_total = 0;
+    uint64_t first_commit_ever = kNever, min_data_ever = kNever;
+    uint64_t last_evicted_commit = 0, max_evicted_data = 0;
+    bool any_evicted = false;
+    uint64_t cycle_sum = 0, cycle_max = 0;
+
+    const Record& by_seq(uint64_t seq) const { return records[seq - head_seq]; }
+    /// Index in by_data of the first entry with data time > t (inclusive) or >= t.
+    size_t data_after(uint64_t t, bool inclusive) const
+    {
+        return search_sorted(by_data.size(), [this](size_t i) { return by_data[i].data; }, t, inclusive);
+    }
+
+    StoredSample copy(const Record& r) const
+    {
+        StoredSample s{r.commit, r.data, r.valid_after, r.source, std::vector<uint8_t>(r.size)};
+        bytes.read(r.pos, r.size, s.payload.data());
+        return s;
+    }
+    Found found(const Record& r) const { return {Status::ok, copy(r)}; }
+
+    /// Evicts the oldest sample by commit time; returns its payload size.
+    size_t evict_front()
+    {
+        const Record r = records.front();
+        if (by_data.front().seq == head_seq) by_data.pop_front();  // data times in order: the usual case
+        else by_data.erase(std::lower_bound(by_data.begin(), by_data.end(), DataKey{r.data, head_seq}));
+        records.pop_front();
+        ++head_seq;
+        bytes.pop(r.size);
+        bytes_held -= r.size;
+        any_evicted = true;
+        last_evicted_commit = r.commit;
+        max_evicted_data = std::max(max_evicted_data, r.data);
+        return r.size;
+    }
+
+    /// Why nothing held answers a query for "at or before t" (inclusive) / "before t".
+    Status nothing_at_or_before(uint64_t t, By by, bool inclusive) const
+    {
+        const uint64_t first = by == By::commit ? first_commit_ever : min_data_ever;
+        if (first == kNever) return Status::not_found;
+        const bool stored_one = inclusive ? first <= t : first < t;
+        return stored_one && any_evicted ? Status::evicted : Status::not_found;
+    }
+
+    Found at(uint64_t t, By by, bool inclusive) const
+    {
+        if (by == By::commit) {
+            const size_t i = records.first_after(t, inclusive);
+            if (i == 0) return {nothing_at_or_before(t, by, inclusive), {}};
+            return found(records[i - 1]);
+        }
+        const size_t i = data_after(t, inclusive);
+        if (i == 0) return {nothing_at_or_before(t, by, inclusive), {}};
+        return found(by_seq(by_data[i - 1].seq));
+    }
+
+    Found younger(uint64_t t, By by) const
+    {
+        if (records.empty() && !any_evicted) return {Status::not_found, {}};
+        if (by == By::commit) {
+            if (any_evicted && t < last_evicted_commit) return {Status::evicted, {}};
+            const size_t i = records.first_after(t, true);
+            if (i == records.size()) return {Status::not_yet, {}};
+            return found(records[i]);
+        }
+        if (any_evicted && t < max_evicted_data) return {Status::evicted, {}};
+        const size_t i = data_after(t, true);
+        if (i == by_data.size()) return {Status::not_yet, {}};
+        return found(by_seq(by_data[i].seq));
+    }
+};
+
+Store::Store(StoreOptions options) : options_(options) {}
+Store::~Store() = default;
+
+void Store::set_retention(const std::string& topic, Retention r)
+{
+    std::unique_lock lock(registry_mutex_);
+    retention_[topic] = r;
+    for (auto& [oid, o] : objects_) {
+        if (o->info.topic != topic) continue;
+        std::unique_lock ol(o->mutex);
+        o->retention = r;
+        o->info.history_interval_ns = r.window_ns;
+    }
+}
+
+Retention Store::retention(const std::string& topic) const
+{
+    std::shared_lock lock(registry_mutex_);
+    auto it = retention_.find(topic);
+    return it == retention_.end() ? options_.default_retention : it->second;
+}
+
+Oid Store::add_object(ObjectInfo info)
+{
+    auto o = std::make_shared<Object>();
+    o->retention = retention(info.topic);
+    {
+        std::unique_lock lock(registry_mutex_);
+        info.oid = next_oid_++;
+        info.history_interval_ns = o->retention.window_ns;
+        if (info.name.empty()) info.name = info.key.empty() ? info.topic : info.topic + "/" + info.key;
+        o->info = std::move(info);
+        objects_[o->info.oid] = o;
+        if (by_oid_.size() <= o->info.oid) by_oid_.resize(o->info.oid + 1, nullptr);
+        by_oid_[o->info.oid] = o.get();
+    }
+    notify();
+    return o->info.oid;
+}
+
+std::shared_ptr<Store::Object> Store::object(Oid oid) const
+{
+    std::shared_lock lock(registry_mutex_);
+    auto it = objects_.find(oid);
+    return it == objects_.end() ? nullptr : it->second;
+}
+
+template <typename F>
+auto Store::read(Oid oid, F&& f) const
+{
+    std::shared_lock lock(registry_mutex_);
+    const Object* o = oid < by_oid_.size() ? by_oid_[oid] : nullptr;
+    if (!o) return f(nullptr);
+    std::shared_lock ol(o->mutex);
+    return f(o);
+}
+
+void Store::evict_for_budget(const std::string& topic, uint64_t needed)
+{
+    const uint64_t topic_budget = retention(topic).max_bytes;
+    auto over = [&](bool whole_store) {
+        return whole_store ? total_bytes_ + needed > options_.max_bytes_total : topic_bytes_[topic] + needed > topic_budget;
+    };
+    for (bool whole_store : {false, true}) {
+        if (!over(whole_store)) continue;
+        // Evict the oldest samples in scope until 1/16 of the budget is free again, so that a
+        // flood pays for the scan once per many samples.
+        const uint64_t budget = whole_store ? options_.max_bytes_total : topic_budget;
+        const uint64_t goal = budget - std::min(budget, needed + budget / 16);
+        std::vector<std::shared_ptr<Object>> scope;
+        {
+            std::shared_lock lock(registry_mutex_);
+            for (auto& [oid, o] : objects_) {
+                if (whole_store || o->info.topic == topic) scope.push_back(o);
+            }
+        }
+        while ((whole_store ? total_bytes_ : topic_bytes_[topic]) > goal) {
+            Object* oldest = nullptr;
+            uint64_t oldest_commit = kNever;
+            for (auto& o : scope) {
+                std::shared_lock ol(o->mutex);
+                if (!o->records.empty() && o->records.front().commit < oldest_commit) {
+                    oldest_commit = o->records.front().commit;
+                    oldest = o.get();
+                }
+            }
+            if (!oldest) break;
+            std::unique_lock ol(oldest->mutex);
+            const size_t n = oldest->evict_front();
+            total_bytes_ -= n;
+            topic_bytes_[oldest->info.topic] -= n;
+            ++evicted_;
+        }
+    }
+}
+
+uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
+{
+    auto o = object(oid);
+    if (!o) return 0;
+    evict_for_budget(o->info.topic, in.size);
+    uint64_t commit_ns;
+    {
+        std::unique_lock lock(o->mutex);
+        const uint64_t last = o->records.empty() ? (o->samples_total ? o->last_evicted_commit : 0) : o->records.back().commit;
+        commit_ns = o->samples_total ? std::max(now_ns, last + 1) : now_ns;
+        if (o->samples_total) {
+            const uint64_t cycle = commit_ns - (o->records.empty() ? last : o->records.back().commit);
+            o->cycle_sum += cycle;
+            o->cycle_max = std::max(o->cycle_max, cycle);
+        }
+        // Time window, relative to the newest commit.
+        while (!o->records.empty() && o->records.front().commit + o->retention.window_ns < commit_ns) {
+            const size_t n = o->evict_front();
+            total_bytes_ -= n;
+            topic_bytes_[o->info.topic] -= n;
+            ++evicted_;
+        }
+        const uint64_t seq = o->head_seq + o->records.size();
+        o->records.push_back({commit_ns, in.data_ns, in.valid_after_ns, in.source_ns, o->bytes.push(in.data, in.size),
+                              static_cast<uint32_t>(in.size)});
+        const DataKey key{in.data_ns, seq};
+        // Mostly in order: search from the back.
+        if (o->by_data.empty() || o->by_data.back() < key) o->by_data.push_back(key);
+        else o->by_data.insert(std::upper_bound(o->by_data.begin(), o->by_data.end(), key), key);
+        o->bytes_held += in.size;
+        ++o->samples_total;
+        o->first_commit_ever = std::min(o->first_commit_ever, commit_ns);
+        o->min_data_ever = std::min(o->min_data_ever, in.data_ns);
+    }
+    total_bytes_ += in.size;
+    topic_bytes_[o->info.topic] += in.size;
+    notify();
+    return commit_ns;
+}
+
+void Store::mark_deleted(Oid oid, uint64_t t_ns)
+{
+    auto o = object(oid);
+    if (!o) return;
+    {
+        std::unique_lock lock(o->mutex);
+        if (o->info.deleted_ts == 0) o->info.deleted_ts = std::max<uint64_t>(t_ns, 1);
+    }
+    notify();
+}
+
+void Store::expire(uint64_t now_ns)
+{
+    std::vector<Oid> purge;
+    {
+        std::shared_lock lock(registry_mutex_);
+        for (auto& [oid, o] : objects_) {
+            std::unique_lock ol(o->mutex);
+            const uint64_t window = o->retention.window_ns;
+            while (!o->records.empty() && o->records.front().commit + window < now_ns) {
+                const size_t n = o->evict_front();
+                total_bytes_ -= n;
+                topic_bytes_[o->info.topic] -= n;
+                ++evicted_;
+            }
+            o->bytes.shrink();
+            o->records.shrink();
+            if (o->info.deleted_ts && o->info.deleted_ts + window < now_ns) purge.push_back(oid);
+        }
+    }
+    if (purge.empty()) return;
+    std::unique_lock lock(registry_mutex_);
+    for (Oid oid : purge) {
+        auto& o = objects_[oid];
+        total_bytes_ -= o->bytes_held;
+        topic_bytes_[o->info.topic] -= o->bytes_held;
+        objects_.erase(oid);
+        by_oid_[oid] = nullptr;
+        ++purged_;
+    }
+}
+
+void Store::notify()
+{
+    std::lock_guard lock(wait_mutex_);
+    ++version_;
+    if (waiters_) wait_cv_.notify_all();
+}
+
+Found Store::latest(Oid oid) const
+{
+    return read(oid, [](const Object* o) -> Found {
+        if (!o) return {Status::unknown_object, {}};
+        if (o->records.empty()) return {o->any_evicted ? Status::evicted : Status::not_found, {}};
+        return o->found(o->records.back());
+    });
+}
+
+Found Store::at(Oid oid, uint64_t t, By by) const
+{
+    return read(oid, [&](const Object* o) { return o ? o->at(t, by, true) : Found{Status::unknown_object, {}}; });
+}
+
+Found Store::older(Oid oid, uint64_t t, By by) const
+{
+    return read(oid, [&](const Object* o) { return o ? o->at(t, by, false) : Found{Status::unknown_object, {}}; });
+}
+
+Found Store::younger(Oid oid, uint64_t t, By by) const
+{
+    return read(oid, [&](const Object* o) { return o ? o->younger(t, by) : Found{Status::unknown_object, {}}; });
+}
+
+Range Store::range(Oid oid, uint64_t t0, uint64_t t1, By by, size_t limit) const
+{
+    return read(oid, [&](const Object* o) { return o ? range_of(*o, t0, t1, by, limit) : Range{Status::unknown_object, {}, false}; });
+}
+
+Range Store::range_of(const Object& obj, uint64_t t0, uint64_t t1, By by, size_t limit)
+{
+    const Object* o = &obj;
+    Range r;
+    auto add = [&](const Record& rec) {
+        if (r.samples.size() == limit) {
+            r.truncated = true;
+            return false;
+        }
+        r.samples.push_back(o->copy(rec));
+        return true;
+    };
+    if (t1 > t0 && by == By::commit) {
+        const size_t end = o->records.first_after(t1, false);
+        for (size_t i = o->records.first_after(t0, false); i < end && add(o->records[i]); ++i) {}
+    } else if (t1 > t0) {
+        const size_t end = o->data_after(t1, false);
+        for (size_t i = o->data_after(t0, false); i < end && add(o->by_seq(o->by_data[i].seq)); ++i) {}
+    }
+    if (!r.samples.empty()) r.status = Status::ok;
+    else if (t1 > t0 && o->nothing_at_or_before(t1, by, false) == Status::evicted &&
+             (by == By::commit ? t0 <= o->last_evicted_commit : t0 <= o->max_evicted_data)) r.status = Status::evicted;
+    else if (!o->records.empty() && t0 > (by == By::commit ? o->records.back().commit : o->by_data.back().data)) r.status = Status::not_yet;
+    else r.status = Status::not_found;
+    return r;
+}
+
+Found Store::wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout, bool exact) const
+{
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    std::unique_lock lock(wait_mutex_);
+    ++waiters_;
+    struct Leave
+    {
+        int& n;
+        ~Leave() { --n; }
+    } leave{waiters_};
+    for (;;) {
+        const uint64_t seen = version_;
+        lock.unlock();
+        Found f = read(oid, [&](const Object* o) -> Found {
+            if (!o) return {Status::unknown_object, {}};
+            if (exact) {
+                Found next = o->younger(after, By::commit);
+                if (next.status == Status::evicted) next.status = Status::gap;
+                if (next.status == Status::not_found) next.status = Status::not_yet;  // nothing stored yet: wait
+                return next;
+            }
+            if (!o->records.empty() && o->records.back().commit > after) return o->found(o->records.back());
+            return {Status::not_yet, {}};
+        });
+        lock.lock();
+        if (f.status != Status::not_yet) return f;
+        if (!wait_cv_.wait_until(lock, deadline, [&] { return version_ != seen; })) return {Status::timeout, {}};
+    }
+}
+
+Found Store::wait_next(Oid oid, uint64_t after, std::chrono::nanoseconds timeout) const { return wait_for(oid, after, timeout, false); }
+
+Found Store::successor(Oid oid, uint64_t after, std::chrono::nanoseconds timeout) const { return wait_for(oid, after, timeout, true); }
+
+std::vector<Found> Store::snapshot(uint64_t t, const std::vector<Oid>& oids, By by) const
+{
+    std::shared_lock lock(registry_mutex_);
+    // Lock every object (in address order, the same for every reader) before answering any.
+    std::vector<const Object*> objs, order;
+    for (Oid oid : oids) {
+        objs.push_back(oid < by_oid_.size() ? by_oid_[oid] : nullptr);
+        if (objs.back()) order.push_back(objs.back());
+    }
+    std::sort(order.begin(), order.end());
+    order.erase(std::unique(order.begin(), order.end()), order.end());
+    std::vector<std::shared_lock<std::shared_mutex>> locks;
+    for (const Object* o : order) locks.emplace_back(o->mutex);
+    std::vector<Found> out;
+    for (const Object* o : objs) out.push_back(o ? o->at(t, by, true) : Found{Status::unknown_object, {}});
+    return out;
+}
+
+namespace {
+
+ObjectInfo described(const ObjectInfo& base, uint64_t held, uint64_t bytes, uint64_t total, uint64_t newest,
+                     uint64_t cycle_sum, uint64_t cycle_max)
+{
+    ObjectInfo i = base;
+    i.samples_held = held;
+    i.bytes_held = bytes;
+    i.samples_total = total;
+    i.newest_commit_ns = newest;
+    i.avg_cycle_s = total > 1 ? double(cycle_sum) * 1e-9 / double(total - 1) : 0;
+    i.max_cycle_s = double(cycle_max) * 1e-9;
+    return i;
+}
+
+}  // namespace
+
+std::optional<ObjectInfo> Store::info(Oid oid) const
+{
+    return read(oid, [](const Object* o) -> std::optional<ObjectInfo> {
+        if (!o) return std::nullopt;
+        return described(o->info, o->records.size(), o->bytes_held, o->samples_total,
+                         o->records.empty() ? 0 : o->records.back().commit, o->cycle_sum, o->cycle_max);
+    });
+}
+
+std::vector<ObjectInfo> Store::search(const Criteria& c) const
+{
+    std::optional<std::regex> re;
+    if (c.name_regex) re.emplace(*c.name_regex, std::regex::ECMAScript | std::regex::icase);  // throws std::regex_error
+    std::vector<std::shared_ptr<Object>> all;
+    {
+        std::shared_lock lock(registry_mutex_);
+        for (auto& [oid, o] : objects_) all.push_back(o);
+    }
+    std::vector<ObjectInfo> out;
+    for (auto& o : all) {
+        auto i = info(o->info.oid);
+        if (!i) continue;
+        if (re && !std::regex_search(i->name, *re)) continue;
+        if (c.type_name && i->type_name != *c.type_name) continue;
+        if (c.parent && i->parent != *c.parent) continue;
+        if (c.creator && i->creator != *c.creator && i->creator_guid != *c.creator) continue;
+        if (c.kind && i->kind != *c.kind) continue;
+        if (c.alive_at && (i->created_ts > *c.alive_at || (i->deleted_ts && i->deleted_ts <= *c.alive_at))) continue;
+        out.push_back(std::move(*i));
+    }
+    return out;
+}
+
+std::optional<ObjectInfo> Store::wait_for_object(const Criteria& c, std::chrono::nanoseconds timeout) const
+{
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    std::unique_lock lock(wait_mutex_);
+    ++waiters_;
+    struct Leave
+    {
+        int& n;
+        ~Leave() { --n; }
+    } leave{waiters_};
+    for (;;) {
+        const uint64_t seen = version_;
+        lock.unlock();
+        auto found = search(c);
+        lock.lock();
+        if (!found.empty()) return found.front();
+        if (!wait_cv_.wait_until(lock, deadline, [&] { return version_ != seen; })) return std::nullopt;
+    }
+}
+
+std::optional<Oid> Store::find(const std::string& topic, const std::string& key) const
+{
+    std::shared_lock lock(registry_mutex_);
+    for (auto& [oid, o] : objects_) {
+        if (o->info.kind == ObjectKind::instance && o->info.topic == topic && o->info.key == key) return oid;
+    }
+    return std::nullopt;
+}
+
+Changes Store::changes_since(uint64_t t_ns) const
+{
+    Changes ch;
+    for (auto& i : search({})) {
+        if (i.created_ts > t_ns) ch.created.push_back(i);
+        if (i.deleted_ts > t_ns) ch.deleted.push_back(i);
+    }
+    return ch;
+}
+
+StoreStats Store::stats() const
+{
+    StoreStats s;
+    std::shared_lock lock(registry_mutex_);
+    for (auto& [oid, o] : objects_) {
+        std::shared_lock ol(o->mutex);
+        ++s.objects;
+        if (!o->info.deleted_ts) ++s.alive;
+        s.samples += o->records.size();
+        s.bytes += o->bytes_held;
+    }
+    s.evicted = evicted_;
+    s.purged_objects = purged_;
+    return s;
+}
+
+}  // namespace cpm::rtdb

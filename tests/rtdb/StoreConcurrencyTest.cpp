@@ -1,0 +1,235 @@
+// The store under a concurrent writer: snapshot consistency, wait_next/successor wake-ups,
+// timeouts and gaps, retention by time and by bytes; and the object registry.
+#include <cpm/rtdb/Store.hpp>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <regex>
+#include <thread>
+
+using namespace cpm::rtdb;
+using namespace std::chrono_literals;
+
+namespace {
+
+uint64_t now_ns() { return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+
+void put(Store& s, Oid oid, uint64_t data, const std::vector<uint8_t>& payload, uint64_t now)
+{
+    s.commit(oid, {data, data, 0, payload.data(), payload.size()}, now);
+}
+
+TEST(StoreSnapshot, IsOneConsistentCutUnderAConcurrentWriter)
+{
+    Store store;
+    const Oid a = store.add_object({.topic = "a", .type_name = "T"});
+    const Oid b = store.add_object({.topic = "b", .type_name = "T"});
+    std::atomic<bool> stop{false};
+    // Each round writes generation g to a, then to b, each payload 200 bytes of g.
+    std::thread writer([&] {
+        for (uint64_t g = 1; !stop; ++g) {
+            std::vector<uint8_t> p(200, uint8_t(g));
+            put(store, a, g, p, now_ns());
+            put(store, b, g, p, now_ns());
+        }
+    });
+    int checked = 0;
+    uint64_t first_generation = 0, last_generation = 0;
+    for (int i = 0; checked < 10000 && i < 100'000'000; ++i) {
+        auto cut = store.snapshot(~0ull, {a, b});
+        if (!cut[0].ok() || !cut[1].ok()) continue;
+        const uint64_t ga = cut[0].sample.data_ns, gb = cut[1].sample.data_ns;
+        // b is written after a: a consistent cut has a == b or a == b + 1.
+        ASSERT_TRUE(ga == gb || ga == gb + 1) << "a " << ga << " b " << gb;
+        for (auto& f : cut) {
+            for (uint8_t byte : f.sample.payload) ASSERT_EQ(byte, uint8_t(f.sample.data_ns)) << "torn payload";
+        }
+        if (!first_generation) first_generation = ga;
+        last_generation = ga;
+        ++checked;
+    }
+    stop = true;
+    writer.join();
+    EXPECT_EQ(checked, 10000);
+    EXPECT_GT(last_generation - first_generation, 100u);  // the writer really ran alongside
+}
+
+TEST(StoreWait, WaitNextWakesOnTheNextCommitAndReturnsTheNewest)
+{
+    Store store;
+    const Oid oid = store.add_object({.topic = "t"});
+    put(store, oid, 1, {1}, 1000);
+    std::thread writer([&] {
+        std::this_thread::sleep_for(50ms);
+        put(store, oid, 2, {2}, 2000);
+    });
+    auto f = store.wait_next(oid, 1000, 10s);
+    writer.join();
+    ASSERT_TRUE(f.ok()) << to_string(f.status);
+    EXPECT_EQ(f.sample.commit_ns, 2000u);
+    EXPECT_EQ(f.sample.payload, std::vector<uint8_t>{2});
+    // Something newer than `after` already there: no wait, the newest.
+    put(store, oid, 3, {3}, 3000);
+    EXPECT_EQ(store.wait_next(oid, 1000, 0ms).sample.commit_ns, 3000u);
+    EXPECT_EQ(store.wait_next(oid, 3000, 30ms).status, Status::timeout);
+    EXPECT_EQ(store.wait_next(999, 0, 30ms).status, Status::unknown_object);
+}
+
+TEST(StoreWait, SuccessorIsExactlyTheNextOrAGapWhenItWasEvicted)
+{
+    Store store{StoreOptions{{1000, 1 << 20}, 1 << 30}};
+    const Oid oid = store.add_object({.topic = "t"});
+    for (uint64_t c : {100, 200, 300}) put(store, oid, c, {uint8_t(c / 100)}, c);
+    EXPECT_EQ(store.successor(oid, 100, 0ms).sample.commit_ns, 200u);  // not the newest
+    EXPECT_EQ(store.successor(oid, 150, 0ms).sample.commit_ns, 200u);
+    EXPECT_EQ(store.successor(oid, 300, 20ms).status, Status::timeout);
+    std::thread writer([&] {
+        std::this_thread::sleep_for(50ms);
+        put(store, oid, 4, {4}, 400);
+    });
+    EXPECT_EQ(store.successor(oid, 300, 10s).sample.commit_ns, 400u);
+    writer.join();
+    store.expire(1250);  // 100 and 200 leave the 1000 ns window
+    EXPECT_EQ(store.successor(oid, 100, 0ms).status, Status::gap);  // 200 was next, and is gone
+    EXPECT_EQ(store.successor(oid, 200, 0ms).sample.commit_ns, 300u);
+}
+
+TEST(StoreWait, SuccessorOnAnEmptyObjectWaitsForTheFirstSample)
+{
+    Store store;
+    const Oid oid = store.add_object({.topic = "t"});
+    EXPECT_EQ(store.successor(oid, 0, 20ms).status, Status::timeout);
+    std::thread writer([&] {
+        std::this_thread::sleep_for(30ms);
+        put(store, oid, 1, {1}, 10);
+    });
+    EXPECT_EQ(store.successor(oid, 0, 10s).sample.commit_ns, 10u);
+    writer.join();
+}
+
+TEST(StoreRetention, KeepsTheTimeWindowOfEachTopic)
+{
+    Store store;
+    store.set_retention("fast", {1'000, 1 << 20});
+    const Oid fast = store.add_object({.topic = "fast"});
+    const Oid slow = store.add_object({.topic = "slow"});
+    EXPECT_EQ(store.info(fast)->history_interval_ns, 1'000u);
+    EXPECT_EQ(store.info(slow)->history_interval_ns, 10'000'000'000u);  // the default, 10 s
+    for (uint64_t t = 1; t <= 5000; ++t) {
+        put(store, fast, t, {1}, t);
+        put(store, slow, t, {1}, t);
+    }
+    // On commit the window is kept relative to the newest sample.
+    EXPECT_EQ(store.info(fast)->samples_held, 1001u);
+    EXPECT_EQ(store.info(slow)->samples_held, 5000u);
+    EXPECT_EQ(store.at(fast, 3000).status, Status::evicted);
+    store.expire(20'000'000'000ull);
+    EXPECT_EQ(store.info(slow)->samples_held, 0u);
+    EXPECT_EQ(store.latest(slow).status, Status::evicted);
+}
+
+TEST(StoreRetention, AFloodOfLargeSamplesStaysWithinTheByteBudgets)
+{
+    StoreOptions options;
+    options.default_retention = {~0ull / 2, 4 << 20};  // 4 MiB per topic, no time limit
+    options.max_bytes_total = 6 << 20;                 // 6 MiB in all
+    Store store(options);
+    const Oid a1 = store.add_object({.topic = "camera", .key = "1"});
+    const Oid a2 = store.add_object({.topic = "camera", .key = "2"});
+    const Oid b = store.add_object({.topic = "lidar"});
+    std::vector<uint8_t> big(100'000, 7);
+    uint64_t t = 1;
+    for (int i = 0; i < 300; ++i) {  // 30 MB into each topic
+        put(store, a1, t, big, t);
+        ++t;
+        put(store, a2, t, big, t);
+        ++t;
+        put(store, b, t, big, t);
+        ++t;
+        auto s = store.stats();
+        ASSERT_LE(s.bytes, 6u << 20);
+        ASSERT_LE(store.info(a1)->bytes_held + store.info(a2)->bytes_held, 4u << 20);
+    }
+    auto s = store.stats();
+    EXPECT_GT(s.bytes, 5u << 20);  // it still uses what it may
+    EXPECT_GT(s.evicted, 800u);
+    // The oldest went first: both camera instances keep their recent past.
+    EXPECT_GT(store.info(a1)->samples_held, 5u);
+    EXPECT_GT(store.info(a2)->samples_held, 5u);
+    EXPECT_TRUE(store.latest(a1).ok());
+}
+
+TEST(StoreRegistry, SearchesByNameTypeParentCreatorAndAliveAt)
+{
+    Store store;
+    const Oid proc = store.add_object({.kind = ObjectKind::process, .name = "vehicle_bridge_3", .type_name = "participant",
+                                       .creator = "vehicle_bridge_3", .creator_guid = "01.0f.aa", .created_ts = 100});
+    const Oid state3 = store.add_object({.topic = "vehicleState", .key = "3", .type_name = "VehicleState", .parent = proc,
+                                         .creator = "vehicle_bridge_3", .created_ts = 110});
+    const Oid ranges3 = store.add_object({.topic = "rangeSensors", .key = "3", .type_name = "RangeSensors", .parent = proc,
+                                          .creator = "vehicle_bridge_3", .created_ts = 120});
+    const Oid state4 = store.add_object({.topic = "vehicleState", .key = "4", .type_name = "VehicleState",
+                                         .creator = "vehicle_bridge_4", .created_ts = 300});
+    store.mark_deleted(ranges3, 200);
+    auto oids = [](const std::vector<ObjectInfo>& v) {
+        std::vector<Oid> o;
+        for (auto& i : v) o.push_back(i.oid);
+        return o;
+    };
+    EXPECT_EQ(store.info(state3)->name, "vehicleState/3");
+    EXPECT_EQ(oids(store.search({.name_regex = "VEHICLESTATE"})), (std::vector<Oid>{state3, state4}));
+    EXPECT_EQ(oids(store.search({.name_regex = "/3$"})), (std::vector<Oid>{state3, ranges3}));
+    EXPECT_EQ(oids(store.search({.type_name = "RangeSensors"})), (std::vector<Oid>{ranges3}));
+    EXPECT_EQ(oids(store.search({.parent = proc})), (std::vector<Oid>{state3, ranges3}));
+    EXPECT_EQ(oids(store.search({.creator = "01.0f.aa"})), (std::vector<Oid>{proc}));
+    EXPECT_EQ(oids(store.search({.creator = "vehicle_bridge_4"})), (std::vector<Oid>{state4}));
+    EXPECT_EQ(oids(store.search({.alive_at = 150})), (std::vector<Oid>{proc, state3, ranges3}));
+    EXPECT_EQ(oids(store.search({.alive_at = 250})), (std::vector<Oid>{proc, state3}));
+    EXPECT_EQ(oids(store.search({.name_regex = "state", .alive_at = 350})), (std::vector<Oid>{state3, state4}));
+    EXPECT_EQ(oids(store.search({.kind = ObjectKind::process})), (std::vector<Oid>{proc}));
+    EXPECT_THROW(store.search({.name_regex = "(unclosed"}), std::regex_error);
+
+    auto changes = store.changes_since(115);
+    EXPECT_EQ(oids(changes.created), (std::vector<Oid>{ranges3, state4}));
+    EXPECT_EQ(oids(changes.deleted), (std::vector<Oid>{ranges3}));
+    EXPECT_EQ(store.find("vehicleState", "4"), state4);
+    EXPECT_FALSE(store.find("vehicleState", "5"));
+}
+
+TEST(StoreRegistry, WaitForObjectWakesWhenOneAppearsAndTimesOutOtherwise)
+{
+    Store store;
+    EXPECT_FALSE(store.wait_for_object({.name_regex = "^camera"}, 20ms));
+    std::thread creator([&] {
+        std::this_thread::sleep_for(50ms);
+        store.add_object({.topic = "other"});
+        store.add_object({.topic = "cameraFrames", .type_name = "Image"});
+    });
+    auto found = store.wait_for_object({.name_regex = "^camera"}, 10s);
+    creator.join();
+    ASSERT_TRUE(found);
+    EXPECT_EQ(found->type_name, "Image");
+}
+
+TEST(StoreRegistry, DeletedObjectsStayReadableForTheirWindowThenArePurged)
+{
+    Store store;
+    store.set_retention("t", {1'000, 1 << 20});
+    const Oid oid = store.add_object({.topic = "t", .created_ts = 1});
+    put(store, oid, 1, {9}, 100);
+    store.mark_deleted(oid, 500);
+    store.expire(1'400);
+    ASSERT_TRUE(store.info(oid));
+    EXPECT_EQ(store.info(oid)->deleted_ts, 500u);
+    EXPECT_EQ(store.latest(oid).status, Status::evicted);  // its sample left the window at 1100
+    EXPECT_EQ(store.search({.alive_at = 600}).size(), 0u);
+    EXPECT_EQ(store.search({.alive_at = 400}).size(), 1u);
+    store.expire(1'501);
+    EXPECT_FALSE(store.info(oid));
+    EXPECT_EQ(store.latest(oid).status, Status::unknown_object);
+    EXPECT_EQ(store.stats().objects, 0u);
+    EXPECT_EQ(store.stats().purged_objects, 1u);
+}
+
+}  // namespace

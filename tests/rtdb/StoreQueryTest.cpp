@@ -1,0 +1,179 @@
+// The query matrix of the store: every query x {empty object, before first, equal to a stored
+// time, between two, after last, evicted, deleted-but-held, purged}, by commit and by data
+// time, with data times arriving out of order.
+#include <cpm/rtdb/Store.hpp>
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+using namespace cpm::rtdb;
+
+namespace {
+
+// Three samples: commit 100, 200, 300 with data times 10, 30, 20 (the third arrives late).
+// By data time the order is 10 (c100), 20 (c300), 30 (c200).
+constexpr uint64_t kWindow = 250;
+
+struct Fixture
+{
+    Store store{StoreOptions{{kWindow, 1 << 20}, 1 << 30}};
+    Oid oid = store.add_object({.topic = "vehicleState", .key = "3", .type_name = "VehicleState", .created_ts = 1});
+
+    void put(uint64_t commit, uint64_t data)
+    {
+        const std::string payload = "sample c" + std::to_string(commit);
+        EXPECT_EQ(store.commit(oid, {data, data + 5, commit - 1, reinterpret_cast<const uint8_t*>(payload.data()), payload.size()}, commit), commit);
+    }
+    void fill()
+    {
+        put(100, 10);
+        put(200, 30);
+        put(300, 20);
+    }
+};
+
+enum class Q { latest, at, older, younger, range };
+
+/// "c200" for a found sample (its commit time), otherwise the status's name.
+std::string answer(const Found& f)
+{
+    if (!f.ok()) return to_string(f.status);
+    EXPECT_EQ(std::string(f.sample.payload.begin(), f.sample.payload.end()), "sample c" + std::to_string(f.sample.commit_ns));
+    EXPECT_EQ(f.sample.valid_after_ns, f.sample.data_ns + 5);
+    EXPECT_EQ(f.sample.source_ns, f.sample.commit_ns - 1);
+    return "c" + std::to_string(f.sample.commit_ns);
+}
+
+std::string answer(const Range& r)
+{
+    if (r.status != Status::ok) return to_string(r.status);
+    std::string s;
+    for (auto& x : r.samples) s += (s.empty() ? "c" : " c") + std::to_string(x.commit_ns);
+    return s;
+}
+
+std::string ask(const Store& s, Oid oid, Q q, uint64_t t, By by)
+{
+    switch (q) {
+    case Q::latest: return answer(s.latest(oid));
+    case Q::at: return answer(s.at(oid, t, by));
+    case Q::older: return answer(s.older(oid, t, by));
+    case Q::younger: return answer(s.younger(oid, t, by));
+    case Q::range: return answer(s.range(oid, t, t + 100, by));
+    }
+    return "";
+}
+
+struct Case
+{
+    const char* situation;
+    By by;
+    uint64_t t;
+    const char *at, *older, *younger, *range;  // range is [t, t + 100)
+};
+
+class StoreQueryMatrix : public ::testing::TestWithParam<Case>
+{
+};
+
+// Scenarios "evicted" (c100 gone), "deleted" (deleted, still held) and "purged" are set up
+// by the situation name; the others query the three samples.
+TEST_P(StoreQueryMatrix, AnswersAsSpecified)
+{
+    const Case& c = GetParam();
+    Fixture f;
+    const std::string situation = c.situation;
+    if (situation != "empty") f.fill();
+    if (situation == "evicted") f.store.expire(100 + kWindow + 1);
+    if (situation == "deleted") {
+        f.store.mark_deleted(f.oid, 310);
+        f.store.expire(320);
+    }
+    if (situation == "purged") {
+        f.store.mark_deleted(f.oid, 310);
+        f.store.expire(310 + kWindow + 1);
+    }
+    EXPECT_EQ(ask(f.store, f.oid, Q::at, c.t, c.by), c.at) << situation << " at " << c.t;
+    EXPECT_EQ(ask(f.store, f.oid, Q::older, c.t, c.by), c.older) << situation << " older " << c.t;
+    EXPECT_EQ(ask(f.store, f.oid, Q::younger, c.t, c.by), c.younger) << situation << " younger " << c.t;
+    EXPECT_EQ(ask(f.store, f.oid, Q::range, c.t, c.by), c.range) << situation << " range from " << c.t;
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    ByCommitTime, StoreQueryMatrix,
+    ::testing::Values(Case{"empty", By::commit, 150, "not found", "not found", "not found", "not found"},
+                      Case{"before first", By::commit, 50, "not found", "not found", "c100", "c100"},
+                      Case{"equal", By::commit, 200, "c200", "c100", "c300", "c200"},
+                      Case{"between", By::commit, 250, "c200", "c200", "c300", "c300"},
+                      Case{"after last", By::commit, 400, "c300", "c300", "not yet", "not yet"},
+                      Case{"evicted", By::commit, 150, "evicted", "evicted", "c200", "c200"},
+                      Case{"evicted", By::commit, 20, "not found", "not found", "evicted", "evicted"},
+                      Case{"deleted", By::commit, 250, "c200", "c200", "c300", "c300"},
+                      Case{"purged", By::commit, 250, "unknown object", "unknown object", "unknown object", "unknown object"}));
+
+INSTANTIATE_TEST_SUITE_P(
+    ByDataTime, StoreQueryMatrix,
+    ::testing::Values(Case{"empty", By::data, 15, "not found", "not found", "not found", "not found"},
+                      Case{"before first", By::data, 5, "not found", "not found", "c100", "c100 c300 c200"},
+                      Case{"equal", By::data, 20, "c300", "c100", "c200", "c300 c200"},
+                      Case{"between", By::data, 25, "c300", "c300", "c200", "c200"},
+                      Case{"after last", By::data, 40, "c200", "c200", "not yet", "not yet"},
+                      Case{"evicted", By::data, 15, "evicted", "evicted", "c300", "c300 c200"},
+                      Case{"evicted", By::data, 5, "not found", "not found", "evicted", "c300 c200"},
+                      Case{"deleted", By::data, 25, "c300", "c300", "c200", "c200"},
+                      Case{"purged", By::data, 25, "unknown object", "unknown object", "unknown object", "unknown object"}));
+
+TEST(StoreQuery, LatestInEverySituation)
+{
+    Fixture f;
+    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "not found");
+    f.fill();
+    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "c300");  // the last committed, whatever its data time
+    f.store.mark_deleted(f.oid, 310);
+    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "c300");
+    f.store.expire(300 + kWindow + 1);
+    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "evicted");
+    f.store.expire(310 + kWindow + 1);
+    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "unknown object");
+}
+
+TEST(StoreQuery, CommitTimesStrictlyIncreaseWhenTheClockTies)
+{
+    Fixture f;
+    uint8_t b = 0;
+    EXPECT_EQ(f.store.commit(f.oid, {1, 1, 0, &b, 1}, 500), 500u);
+    EXPECT_EQ(f.store.commit(f.oid, {2, 2, 0, &b, 1}, 500), 501u);
+    EXPECT_EQ(f.store.commit(f.oid, {3, 3, 0, &b, 1}, 400), 502u);  // a clock step back does not reorder
+    EXPECT_EQ(f.store.at(f.oid, 501).sample.data_ns, 2u);
+}
+
+TEST(StoreQuery, EqualDataTimesAnswerWithTheOneCommittedLast)
+{
+    Fixture f;
+    f.put(100, 50);
+    f.put(200, 50);
+    f.put(300, 40);
+    EXPECT_EQ(answer(f.store.at(f.oid, 50, By::data)), "c200");
+    EXPECT_EQ(answer(f.store.younger(f.oid, 40, By::data)), "c100");
+    EXPECT_EQ(answer(f.store.range(f.oid, 0, 100, By::data)), "c300 c100 c200");
+}
+
+TEST(StoreQuery, RangeHonoursItsLimitAndSaysSo)
+{
+    Fixture f;
+    f.fill();
+    auto r = f.store.range(f.oid, 0, 1000, By::commit, 2);
+    EXPECT_EQ(answer(r), "c100 c200");
+    EXPECT_TRUE(r.truncated);
+    EXPECT_EQ(answer(f.store.range(f.oid, 300, 200)), "not found");  // t1 < t0 is empty
+}
+
+TEST(StoreQuery, UnknownObjectIsNamedAsSuch)
+{
+    Store store;
+    EXPECT_EQ(store.at(42, 1).status, Status::unknown_object);
+    EXPECT_FALSE(store.info(42));
+}
+
+}  // namespace
