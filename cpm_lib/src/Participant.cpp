@@ -116,7 +116,8 @@ ParticipantCore::ParticipantCore(const ParticipantOptions& options)
                                    "participant option domain_id"))
 {
     dds::DomainParticipantQos qos = participant_qos(options);
-    participant_ = factory_->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos);
+    participant_ = factory_->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, options.discovery_listener,
+                                                dds::StatusMask::none());
     if (participant_ == nullptr) {
         throw Error("cannot create a DDS participant on domain " + std::to_string(domain_id_) +
                     " (Fast DDS refused the transport or discovery settings; see its log above)");

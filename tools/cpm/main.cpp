@@ -1,6 +1,7 @@
 // cpm — the lab's command line, in the style of `ros2`:
 //   cpm lab clock --nodes a,b,c [--simulated --until 10s | --start-delay 1s --duration 60s]
 // Errors go to stderr with the reason, and the exit code is non-zero.
+#include "history.hpp"
 #include "vehicle_sim.hpp"
 
 #include <cpm/CommandLine.hpp>
@@ -52,6 +53,9 @@ const char* kTopHelp =
     "  fsm check    check a state machine file (.json or UMLet .uxf): every error and warning\n"
     "  fsm convert  print a UMLet drawing's state machine as JSON\n"
     "  fsm render   draw a state machine with Graphviz (-o OUT.svg|png|dot)\n"
+    "  history ...  ask the history service about the recent past: list, search, latest, at,\n"
+    "               older, younger, range, wait, successor, snapshot (see `cpm history --help`)\n"
+    "  dump         one table of every object the history service holds\n"
     "  vehicle sim  start simulated cars: firmware simulator + vehicle bridge over a pty\n"
     "               (see `cpm vehicle sim --help`)\n"
     "\n"
@@ -302,6 +306,16 @@ int main(int argc, char** argv)
                                            {"fsm", "check", kFsmCheckHelp, fsm_check},
                                            {"fsm", "convert", kFsmConvertHelp, fsm_convert},
                                            {"fsm", "render", kFsmRenderHelp, fsm_render}};
+        if (args[0] == "dump" || args[0] == "history") {
+            if (help) {
+                std::fputs(args[0] == "dump" ? cpm::tools::kDumpHelp : cpm::tools::kHistoryHelp, stdout);
+                return 0;
+            }
+            cpm::init(argc, argv);
+            if (args[0] == "dump") return cpm::tools::dump_command(std::vector<std::string>(args.begin() + 1, args.end()));
+            if (args.size() < 2) throw UsageError("cpm history: which query? (see cpm history --help)");
+            return cpm::tools::history_command(args[1], std::vector<std::string>(args.begin() + 2, args.end()));
+        }
         for (const auto& c : commands) {
             if (args.size() < 2 || args[0] != c.group || args[1] != c.verb) continue;
             if (help) {

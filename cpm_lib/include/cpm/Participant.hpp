@@ -7,7 +7,8 @@
 
 namespace eprosima::fastdds::dds {
 class DomainParticipant;
-}
+class DomainParticipantListener;
+}  // namespace eprosima::fastdds::dds
 
 namespace cpm {
 namespace detail {
@@ -26,6 +27,9 @@ struct ParticipantOptions
     std::string discovery_server;            ///< "host:port" of a Fast DDS discovery server (server id 0)
     bool shared_memory = true;               ///< use shared memory between processes on this host
     int max_initial_peers_range = 32;        ///< participants per host that unicast discovery probes
+    /// Told of every participant, writer and reader discovered from the first moment (its
+    /// discovery callbacks only; it must outlive the participant). For tools such as cpm_history.
+    eprosima::fastdds::dds::DomainParticipantListener* discovery_listener = nullptr;
 
     /// The options given by cpm::init (or the environment).
     static ParticipantOptions from_init();

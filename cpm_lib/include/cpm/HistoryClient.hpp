@@ -1,0 +1,153 @@
+#pragma once
+// cpm::HistoryClient — asks the lab's history service (cpm_history) what an object was at a
+// time in the recent past, by commit time (when the service received it) or by data time
+// (create_stamp). Typed calls decode the stored payload as T; untyped calls return the reply
+// with the payload bytes.
+//
+//   cpm::HistoryClient history;
+//   auto r = history.at<VehicleState>("vehicleState", 3, t);   // r.ok(), r.status, r.sample
+#include <cpm/Error.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm/TopicType.hpp>
+
+#include <HistoryReply.h>
+#include <HistoryRequest.h>
+#include <cpm_topic_types.hpp>
+
+#include <fastdds/rtps/common/SerializedPayload.h>
+
+#include <chrono>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <type_traits>
+
+namespace cpm {
+
+template <class T>
+struct HistoryResult
+{
+    std::string status;  ///< ok, not found, evicted, not yet, timeout, gap, unknown object, error
+    std::string error;   ///< why, when the request was refused
+    uint64_t commit_ns = 0, data_ns = 0, valid_after_ns = 0, source_ns = 0;
+    T sample{};
+    bool ok() const { return status == "ok"; }
+};
+
+enum class HistoryBy { commit, data };
+
+class HistoryClient
+{
+public:
+    /// reply_timeout: how long to wait for the service beyond a request's own timeout.
+    explicit HistoryClient(Participant& participant = Participant::default_participant(),
+                           std::chrono::milliseconds reply_timeout = std::chrono::milliseconds(3000));
+    ~HistoryClient();
+    HistoryClient(const HistoryClient&) = delete;
+    HistoryClient& operator=(const HistoryClient&) = delete;
+
+    /// Sends a request (client_id and request_id are filled in) and waits for its reply.
+    /// Throws cpm::Error when no service answers in time.
+    HistoryReply request(HistoryRequest rq);
+
+    // Untyped: the reply, payloads as bytes.
+    HistoryReply latest(const std::string& topic, const std::string& key = "");
+    HistoryReply at(const std::string& topic, const std::string& key, uint64_t t, HistoryBy by = HistoryBy::commit);
+
+    // Typed: the payload decoded as T (a cpm type, or one registered with CPM_REGISTER_TYPE).
+    template <class T, class Key>
+    HistoryResult<T> latest(const std::string& topic, const Key& key)
+    {
+        return decoded<T>(request(make("latest", topic, key_text(key))));
+    }
+    template <class T, class Key>
+    HistoryResult<T> at(const std::string& topic, const Key& key, uint64_t t, HistoryBy by = HistoryBy::commit)
+    {
+        return decoded<T>(request(make("at", topic, key_text(key), t, by)));
+    }
+    template <class T, class Key>
+    HistoryResult<T> older(const std::string& topic, const Key& key, uint64_t t, HistoryBy by = HistoryBy::commit)
+    {
+        return decoded<T>(request(make("older", topic, key_text(key), t, by)));
+    }
+    template <class T, class Key>
+    HistoryResult<T> younger(const std::string& topic, const Key& key, uint64_t t, HistoryBy by = HistoryBy::commit)
+    {
+        return decoded<T>(request(make("younger", topic, key_text(key), t, by)));
+    }
+    /// The newest sample committed after `after`, waiting up to `timeout`.
+    template <class T, class Key>
+    HistoryResult<T> wait_next(const std::string& topic, const Key& key, uint64_t after, std::chrono::nanoseconds timeout)
+    {
+        auto rq = make("wait_next", topic, key_text(key), after);
+        rq.timeout_ns(static_cast<uint64_t>(timeout.count()));
+        return decoded<T>(request(rq));
+    }
+    /// Samples with time in [t0, t1), oldest first.
+    template <class T, class Key>
+    std::vector<HistoryResult<T>> range(const std::string& topic, const Key& key, uint64_t t0, uint64_t t1,
+                                        HistoryBy by = HistoryBy::commit, uint32_t limit = 1000)
+    {
+        auto rq = make("range", topic, key_text(key), t0, by);
+        rq.t1(t1);
+        rq.limit(limit);
+        auto reply = request(rq);
+        std::vector<HistoryResult<T>> out;
+        for (const auto& s : reply.samples()) out.push_back(decode<T>(s, reply));
+        return out;
+    }
+
+    /// Decodes a stored payload (CDR encapsulation included) as T.
+    template <class T>
+    static bool decode_payload(const std::vector<uint8_t>& bytes, T& out)
+    {
+        typename TopicType<T>::PubSubType type;
+        eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(bytes.size()));
+        std::memcpy(payload.data, bytes.data(), bytes.size());
+        payload.length = static_cast<uint32_t>(bytes.size());
+        return type.deserialize(&payload, &out);
+    }
+
+    static HistoryRequest make(const std::string& kind, const std::string& topic, const std::string& key, uint64_t t0 = 0,
+                               HistoryBy by = HistoryBy::commit);
+
+private:
+    template <class K>
+    static std::string key_text(const K& key)
+    {
+        if constexpr (std::is_arithmetic_v<K>) return std::to_string(static_cast<long long>(key));
+        else return std::string(key);
+    }
+    template <class T>
+    static HistoryResult<T> decode(const HistorySample& s, const HistoryReply& reply)
+    {
+        HistoryResult<T> r;
+        r.status = s.status().empty() ? reply.status() : s.status();
+        r.error = reply.error();
+        r.commit_ns = s.commit_ns();
+        r.data_ns = s.data_ns();
+        r.valid_after_ns = s.valid_after_ns();
+        r.source_ns = s.source_ns();
+        if (!decode_payload(s.payload(), r.sample)) {
+            r.status = "error";
+            r.error = "the stored payload does not decode as the type asked for";
+        }
+        return r;
+    }
+    template <class T>
+    static HistoryResult<T> decoded(const HistoryReply& reply)
+    {
+        if (reply.samples().empty()) {
+            HistoryResult<T> r;
+            r.status = reply.status();
+            r.error = reply.error();
+            return r;
+        }
+        return decode<T>(reply.samples().front(), reply);
+    }
+
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace cpm

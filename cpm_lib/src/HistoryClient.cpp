@@ -1,0 +1,111 @@
+#include <cpm/AsyncReader.hpp>
+#include <cpm/HistoryClient.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/stamp_message.hpp>
+
+#include <atomic>
+#include <condition_variable>
+#include <map>
+#include <mutex>
+#include <random>
+#include <unistd.h>
+
+namespace cpm {
+
+namespace {
+
+WriterOptions request_options()
+{
+    WriterOptions o;
+    o.reliable = true;
+    o.history_depth = 64;
+    return o;
+}
+
+ReaderOptions reply_options()
+{
+    ReaderOptions o;
+    o.reliable = true;
+    o.keep_all = true;
+    return o;
+}
+
+}  // namespace
+
+struct HistoryClient::Impl
+{
+    std::string client_id;
+    std::chrono::milliseconds reply_timeout;
+    std::mutex mutex;
+    std::condition_variable cv;
+    std::map<uint64_t, HistoryReply> replies;  // arrived, not yet collected
+    std::atomic<uint64_t> next_id{1};
+    Writer<HistoryRequest> requests;
+    AsyncReader<HistoryReply> reader;
+
+    Impl(Participant& p, std::chrono::milliseconds timeout)
+        : client_id(std::to_string(::getpid()) + "-" + std::to_string(std::random_device{}())), reply_timeout(timeout),
+          requests(p, "historyRequest", request_options()),
+          reader(
+              [this](std::vector<HistoryReply>& batch) {
+                  std::lock_guard lock(mutex);
+                  for (auto& r : batch) {
+                      if (r.client_id() == client_id) replies[r.request_id()] = std::move(r);
+                  }
+                  cv.notify_all();
+              },
+              p, "historyReply", reply_options())
+    {
+    }
+};
+
+HistoryClient::HistoryClient(Participant& participant, std::chrono::milliseconds reply_timeout)
+    : impl_(std::make_unique<Impl>(participant, reply_timeout))
+{
+}
+
+HistoryClient::~HistoryClient() = default;
+
+HistoryRequest HistoryClient::make(const std::string& kind, const std::string& topic, const std::string& key, uint64_t t0, HistoryBy by)
+{
+    HistoryRequest rq;
+    rq.kind(kind);
+    rq.topic(topic);
+    rq.key(key);
+    rq.t0(t0);
+    rq.by(by == HistoryBy::data ? "data" : "commit");
+    return rq;
+}
+
+HistoryReply HistoryClient::request(HistoryRequest rq)
+{
+    auto& d = *impl_;
+    const auto deadline = std::chrono::steady_clock::now() + d.reply_timeout + std::chrono::nanoseconds(rq.timeout_ns());
+    // A volatile request sent before the service's reader matched would be lost: wait for it.
+    auto left = [&] { return std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now()); };
+    if (!d.requests.wait_for_matched(1, left()) || !d.reader.wait_for_matched(1, left())) {
+        throw Error("history: no history service answers on this domain (is cpm_history running?)");
+    }
+    const uint64_t id = d.next_id++;
+    rq.client_id(d.client_id);
+    rq.request_id(id);
+    stamp_message(rq, get_time_ns(), 0);
+    if (!d.requests.write(rq)) throw Error("history: the request could not be sent");
+    std::unique_lock lock(d.mutex);
+    if (!d.cv.wait_until(lock, deadline, [&] { return d.replies.count(id) != 0; })) {
+        throw Error("history: no reply to request " + std::to_string(id) + " (" + rq.kind() + ") in time");
+    }
+    HistoryReply reply = std::move(d.replies[id]);
+    d.replies.erase(id);
+    return reply;
+}
+
+HistoryReply HistoryClient::latest(const std::string& topic, const std::string& key) { return request(make("latest", topic, key)); }
+
+HistoryReply HistoryClient::at(const std::string& topic, const std::string& key, uint64_t t, HistoryBy by)
+{
+    return request(make("at", topic, key, t, by));
+}
+
+}  // namespace cpm

@@ -1,0 +1,49 @@
+#pragma once
+// cpm_history as a library: finds topics by DDS discovery, records every matching one into a
+// Store as raw serialized payloads (types it was never compiled with included), answers
+// historyRequest with historyReply and publishes historyStatus.
+#include <cpm/Participant.hpp>
+#include <cpm/rtdb/Store.hpp>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace cpm::rtdb {
+
+struct ServiceOptions
+{
+    std::vector<std::string> include;  ///< topic name regexes (full match); empty: every topic
+    std::vector<std::string> exclude;  ///< topic name regexes never recorded (historyRequest/Reply always are)
+    uint64_t window_ns = 10'000'000'000ull;
+    uint64_t max_bytes = 512ull << 20;  ///< payload bytes across all topics
+    uint64_t max_bytes_per_topic = 128ull << 20;
+    uint64_t status_period_ns = 1'000'000'000ull;
+    size_t workers = 4;  ///< threads answering requests that may wait
+    ParticipantOptions participant = ParticipantOptions::from_init();
+};
+
+struct ServiceCounters
+{
+    uint64_t topics = 0, received = 0, dropped = 0, requests = 0, bad_requests = 0;
+};
+
+class HistoryService
+{
+public:
+    /// Starts recording and serving at once. Throws cpm::Error for a bad pattern or when DDS
+    /// refuses the participants.
+    explicit HistoryService(ServiceOptions options);
+    ~HistoryService();
+    HistoryService(const HistoryService&) = delete;
+    HistoryService& operator=(const HistoryService&) = delete;
+
+    const Store& store() const;
+    ServiceCounters counters() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace cpm::rtdb

@@ -1,0 +1,71 @@
+// cpm_history: the lab's history service (KogMo-RTDB over DDS). Records every topic it
+// discovers into a time-indexed store and answers historyRequest on historyReply.
+#include <cpm/CommandLine.hpp>
+#include <cpm/init.hpp>
+#include <cpm/rtdb/HistoryService.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <sstream>
+#include <thread>
+
+namespace {
+
+const char* kHelp =
+    "usage: cpm_history [--include REGEX]... [--exclude REGEX]... [--window 10s] [--max-bytes N]\n"
+    "                   [--max-bytes-per-topic N] [--status-period 1s] [--dds_domain N]\n"
+    "\n"
+    "Finds topics by DDS discovery and records every one whose name matches an --include pattern\n"
+    "(all when none is given) and no --exclude pattern (full-match ECMAScript regexes), types it\n"
+    "was never compiled with included: it keeps the serialized payloads and reads the stamps from\n"
+    "the Header every cpm type starts with. Each topic keeps --window of history (and at most\n"
+    "--max-bytes-per-topic, default 128 MiB; --max-bytes in all, default 512 MiB). Deleted\n"
+    "objects (disposed, or their writers gone) stay readable for the window.\n"
+    "Answers historyRequest on historyReply (cpm history ..., cpm dump, cpm::HistoryClient) and\n"
+    "publishes historyStatus every --status-period. Ends on SIGINT/SIGTERM.\n";
+
+int run(int argc, char** argv)
+{
+    std::vector<std::string> args(argv + 1, argv + argc);
+    auto parsed = cpm::cli::parse_args(args,
+                                       {{"--include", true, true},
+                                        {"--exclude", true, true},
+                                        {"--window", true},
+                                        {"--max-bytes", true},
+                                        {"--max-bytes-per-topic", true},
+                                        {"--status-period", true}},
+                                       "cpm_history");
+    if (!parsed.positional.empty()) throw cpm::cli::UsageError("cpm_history: unexpected argument '" + parsed.positional[0] + "'");
+    cpm::rtdb::ServiceOptions options;
+    auto lines = [&](const char* flag) {
+        std::vector<std::string> out;
+        if (!parsed.has(flag)) return out;
+        std::string all = parsed.get(flag), item;
+        for (std::istringstream in(all); std::getline(in, item);) out.push_back(item);
+        return out;
+    };
+    options.include = lines("--include");
+    options.exclude = lines("--exclude");
+    options.window_ns = cpm::cli::parse_duration("--window", parsed.get("--window", "10s"));
+    if (options.window_ns == 0) throw cpm::cli::UsageError("cpm_history: --window must be longer than 0");
+    options.max_bytes = static_cast<uint64_t>(cpm::cli::parse_integer("--max-bytes", parsed.get("--max-bytes", "536870912"), 1024, 1LL << 40));
+    options.max_bytes_per_topic = static_cast<uint64_t>(
+        cpm::cli::parse_integer("--max-bytes-per-topic", parsed.get("--max-bytes-per-topic", "134217728"), 1024, 1LL << 40));
+    options.status_period_ns = cpm::cli::parse_duration("--status-period", parsed.get("--status-period", "1s"));
+    cpm::init(argc, argv);
+    options.participant = cpm::ParticipantOptions::from_init();
+
+    cpm::cli::stop_on_signals();
+    cpm::rtdb::HistoryService service(options);
+    std::fprintf(stderr, "cpm_history: recording (window %.1f s); Ctrl-C ends\n", double(options.window_ns) * 1e-9);
+    while (!cpm::cli::stop_requested()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    auto c = service.counters();
+    std::printf("{\"topics\": %llu, \"received\": %llu, \"dropped\": %llu, \"requests\": %llu, \"bad_requests\": %llu}\n",
+                (unsigned long long)c.topics, (unsigned long long)c.received, (unsigned long long)c.dropped,
+                (unsigned long long)c.requests, (unsigned long long)c.bad_requests);
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "cpm_history", kHelp, run); }

@@ -1,0 +1,317 @@
+// cpm history ... and cpm dump: the history service's answers on the command line.
+#include "history.hpp"
+
+#include "IdlDecoder.hpp"
+
+#include <cpm/CommandLine.hpp>
+#include <cpm/HistoryClient.hpp>
+#include <cpm/get_time_ns.hpp>
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <ctime>
+#include <memory>
+#include <sys/stat.h>
+
+namespace cpm::tools {
+
+const char* kHistoryHelp =
+    "usage: cpm history list|search|latest|at|older|younger|range|wait|successor|snapshot [flags] [--json]\n"
+    "\n"
+    "Asks the history service (cpm_history, on this domain) about the recent past.\n"
+    "  list                                 every object held (alive and deleted-but-held)\n"
+    "  search [--name REGEX] [--type T] [--parent OID] [--creator NAME|GUID] [--alive-at T]\n"
+    "  latest --topic NAME [--key K]\n"
+    "  at|older|younger --topic NAME [--key K] --time T [--by commit|data]\n"
+    "                                       newest at or before / strictly before / after T\n"
+    "  range --topic NAME [--key K] --from T --to T [--by commit|data] [--limit N]\n"
+    "  wait --topic NAME [--key K] [--time T] [--timeout 10s]   newest committed after T (default now)\n"
+    "  successor --topic NAME [--key K] --time T [--timeout 10s]  exactly the next one, or 'gap'\n"
+    "  snapshot --objects TOPIC[/KEY],... --time T [--by commit|data]   one consistent cut\n"
+    "--key: a vehicle id, or the key as `cpm history list` prints it. Times: nanoseconds,\n"
+    "ISO-8601 UTC (2026-11-23T14:05:00.25Z) or relative to now (-2s). --by commit (default):\n"
+    "when the service received it; data: the sample's create_stamp.\n"
+    "Output: a table, or one JSON object per line (--json) with every field of a cpm type\n"
+    "decoded; a type cpm does not know is shown with its stamps and payload_base64.\n"
+    "Exit code 0 when the answer is ok; 1 with the status (not found, evicted, not yet, timeout,\n"
+    "gap) or the service's error on stderr; 2 on a usage error.\n";
+
+const char* kDumpHelp =
+    "usage: cpm dump [--alive] [--json] [--dds_domain N]\n"
+    "\n"
+    "One table of every object the history service holds (like kogmo_rtdb_dump -a): name, type,\n"
+    "creator, created, deleted, samples held, rate, age of the newest sample. Processes are\n"
+    "objects too. --alive: only objects alive now.\n";
+
+namespace {
+
+using cpm::cli::UsageError;
+
+/// A time as nanoseconds since the epoch: digits (ns), ISO-8601 UTC
+/// (2026-11-23T14:05:00.250Z) or relative to now (-2s, +500ms, now).
+uint64_t parse_time(const std::string& flag, const std::string& text)
+{
+    if (text == "now") return cpm::get_time_ns();
+    if (!text.empty() && (text[0] == '-' || text[0] == '+')) {
+        const uint64_t d = cpm::cli::parse_duration(flag, text.substr(1));
+        const uint64_t now = cpm::get_time_ns();
+        return text[0] == '-' ? (d > now ? 0 : now - d) : now + d;
+    }
+    if (!text.empty() && text.find_first_not_of("0123456789") == std::string::npos) {
+        return std::stoull(text);
+    }
+    std::tm tm{};
+    const char* rest = ::strptime(text.c_str(), "%Y-%m-%dT%H:%M:%S", &tm);
+    if (!rest) {
+        throw UsageError(flag + " '" + text + "': expected nanoseconds, ISO-8601 (2026-11-23T14:05:00.25Z) or relative (-2s)");
+    }
+    uint64_t frac_ns = 0;
+    if (*rest == '.') {
+        ++rest;
+        uint64_t scale = 100'000'000;
+        while (*rest >= '0' && *rest <= '9') {
+            frac_ns += uint64_t(*rest - '0') * scale;
+            scale /= 10;
+            ++rest;
+        }
+    }
+    if (*rest == 'Z') ++rest;
+    if (*rest != '\0') throw UsageError(flag + " '" + text + "': only UTC times (ending in Z or nothing) are accepted");
+    return uint64_t(::timegm(&tm)) * 1'000'000'000ull + frac_ns;
+}
+
+std::string base64(const std::vector<uint8_t>& b)
+{
+    static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string out;
+    for (size_t i = 0; i < b.size(); i += 3) {
+        const uint32_t v = uint32_t(b[i]) << 16 | (i + 1 < b.size() ? uint32_t(b[i + 1]) << 8 : 0) | (i + 2 < b.size() ? b[i + 2] : 0);
+        out += t[v >> 18 & 63];
+        out += t[v >> 12 & 63];
+        out += i + 1 < b.size() ? t[v >> 6 & 63] : '=';
+        out += i + 2 < b.size() ? t[v & 63] : '=';
+    }
+    return out;
+}
+
+const IdlDecoder& decoder()
+{
+    static std::unique_ptr<IdlDecoder> d = [] {
+        std::vector<std::string> dirs;
+        if (const char* env = std::getenv("CPM_IDL_DIR")) dirs.push_back(env);
+        dirs.push_back(CPM_IDL_SOURCE_DIR);
+        dirs.push_back(CPM_IDL_INSTALL_DIR);
+        for (const auto& dir : dirs) {
+            struct stat st{};
+            if (::stat(dir.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) return std::make_unique<IdlDecoder>(dir);
+        }
+        return std::unique_ptr<IdlDecoder>();
+    }();
+    if (!d) throw std::runtime_error("cannot find the lab's IDL files (set CPM_IDL_DIR)");
+    return *d;
+}
+
+nlohmann::json object_json(const HistoryObject& o, uint64_t now)
+{
+    return {{"oid", o.oid()},
+            {"name", o.name()},
+            {"kind", o.is_process() ? "process" : "instance"},
+            {"topic", o.topic()},
+            {"key", o.key()},
+            {"type", o.type_name()},
+            {"parent", o.parent()},
+            {"creator", o.creator()},
+            {"creator_guid", o.creator_guid()},
+            {"created_ts", o.created_ts()},
+            {"deleted_ts", o.deleted_ts()},
+            {"history_interval_ns", o.history_interval_ns()},
+            {"samples_held", o.samples_held()},
+            {"bytes_held", o.bytes_held()},
+            {"samples_total", o.samples_total()},
+            {"rate_hz", o.avg_cycle_s() > 0 ? 1.0 / o.avg_cycle_s() : 0.0},
+            {"max_cycle_s", o.max_cycle_s()},
+            {"newest_age_s", o.newest_commit_ns() ? double(now - std::min(now, o.newest_commit_ns())) * 1e-9 : -1.0}};
+}
+
+nlohmann::json sample_json(const HistorySample& s, const HistoryObject* o)
+{
+    nlohmann::json j{{"status", s.status()},         {"commit_ns", s.commit_ns()}, {"data_ns", s.data_ns()},
+                     {"valid_after_ns", s.valid_after_ns()}, {"source_ns", s.source_ns()}};
+    if (o) {
+        j["topic"] = o->topic();
+        j["key"] = o->key();
+        j["type"] = o->type_name();
+        if (auto data = decoder().decode(o->type_name(), s.payload())) {
+            j["data"] = *data;
+            return j;
+        }
+    }
+    j["payload_base64"] = base64(s.payload());
+    return j;
+}
+
+std::string age_text(double s)
+{
+    char buf[32];
+    if (s < 0) return "-";
+    std::snprintf(buf, sizeof buf, s < 10 ? "%.3f s" : "%.1f s", s);
+    return buf;
+}
+
+std::string time_text(uint64_t ns)
+{
+    if (!ns) return "-";
+    const std::time_t secs = std::time_t(ns / 1'000'000'000ull);
+    std::tm tm{};
+    ::gmtime_r(&secs, &tm);
+    char buf[48];
+    std::strftime(buf, sizeof buf, "%H:%M:%S", &tm);
+    char out[64];
+    std::snprintf(out, sizeof out, "%s.%03llu", buf, (unsigned long long)(ns / 1'000'000 % 1000));
+    return out;
+}
+
+void print_objects(const HistoryReply& reply, bool json)
+{
+    const uint64_t now = cpm::get_time_ns();
+    if (json) {
+        for (const auto& o : reply.objects()) std::printf("%s\n", object_json(o, now).dump().c_str());
+        return;
+    }
+    std::printf("%-5s %-28s %-22s %-20s %-12s %-12s %8s %9s %10s\n", "oid", "name", "type", "creator", "created", "deleted",
+                "samples", "rate", "newest");
+    for (const auto& o : reply.objects()) {
+        const auto j = object_json(o, now);
+        char rate[32];
+        std::snprintf(rate, sizeof rate, "%.1f Hz", j["rate_hz"].get<double>());
+        std::printf("%-5llu %-28s %-22s %-20s %-12s %-12s %8llu %9s %10s\n", (unsigned long long)o.oid(), o.name().c_str(),
+                    o.type_name().c_str(), o.creator().c_str(), time_text(o.created_ts()).c_str(), time_text(o.deleted_ts()).c_str(),
+                    (unsigned long long)o.samples_held(), o.is_process() ? "-" : rate, age_text(j["newest_age_s"]).c_str());
+    }
+}
+
+void print_samples(const HistoryReply& reply, bool json)
+{
+    for (size_t i = 0; i < reply.samples().size(); ++i) {
+        const auto& s = reply.samples()[i];
+        // A snapshot names one object per sample; other answers are about the one object.
+        const HistoryObject* o = reply.objects().size() == reply.samples().size() ? &reply.objects()[i]
+                                 : reply.objects().empty()                        ? nullptr
+                                                                                  : &reply.objects()[0];
+        auto j = sample_json(s, o);
+        if (json) {
+            std::printf("%s\n", j.dump().c_str());
+        } else {
+            std::printf("%s%s  commit %llu  data %llu  valid_after %llu  %s\n", o ? o->name().c_str() : "", o ? ":" : "",
+                        (unsigned long long)s.commit_ns(), (unsigned long long)s.data_ns(), (unsigned long long)s.valid_after_ns(),
+                        j.contains("data") ? j["data"].dump().c_str() : ("payload " + j["payload_base64"].get<std::string>()).c_str());
+        }
+    }
+}
+
+}  // namespace
+
+int history_command(const std::string& verb, const std::vector<std::string>& args)
+{
+    const std::string command = "cpm history " + verb;
+    auto parsed = cpm::cli::parse_args(args,
+                                       {{"--topic", true},
+                                        {"--key", true},
+                                        {"--oid", true},
+                                        {"--time", true},
+                                        {"--by", true},
+                                        {"--from", true},
+                                        {"--to", true},
+                                        {"--timeout", true},
+                                        {"--limit", true},
+                                        {"--objects", true},
+                                        {"--name", true},
+                                        {"--type", true},
+                                        {"--parent", true},
+                                        {"--creator", true},
+                                        {"--alive-at", true},
+                                        {"--json", false}},
+                                       command);
+    if (!parsed.positional.empty()) throw UsageError(command + ": unexpected argument '" + parsed.positional[0] + "'");
+    static const std::map<std::string, std::string> kinds{{"list", "list"},     {"at", "at"},         {"older", "older"},
+                                                          {"younger", "younger"}, {"range", "range"}, {"latest", "latest"},
+                                                          {"wait", "wait_next"}, {"search", "search"}, {"snapshot", "snapshot"},
+                                                          {"successor", "successor"}};
+    auto kind = kinds.find(verb);
+    if (kind == kinds.end()) throw UsageError("unknown command 'history " + verb + "' (see cpm history --help)");
+    HistoryRequest rq;
+    rq.kind(kind->second);
+    rq.topic(parsed.get("--topic"));
+    rq.key(parsed.get("--key"));
+    if (parsed.has("--oid")) rq.oid(uint64_t(cpm::cli::parse_integer("--oid", parsed.get("--oid"), 1, INT64_MAX)));
+    const std::string by = parsed.get("--by", "commit");
+    if (by != "commit" && by != "data") throw UsageError(command + ": --by '" + by + "': expected commit or data");
+    rq.by(by);
+    const bool object_query = verb != "list" && verb != "search" && verb != "snapshot";
+    if (object_query && rq.topic().empty() && !rq.oid()) throw UsageError(command + ": --topic NAME (and --key K) is required");
+    const bool timed = verb == "at" || verb == "older" || verb == "younger" || verb == "snapshot";
+    if (timed) {
+        if (!parsed.has("--time")) throw UsageError(command + ": --time T is required (ns, ISO-8601 or relative such as -2s)");
+        rq.t0(parse_time("--time", parsed.get("--time")));
+    }
+    if (verb == "range") {
+        if (!parsed.has("--from") || !parsed.has("--to")) throw UsageError(command + ": --from T and --to T are required");
+        rq.t0(parse_time("--from", parsed.get("--from")));
+        rq.t1(parse_time("--to", parsed.get("--to")));
+        if (rq.t1() < rq.t0()) throw UsageError(command + ": --to is before --from");
+    }
+    if (verb == "wait" || verb == "successor") rq.t0(parsed.has("--time") ? parse_time("--time", parsed.get("--time")) : cpm::get_time_ns());
+    if (parsed.has("--timeout")) rq.timeout_ns(cpm::cli::parse_duration("--timeout", parsed.get("--timeout")));
+    else if (verb == "wait" || verb == "successor") rq.timeout_ns(10'000'000'000ull);
+    if (parsed.has("--limit")) rq.limit(uint32_t(cpm::cli::parse_integer("--limit", parsed.get("--limit"), 1, 100000)));
+    if (verb == "snapshot") {
+        if (!parsed.has("--objects")) throw UsageError(command + ": --objects TOPIC[/KEY],... is required");
+        for (const auto& o : cpm::cli::split_list("--objects", parsed.get("--objects"))) rq.objects().push_back(o);
+    }
+    rq.name_regex(parsed.get("--name"));
+    rq.type_name(parsed.get("--type"));
+    if (parsed.has("--parent")) rq.parent(uint64_t(cpm::cli::parse_integer("--parent", parsed.get("--parent"), 1, INT64_MAX)));
+    rq.creator(parsed.get("--creator"));
+    if (parsed.has("--alive-at")) rq.alive_at(parse_time("--alive-at", parsed.get("--alive-at")));
+
+    cpm::HistoryClient client;
+    const HistoryReply reply = client.request(rq);
+    const bool json = parsed.has("--json");
+    if (reply.status() == "error" || reply.status() == "unknown object") {
+        std::fprintf(stderr, "cpm history %s: %s: %s\n", verb.c_str(), reply.status().c_str(), reply.error().c_str());
+        return 1;
+    }
+    if (verb == "list" || verb == "search") print_objects(reply, json);
+    else print_samples(reply, json);
+    if (reply.truncated()) std::fprintf(stderr, "cpm history %s: more samples matched than --limit; the oldest are shown\n", verb.c_str());
+    if (reply.status() != "ok") {
+        const std::string what = rq.topic().empty() ? "" : rq.topic() + (rq.key().empty() ? "" : "/" + rq.key()) + ": ";
+        std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(), what.c_str(), reply.status().c_str());
+        if (json && reply.samples().empty()) std::printf("%s\n", nlohmann::json{{"status", reply.status()}}.dump().c_str());
+        return 1;
+    }
+    return 0;
+}
+
+int dump_command(const std::vector<std::string>& args)
+{
+    auto parsed = cpm::cli::parse_args(args, {{"--json", false}, {"--alive", false}}, "cpm dump");
+    if (!parsed.positional.empty()) throw UsageError("cpm dump: unexpected argument '" + parsed.positional[0] + "'");
+    cpm::HistoryClient client;
+    HistoryRequest rq;
+    rq.kind("list");
+    if (parsed.has("--alive")) {
+        rq.kind("search");
+        rq.alive_at(cpm::get_time_ns());
+    }
+    const HistoryReply reply = client.request(rq);
+    if (reply.status() != "ok") {
+        std::fprintf(stderr, "cpm dump: %s: %s\n", reply.status().c_str(), reply.error().c_str());
+        return 1;
+    }
+    print_objects(reply, parsed.has("--json"));
+    return 0;
+}
+
+}  // namespace cpm::tools
