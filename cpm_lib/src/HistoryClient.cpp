@@ -9,6 +9,7 @@
 #include <map>
 #include <mutex>
 #include <random>
+#include <set>
 #include <unistd.h>
 
 namespace cpm {
@@ -28,6 +29,7 @@ ReaderOptions reply_options()
     ReaderOptions o;
     o.reliable = true;
     o.keep_all = true;
+    o.transient_local = true;  // the service's replies written before this reader matched
     return o;
 }
 
@@ -40,6 +42,7 @@ struct HistoryClient::Impl
     std::mutex mutex;
     std::condition_variable cv;
     std::map<uint64_t, HistoryReply> replies;  // arrived, not yet collected
+    std::set<uint64_t> pending;                // asked, not yet answered
     std::atomic<uint64_t> next_id{1};
     Writer<HistoryRequest> requests;
     AsyncReader<HistoryReply> reader;
@@ -51,7 +54,7 @@ struct HistoryClient::Impl
               [this](std::vector<HistoryReply>& batch) {
                   std::lock_guard lock(mutex);
                   for (auto& r : batch) {
-                      if (r.client_id() == client_id) replies[r.request_id()] = std::move(r);
+                      if (r.client_id() == client_id && pending.count(r.request_id())) replies[r.request_id()] = std::move(r);
                   }
                   cv.notify_all();
               },
@@ -91,14 +94,32 @@ HistoryReply HistoryClient::request(HistoryRequest rq)
     rq.client_id(d.client_id);
     rq.request_id(id);
     stamp_message(rq, get_time_ns(), 0);
-    if (!d.requests.write(rq)) throw Error("history: the request could not be sent");
+    // Sent again each second without an answer (queries do not change what is stored; the
+    // first reply to arrive is taken).
     std::unique_lock lock(d.mutex);
-    if (!d.cv.wait_until(lock, deadline, [&] { return d.replies.count(id) != 0; })) {
-        throw Error("history: no reply to request " + std::to_string(id) + " (" + rq.kind() + ") in time");
+    d.pending.insert(id);
+    struct Done
+    {
+        Impl& d;
+        uint64_t id;
+        ~Done()
+        {
+            d.pending.erase(id);
+            d.replies.erase(id);
+        }
+    } done{d, id};
+    for (;;) {
+        lock.unlock();
+        if (!d.requests.write(rq)) throw Error("history: the request could not be sent");
+        lock.lock();
+        const auto resend = std::min(deadline, std::chrono::steady_clock::now() + std::chrono::nanoseconds(rq.timeout_ns()) +
+                                                   std::chrono::seconds(1));
+        if (d.cv.wait_until(lock, resend, [&] { return d.replies.count(id) != 0; })) break;
+        if (std::chrono::steady_clock::now() >= deadline) {
+            throw Error("history: no reply to request " + std::to_string(id) + " (" + rq.kind() + ") in time");
+        }
     }
-    HistoryReply reply = std::move(d.replies[id]);
-    d.replies.erase(id);
-    return reply;
+    return std::move(d.replies[id]);
 }
 
 HistoryReply HistoryClient::latest(const std::string& topic, const std::string& key) { return request(make("latest", topic, key)); }

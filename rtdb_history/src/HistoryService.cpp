@@ -155,7 +155,10 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         ParticipantOptions srv = options.participant;
         if (srv.name.empty()) srv.name = "cpm_history";
         serving = std::make_unique<Participant>(srv);
-        replies = std::make_unique<Writer<HistoryReply>>(*serving, "historyReply", WriterOptions{.reliable = true, .history_depth = 64});
+        // Transient-local: a client whose reader the writer has not matched yet when the reply
+        // goes out still gets it on matching.
+        replies = std::make_unique<Writer<HistoryReply>>(*serving, "historyReply",
+                                                         WriterOptions{.reliable = true, .history_depth = 64, .transient_local = true});
         status = std::make_unique<Writer<HistoryStatus>>(*serving, "historyStatus",
                                                           WriterOptions{.reliable = true, .history_depth = 1, .transient_local = true});
         for (size_t i = 0; i < std::max<size_t>(1, options.workers); ++i) workers.emplace_back([this] { work_loop(); });
@@ -316,11 +319,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             }
             return;
         }
-        case Event::writer_found: {
-            if (!wanted(e.topic) || topics.count(e.topic)) return;
-            subscribe(e);
-            return;
-        }
+        case Event::writer_found: return;  // control_loop subscribes, outside ingest_mutex
         }
     }
 
@@ -369,6 +368,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             return;
         }
         CPM_LOG_INFO("cpm_history: recording topic '%s' (type '%s'%s)", e.topic.c_str(), e.type_name.c_str(), e.keyed ? ", keyed" : "");
+        std::lock_guard lock(ingest_mutex);
         topics[e.topic] = std::move(rec);
     }
 
@@ -395,7 +395,8 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             const auto& b = raw.bytes;
             if (b.size() < 4 + 16) {  // encapsulation + Header
                 if (++dropped <= 10) {
-                    CPM_LOG_WARN("cpm_history: topic '%s': a %zu-byte sample is too short to hold a header; skipped", t.name.c_str(), b.size());
+                    CPM_LOG_WARN("cpm_history: topic '%s': a sample of %zu bytes is too short to hold a Header (4 + 16 bytes); skipped",
+                                 t.name.c_str(), b.size());
                 }
                 continue;
             }
@@ -434,9 +435,23 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
                 batch.swap(events);
             }
             const uint64_t now = cpm::get_time_ns();
+            for (const auto& e : batch) {
+                // Creating a reader takes Fast DDS locks that its receive threads hold while
+                // they call ingest(): never under ingest_mutex.
+                if (e.kind == Event::writer_found) {
+                    bool known;
+                    {
+                        std::lock_guard lock(ingest_mutex);
+                        known = topics.count(e.topic) != 0;
+                    }
+                    if (!known && wanted(e.topic)) subscribe(e);
+                } else {
+                    std::lock_guard lock(ingest_mutex);
+                    handle(e);
+                }
+            }
             {
                 std::lock_guard lock(ingest_mutex);
-                for (const auto& e : batch) handle(e);
                 store_.expire(now);
             }
             if (now >= next_status) {

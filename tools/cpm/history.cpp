@@ -210,6 +210,19 @@ void print_samples(const HistoryReply& reply, bool json)
     }
 }
 
+/// The command's participant: UDP loopback only. A short-lived process that reuses the
+/// shared-memory port of one that just exited is not reached by the service's replies
+/// (Fast DDS 2.9 keeps sending to the old port for a while).
+cpm::Participant& client_participant()
+{
+    static cpm::Participant p = [] {
+        auto o = cpm::ParticipantOptions::from_init();
+        o.shared_memory = false;
+        return cpm::Participant(o);
+    }();
+    return p;
+}
+
 }  // namespace
 
 int history_command(const std::string& verb, const std::vector<std::string>& args)
@@ -275,7 +288,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     rq.creator(parsed.get("--creator"));
     if (parsed.has("--alive-at")) rq.alive_at(parse_time("--alive-at", parsed.get("--alive-at")));
 
-    cpm::HistoryClient client;
+    cpm::HistoryClient client(client_participant());
     const HistoryReply reply = client.request(rq);
     const bool json = parsed.has("--json");
     if (reply.status() == "error" || reply.status() == "unknown object") {
@@ -298,7 +311,7 @@ int dump_command(const std::vector<std::string>& args)
 {
     auto parsed = cpm::cli::parse_args(args, {{"--json", false}, {"--alive", false}}, "cpm dump");
     if (!parsed.positional.empty()) throw UsageError("cpm dump: unexpected argument '" + parsed.positional[0] + "'");
-    cpm::HistoryClient client;
+    cpm::HistoryClient client(client_participant());
     HistoryRequest rq;
     rq.kind("list");
     if (parsed.has("--alive")) {

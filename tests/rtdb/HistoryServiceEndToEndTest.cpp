@@ -1,0 +1,234 @@
+// cpm_history as a real process: it records writer processes it discovers (a type it was
+// never compiled with included), answers HistoryClient and the cpm history command, skips
+// truncated samples, answers bad requests with errors, and marks objects deleted when they
+// are disposed or their writer process dies.
+#include <cpm/HistoryClient.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/get_time_ns.hpp>
+
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+
+#include <HistoryStatus.h>
+#include <LabOnlyThingPubSubTypes.h>
+#include <VehicleState.h>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <csignal>
+#include <sstream>
+
+CPM_REGISTER_TYPE(LabOnlyThing)
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+using cpm_test::Process;
+
+namespace {
+
+constexpr uint64_t kBase = 1'700'000'000'000'000'000ull;  // history_writer's first data time; then 1 ms apart
+constexpr uint64_t kMs = 1'000'000;
+
+/// UDP loopback only: every test starts a new cpm_history, which reuses the previous one's
+/// shared-memory port, and Fast DDS 2.9 in a long-lived process keeps sending to the old port.
+cpm::ParticipantOptions udp_only()
+{
+    auto o = cpm_test::isolated_options();
+    o.shared_memory = false;
+    return o;
+}
+
+class HistoryService : public ::testing::Test
+{
+protected:
+    cpm::Participant participant{udp_only()};
+    Process service{{built_program("cpm_history"), "--window", "30s", "--status-period", "200ms"}};
+    cpm::HistoryClient client{participant};
+
+    /// The object's info once it holds n samples (polls `latest`).
+    bool wait_for_samples(const std::string& topic, const std::string& key, uint64_t n)
+    {
+        return cpm_test::wait_until([&] {
+            try {
+                auto r = client.latest(topic, key);
+                return !r.objects().empty() && r.objects()[0].samples_held() >= n;
+            } catch (const std::exception&) {
+                return false;
+            }
+        }, 20s, 20ms);
+    }
+    Process writer(std::vector<std::string> args)
+    {
+        args.insert(args.begin(), built_program("history_writer"));
+        return Process(args);
+    }
+};
+
+TEST_F(HistoryService, RecordsAWriterProcessAndAnswersTheTypedClientByCommitAndDataTime)
+{
+    Process w = writer({"--type", "vehicle", "--vehicle", "3", "--count", "50"});
+    ASSERT_EQ(w.wait(30s), 0) << w.errors();
+    ASSERT_TRUE(wait_for_samples("vehicleState", "3", 50)) << service.errors();
+
+    auto latest = client.latest<VehicleState>("vehicleState", 3);
+    ASSERT_TRUE(latest.ok()) << latest.status << " " << latest.error;
+    EXPECT_EQ(latest.sample.pose().x(), 49);
+    EXPECT_EQ(latest.data_ns, kBase + 49 * kMs);
+    EXPECT_EQ(latest.valid_after_ns, kBase + 49 * kMs + 5);
+    EXPECT_EQ(latest.sample.vehicle_id(), 3);
+
+    // By data time (create_stamp): exact, between two, strictly before and after.
+    auto at = client.at<VehicleState>("vehicleState", 3, kBase + 20 * kMs + kMs / 2, cpm::HistoryBy::data);
+    ASSERT_TRUE(at.ok()) << at.status;
+    EXPECT_EQ(at.sample.pose().x(), 20);
+    EXPECT_EQ(client.older<VehicleState>("vehicleState", 3, kBase + 20 * kMs, cpm::HistoryBy::data).sample.pose().x(), 19);
+    EXPECT_EQ(client.younger<VehicleState>("vehicleState", 3, kBase + 20 * kMs, cpm::HistoryBy::data).sample.pose().x(), 21);
+    auto range = client.range<VehicleState>("vehicleState", 3, kBase + 10 * kMs, kBase + 15 * kMs, cpm::HistoryBy::data);
+    ASSERT_EQ(range.size(), 5u);
+    for (int i = 0; i < 5; ++i) EXPECT_EQ(range[i].sample.pose().x(), 10 + i);
+
+    // By commit time: the sample committed at or before sample 30's commit time is sample 30.
+    auto by_commit = client.at<VehicleState>("vehicleState", 3, kBase + 30 * kMs, cpm::HistoryBy::data);
+    auto again = client.at<VehicleState>("vehicleState", 3, by_commit.commit_ns);
+    EXPECT_EQ(again.sample.pose().x(), 30);
+    EXPECT_EQ(client.older<VehicleState>("vehicleState", 3, by_commit.commit_ns).sample.pose().x(), 29);
+    EXPECT_EQ(client.at<VehicleState>("vehicleState", 3, 1000).status, "not found");  // before the first
+    EXPECT_EQ(client.younger<VehicleState>("vehicleState", 3, latest.commit_ns).status, "not yet");
+}
+
+TEST_F(HistoryService, TheCommandPrintsEveryFieldAsJsonAndDumpListsTheObjects)
+{
+    Process w = writer({"--type", "vehicle", "--vehicle", "4", "--count", "30"});
+    ASSERT_EQ(w.wait(30s), 0) << w.errors();
+    ASSERT_TRUE(wait_for_samples("vehicleState", "4", 30));
+
+    Process at({built_program("cpm"), "history", "at", "--topic", "vehicleState", "--key", "4", "--by", "data", "--time",
+                std::to_string(kBase + 12 * kMs), "--json"});
+    ASSERT_EQ(at.wait(20s), 0) << at.errors();
+    auto j = nlohmann::json::parse(at.output());
+    EXPECT_EQ(j["status"], "ok");
+    EXPECT_EQ(j["topic"], "vehicleState");
+    EXPECT_EQ(j["key"], "4");
+    EXPECT_EQ(j["type"], "VehicleState");
+    EXPECT_EQ(j["data_ns"], kBase + 12 * kMs);
+    EXPECT_EQ(j["valid_after_ns"], kBase + 12 * kMs + 5);
+    EXPECT_EQ(j["data"]["vehicle_id"], 4);
+    EXPECT_EQ(j["data"]["pose"]["x"], 12.0);
+    EXPECT_EQ(j["data"]["header"]["create_stamp"]["nanoseconds"], kBase + 12 * kMs);
+    EXPECT_EQ(j["data"]["header"]["valid_after_stamp"]["nanoseconds"], kBase + 12 * kMs + 5);
+    for (const char* field : {"speed", "odometer_distance", "imu_yaw", "battery_voltage", "is_real"}) {
+        EXPECT_TRUE(j["data"].contains(field)) << field;
+    }
+
+    Process range({built_program("cpm"), "history", "range", "--topic", "vehicleState", "--key", "4", "--by", "data", "--from",
+                   std::to_string(kBase), "--to", std::to_string(kBase + 3 * kMs), "--json"});
+    ASSERT_EQ(range.wait(20s), 0) << range.errors() << service.errors();
+    std::istringstream lines(range.output());
+    int n = 0;
+    for (std::string line; std::getline(lines, line); ++n) EXPECT_EQ(nlohmann::json::parse(line)["data"]["pose"]["x"], n);
+    EXPECT_EQ(n, 3);
+
+    Process dump({built_program("cpm"), "dump", "--json"});
+    ASSERT_EQ(dump.wait(20s), 0) << dump.errors();
+    bool found = false, writer_process = false;
+    std::istringstream objects(dump.output());
+    for (std::string line; std::getline(objects, line);) {
+        auto o = nlohmann::json::parse(line);
+        if (o["name"] == "vehicleState/4") {
+            found = true;
+            EXPECT_EQ(o["type"], "VehicleState");
+            EXPECT_EQ(o["creator"], "history_writer_vehicle");
+            EXPECT_EQ(o["samples_held"], 30);
+            EXPECT_GT(o["parent"].get<uint64_t>(), 0u);
+        }
+        if (o["kind"] == "process" && o["name"] == "history_writer_vehicle") writer_process = true;
+    }
+    EXPECT_TRUE(found) << dump.output();
+    EXPECT_TRUE(writer_process) << dump.output();
+
+    Process unknown({built_program("cpm"), "history", "latest", "--topic", "noSuchTopic"});
+    EXPECT_EQ(unknown.wait(20s), 1);
+    EXPECT_NE(unknown.errors().find("unknown object: no object 'noSuchTopic'"), std::string::npos) << unknown.errors();
+    Process usage({built_program("cpm"), "history", "at", "--topic", "vehicleState", "--time", "yesterday"});
+    EXPECT_EQ(usage.wait(20s), 2);
+    EXPECT_NE(usage.errors().find("--time 'yesterday'"), std::string::npos) << usage.errors();
+}
+
+TEST_F(HistoryService, RecordsATypeItWasNeverCompiledWith)
+{
+    Process w = writer({"--type", "lab_only", "--topic", "labOnlyThing", "--vehicle", "7", "--count", "5"});
+    ASSERT_EQ(w.wait(30s), 0) << w.errors();
+    ASSERT_TRUE(wait_for_samples("labOnlyThing", "7", 5));
+    // The test knows the type; the service and the cpm command do not.
+    auto r = client.at<LabOnlyThing>("labOnlyThing", 7, kBase + 3 * kMs, cpm::HistoryBy::data);
+    ASSERT_TRUE(r.ok()) << r.status << " " << r.error;
+    EXPECT_EQ(r.sample.note(), "thing 3");
+    EXPECT_EQ(r.sample.value(), 1.5);
+    EXPECT_EQ(r.sample.vehicle_id(), 7);
+
+    Process cli({built_program("cpm"), "history", "latest", "--topic", "labOnlyThing", "--key", "7", "--json"});
+    ASSERT_EQ(cli.wait(20s), 0) << cli.errors();
+    auto j = nlohmann::json::parse(cli.output());
+    EXPECT_EQ(j["type"], "LabOnlyThing");
+    EXPECT_EQ(j["data_ns"], kBase + 4 * kMs);
+    EXPECT_FALSE(j.contains("data"));
+    EXPECT_GT(j["payload_base64"].get<std::string>().size(), 40u);
+}
+
+TEST_F(HistoryService, TruncatedSamplesAreCountedAndSkippedAndBadRequestsAnsweredWithErrors)
+{
+    cpm::ReaderAbstract<HistoryStatus> status(participant, "historyStatus", {.reliable = true, .history_depth = 1, .transient_local = true});
+    Process tiny = writer({"--type", "tiny", "--topic", "tinyThing", "--count", "3"});
+    ASSERT_EQ(tiny.wait(30s), 0) << tiny.errors();
+    uint64_t dropped = 0;
+    EXPECT_TRUE(cpm_test::wait_until([&] {
+        for (auto& s : status.take()) dropped = s.dropped();
+        return dropped == 3;
+    }, 10s, 20ms)) << dropped;
+    EXPECT_NE(service.errors().find("topic 'tinyThing': a sample of 8 bytes is too short to hold a Header (4 + 16 bytes); skipped"), std::string::npos)
+        << service.errors();
+
+    HistoryRequest bad = cpm::HistoryClient::make("range", "tinyThing", "");
+    bad.t0(10);
+    bad.t1(5);
+    auto reply = client.request(bad);
+    EXPECT_EQ(reply.status(), "error");
+    EXPECT_EQ(reply.error(), "range: t1 (5) is before t0 (10)");
+    auto bogus = client.request(cpm::HistoryClient::make("teleport", "x", ""));
+    EXPECT_EQ(bogus.status(), "error");
+    // The service is still there and answers.
+    Process w = writer({"--type", "vehicle", "--vehicle", "5", "--count", "3"});
+    ASSERT_EQ(w.wait(30s), 0) << w.errors();
+    EXPECT_TRUE(wait_for_samples("vehicleState", "5", 3));
+    EXPECT_EQ(service.wait(0ms), -1);  // still running
+}
+
+TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReadable)
+{
+    Process disposing = writer({"--type", "vehicle", "--vehicle", "8", "--count", "4", "--dispose"});
+    ASSERT_EQ(disposing.wait(30s), 0) << disposing.errors();
+    auto deleted = [&](const std::string& key) {
+        auto r = client.latest("vehicleState", key);
+        return !r.objects().empty() && r.objects()[0].deleted_ts() != 0;
+    };
+    EXPECT_TRUE(cpm_test::wait_until([&] { return deleted("8"); }, 10s, 20ms));
+    EXPECT_EQ(client.latest<VehicleState>("vehicleState", 8).sample.pose().x(), 3);  // readable after deletion
+
+    Process doomed = writer({"--type", "vehicle", "--vehicle", "9", "--count", "4", "--stay"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return doomed.output().find("written 4") != std::string::npos; }, 30s, 20ms));
+    EXPECT_FALSE(deleted("9"));
+    doomed.kill(SIGKILL);
+    doomed.wait(5s);
+    // Its participant's lease (10 s) runs out, then its writer and its instances are gone.
+    EXPECT_TRUE(cpm_test::wait_until([&] { return deleted("9"); }, 30s, 100ms));
+    EXPECT_EQ(client.latest<VehicleState>("vehicleState", 9).sample.pose().x(), 3);
+    HistoryRequest alive = cpm::HistoryClient::make("search", "", "");
+    alive.name_regex("^history_writer_vehicle$");
+    alive.alive_at(cpm::get_time_ns());
+    EXPECT_TRUE(client.request(alive).objects().empty());  // the dead process too
+}
+
+}  // namespace

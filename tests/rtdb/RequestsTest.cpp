@@ -1,0 +1,109 @@
+// The service's request handling against an in-process store: answers, and malformed requests
+// answered with an error that names the field and value.
+#include <cpm/rtdb/Requests.hpp>
+
+#include <gtest/gtest.h>
+
+using namespace cpm::rtdb;
+
+namespace {
+
+struct Fixture
+{
+    Store store;
+    Oid oid = store.add_object({.topic = "vehicleState", .key = "3", .type_name = "VehicleState", .created_ts = 1});
+    Fixture()
+    {
+        for (uint64_t c : {100, 200, 300}) {
+            const uint8_t b[] = {uint8_t(c / 100)};
+            store.commit(oid, {c / 10, 0, 0, b, 1}, c);
+        }
+    }
+    HistoryReply ask(const std::string& kind, uint64_t t0 = 0, uint64_t t1 = 0, uint32_t limit = 0)
+    {
+        HistoryRequest rq;
+        rq.client_id("me");
+        rq.request_id(7);
+        rq.kind(kind);
+        rq.topic("vehicleState");
+        rq.key("3");
+        rq.t0(t0);
+        rq.t1(t1);
+        rq.limit(limit);
+        return answer(store, rq);
+    }
+};
+
+TEST(HistoryRequests, AnswersCarryTheRequestIdsTheObjectAndTheSamples)
+{
+    Fixture f;
+    auto r = f.ask("at", 250);
+    EXPECT_EQ(r.client_id(), "me");
+    EXPECT_EQ(r.request_id(), 7u);
+    EXPECT_EQ(r.status(), "ok");
+    ASSERT_EQ(r.samples().size(), 1u);
+    EXPECT_EQ(r.samples()[0].commit_ns(), 200u);
+    EXPECT_EQ(r.samples()[0].data_ns(), 20u);
+    EXPECT_EQ(r.samples()[0].payload(), std::vector<uint8_t>{2});
+    ASSERT_EQ(r.objects().size(), 1u);
+    EXPECT_EQ(r.objects()[0].name(), "vehicleState/3");
+    EXPECT_EQ(r.objects()[0].samples_held(), 3u);
+    EXPECT_EQ(f.ask("range", 100, 300).samples().size(), 2u);
+    EXPECT_EQ(f.ask("younger", 300).status(), "not yet");
+    EXPECT_EQ(f.ask("older", 100).status(), "not found");
+}
+
+TEST(HistoryRequests, MalformedRequestsGetAnErrorNamingWhatIsWrong)
+{
+    Fixture f;
+    auto bad_kind = f.ask("teleport");
+    EXPECT_EQ(bad_kind.status(), "error");
+    EXPECT_NE(bad_kind.error().find("unknown kind 'teleport'"), std::string::npos) << bad_kind.error();
+    auto backwards = f.ask("range", 300, 100);
+    EXPECT_EQ(backwards.status(), "error");
+    EXPECT_EQ(backwards.error(), "range: t1 (100) is before t0 (300)");
+    auto absurd = f.ask("range", 0, 1000, 5'000'000);
+    EXPECT_EQ(absurd.status(), "error");
+    EXPECT_EQ(absurd.error(), "limit 5000000 is above 100000");
+
+    HistoryRequest rq;
+    rq.kind("latest");
+    rq.topic("vehicleState");
+    rq.key("9");
+    auto unknown = answer(f.store, rq);
+    EXPECT_EQ(unknown.status(), "unknown object");
+    EXPECT_NE(unknown.error().find("no object 'vehicleState/9'"), std::string::npos) << unknown.error();
+    rq.kind("search");
+    rq.name_regex("(open");
+    auto regex = answer(f.store, rq);
+    EXPECT_EQ(regex.status(), "error");
+    EXPECT_NE(regex.error().find("name_regex '(open' is not a regular expression"), std::string::npos) << regex.error();
+    rq.kind("at");
+    rq.name_regex("");
+    rq.by("sideways");
+    EXPECT_EQ(answer(f.store, rq).error(), "by is 'sideways'; expected commit or data");
+    rq.by("");
+    rq.kind("wait_next");
+    rq.timeout_ns(3'600'000'000'000ull);
+    EXPECT_EQ(answer(f.store, rq).error(), "timeout_ns 3600000000000 is above 60 s");
+    EXPECT_EQ(f.ask("latest").status(), "ok");  // and it still answers
+}
+
+TEST(HistoryRequests, SnapshotAnswersEachObjectWithItsOwnStatus)
+{
+    Fixture f;
+    f.store.add_object({.topic = "rangeSensors", .key = "3"});
+    HistoryRequest rq;
+    rq.kind("snapshot");
+    rq.objects({"vehicleState/3", "rangeSensors/3"});
+    rq.t0(250);
+    auto r = answer(f.store, rq);
+    EXPECT_EQ(r.status(), "partial");
+    ASSERT_EQ(r.samples().size(), 2u);
+    EXPECT_EQ(r.samples()[0].status(), "ok");
+    EXPECT_EQ(r.samples()[0].commit_ns(), 200u);
+    EXPECT_EQ(r.samples()[1].status(), "not found");
+    EXPECT_EQ(r.objects()[1].name(), "rangeSensors/3");
+}
+
+}  // namespace
