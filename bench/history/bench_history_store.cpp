@@ -11,6 +11,7 @@
 #include <sqlite3.h>
 
 #include <algorithm>
+#include <malloc.h>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -271,6 +272,16 @@ void print_percentiles()
          percentiles([&] { q.query(q.at_data, k = (k + 1) % kObjects, times.t(q.next)); }));
     line("range 100", percentiles([&] { const uint64_t t0 = times.t(s.next); s.store.range(s.oids[1], t0, t0 + 100 * kCycle); }, 20'000),
          percentiles([&] { const uint64_t t0 = times.t(q.next); q.query(q.range, 1, t0, t0 + 100 * kCycle); }, 20'000));
+    {
+        // The store's own memory per sample beyond its payload: heap in use around building a
+        // second store like the query fixture (100,000 samples of 150 bytes).
+        const size_t before = mallinfo2().uordblks;
+        auto extra = std::make_unique<StoreWork>();
+        const size_t after = mallinfo2().uordblks;
+        const auto st2 = extra->store.stats();
+        std::printf("store memory: %.1f bytes per sample beyond its payload (heap in use, %llu samples; target <= 64)\n",
+                    (double(after - before) - double(st2.bytes)) / double(st2.samples), (unsigned long long)st2.samples);
+    }
     const auto clock = percentiles([] {});
     std::printf("(each figure includes reading the clock around the call: p50 %.0f ns for an empty call)\n", clock.first);
     auto st = s.store.stats();

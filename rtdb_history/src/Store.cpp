@@ -25,79 +25,64 @@ namespace {
 
 constexpr uint64_t kNever = std::numeric_limits<uint64_t>::max();
 
-/// A sample's times and where its payload sits in the object's byte ring: 48 bytes.
+/// A sample's times and where its payload sits in the object's chunks: 44 bytes.
+#pragma pack(push, 4)
 struct Record
 {
     uint64_t commit, data, valid_after, source;
-    uint64_t pos;  ///< absolute position of the payload in the ring
+    uint64_t pos;  ///< chunk number << 32 | offset
     uint32_t size;
 };
+#pragma pack(pop)
+static_assert(sizeof(Record) == 44);
 
-/// The data-time index entry: 16 bytes, kept sorted by (data, seq).
-struct DataKey
-{
-    uint64_t data, seq;
-    bool operator<(const DataKey& o) const { return data != o.data ? data < o.data : seq < o.seq; }
-};
-
-/// Payload bytes of one object, first in first out, in one power-of-two circular buffer.
-class ByteRing
+/// Payload bytes of one object, first in first out, in chunks of 16 KiB (a larger sample gets
+/// a chunk of its own). A sample never spans chunks; a chunk is freed when its last sample is
+/// evicted. Unlike one growing buffer, this keeps at most one partly used chunk beyond the
+/// payload held.
+class ByteChunks
 {
 public:
+    static constexpr size_t kChunk = 16 * 1024;
+    /// Stores the bytes; returns where: chunk number << 32 | offset.
     uint64_t push(const uint8_t* data, size_t size)
     {
-        if (tail_ - head_ + size > buf_.size()) grow(tail_ - head_ + size);
-        const uint64_t pos = tail_;
-        copy(data, size, pos, true);
-        tail_ += size;
+        if (chunks_.empty() || chunks_.back().capacity - chunks_.back().used < size) {
+            const size_t cap = std::max(kChunk, size);
+            chunks_.push_back({std::unique_ptr<uint8_t[]>(new uint8_t[cap]), cap, 0, 0});
+        }
+        Chunk& c = chunks_.back();
+        std::memcpy(c.data.get() + c.used, data, size);
+        const uint64_t pos = (first_ + chunks_.size() - 1) << 32 | c.used;
+        c.used += size;
+        ++c.samples;
         return pos;
     }
-    void pop(size_t size) { head_ += size; }
-    void read(uint64_t pos, size_t size, uint8_t* out) const { const_cast<ByteRing*>(this)->copy(out, size, pos, false); }
-    /// Gives memory back after a flood has passed.
-    void shrink()
+    /// The oldest sample (at pos) is evicted.
+    void pop(uint64_t pos)
     {
-        const uint64_t used = tail_ - head_;
-        if (buf_.size() > 4096 && used < buf_.size() / 4) resize(std::max<size_t>(4096, next_pow2(used * 2)));
+        Chunk& c = chunks_[(pos >> 32) - first_];
+        if (--c.samples == 0 && &c == &chunks_.front() && chunks_.size() > 1) {
+            chunks_.pop_front();
+            ++first_;
+        } else if (c.samples == 0 && chunks_.size() == 1) {
+            c.used = 0;  // the only chunk, empty: start again at its beginning
+        }
     }
-    size_t capacity() const { return buf_.size(); }
+    void read(uint64_t pos, size_t size, uint8_t* out) const
+    {
+        std::memcpy(out, chunks_[(pos >> 32) - first_].data.get() + (pos & 0xffffffffu), size);
+    }
 
 private:
-    static size_t next_pow2(size_t n)
+    struct Chunk
     {
-        size_t c = 256;
-        while (c < n) c *= 2;
-        return c;
-    }
-    void grow(size_t needed) { resize(next_pow2(std::max(needed, buf_.size() * 2))); }
-    void resize(size_t capacity)
-    {
-        std::vector<uint8_t> next(capacity);
-        const uint64_t used = tail_ - head_;
-        for (uint64_t i = 0; i < used;) {  // copy the live bytes in at most two pieces
-            const size_t at = (head_ + i) & (buf_.size() - 1);
-            const size_t n = std::min<uint64_t>(used - i, buf_.size() - at);
-            std::memcpy(next.data() + ((head_ + i) & (capacity - 1)), buf_.data() + at, n);
-            i += n;
-        }
-        buf_.swap(next);
-    }
-    /// Copies between `bytes` and the ring at `pos`, wrapping around; into the ring if `in`.
-    void copy(const uint8_t* bytes, size_t size, uint64_t pos, bool in) { copy(const_cast<uint8_t*>(bytes), size, pos, in); }
-    void copy(uint8_t* bytes, size_t size, uint64_t pos, bool in)
-    {
-        size_t done = 0;
-        while (done < size) {
-            const size_t at = (pos + done) & (buf_.size() - 1);
-            const size_t n = std::min(size - done, buf_.size() - at);
-            if (in) std::memcpy(buf_.data() + at, bytes + done, n);
-            else std::memcpy(bytes + done, buf_.data() + at, n);
-            done += n;
-        }
-    }
-
-    std::vector<uint8_t> buf_;
-    uint64_t head_ = 0, tail_ = 0;
+        std::unique_ptr<uint8_t[]> data;
+        size_t capacity, used;
+        size_t samples;  ///< not yet evicted
+    };
+    std::deque<Chunk> chunks_;
+    uint64_t first_ = 0;  ///< number of chunks_.front()
 };
 
 /// Index of the first of n sorted keys with key > t (inclusive) or >= t (!inclusive); n if none.
@@ -139,30 +124,33 @@ size_t search_sorted(size_t n, Key key, uint64_t t, bool inclusive)
     return hi;
 }
 
-/// Records of one object, oldest first, in one power-of-two circular buffer (contiguous, so
-/// lookups by index are a mask, not a deque's block walk).
+/// Records of one object, oldest first, in one circular buffer (contiguous, so a lookup by
+/// index is an add and a compare, not a deque's block walk). It grows by a quarter at a time:
+/// little unused room per sample, still amortised O(1) appends.
 class RecordRing
 {
 public:
     size_t size() const { return n_; }
     bool empty() const { return n_ == 0; }
-    const Record& operator[](size_t i) const { return buf_[(head_ + i) & (buf_.size() - 1)]; }
+    const Record& operator[](size_t i) const
+    {
+        size_t k = head_ + i;
+        if (k >= buf_.size()) k -= buf_.size();
+        return buf_[k];
+    }
     const Record& front() const { return (*this)[0]; }
     const Record& back() const { return (*this)[n_ - 1]; }
     void push_back(const Record& r)
     {
-        if (n_ == buf_.size()) {
-            std::vector<Record> next(std::max<size_t>(16, buf_.size() * 2));
-            for (size_t i = 0; i < n_; ++i) next[i] = (*this)[i];
-            buf_.swap(next);
-            head_ = 0;
-        }
-        buf_[(head_ + n_) & (buf_.size() - 1)] = r;
+        if (n_ == buf_.size()) resize(std::max<size_t>(16, buf_.size() + buf_.size() / 4));
+        size_t k = head_ + n_;
+        if (k >= buf_.size()) k -= buf_.size();
+        buf_[k] = r;
         ++n_;
     }
     void pop_front()
     {
-        head_ = (head_ + 1) & (buf_.size() - 1);
+        if (++head_ == buf_.size()) head_ = 0;
         --n_;
     }
     /// Index of the first record with commit > t (inclusive) or >= t (!inclusive); size() if none.
@@ -170,17 +158,20 @@ public:
     {
         return search_sorted(n_, [this](size_t i) { return (*this)[i].commit; }, t, inclusive);
     }
+    /// Gives memory back after a flood has passed.
     void shrink()
     {
-        if (buf_.size() > 64 && n_ < buf_.size() / 4) {
-            std::vector<Record> next(std::max<size_t>(16, buf_.size() / 2));
-            for (size_t i = 0; i < n_; ++i) next[i] = (*this)[i];
-            buf_.swap(next);
-            head_ = 0;
-        }
+        if (buf_.size() > 64 && n_ < buf_.size() / 2) resize(std::max<size_t>(16, n_ + n_ / 4));
     }
 
 private:
+    void resize(size_t capacity)
+    {
+        std::vector<Record> next(capacity);
+        for (size_t i = 0; i < n_; ++i) next[i] = (*this)[i];
+        buf_.swap(next);
+        head_ = 0;
+    }
     std::vector<Record> buf_;
     size_t head_ = 0, n_ = 0;
 };
@@ -194,8 +185,10 @@ struct Store::Object
     Retention retention;
     RecordRing records;  // by commit time; records[i] has sequence head_seq + i
     uint64_t head_seq = 0;
-    std::deque<DataKey> by_data;
-    ByteRing bytes;
+    /// The data-time index: the low 32 bits of each held sample's sequence number, ordered by
+    /// (data time, sequence): 4 bytes a sample.
+    std::deque<uint32_t> by_data;
+    ByteChunks bytes;
     uint64_t bytes_held = 0;
     uint64_t samples_total = 0;
     uint64_t first_commit_ever = kNever, min_data_ever = kNever;
@@ -203,11 +196,12 @@ struct Store::Object
     bool any_evicted = false;
     uint64_t cycle_sum = 0, cycle_max = 0;
 
-    const Record& by_seq(uint64_t seq) const { return records[seq - head_seq]; }
+    /// The record of an index entry (sequence numbers held span far less than 2^32).
+    const Record& entry(uint32_t seq32) const { return records[uint32_t(seq32 - uint32_t(head_seq))]; }
     /// Index in by_data of the first entry with data time > t (inclusive) or >= t.
     size_t data_after(uint64_t t, bool inclusive) const
     {
-        return search_sorted(by_data.size(), [this](size_t i) { return by_data[i].data; }, t, inclusive);
+        return search_sorted(by_data.size(), [this](size_t i) { return entry(by_data[i]).data; }, t, inclusive);
     }
 
     StoredSample copy(const Record& r) const
@@ -222,11 +216,15 @@ struct Store::Object
     size_t evict_front()
     {
         const Record r = records.front();
-        if (by_data.front().seq == head_seq) by_data.pop_front();  // data times in order: the usual case
-        else by_data.erase(std::lower_bound(by_data.begin(), by_data.end(), DataKey{r.data, head_seq}));
+        if (by_data.front() == uint32_t(head_seq)) {
+            by_data.pop_front();  // data times in order: the usual case
+        } else {
+            // Among the entries with its data time, it is the first (the oldest sequence).
+            by_data.erase(by_data.begin() + std::ptrdiff_t(data_after(r.data, false)));
+        }
         records.pop_front();
         ++head_seq;
-        bytes.pop(r.size);
+        bytes.pop(r.pos);
         bytes_held -= r.size;
         any_evicted = true;
         last_evicted_commit = r.commit;
@@ -252,7 +250,7 @@ struct Store::Object
         }
         const size_t i = data_after(t, inclusive);
         if (i == 0) return {nothing_at_or_before(t, by, inclusive), {}};
-        return found(by_seq(by_data[i - 1].seq));
+        return found(entry(by_data[i - 1]));
     }
 
     Found younger(uint64_t t, By by) const
@@ -267,7 +265,7 @@ struct Store::Object
         if (any_evicted && t < max_evicted_data) return {Status::evicted, {}};
         const size_t i = data_after(t, true);
         if (i == by_data.size()) return {Status::not_yet, {}};
-        return found(by_seq(by_data[i].seq));
+        return found(entry(by_data[i]));
     }
 };
 
@@ -392,10 +390,9 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
         const uint64_t seq = o->head_seq + o->records.size();
         o->records.push_back({commit_ns, in.data_ns, in.valid_after_ns, in.source_ns, o->bytes.push(in.data, in.size),
                               static_cast<uint32_t>(in.size)});
-        const DataKey key{in.data_ns, seq};
-        // Mostly in order: search from the back.
-        if (o->by_data.empty() || o->by_data.back() < key) o->by_data.push_back(key);
-        else o->by_data.insert(std::upper_bound(o->by_data.begin(), o->by_data.end(), key), key);
+        // Mostly in order: append; else after every entry with a data time <= this one's.
+        if (o->by_data.empty() || o->entry(o->by_data.back()).data <= in.data_ns) o->by_data.push_back(uint32_t(seq));
+        else o->by_data.insert(o->by_data.begin() + std::ptrdiff_t(o->data_after(in.data_ns, true)), uint32_t(seq));
         o->bytes_held += in.size;
         ++o->samples_total;
         o->first_commit_ever = std::min(o->first_commit_ever, commit_ns);
@@ -432,7 +429,6 @@ void Store::expire(uint64_t now_ns)
                 topic_bytes_[o->info.topic] -= n;
                 ++evicted_;
             }
-            o->bytes.shrink();
             o->records.shrink();
             if (o->info.deleted_ts && o->info.deleted_ts + window < now_ns) purge.push_back(oid);
         }
@@ -502,12 +498,12 @@ Range Store::range_of(const Object& obj, uint64_t t0, uint64_t t1, By by, size_t
         for (size_t i = o->records.first_after(t0, false); i < end && add(o->records[i]); ++i) {}
     } else if (t1 > t0) {
         const size_t end = o->data_after(t1, false);
-        for (size_t i = o->data_after(t0, false); i < end && add(o->by_seq(o->by_data[i].seq)); ++i) {}
+        for (size_t i = o->data_after(t0, false); i < end && add(o->entry(o->by_data[i])); ++i) {}
     }
     if (!r.samples.empty()) r.status = Status::ok;
     else if (t1 > t0 && o->nothing_at_or_before(t1, by, false) == Status::evicted &&
              (by == By::commit ? t0 <= o->last_evicted_commit : t0 <= o->max_evicted_data)) r.status = Status::evicted;
-    else if (!o->records.empty() && t0 > (by == By::commit ? o->records.back().commit : o->by_data.back().data)) r.status = Status::not_yet;
+    else if (!o->records.empty() && t0 > (by == By::commit ? o->records.back().commit : o->entry(o->by_data.back()).data)) r.status = Status::not_yet;
     else r.status = Status::not_found;
     return r;
 }

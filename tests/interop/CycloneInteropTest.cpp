@@ -1,6 +1,7 @@
 // cpm (Fast DDS) and a Cyclone DDS program built from the same IDL exchange VehicleState
 // both ways, on loopback only. Transient-local on both sides: each side may see the match
 // before the other does, and a volatile reader may then skip what was written before.
+#include <cpm/HistoryClient.hpp>
 #include <cpm/MultiVehicleReader.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm_test/Dds.hpp>
@@ -80,4 +81,36 @@ TEST(CycloneInterop, CpmWriterIsReadByCycloneReader)
     }
     for (std::string line; std::getline(lines, line);) received.insert(line);
     EXPECT_EQ(received, expected);
+}
+
+TEST(CycloneInterop, HistoryServiceRecordsACyclonePublisher)
+{
+    auto options = cpm_test::isolated_options();
+    options.shared_memory = false;  // the service is a new process on a port another may have used
+    cpm::Participant participant(options);
+    cpm_test::Process service({cpm_test::built_program("cpm_history"), "--window", "30s"});
+    const std::string topic = cpm_test::unique_topic("cycloneState");
+    constexpr int kCount = 20;
+    // The Cyclone publisher waits for a reader: the service's, once it discovered the topic.
+    cpm_test::Process peer({cpm_test::built_program("cyclone_peer"), "pub", std::to_string(kCount), "1", "2"}, peer_env(topic));
+    ASSERT_EQ(peer.wait(30000ms), 0) << "the Cyclone publisher failed (no match or no acknowledgement)" << service.errors();
+
+    cpm::HistoryClient client(participant);
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        auto r = client.latest(topic, "2");
+        return !r.objects().empty() && r.objects()[0].samples_held() == kCount;
+    }, 10000ms, 20ms)) << service.errors();
+    // Sample k of vehicle id: create = 1000 k + id, pose.x = k; the key is the vehicle id.
+    for (uint8_t id : {1, 2}) {
+        auto at = client.at<VehicleState>(topic, id, 1000ull * 7 + id, cpm::HistoryBy::data);
+        ASSERT_TRUE(at.ok()) << at.status << " " << at.error;
+        EXPECT_EQ(at.sample.vehicle_id(), id);
+        EXPECT_EQ(at.sample.pose().x(), 7);
+        EXPECT_EQ(at.valid_after_ns, 1000ull * 7 + id + 60);
+        EXPECT_DOUBLE_EQ(at.sample.speed(), 0.5 * id);
+    }
+    auto info = client.latest(topic, "1");
+    ASSERT_FALSE(info.objects().empty());
+    EXPECT_EQ(info.objects()[0].type_name(), "VehicleState");
+    EXPECT_EQ(info.objects()[0].name(), topic + "/1");
 }

@@ -1,0 +1,216 @@
+// bench_history_service: cpm_history over DDS, in one run:
+//  1. ingest: 100 vehicles' VehicleState at 100 Hz each (10,000 samples/s) for 3 s, then
+//     rising rates until samples are lost; the highest rate with none lost;
+//  2. query round trip (`at` through cpm::HistoryClient) against a plain request/reply
+//     ping-pong of the same types and sizes (an echo process answering each request with a
+//     reply of one stored sample's size, no store behind it), p50/p99;
+//  3. resident memory of the service per stored sample beyond its payload.
+//
+//   bench_history_service [--domain 212] [--seconds 3]
+#include "bench_common.hpp"
+
+#include <cpm/AsyncReader.hpp>
+#include <cpm/HistoryClient.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/stamp_message.hpp>
+
+#include <HistoryStatus.h>
+#include <VehicleState.h>
+
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <thread>
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+cpm::ParticipantOptions options_for(int domain, bool shm)
+{
+    cpm::ParticipantOptions o;
+    o.domain_id = domain;
+    o.name = "bench_history";
+    o.shared_memory = shm;
+    return o;
+}
+
+/// The echo: answers every HistoryRequest with a HistoryReply holding one sample of the
+/// service's size (150-byte payload) and one object info, as the service's `at` does.
+int echo(int domain)
+{
+    cpm::Participant p(options_for(domain, true));
+    cpm::WriterOptions wo;
+    wo.reliable = true;
+    wo.history_depth = 64;
+    wo.transient_local = true;
+    cpm::Writer<HistoryReply> replies(p, "historyReply", wo);
+    HistoryReply proto;
+    proto.status("ok");
+    HistorySample s;
+    s.payload(std::vector<uint8_t>(150, 7));
+    s.status("ok");
+    proto.samples().push_back(s);
+    HistoryObject o;
+    o.name("vehicleState/42");
+    o.topic("vehicleState");
+    o.key("42");
+    o.type_name("VehicleState");
+    o.creator("bench_history");
+    proto.objects().push_back(o);
+    cpm::ReaderOptions ro;
+    ro.reliable = true;
+    ro.keep_all = true;
+    cpm::AsyncReader<HistoryRequest> requests(
+        [&](std::vector<HistoryRequest>& batch) {
+            for (auto& rq : batch) {
+                HistoryReply r = proto;
+                r.client_id(rq.client_id());
+                r.request_id(rq.request_id());
+                cpm::stamp_message(r, cpm::get_time_ns(), 0);
+                replies.write(r);
+            }
+        },
+        p, "historyRequest", ro);
+    std::signal(SIGTERM, [](int) { std::_Exit(0); });
+    for (;;) std::this_thread::sleep_for(std::chrono::seconds(1));
+}
+
+long rss_kb(int pid)
+{
+    std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+    for (std::string line; std::getline(in, line);) {
+        if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
+    }
+    return -1;
+}
+
+/// Writes `rate` samples/s spread over 100 vehicles for `seconds`; returns the number written.
+uint64_t write_at(cpm::Writer<VehicleState>& w, double rate, double seconds, double& tag)
+{
+    const auto start = Clock::now();
+    uint64_t written = 0;
+    VehicleState s;
+    while (true) {
+        const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+        if (elapsed >= seconds) break;
+        const uint64_t due = uint64_t(elapsed * rate);
+        for (; written < due; ++written) {
+            s.vehicle_id(uint8_t(written % 100));
+            cpm::stamp_message(s, cpm::get_time_ns(), 0);
+            s.pose().x(tag++);
+            w.write(s);
+        }
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+    return written;
+}
+
+/// What the service committed on vehicleState so far (all vehicles).
+uint64_t committed(cpm::HistoryClient& client)
+{
+    HistoryRequest rq = cpm::HistoryClient::make("search", "", "");
+    rq.name_regex("^vehicleState/");
+    uint64_t total = 0;
+    for (const auto& o : client.request(rq).objects()) total += o.samples_total();
+    return total;
+}
+
+std::vector<double> round_trips(cpm::HistoryClient& client, int n)
+{
+    std::vector<double> us;
+    const uint64_t now = cpm::get_time_ns();
+    for (int i = 0; i < n; ++i) {
+        const auto t0 = Clock::now();
+        auto r = client.at("vehicleState", std::to_string(i % 100), now);
+        const auto t1 = Clock::now();
+        if (r.samples().size() != 1) {
+            std::fprintf(stderr, "bench_history_service: query %d answered %s\n", i, r.status().c_str());
+            continue;
+        }
+        if (i >= 50) us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+    }
+    return us;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "212"));
+    if (bench::arg(argc, argv, "--echo", "") == "1") return echo(domain);
+    const double seconds = std::stod(bench::arg(argc, argv, "--seconds", "3"));
+    bench::print_machine("bench_history_service: cpm_history on domain " + std::to_string(domain) + ", " +
+                         bench::arg(argc, argv, "--seconds", "3") + " s per rate");
+    const std::vector<std::string> env{"CPM_DOMAIN_ID=" + std::to_string(domain)};
+    const int service = bench::spawn({std::string(CPM_BIN_DIR) + "/cpm_history", "--window", "120s", "--max-bytes",
+                                      "4294967296", "--max-bytes-per-topic", "4294967296"},
+                                     env, "/tmp/bench_history_service.out", "/tmp/bench_history_service.err");
+    // The client talks UDP loopback (a restarted service may reuse a shared-memory port);
+    // the writer, like a vehicle, uses shared memory.
+    cpm::Participant client_participant(options_for(domain, false));
+    cpm::Participant writer_participant(options_for(domain, true));
+    cpm::WriterOptions wo;
+    wo.reliable = true;
+    wo.history_depth = 100;
+    cpm::Writer<VehicleState> writer(writer_participant, "vehicleState", wo);
+    cpm::HistoryClient client(client_participant, std::chrono::milliseconds(10000));
+    if (!writer.wait_for_matched(1, std::chrono::milliseconds(10000))) {
+        // The service subscribes when it discovers the topic: write once so it does.
+        std::fprintf(stderr, "bench_history_service: the service did not subscribe\n");
+    }
+    double tag = 0;
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    const long rss_before = rss_kb(service);
+    const uint64_t before = 0;
+
+    std::printf("\ningest (100 vehicles, VehicleState, reliable writer, depth 100 per vehicle)\n");
+    std::printf("%12s %10s %10s %8s\n", "rate /s", "written", "committed", "lost");
+    uint64_t written_total = 0, best_clean = 0;
+    uint64_t base = before;
+    for (double rate : {10'000.0, 20'000.0, 40'000.0, 60'000.0, 80'000.0}) {
+        const uint64_t w = write_at(writer, rate, seconds, tag);
+        writer.wait_for_acknowledgments(std::chrono::milliseconds(5000));
+        std::this_thread::sleep_for(std::chrono::milliseconds(300));
+        const uint64_t c = committed(client) - base;
+        base += c;
+        written_total += w;
+        std::printf("%12.0f %10llu %10llu %8lld\n", rate, (unsigned long long)w, (unsigned long long)c, (long long)w - (long long)c);
+        if (c >= w) best_clean = uint64_t(rate);
+        else break;
+    }
+    std::printf("highest rate with none lost: %llu samples/s (target >= 20000)\n", (unsigned long long)best_clean);
+
+    // Memory: what the service holds now, against its resident size before ingest.
+    HistoryRequest rq = cpm::HistoryClient::make("search", "", "");
+    rq.name_regex("^vehicleState/");
+    uint64_t held = 0, bytes = 0;
+    for (const auto& o : client.request(rq).objects()) {
+        held += o.samples_held();
+        bytes += o.bytes_held();
+    }
+    const long rss_after = rss_kb(service);
+    std::printf("\nmemory: %llu samples held, %llu payload bytes; service RSS %ld -> %ld KiB: %.1f bytes per sample beyond "
+                "its payload (target <= 64)\n",
+                (unsigned long long)held, (unsigned long long)bytes, rss_before, rss_after,
+                held ? (double(rss_after - rss_before) * 1024.0 - double(bytes)) / double(held) : 0.0);
+
+    std::printf("\nquery round trip: `at` through cpm::HistoryClient (2000 queries) vs plain request/reply ping-pong\n");
+    bench::print_header("round trip");
+    const auto service_stats = bench::stats_of(round_trips(client, 2050));
+    bench::print_row("cpm_history at", service_stats);
+    ::kill(service, SIGTERM);
+    bench::wait_child(service, 10);
+    const int echo_pid = bench::spawn_self({"--echo", "1", "--domain", std::to_string(domain)});
+    cpm::HistoryClient echo_client(client_participant, std::chrono::milliseconds(10000));
+    const auto echo_stats = bench::stats_of(round_trips(echo_client, 2050));
+    bench::print_row("plain ping-pong", echo_stats);
+    bench::print_ratio("cpm_history / ping-pong (target <= 1.5)", service_stats, echo_stats);
+    ::kill(echo_pid, SIGTERM);
+    bench::wait_child(echo_pid, 10);
+    return 0;
+}
