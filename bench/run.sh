@@ -18,3 +18,9 @@ echo "== bench_vehicle (simulated cars: bridge cycle cost, command latency, flee
 echo
 echo "== bench_fsm (state-machine tick cost; fsm_node command latency vs a plain DDS relay)"
 "$bin/bench_fsm"
+echo
+echo "== bench_history_store (the history store vs SQLite in memory, indexed, prepared statements)"
+"$bin/bench_history_store"
+echo
+echo "== bench_history_service (cpm_history: ingest without loss, query round trip vs plain ping-pong, memory)"
+"$bin/bench_history_service"

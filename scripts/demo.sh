@@ -3,7 +3,8 @@
 # 60 ms after creation); a monitor reads them with one MultiVehicleReader and prints each
 # vehicle's newest valid state and its age once a second. Both stop by themselves after ~5 s.
 # Part 2: the closed loop: a simulated car (firmware_sim + vehicle_bridge over a pty) in the
-# corridor, driven by fsm_node; it prints each transition and a short report.
+# corridor, driven by fsm_node; it prints each transition and a short report. cpm_history
+# records the run; the demo ends by asking it what happened.
 set -euo pipefail
 build="$1"; shift || true
 bin="$build/bin"
@@ -36,9 +37,11 @@ echo
 root="$(cd "$(dirname "$0")/.." && pwd)"
 echo "demo: simulated car 5 in scenarios/maps/corridor.json, driven by fsm_node with scenarios/fsm/corridor.json"
 "$bin/cpm" fsm check "$root/scenarios/fsm/corridor.json"
+"$bin/cpm_history" --window 60s > /tmp/cpm_demo_history.$$.out 2>&1 &
+history=$!
 "$bin/cpm" vehicle sim --id 5 --map "$root/scenarios/maps/corridor.json" --start 0,-0.01,0 > /tmp/cpm_demo_sim.$$.out 2>&1 &
 sim=$!
-trap 'kill $monitor $writer $sim 2>/dev/null || true' EXIT INT TERM
+trap 'kill $monitor $writer $sim $history 2>/dev/null || true' EXIT INT TERM
 timeout 60 "$bin/fsm_node" --vehicle_id 5 --fsm "$root/scenarios/fsm/corridor.json" --report 2>/dev/null || status=$?
 kill -INT $sim 2>/dev/null || true
 wait $sim 2>/dev/null || true
@@ -47,10 +50,22 @@ if [ $status -eq 0 ]; then
   echo "demo: the car followed the right wall at 0.50 m (past the door niche, whose jump FollowWall"
   echo "      ignores), turned left at the corner when the end wall came within 0.9 m, followed"
   echo "      the new right wall and stopped 0.6 m before the corridor's end. Draw the machine with"
-  echo "      'build/bin/cpm fsm render scenarios/fsm/corridor.json -o corridor.svg'. (Querying the"
-  echo "      run afterwards needs cpm_history, which is not built yet.)"
+  echo "      'build/bin/cpm fsm render scenarios/fsm/corridor.json -o corridor.svg'."
+  echo
+  echo "demo: what cpm_history recorded (cpm dump):"
+  "$bin/cpm" dump || status=$?
+  echo
+  echo "demo: the car's state machine 3 s ago and the car's state then (cpm history at ... --time -3s):"
+  "$bin/cpm" history at --topic fsmStatus --key 5 --time -3s || status=$?
+  "$bin/cpm" history at --topic vehicleState --key 5 --time -3s || status=$?
+  echo
+  echo "      Ask more while it runs: cpm history list | search --name Range | range --topic"
+  echo "      rangeSensors --key 5 --from -5s --to -4s --json | wait --topic vehicleState --key 5;"
+  echo "      'cpm history --help' lists them all."
 else
   echo "demo: the closed loop FAILED (exit $status); the car's log: /tmp/cpm_demo_sim.$$.out" >&2
 fi
-rm -f /tmp/cpm_demo_sim.$$.out
+kill -INT $history 2>/dev/null || true
+wait $history 2>/dev/null || true
+rm -f /tmp/cpm_demo_sim.$$.out /tmp/cpm_demo_history.$$.out
 exit $status

@@ -113,7 +113,8 @@ int run(int argc, char** argv)
     }
     cpm::fsm::Machine& machine = *loaded.machine;
     std::map<int, std::pair<std::string, double>> walls;  // for --report: which states follow which wall
-    for (const auto& st : nlohmann::json::parse(loaded.json)["states"]) {
+    const auto machine_json = nlohmann::json::parse(loaded.json);  // kept: the loop below reads into it
+    for (const auto& st : machine_json["states"]) {
         if (st["type"].get<std::string>().find("FollowWall") != std::string::npos) {
             walls[st["id"].get<int>()] = {st.value("side", "right"), st.value("clearance", 0.4)};
         }

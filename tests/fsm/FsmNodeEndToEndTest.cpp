@@ -62,7 +62,7 @@ Drive drive(const std::string& machine)
     const std::string root = CPM_SOURCE_DIR;
     Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", root + "/scenarios/maps/corridor.json",
                  "--start", "0,-0.01,0"});
-    Process sut({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", root + "/scenarios/fsm/" + machine});
+    Process sut({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", root + "/scenarios/fsm/" + machine, "--report"});
     Drive run;
     auto collect = [&] {
         for (auto& o : observations.take()) run.track.push_back(o);
@@ -89,6 +89,10 @@ TEST(FsmNodeEndToEnd, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCorne
     const Drive run = drive("corridor.json");
     EXPECT_EQ(run.states, (std::vector<int>{0, 1, 2, 3})) << run.output;
     EXPECT_NE(run.output.find("ended in state 3 (Stop)"), std::string::npos) << run.output;
+    // --report: the distance, the turn, and each wall-following state's clearance statistics.
+    EXPECT_NE(run.output.find("report: driven "), std::string::npos) << run.output;
+    EXPECT_NE(run.output.find("report: state 0, right wall at 0.50 m"), std::string::npos) << run.output;
+    EXPECT_NE(run.output.find("report: state 2, right wall at 0.50 m"), std::string::npos) << run.output;
     ASSERT_GT(run.track.size(), 300u);
     ASSERT_GT(run.commands.size(), 300u);
     // The first leg, settled after its first metre, for 5 m (the corner's Motor state starts at
