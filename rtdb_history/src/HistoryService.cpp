@@ -375,9 +375,29 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
     // ---- ingest ----------------------------------------------------------------------------
     void ingest(TopicRec& t, dds::DataReader* reader)
     {
+        Skipped skipped;
+        {
+            std::lock_guard lock(ingest_mutex);
+            take_all(t, reader, skipped);
+        }
+        // Logged outside the lock: the log topic is recorded too, and Fast DDS delivers a write
+        // to a reader in this process on the writing thread, which would take the lock again.
+        for (size_t i = 0; i < skipped.count; ++i) {
+            CPM_LOG_WARN("cpm_history: topic '%s': a sample of %zu bytes is too short to hold a Header (4 + 16 bytes); skipped",
+                         t.name.c_str(), skipped.size);
+        }
+    }
+
+    struct Skipped
+    {
+        size_t count = 0, size = 0;  ///< too short to hold a header (the first ten), and the last one's size
+    };
+
+    /// Takes every sample the reader holds into the store; under ingest_mutex.
+    void take_all(TopicRec& t, dds::DataReader* reader, Skipped& skipped)
+    {
         RawSample raw;
         dds::SampleInfo info;
-        std::lock_guard lock(ingest_mutex);
         while (reader->take_next_sample(&raw, &info) == ReturnCode_t::RETCODE_OK) {
             const uint64_t now = cpm::get_time_ns();
             rtps::GUID_t writer;
@@ -395,8 +415,8 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             const auto& b = raw.bytes;
             if (b.size() < 4 + 16) {  // encapsulation + Header
                 if (++dropped <= 10) {
-                    CPM_LOG_WARN("cpm_history: topic '%s': a sample of %zu bytes is too short to hold a Header (4 + 16 bytes); skipped",
-                                 t.name.c_str(), b.size());
+                    ++skipped.count;
+                    skipped.size = b.size();
                 }
                 continue;
             }
