@@ -18,7 +18,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <atomic>
 #include <csignal>
+#include <thread>
 #include <sstream>
 
 CPM_REGISTER_TYPE(LabOnlyThing)
@@ -204,6 +206,36 @@ TEST_F(HistoryService, TruncatedSamplesAreCountedAndSkippedAndBadRequestsAnswere
     ASSERT_EQ(w.wait(30s), 0) << w.errors();
     EXPECT_TRUE(wait_for_samples("vehicleState", "5", 3));
     EXPECT_EQ(service.wait(0ms), -1);  // still running
+}
+
+TEST_F(HistoryService, SeveralClientsAtOnceAndAWaitingOrStoppedClientStallsNeitherOthersNorIngest)
+{
+    Process first = writer({"--type", "vehicle", "--vehicle", "2", "--count", "5"});
+    ASSERT_EQ(first.wait(30s), 0) << first.errors();
+    ASSERT_TRUE(wait_for_samples("vehicleState", "2", 5));
+    // A client frozen in the middle of a wait (SIGSTOP: it reads no reply), and one in this
+    // process waiting 3 s for a sample that does not come.
+    Process frozen({built_program("cpm"), "history", "wait", "--topic", "vehicleState", "--key", "2", "--timeout", "20s"});
+    std::this_thread::sleep_for(300ms);
+    frozen.kill(SIGSTOP);
+    std::atomic<bool> waited{false};
+    std::thread waiter([&] {
+        cpm::HistoryClient slow(participant);
+        auto r = slow.wait_next<VehicleState>("vehicleState", 2, cpm::get_time_ns(), 3s);
+        EXPECT_EQ(r.status, "timeout");
+        waited = true;
+    });
+    // Meanwhile another client is answered at once, and a writer's samples are all recorded.
+    cpm::HistoryClient other(participant);
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int i = 0; i < 20; ++i) EXPECT_EQ(other.latest<VehicleState>("vehicleState", 2).sample.pose().x(), 4);
+    EXPECT_FALSE(waited) << "20 queries answered only after the 3 s wait: "
+                         << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s";
+    Process second = writer({"--type", "vehicle", "--vehicle", "6", "--count", "200"});
+    ASSERT_EQ(second.wait(30s), 0) << second.errors();
+    EXPECT_TRUE(wait_for_samples("vehicleState", "6", 200));
+    waiter.join();
+    frozen.kill(SIGKILL);
 }
 
 TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReadable)
