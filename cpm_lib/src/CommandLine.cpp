@@ -146,13 +146,18 @@ int run_main(int argc, char** argv, const char* program, const char* help, const
         std::fputs(help, stdout);
         return 0;
     }
+    // The program's name once, whether or not the message already starts with it.
+    auto report = [program](const char* what) {
+        const std::string prefix = std::string(program) + ": ";
+        std::fprintf(stderr, "%s%s\n", std::string(what).rfind(prefix, 0) == 0 ? "" : prefix.c_str(), what);
+    };
     try {
         return run(argc, argv);
     } catch (const UsageError& e) {
-        std::fprintf(stderr, "%s: %s\n", program, e.what());
+        report(e.what());
         return kUsageExit;
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "%s: %s\n", program, e.what());
+        report(e.what());
         return 1;
     }
 }

@@ -140,6 +140,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             }
             return out;
         };
+        for (const auto& [topic, window] : options.topic_windows_ns) store_.set_retention(topic, {window, options.max_bytes_per_topic});
         include = compile(options.include, "--include");
         exclude = compile(options.exclude, "--exclude");
     }

@@ -12,13 +12,14 @@
 namespace {
 
 const char* kHelp =
-    "usage: cpm_history [--include REGEX]... [--exclude REGEX]... [--window 10s] [--max-bytes N]\n"
-    "                   [--max-bytes-per-topic N] [--status-period 1s] [--dds_domain N]\n"
+    "usage: cpm_history [--include REGEX]... [--exclude REGEX]... [--window 10s] [--topic-window TOPIC=DURATION]...\n"
+    "                   [--max-bytes N] [--max-bytes-per-topic N] [--status-period 1s] [--dds_domain N]\n"
     "\n"
     "Finds topics by DDS discovery and records every one whose name matches an --include pattern\n"
     "(all when none is given) and no --exclude pattern (full-match ECMAScript regexes), types it\n"
     "was never compiled with included: it keeps the serialized payloads and reads the stamps from\n"
-    "the Header every cpm type starts with. Each topic keeps --window of history (and at most\n"
+    "the Header every cpm type starts with. Each topic keeps --window of history (--topic-window\n"
+    "sets one topic's, e.g. --topic-window vehicleState=60s; repeatable) and at most\n"
     "--max-bytes-per-topic, default 128 MiB; --max-bytes in all, default 512 MiB). Deleted\n"
     "objects (disposed, or their writers gone) stay readable for the window.\n"
     "Answers historyRequest on historyReply (cpm history ..., cpm dump, cpm::HistoryClient) and\n"
@@ -31,6 +32,7 @@ int run(int argc, char** argv)
                                        {{"--include", true, true},
                                         {"--exclude", true, true},
                                         {"--window", true},
+                                        {"--topic-window", true, true},
                                         {"--max-bytes", true},
                                         {"--max-bytes-per-topic", true},
                                         {"--status-period", true}},
@@ -47,7 +49,16 @@ int run(int argc, char** argv)
     options.include = lines("--include");
     options.exclude = lines("--exclude");
     options.window_ns = cpm::cli::parse_duration("--window", parsed.get("--window", "10s"));
-    if (options.window_ns == 0) throw cpm::cli::UsageError("cpm_history: --window must be longer than 0");
+    if (options.window_ns == 0) throw cpm::cli::UsageError("--window must be longer than 0");
+    for (const auto& item : lines("--topic-window")) {
+        const auto eq = item.find('=');
+        if (eq == std::string::npos || eq == 0) {
+            throw cpm::cli::UsageError("cpm_history: --topic-window '" + item + "': expected TOPIC=DURATION (e.g. vehicleState=60s)");
+        }
+        const uint64_t w = cpm::cli::parse_duration("--topic-window", item.substr(eq + 1));
+        if (w == 0) throw cpm::cli::UsageError("cpm_history: --topic-window '" + item + "': the window must be longer than 0");
+        options.topic_windows_ns[item.substr(0, eq)] = w;
+    }
     options.max_bytes = static_cast<uint64_t>(cpm::cli::parse_integer("--max-bytes", parsed.get("--max-bytes", "536870912"), 1024, 1LL << 40));
     options.max_bytes_per_topic = static_cast<uint64_t>(
         cpm::cli::parse_integer("--max-bytes-per-topic", parsed.get("--max-bytes-per-topic", "134217728"), 1024, 1LL << 40));

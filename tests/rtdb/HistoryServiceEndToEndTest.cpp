@@ -238,6 +238,33 @@ TEST_F(HistoryService, SeveralClientsAtOnceAndAWaitingOrStoppedClientStallsNeith
     frozen.kill(SIGKILL);
 }
 
+TEST(HistoryServiceOptions, ATopicKeepsItsOwnWindowAndBadOptionsAreRefused)
+{
+    cpm::Participant participant{udp_only()};
+    Process service({built_program("cpm_history"), "--window", "30s", "--topic-window", "shortLived=1s"});
+    cpm::HistoryClient client(participant);
+    Process a({built_program("history_writer"), "--type", "vehicle", "--topic", "shortLived", "--vehicle", "1", "--count", "5"});
+    Process b({built_program("history_writer"), "--type", "vehicle", "--topic", "longLived", "--vehicle", "1", "--count", "5"});
+    ASSERT_EQ(a.wait(30s), 0) << a.errors();
+    ASSERT_EQ(b.wait(30s), 0) << b.errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        auto r = client.latest("longLived", "1");
+        return !r.objects().empty() && r.objects()[0].samples_held() == 5;
+    }, 10s, 20ms));
+    EXPECT_EQ(client.latest("longLived", "1").objects().at(0).history_interval_ns(), 30'000'000'000u);
+    // One second after its last sample the short-lived topic's samples are gone, the other's not.
+    EXPECT_TRUE(cpm_test::wait_until([&] { return client.latest("shortLived", "1").status() == "evicted"; }, 10s, 50ms));
+    EXPECT_EQ(client.latest("shortLived", "1").objects().at(0).history_interval_ns(), 1'000'000'000u);
+    EXPECT_EQ(client.latest("longLived", "1").status(), "ok");
+
+    Process bad({built_program("cpm_history"), "--topic-window", "shortLived"});
+    EXPECT_EQ(bad.wait(10s), 2);
+    EXPECT_EQ(bad.errors(), "cpm_history: --topic-window 'shortLived': expected TOPIC=DURATION (e.g. vehicleState=60s)\n");
+    Process zero({built_program("cpm_history"), "--window", "0s"});
+    EXPECT_EQ(zero.wait(10s), 2);
+    EXPECT_NE(zero.errors().find("--window must be longer than 0"), std::string::npos) << zero.errors();
+}
+
 TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReadable)
 {
     Process disposing = writer({"--type", "vehicle", "--vehicle", "8", "--count", "4", "--dispose"});

@@ -5,6 +5,7 @@
 #include <cpm/Participant.hpp>
 #include <cpm/rtdb/Store.hpp>
 
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@ struct ServiceOptions
     uint64_t window_ns = 10'000'000'000ull;
     uint64_t max_bytes = 512ull << 20;  ///< payload bytes across all topics
     uint64_t max_bytes_per_topic = 128ull << 20;
+    std::map<std::string, uint64_t> topic_windows_ns;  ///< topics keeping another window than window_ns
     uint64_t status_period_ns = 1'000'000'000ull;
     size_t workers = 4;  ///< threads answering requests that may wait
     ParticipantOptions participant = ParticipantOptions::from_init();
