@@ -42,14 +42,12 @@ struct StoreWork
     StoreWork()
     {
         for (int k = 0; k < kObjects; ++k) oids.push_back(store.add_object({.topic = "vehicleState", .key = std::to_string(k)}));
-        for (; next <= kSamples; ++next) append();
-    }
-    void append()
-    {
-        for (int k = 0; k < kObjects; ++k) {
-            store.commit(oids[k], {data_time(next), data_time(next), 0, payload.data(), payload.size()}, next * kCycle + k);
+        for (; next <= kSamples; ++next) {
+            for (int k = 0; k < kObjects; ++k) put(k, next);
         }
     }
+    /// Object k's sample i: commit time i * kCycle + k, data time data_time(i).
+    void put(int k, uint64_t i) { store.commit(oids[k], {data_time(i), data_time(i), 0, payload.data(), payload.size()}, i * kCycle + k); }
 };
 
 void check(int rc, sqlite3* db, const char* what)
@@ -82,7 +80,9 @@ struct SqliteWork
         prepare("SELECT commit_ns, data_ns, valid_after_ns, source_ns, payload FROM samples WHERE object = ?1 AND commit_ns >= ?2"
                 " AND commit_ns < ?3 ORDER BY commit_ns LIMIT 10000", &range);
         check(sqlite3_exec(db, "BEGIN", nullptr, nullptr, nullptr), db, "begin");
-        for (; next <= kSamples; ++next) append();
+        for (; next <= kSamples; ++next) {
+            for (int k = 0; k < kObjects; ++k) put(k, next);
+        }
         check(sqlite3_exec(db, "COMMIT", nullptr, nullptr, nullptr), db, "commit");
     }
     ~SqliteWork()
@@ -91,16 +91,15 @@ struct SqliteWork
         sqlite3_close(db);
     }
     void prepare(const char* sql, sqlite3_stmt** s) { check(sqlite3_prepare_v2(db, sql, -1, s, nullptr), db, sql); }
-    void append()
+    /// The row of StoreWork::put(k, i).
+    void put(int k, uint64_t i)
     {
-        for (int k = 0; k < kObjects; ++k) {
-            sqlite3_bind_int64(insert, 1, k);
-            sqlite3_bind_int64(insert, 2, int64_t(next * kCycle + k));
-            sqlite3_bind_int64(insert, 3, int64_t(data_time(next)));
-            sqlite3_bind_blob(insert, 4, payload.data(), int(payload.size()), SQLITE_STATIC);
-            check(sqlite3_step(insert), db, "insert");
-            sqlite3_reset(insert);
-        }
+        sqlite3_bind_int64(insert, 1, k);
+        sqlite3_bind_int64(insert, 2, int64_t(i * kCycle + k));
+        sqlite3_bind_int64(insert, 3, int64_t(data_time(i)));
+        sqlite3_bind_blob(insert, 4, payload.data(), int(payload.size()), SQLITE_STATIC);
+        check(sqlite3_step(insert), db, "insert");
+        sqlite3_reset(insert);
     }
     /// Reads rows the way the store answers: times and a copy of the payload.
     size_t query(sqlite3_stmt* s, int object, uint64_t t0, uint64_t t1 = 0)
@@ -123,28 +122,17 @@ struct SqliteWork
     }
 };
 
-StoreWork& store_work()
+/// The query fixtures (slot 0) and, so that they keep their window, the append targets (slot 1).
+template <typename Work, int Slot>
+Work& work()
 {
-    static StoreWork w;
+    static Work w;
     return w;
 }
-SqliteWork& sqlite_work()
-{
-    static SqliteWork w;
-    return w;
-}
-
-/// Appends go to their own store and database, so the query fixtures keep their window.
-StoreWork& append_store()
-{
-    static StoreWork w;
-    return w;
-}
-SqliteWork& append_sqlite()
-{
-    static SqliteWork w;
-    return w;
-}
+auto& store_work() { return work<StoreWork, 0>(); }
+auto& sqlite_work() { return work<SqliteWork, 0>(); }
+auto& append_store() { return work<StoreWork, 1>(); }
+auto& append_sqlite() { return work<SqliteWork, 1>(); }
 
 /// Query times spread over the held window, object by object.
 struct Times
@@ -157,23 +145,12 @@ struct Times
 void BM_Store_Append(benchmark::State& state)
 {
     auto& w = append_store();
-    for (auto _ : state) {
-        w.store.commit(w.oids[0], {data_time(w.next), data_time(w.next), 0, w.payload.data(), w.payload.size()}, w.next * kCycle);
-        ++w.next;
-    }
+    for (auto _ : state) w.put(0, w.next++);
 }
 void BM_Sqlite_Append(benchmark::State& state)
 {
     auto& w = append_sqlite();
-    for (auto _ : state) {
-        sqlite3_bind_int64(w.insert, 1, 0);
-        sqlite3_bind_int64(w.insert, 2, int64_t(w.next * kCycle));
-        sqlite3_bind_int64(w.insert, 3, int64_t(data_time(w.next)));
-        sqlite3_bind_blob(w.insert, 4, w.payload.data(), int(w.payload.size()), SQLITE_STATIC);
-        sqlite3_step(w.insert);
-        sqlite3_reset(w.insert);
-        ++w.next;
-    }
+    for (auto _ : state) w.put(0, w.next++);
 }
 template <cpm::rtdb::By by>
 void BM_Store_At(benchmark::State& state)
@@ -253,19 +230,7 @@ void print_percentiles()
         std::printf("%-12s store p50 %8.0f ns  p99 %8.0f ns | sqlite p50 %8.0f ns  p99 %8.0f ns | sqlite/store at p50 %6.1fx\n",
                     what, store.first, store.second, sqlite.first, sqlite.second, sqlite.first / store.first);
     };
-    line("append", percentiles([&] {
-             sa.store.commit(sa.oids[2], {data_time(sa.next), data_time(sa.next), 0, sa.payload.data(), sa.payload.size()}, sa.next * kCycle);
-             ++sa.next;
-         }),
-         percentiles([&] {
-             sqlite3_bind_int64(qa.insert, 1, 2);
-             sqlite3_bind_int64(qa.insert, 2, int64_t(qa.next * kCycle));
-             sqlite3_bind_int64(qa.insert, 3, int64_t(data_time(qa.next)));
-             sqlite3_bind_blob(qa.insert, 4, qa.payload.data(), int(qa.payload.size()), SQLITE_STATIC);
-             sqlite3_step(qa.insert);
-             sqlite3_reset(qa.insert);
-             ++qa.next;
-         }));
+    line("append", percentiles([&] { sa.put(2, sa.next++); }), percentiles([&] { qa.put(2, qa.next++); }));
     line("at commit", percentiles([&] { benchmark::DoNotOptimize(s.store.at(s.oids[k = (k + 1) % kObjects], times.t(s.next))); }),
          percentiles([&] { q.query(q.at_commit, k = (k + 1) % kObjects, times.t(q.next)); }));
     line("at data", percentiles([&] { benchmark::DoNotOptimize(s.store.at(s.oids[k = (k + 1) % kObjects], times.t(s.next), cpm::rtdb::By::data)); }),

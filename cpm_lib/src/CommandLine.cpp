@@ -14,6 +14,16 @@ std::string ParsedArgs::get(const std::string& name, const std::string& fallback
     return it == flags.end() ? fallback : it->second;
 }
 
+std::vector<std::string> ParsedArgs::all(const std::string& name) const
+{
+    std::vector<std::string> values;
+    auto it = flags.find(name);
+    if (it == flags.end()) return values;
+    std::istringstream joined(it->second);
+    for (std::string v; std::getline(joined, v);) values.push_back(v);
+    return values;
+}
+
 ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<FlagSpec>& known,
                       const std::string& command)
 {

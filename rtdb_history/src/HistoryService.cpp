@@ -78,7 +78,14 @@ struct Event
 
 struct HistoryService::Impl : public dds::DomainParticipantListener
 {
-    /// One recorded topic: a raw reader on the recording participant.
+    /// What the service knows of an instance it records.
+    struct InstanceRec
+    {
+        Oid oid = kNoOid;
+        std::set<rtps::GUID_t> writers;
+        bool deleted = false;
+    };
+    /// One recorded topic: a raw reader on the recording participant, and its instances.
     struct TopicRec : public dds::DataReaderListener
     {
         Impl* service = nullptr;
@@ -87,14 +94,14 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         dds::Topic* topic = nullptr;
         dds::DataReader* reader = nullptr;
         uint64_t received = 0, received_at_last_status = 0;
+        std::map<rtps::InstanceHandle_t, InstanceRec> instances;  // under ingest_mutex
         void on_data_available(dds::DataReader* r) override { service->ingest(*this, r); }
     };
-    /// What the service knows of an instance it records.
-    struct InstanceRec
+    /// A participant seen: its object and name.
+    struct ProcessRec
     {
         Oid oid = kNoOid;
-        std::set<rtps::GUID_t> writers;
-        bool deleted = false;
+        std::string name;
     };
 
     ServiceOptions options;
@@ -108,14 +115,12 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
     std::mutex events_mutex;
     std::condition_variable events_cv;
     std::deque<Event> events;
-    bool stopping = false;
+    std::atomic<bool> stopping{false};  ///< set (then both condition variables notified) by the destructor
 
     // The ingest path (reader callbacks, discovery handling, expiry) under one lock.
     std::mutex ingest_mutex;
     std::map<std::string, std::unique_ptr<TopicRec>> topics;
-    std::map<std::pair<std::string, rtps::InstanceHandle_t>, InstanceRec> instances;
-    std::map<rtps::GuidPrefix_t, Oid> processes;
-    std::map<rtps::GuidPrefix_t, std::string> process_names;
+    std::map<rtps::GuidPrefix_t, ProcessRec> processes;
     std::atomic<uint64_t> received{0}, dropped{0}, requests{0}, bad_requests{0};
 
     std::unique_ptr<Writer<HistoryReply>> replies;
@@ -223,19 +228,13 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             HistoryRequest rq;
             {
                 std::unique_lock lock(work_mutex);
-                work_cv.wait(lock, [&] { return !work.empty() || is_stopping(); });
+                work_cv.wait(lock, [&] { return !work.empty() || stopping; });
                 if (work.empty()) return;
                 rq = std::move(work.front());
                 work.pop_front();
             }
             serve(rq);
         }
-    }
-
-    bool is_stopping()
-    {
-        std::lock_guard lock(events_mutex);
-        return stopping;
     }
 
     // ---- discovery -------------------------------------------------------------------------
@@ -296,26 +295,28 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         switch (e.kind) {
         case Event::process_found: {
             if (processes.count(e.guid.guidPrefix)) return;
-            process_names[e.guid.guidPrefix] = e.name;
-            processes[e.guid.guidPrefix] = store_.add_object({.kind = ObjectKind::process, .name = e.name, .type_name = "participant",
-                                                              .creator = e.name, .creator_guid = prefix_text(e.guid.guidPrefix),
-                                                              .created_ts = now});
+            processes[e.guid.guidPrefix] = {store_.add_object({.kind = ObjectKind::process, .name = e.name, .type_name = "participant",
+                                                               .creator = e.name, .creator_guid = prefix_text(e.guid.guidPrefix),
+                                                               .created_ts = now}),
+                                            e.name};
             return;
         }
         case Event::process_gone: {
             auto it = processes.find(e.guid.guidPrefix);
-            if (it != processes.end()) store_.mark_deleted(it->second, now);
+            if (it != processes.end()) store_.mark_deleted(it->second.oid, now);
             // Its writers are gone with it.
-            for (auto& [key, inst] : instances) {
-                for (auto w = inst.writers.begin(); w != inst.writers.end();) {
-                    w = w->guidPrefix == e.guid.guidPrefix ? inst.writers.erase(w) : std::next(w);
+            for (auto& [name, t] : topics) {
+                for (auto& [handle, inst] : t->instances) {
+                    std::erase_if(inst.writers, [&](const rtps::GUID_t& w) { return w.guidPrefix == e.guid.guidPrefix; });
+                    if (inst.writers.empty() && !inst.deleted) delete_instance(inst, now);
                 }
-                if (inst.writers.empty() && !inst.deleted) delete_instance(inst, now);
             }
             return;
         }
         case Event::writer_gone: {
-            for (auto& [key, inst] : instances) {
+            auto t = topics.find(e.topic);
+            if (t == topics.end()) return;
+            for (auto& [handle, inst] : t->second->instances) {
                 if (inst.writers.erase(e.guid) && inst.writers.empty() && !inst.deleted) delete_instance(inst, now);
             }
             return;
@@ -403,10 +404,9 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             const uint64_t now = cpm::get_time_ns();
             rtps::GUID_t writer;
             rtps::iHandle2GUID(writer, info.publication_handle);
-            auto key = std::make_pair(t.name, info.instance_handle);
             if (!info.valid_data) {
-                auto it = instances.find(key);
-                if (it != instances.end() && !it->second.deleted && info.instance_state != dds::ALIVE_INSTANCE_STATE) {
+                auto it = t.instances.find(info.instance_handle);
+                if (it != t.instances.end() && !it->second.deleted && info.instance_state != dds::ALIVE_INSTANCE_STATE) {
                     delete_instance(it->second, now);
                 }
                 continue;
@@ -427,14 +427,13 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
                 for (size_t i = 0; i < 8; ++i) v |= uint64_t(b[at + (little ? i : 7 - i)]) << (8 * i);
                 return v;
             };
-            auto& inst = instances[key];
+            auto& inst = t.instances[info.instance_handle];
             if (inst.oid == kNoOid || inst.deleted) {
                 auto proc = processes.find(writer.guidPrefix);
-                auto pname = process_names.find(writer.guidPrefix);
+                const ProcessRec creator = proc == processes.end() ? ProcessRec{} : proc->second;
                 inst = InstanceRec{};
                 inst.oid = store_.add_object({.topic = t.name, .key = key_text(info.instance_handle, t.keyed), .type_name = t.type_name,
-                                              .parent = proc == processes.end() ? kNoOid : proc->second,
-                                              .creator = pname == process_names.end() ? "" : pname->second,
+                                              .parent = creator.oid, .creator = creator.name,
                                               .creator_guid = prefix_text(writer.guidPrefix), .created_ts = now});
             }
             inst.writers.insert(writer);

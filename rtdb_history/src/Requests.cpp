@@ -34,6 +34,15 @@ HistorySample to_wire(const StoredSample& s, Status status)
     return w;
 }
 
+/// The object named by topic and key.
+Oid object_named(const Store& store, const std::string& topic, const std::string& key)
+{
+    auto oid = store.find(topic, key);
+    if (!oid) throw UnknownObject("no object '" + topic + (key.empty() ? "" : "/" + key) + "' (not recorded, or purged after its window)");
+    return *oid;
+}
+
+/// The request's object: its oid, else its topic and key.
 Oid object_of(const Store& store, const HistoryRequest& rq)
 {
     if (rq.oid() != 0) {
@@ -41,12 +50,7 @@ Oid object_of(const Store& store, const HistoryRequest& rq)
         return rq.oid();
     }
     if (rq.topic().empty()) throw BadRequest("kind '" + rq.kind() + "' needs an object: topic (and key) or oid");
-    auto oid = store.find(rq.topic(), rq.key());
-    if (!oid) {
-        throw UnknownObject("no object '" + rq.topic() + (rq.key().empty() ? "" : "/" + rq.key()) +
-                            "' (not recorded, or purged after its window)");
-    }
-    return *oid;
+    return object_named(store, rq.topic(), rq.key());
 }
 
 Criteria criteria_of(const HistoryRequest& rq)
@@ -123,11 +127,7 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
         std::vector<Oid> oids;
         for (const auto& name : rq.objects()) {
             const auto slash = name.find('/');
-            HistoryRequest one;
-            one.kind("snapshot");
-            one.topic(name.substr(0, slash));
-            one.key(slash == std::string::npos ? "" : name.substr(slash + 1));
-            oids.push_back(object_of(store, one));
+            oids.push_back(object_named(store, name.substr(0, slash), slash == std::string::npos ? "" : name.substr(slash + 1)));
         }
         auto cut = store.snapshot(rq.t0(), oids, by);
         bool all_ok = true;

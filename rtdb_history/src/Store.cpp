@@ -183,6 +183,7 @@ struct Store::Object
     mutable std::shared_mutex mutex;
     ObjectInfo info;  // deleted_ts and the counters change under mutex
     Retention retention;
+    uint64_t* topic_bytes = nullptr;  ///< its topic's payload bytes (a node of Store::topic_bytes_)
     RecordRing records;  // by commit time; records[i] has sequence head_seq + i
     uint64_t head_seq = 0;
     /// The data-time index: the low 32 bits of each held sample's sequence number, ordered by
@@ -276,8 +277,8 @@ void Store::set_retention(const std::string& topic, Retention r)
 {
     std::unique_lock lock(registry_mutex_);
     retention_[topic] = r;
-    for (auto& [oid, o] : objects_) {
-        if (o->info.topic != topic) continue;
+    for (auto& o : objects_) {
+        if (!o || o->info.topic != topic) continue;
         std::unique_lock ol(o->mutex);
         o->retention = r;
         o->info.history_interval_ns = r.window_ns;
@@ -297,13 +298,12 @@ Oid Store::add_object(ObjectInfo info)
     o->retention = retention(info.topic);
     {
         std::unique_lock lock(registry_mutex_);
-        info.oid = next_oid_++;
+        info.oid = objects_.size();
         info.history_interval_ns = o->retention.window_ns;
         if (info.name.empty()) info.name = info.key.empty() ? info.topic : info.topic + "/" + info.key;
+        o->topic_bytes = &topic_bytes_[info.topic];
         o->info = std::move(info);
-        objects_[o->info.oid] = o;
-        if (by_oid_.size() <= o->info.oid) by_oid_.resize(o->info.oid + 1, nullptr);
-        by_oid_[o->info.oid] = o.get();
+        objects_.push_back(o);
     }
     notify();
     return o->info.oid;
@@ -312,40 +312,54 @@ Oid Store::add_object(ObjectInfo info)
 std::shared_ptr<Store::Object> Store::object(Oid oid) const
 {
     std::shared_lock lock(registry_mutex_);
-    auto it = objects_.find(oid);
-    return it == objects_.end() ? nullptr : it->second;
+    return oid < objects_.size() ? objects_[oid] : nullptr;
 }
 
 template <typename F>
 auto Store::read(Oid oid, F&& f) const
 {
     std::shared_lock lock(registry_mutex_);
-    const Object* o = oid < by_oid_.size() ? by_oid_[oid] : nullptr;
+    const Object* o = oid < objects_.size() ? objects_[oid].get() : nullptr;
     if (!o) return f(nullptr);
     std::shared_lock ol(o->mutex);
     return f(o);
 }
 
-void Store::evict_for_budget(const std::string& topic, uint64_t needed)
+void Store::evict_oldest(Object& o)
 {
-    const uint64_t topic_budget = retention(topic).max_bytes;
-    auto over = [&](bool whole_store) {
-        return whole_store ? total_bytes_ + needed > options_.max_bytes_total : topic_bytes_[topic] + needed > topic_budget;
-    };
+    const size_t n = o.evict_front();
+    total_bytes_ -= n;
+    *o.topic_bytes -= n;
+    ++evicted_;
+}
+
+void Store::evict_window(Object& o, uint64_t newest)
+{
+    while (!o.records.empty() && o.records.front().commit + o.retention.window_ns < newest) evict_oldest(o);
+}
+
+void Store::evict_for_budget(Object& obj, uint64_t needed)
+{
+    uint64_t topic_budget;
+    {
+        std::shared_lock lock(obj.mutex);
+        topic_budget = obj.retention.max_bytes;
+    }
+    auto used = [&](bool whole_store) { return whole_store ? total_bytes_ : *obj.topic_bytes; };
     for (bool whole_store : {false, true}) {
-        if (!over(whole_store)) continue;
+        const uint64_t budget = whole_store ? options_.max_bytes_total : topic_budget;
+        if (used(whole_store) + needed <= budget) continue;
         // Evict the oldest samples in scope until 1/16 of the budget is free again, so that a
         // flood pays for the scan once per many samples.
-        const uint64_t budget = whole_store ? options_.max_bytes_total : topic_budget;
         const uint64_t goal = budget - std::min(budget, needed + budget / 16);
         std::vector<std::shared_ptr<Object>> scope;
         {
             std::shared_lock lock(registry_mutex_);
-            for (auto& [oid, o] : objects_) {
-                if (whole_store || o->info.topic == topic) scope.push_back(o);
+            for (auto& o : objects_) {
+                if (o && (whole_store || o->topic_bytes == obj.topic_bytes)) scope.push_back(o);
             }
         }
-        while ((whole_store ? total_bytes_ : topic_bytes_[topic]) > goal) {
+        while (used(whole_store) > goal) {
             Object* oldest = nullptr;
             uint64_t oldest_commit = kNever;
             for (auto& o : scope) {
@@ -357,10 +371,7 @@ void Store::evict_for_budget(const std::string& topic, uint64_t needed)
             }
             if (!oldest) break;
             std::unique_lock ol(oldest->mutex);
-            const size_t n = oldest->evict_front();
-            total_bytes_ -= n;
-            topic_bytes_[oldest->info.topic] -= n;
-            ++evicted_;
+            evict_oldest(*oldest);
         }
     }
 }
@@ -369,7 +380,7 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
 {
     auto o = object(oid);
     if (!o) return 0;
-    evict_for_budget(o->info.topic, in.size);
+    evict_for_budget(*o, in.size);
     uint64_t commit_ns;
     {
         std::unique_lock lock(o->mutex);
@@ -380,13 +391,7 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
             o->cycle_sum += cycle;
             o->cycle_max = std::max(o->cycle_max, cycle);
         }
-        // Time window, relative to the newest commit.
-        while (!o->records.empty() && o->records.front().commit + o->retention.window_ns < commit_ns) {
-            const size_t n = o->evict_front();
-            total_bytes_ -= n;
-            topic_bytes_[o->info.topic] -= n;
-            ++evicted_;
-        }
+        evict_window(*o, commit_ns);  // the time window, relative to the newest commit
         const uint64_t seq = o->head_seq + o->records.size();
         o->records.push_back({commit_ns, in.data_ns, in.valid_after_ns, in.source_ns, o->bytes.push(in.data, in.size),
                               static_cast<uint32_t>(in.size)});
@@ -399,7 +404,7 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
         o->min_data_ever = std::min(o->min_data_ever, in.data_ns);
     }
     total_bytes_ += in.size;
-    topic_bytes_[o->info.topic] += in.size;
+    *o->topic_bytes += in.size;
     notify();
     return commit_ns;
 }
@@ -420,17 +425,12 @@ void Store::expire(uint64_t now_ns)
     std::vector<Oid> purge;
     {
         std::shared_lock lock(registry_mutex_);
-        for (auto& [oid, o] : objects_) {
+        for (auto& o : objects_) {
+            if (!o) continue;
             std::unique_lock ol(o->mutex);
-            const uint64_t window = o->retention.window_ns;
-            while (!o->records.empty() && o->records.front().commit + window < now_ns) {
-                const size_t n = o->evict_front();
-                total_bytes_ -= n;
-                topic_bytes_[o->info.topic] -= n;
-                ++evicted_;
-            }
+            evict_window(*o, now_ns);
             o->records.shrink();
-            if (o->info.deleted_ts && o->info.deleted_ts + window < now_ns) purge.push_back(oid);
+            if (o->info.deleted_ts && o->info.deleted_ts + o->retention.window_ns < now_ns) purge.push_back(o->info.oid);
         }
     }
     if (purge.empty()) return;
@@ -438,9 +438,8 @@ void Store::expire(uint64_t now_ns)
     for (Oid oid : purge) {
         auto& o = objects_[oid];
         total_bytes_ -= o->bytes_held;
-        topic_bytes_[o->info.topic] -= o->bytes_held;
-        objects_.erase(oid);
-        by_oid_[oid] = nullptr;
+        *o->topic_bytes -= o->bytes_held;
+        o.reset();
         ++purged_;
     }
 }
@@ -508,7 +507,7 @@ Range Store::range_of(const Object& obj, uint64_t t0, uint64_t t1, By by, size_t
     return r;
 }
 
-Found Store::wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout, bool exact) const
+bool Store::retry_on_change(std::chrono::nanoseconds timeout, const std::function<bool()>& attempt) const
 {
     const auto deadline = std::chrono::steady_clock::now() + timeout;
     std::unique_lock lock(wait_mutex_);
@@ -521,7 +520,18 @@ Found Store::wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout,
     for (;;) {
         const uint64_t seen = version_;
         lock.unlock();
-        Found f = read(oid, [&](const Object* o) -> Found {
+        const bool done = attempt();
+        lock.lock();
+        if (done) return true;
+        if (!wait_cv_.wait_until(lock, deadline, [&] { return version_ != seen; })) return false;
+    }
+}
+
+Found Store::wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout, bool exact) const
+{
+    Found f;
+    const bool answered = retry_on_change(timeout, [&] {
+        f = read(oid, [&](const Object* o) -> Found {
             if (!o) return {Status::unknown_object, {}};
             if (exact) {
                 Found next = o->younger(after, By::commit);
@@ -532,10 +542,9 @@ Found Store::wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout,
             if (!o->records.empty() && o->records.back().commit > after) return o->found(o->records.back());
             return {Status::not_yet, {}};
         });
-        lock.lock();
-        if (f.status != Status::not_yet) return f;
-        if (!wait_cv_.wait_until(lock, deadline, [&] { return version_ != seen; })) return {Status::timeout, {}};
-    }
+        return f.status != Status::not_yet;
+    });
+    return answered ? f : Found{Status::timeout, {}};
 }
 
 Found Store::wait_next(Oid oid, uint64_t after, std::chrono::nanoseconds timeout) const { return wait_for(oid, after, timeout, false); }
@@ -548,7 +557,7 @@ std::vector<Found> Store::snapshot(uint64_t t, const std::vector<Oid>& oids, By 
     // Lock every object (in address order, the same for every reader) before answering any.
     std::vector<const Object*> objs, order;
     for (Oid oid : oids) {
-        objs.push_back(oid < by_oid_.size() ? by_oid_[oid] : nullptr);
+        objs.push_back(oid < objects_.size() ? objects_[oid].get() : nullptr);
         if (objs.back()) order.push_back(objs.back());
     }
     std::sort(order.begin(), order.end());
@@ -593,7 +602,9 @@ std::vector<ObjectInfo> Store::search(const Criteria& c) const
     std::vector<std::shared_ptr<Object>> all;
     {
         std::shared_lock lock(registry_mutex_);
-        for (auto& [oid, o] : objects_) all.push_back(o);
+        for (auto& o : objects_) {
+            if (o) all.push_back(o);
+        }
     }
     std::vector<ObjectInfo> out;
     for (auto& o : all) {
@@ -612,29 +623,16 @@ std::vector<ObjectInfo> Store::search(const Criteria& c) const
 
 std::optional<ObjectInfo> Store::wait_for_object(const Criteria& c, std::chrono::nanoseconds timeout) const
 {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    std::unique_lock lock(wait_mutex_);
-    ++waiters_;
-    struct Leave
-    {
-        int& n;
-        ~Leave() { --n; }
-    } leave{waiters_};
-    for (;;) {
-        const uint64_t seen = version_;
-        lock.unlock();
-        auto found = search(c);
-        lock.lock();
-        if (!found.empty()) return found.front();
-        if (!wait_cv_.wait_until(lock, deadline, [&] { return version_ != seen; })) return std::nullopt;
-    }
+    std::vector<ObjectInfo> found;
+    if (!retry_on_change(timeout, [&] { return !(found = search(c)).empty(); })) return std::nullopt;
+    return found.front();
 }
 
 std::optional<Oid> Store::find(const std::string& topic, const std::string& key) const
 {
     std::shared_lock lock(registry_mutex_);
-    for (auto& [oid, o] : objects_) {
-        if (o->info.kind == ObjectKind::instance && o->info.topic == topic && o->info.key == key) return oid;
+    for (auto& o : objects_) {
+        if (o && o->info.kind == ObjectKind::instance && o->info.topic == topic && o->info.key == key) return o->info.oid;
     }
     return std::nullopt;
 }
@@ -653,7 +651,8 @@ StoreStats Store::stats() const
 {
     StoreStats s;
     std::shared_lock lock(registry_mutex_);
-    for (auto& [oid, o] : objects_) {
+    for (auto& o : objects_) {
+        if (!o) continue;
         std::shared_lock ol(o->mutex);
         ++s.objects;
         if (!o->info.deleted_ts) ++s.alive;

@@ -6,7 +6,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <sstream>
 #include <thread>
 
 namespace {
@@ -39,18 +38,11 @@ int run(int argc, char** argv)
                                        "cpm_history");
     if (!parsed.positional.empty()) throw cpm::cli::UsageError("cpm_history: unexpected argument '" + parsed.positional[0] + "'");
     cpm::rtdb::ServiceOptions options;
-    auto lines = [&](const char* flag) {
-        std::vector<std::string> out;
-        if (!parsed.has(flag)) return out;
-        std::string all = parsed.get(flag), item;
-        for (std::istringstream in(all); std::getline(in, item);) out.push_back(item);
-        return out;
-    };
-    options.include = lines("--include");
-    options.exclude = lines("--exclude");
+    options.include = parsed.all("--include");
+    options.exclude = parsed.all("--exclude");
     options.window_ns = cpm::cli::parse_duration("--window", parsed.get("--window", "10s"));
     if (options.window_ns == 0) throw cpm::cli::UsageError("--window must be longer than 0");
-    for (const auto& item : lines("--topic-window")) {
+    for (const auto& item : parsed.all("--topic-window")) {
         const auto eq = item.find('=');
         if (eq == std::string::npos || eq == 0) {
             throw cpm::cli::UsageError("cpm_history: --topic-window '" + item + "': expected TOPIC=DURATION (e.g. vehicleState=60s)");

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <functional>
 #include <regex>
 #include <thread>
 
@@ -14,6 +15,15 @@ using namespace std::chrono_literals;
 namespace {
 
 uint64_t now_ns() { return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+
+/// Runs `change` on another thread 50 ms from now, while the caller waits for it.
+std::thread soon(std::function<void()> change)
+{
+    return std::thread([change = std::move(change)] {
+        std::this_thread::sleep_for(50ms);
+        change();
+    });
+}
 
 void put(Store& s, Oid oid, uint64_t data, const std::vector<uint8_t>& payload, uint64_t now)
 {
@@ -60,10 +70,7 @@ TEST(StoreWait, WaitNextWakesOnTheNextCommitAndReturnsTheNewest)
     Store store;
     const Oid oid = store.add_object({.topic = "t"});
     put(store, oid, 1, {1}, 1000);
-    std::thread writer([&] {
-        std::this_thread::sleep_for(50ms);
-        put(store, oid, 2, {2}, 2000);
-    });
+    std::thread writer = soon([&] { put(store, oid, 2, {2}, 2000); });
     auto f = store.wait_next(oid, 1000, 10s);
     writer.join();
     ASSERT_TRUE(f.ok()) << to_string(f.status);
@@ -84,10 +91,7 @@ TEST(StoreWait, SuccessorIsExactlyTheNextOrAGapWhenItWasEvicted)
     EXPECT_EQ(store.successor(oid, 100, 0ms).sample.commit_ns, 200u);  // not the newest
     EXPECT_EQ(store.successor(oid, 150, 0ms).sample.commit_ns, 200u);
     EXPECT_EQ(store.successor(oid, 300, 20ms).status, Status::timeout);
-    std::thread writer([&] {
-        std::this_thread::sleep_for(50ms);
-        put(store, oid, 4, {4}, 400);
-    });
+    std::thread writer = soon([&] { put(store, oid, 4, {4}, 400); });
     EXPECT_EQ(store.successor(oid, 300, 10s).sample.commit_ns, 400u);
     writer.join();
     store.expire(1250);  // 100 and 200 leave the 1000 ns window
@@ -100,10 +104,7 @@ TEST(StoreWait, SuccessorOnAnEmptyObjectWaitsForTheFirstSample)
     Store store;
     const Oid oid = store.add_object({.topic = "t"});
     EXPECT_EQ(store.successor(oid, 0, 20ms).status, Status::timeout);
-    std::thread writer([&] {
-        std::this_thread::sleep_for(30ms);
-        put(store, oid, 1, {1}, 10);
-    });
+    std::thread writer = soon([&] { put(store, oid, 1, {1}, 10); });
     EXPECT_EQ(store.successor(oid, 0, 10s).sample.commit_ns, 10u);
     writer.join();
 }
@@ -201,8 +202,7 @@ TEST(StoreRegistry, WaitForObjectWakesWhenOneAppearsAndTimesOutOtherwise)
 {
     Store store;
     EXPECT_FALSE(store.wait_for_object({.name_regex = "^camera"}, 20ms));
-    std::thread creator([&] {
-        std::this_thread::sleep_for(50ms);
+    std::thread creator = soon([&] {
         store.add_object({.topic = "other"});
         store.add_object({.topic = "cameraFrames", .type_name = "Image"});
     });

@@ -36,6 +36,8 @@ struct ParsedArgs
     bool has(const std::string& name) const { return flags.count(name) != 0; }
     /// The flag's value, or fallback when absent.
     std::string get(const std::string& name, const std::string& fallback = {}) const;
+    /// Every value of a repeatable flag, in the order given (none when absent).
+    std::vector<std::string> all(const std::string& name) const;
 };
 
 /// Parses `args` against the known flags; throws UsageError naming `command` and the flag.

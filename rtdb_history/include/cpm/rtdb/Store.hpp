@@ -23,6 +23,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -195,17 +196,21 @@ private:
     template <typename F>
     auto read(Oid oid, F&& f) const;
     static Range range_of(const Object& o, uint64_t t0, uint64_t t1, By by, size_t limit);
-    void evict_for_budget(const std::string& topic, uint64_t needed);
+    // Eviction (ingest thread; the object's lock held, except evict_for_budget, which locks).
+    void evict_oldest(Object& o);
+    void evict_window(Object& o, uint64_t newest);
+    void evict_for_budget(Object& o, uint64_t needed);
     void notify();
+    /// Calls attempt() until it returns true, waiting for the store to change between tries;
+    /// false when the timeout passed first.
+    bool retry_on_change(std::chrono::nanoseconds timeout, const std::function<bool()>& attempt) const;
     Found wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout, bool exact) const;
 
     StoreOptions options_;
     mutable std::shared_mutex registry_mutex_;
-    std::map<Oid, std::shared_ptr<Object>> objects_;
-    std::vector<Object*> by_oid_;  ///< index oid -> object (nullptr once purged), for lookups
+    std::vector<std::shared_ptr<Object>> objects_{nullptr};  ///< index: oid (0 is none); nullptr once purged
     std::map<std::string, Retention> retention_;
-    std::map<std::string, uint64_t> topic_bytes_;
-    Oid next_oid_ = 1;
+    std::map<std::string, uint64_t> topic_bytes_;  ///< objects point at their topic's node
     uint64_t total_bytes_ = 0;
     std::atomic<uint64_t> evicted_{0}, purged_{0};
 
