@@ -22,7 +22,7 @@ struct UnknownObject : std::runtime_error
     using std::runtime_error::runtime_error;
 };
 
-HistorySample to_wire(const StoredSample& s, Status status)
+HistorySample to_wire(const SampleView& s, Status status)
 {
     HistorySample w;
     w.commit_ns(s.commit_ns);
@@ -30,8 +30,13 @@ HistorySample to_wire(const StoredSample& s, Status status)
     w.valid_after_ns(s.valid_after_ns);
     w.source_ns(s.source_ns);
     w.status(to_string(status));
-    w.payload(s.payload);
+    w.payload().assign(s.data, s.data + s.size);
     return w;
+}
+
+HistorySample to_wire(const StoredSample& s, Status status)
+{
+    return to_wire(SampleView{s.commit_ns, s.data_ns, s.valid_after_ns, s.source_ns, s.payload.data(), s.payload.size()}, status);
 }
 
 /// The object named by topic and key.
@@ -99,6 +104,13 @@ void reply_found(HistoryReply& reply, const Found& f)
     if (f.ok()) reply.samples().push_back(to_wire(f.sample, f.status));
 }
 
+/// A single-sample query, its payload copied once: from the store straight into the reply.
+void reply_viewed(HistoryReply& reply, const Store& store, Oid oid, Which which, uint64_t t, By by)
+{
+    const Status st = store.view(oid, which, t, by, [&](const SampleView& v) { reply.samples().push_back(to_wire(v, Status::ok)); });
+    reply.status(to_string(st));
+}
+
 void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
 {
     check(rq);
@@ -142,10 +154,10 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
     const Oid oid = object_of(store, rq);
     if (auto info = store.info(oid)) reply.objects().push_back(to_wire(*info));
     if (kind == "info") reply.status("ok");
-    else if (kind == "latest") reply_found(reply, store.latest(oid));
-    else if (kind == "at") reply_found(reply, store.at(oid, rq.t0(), by));
-    else if (kind == "older") reply_found(reply, store.older(oid, rq.t0(), by));
-    else if (kind == "younger") reply_found(reply, store.younger(oid, rq.t0(), by));
+    else if (kind == "latest") reply_viewed(reply, store, oid, Which::latest, 0, by);
+    else if (kind == "at") reply_viewed(reply, store, oid, Which::at, rq.t0(), by);
+    else if (kind == "older") reply_viewed(reply, store, oid, Which::older, rq.t0(), by);
+    else if (kind == "younger") reply_viewed(reply, store, oid, Which::younger, rq.t0(), by);
     else if (kind == "wait_next") reply_found(reply, store.wait_next(oid, rq.t0(), timeout));
     else if (kind == "successor") reply_found(reply, store.successor(oid, rq.t0(), timeout));
     else if (kind == "range") {

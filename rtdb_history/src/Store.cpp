@@ -69,10 +69,7 @@ public:
             c.used = 0;  // the only chunk, empty: start again at its beginning
         }
     }
-    void read(uint64_t pos, size_t size, uint8_t* out) const
-    {
-        std::memcpy(out, chunks_[(pos >> 32) - first_].data.get() + (pos & 0xffffffffu), size);
-    }
+    const uint8_t* at(uint64_t pos) const { return chunks_[(pos >> 32) - first_].data.get() + (pos & 0xffffffffu); }
 
 private:
     struct Chunk
@@ -124,39 +121,41 @@ size_t search_sorted(size_t n, Key key, uint64_t t, bool inclusive)
     return hi;
 }
 
-/// Records of one object, oldest first, in one circular buffer (contiguous, so a lookup by
-/// index is an add and a compare, not a deque's block walk). It grows by a quarter at a time:
-/// little unused room per sample, still amortised O(1) appends.
-class RecordRing
+/// A sequence in one circular buffer, oldest first (contiguous, so a lookup by index is an add
+/// and a compare, not a deque's block walk). It grows by a quarter at a time: little unused
+/// room per element, still amortised O(1) appends at the back and removals at the front.
+template <typename T>
+class Ring
 {
 public:
     size_t size() const { return n_; }
     bool empty() const { return n_ == 0; }
-    const Record& operator[](size_t i) const
-    {
-        size_t k = head_ + i;
-        if (k >= buf_.size()) k -= buf_.size();
-        return buf_[k];
-    }
-    const Record& front() const { return (*this)[0]; }
-    const Record& back() const { return (*this)[n_ - 1]; }
-    void push_back(const Record& r)
+    const T& operator[](size_t i) const { return buf_[slot(i)]; }
+    T& operator[](size_t i) { return buf_[slot(i)]; }
+    const T& front() const { return (*this)[0]; }
+    const T& back() const { return (*this)[n_ - 1]; }
+    void push_back(const T& x)
     {
         if (n_ == buf_.size()) resize(std::max<size_t>(16, buf_.size() + buf_.size() / 4));
-        size_t k = head_ + n_;
-        if (k >= buf_.size()) k -= buf_.size();
-        buf_[k] = r;
-        ++n_;
+        buf_[slot(n_++)] = x;
     }
     void pop_front()
     {
         if (++head_ == buf_.size()) head_ = 0;
         --n_;
     }
-    /// Index of the first record with commit > t (inclusive) or >= t (!inclusive); size() if none.
-    size_t first_after(uint64_t t, bool inclusive) const
+    /// Inserts before index i, moving the elements after it (cheap near the back).
+    void insert(size_t i, const T& x)
     {
-        return search_sorted(n_, [this](size_t i) { return (*this)[i].commit; }, t, inclusive);
+        push_back(x);
+        for (size_t k = n_ - 1; k > i; --k) (*this)[k] = (*this)[k - 1];
+        (*this)[i] = x;
+    }
+    /// Removes index i, moving the elements before it (cheap near the front).
+    void erase(size_t i)
+    {
+        for (size_t k = i; k > 0; --k) (*this)[k] = (*this)[k - 1];
+        pop_front();
     }
     /// Gives memory back after a flood has passed.
     void shrink()
@@ -165,15 +164,31 @@ public:
     }
 
 private:
+    size_t slot(size_t i) const
+    {
+        size_t k = head_ + i;
+        return k >= buf_.size() ? k - buf_.size() : k;
+    }
     void resize(size_t capacity)
     {
-        std::vector<Record> next(capacity);
+        std::vector<T> next(capacity);
         for (size_t i = 0; i < n_; ++i) next[i] = (*this)[i];
         buf_.swap(next);
         head_ = 0;
     }
-    std::vector<Record> buf_;
+    std::vector<T> buf_;
     size_t head_ = 0, n_ = 0;
+};
+
+/// Records by commit time.
+class RecordRing : public Ring<Record>
+{
+public:
+    /// Index of the first record with commit > t (inclusive) or >= t (!inclusive); size() if none.
+    size_t first_after(uint64_t t, bool inclusive) const
+    {
+        return search_sorted(size(), [this](size_t i) { return (*this)[i].commit; }, t, inclusive);
+    }
 };
 
 }  // namespace
@@ -188,7 +203,7 @@ struct Store::Object
     uint64_t head_seq = 0;
     /// The data-time index: the low 32 bits of each held sample's sequence number, ordered by
     /// (data time, sequence): 4 bytes a sample.
-    std::deque<uint32_t> by_data;
+    Ring<uint32_t> by_data;
     ByteChunks bytes;
     uint64_t bytes_held = 0;
     uint64_t samples_total = 0;
@@ -207,11 +222,9 @@ struct Store::Object
 
     StoredSample copy(const Record& r) const
     {
-        StoredSample s{r.commit, r.data, r.valid_after, r.source, std::vector<uint8_t>(r.size)};
-        bytes.read(r.pos, r.size, s.payload.data());
-        return s;
+        const uint8_t* p = bytes.at(r.pos);
+        return {r.commit, r.data, r.valid_after, r.source, std::vector<uint8_t>(p, p + r.size)};
     }
-    Found found(const Record& r) const { return {Status::ok, copy(r)}; }
 
     /// Evicts the oldest sample by commit time; returns its payload size.
     size_t evict_front()
@@ -221,7 +234,7 @@ struct Store::Object
             by_data.pop_front();  // data times in order: the usual case
         } else {
             // Among the entries with its data time, it is the first (the oldest sequence).
-            by_data.erase(by_data.begin() + std::ptrdiff_t(data_after(r.data, false)));
+            by_data.erase(data_after(r.data, false));
         }
         records.pop_front();
         ++head_seq;
@@ -242,31 +255,47 @@ struct Store::Object
         return stored_one && any_evicted ? Status::evicted : Status::not_found;
     }
 
-    Found at(uint64_t t, By by, bool inclusive) const
+    /// The sample a single-sample query names: its status and, when ok, its record.
+    Status locate(Which which, uint64_t t, By by, const Record*& rec) const
     {
-        if (by == By::commit) {
-            const size_t i = records.first_after(t, inclusive);
-            if (i == 0) return {nothing_at_or_before(t, by, inclusive), {}};
-            return found(records[i - 1]);
+        switch (which) {
+        case Which::latest:
+            if (records.empty()) return any_evicted ? Status::evicted : Status::not_found;
+            rec = &records.back();
+            return Status::ok;
+        case Which::at: return before(t, by, true, rec);
+        case Which::older: return before(t, by, false, rec);
+        case Which::younger: return after(t, by, rec);
         }
-        const size_t i = data_after(t, inclusive);
-        if (i == 0) return {nothing_at_or_before(t, by, inclusive), {}};
-        return found(entry(by_data[i - 1]));
+        return Status::not_found;
     }
-
-    Found younger(uint64_t t, By by) const
+    /// The newest sample at or before t (inclusive) / before t.
+    Status before(uint64_t t, By by, bool inclusive, const Record*& rec) const
     {
-        if (records.empty() && !any_evicted) return {Status::not_found, {}};
-        if (by == By::commit) {
-            if (any_evicted && t < last_evicted_commit) return {Status::evicted, {}};
-            const size_t i = records.first_after(t, true);
-            if (i == records.size()) return {Status::not_yet, {}};
-            return found(records[i]);
-        }
-        if (any_evicted && t < max_evicted_data) return {Status::evicted, {}};
-        const size_t i = data_after(t, true);
-        if (i == by_data.size()) return {Status::not_yet, {}};
-        return found(entry(by_data[i]));
+        const size_t i = by == By::commit ? records.first_after(t, inclusive) : data_after(t, inclusive);
+        if (i == 0) return nothing_at_or_before(t, by, inclusive);
+        rec = by == By::commit ? &records[i - 1] : &entry(by_data[i - 1]);
+        return Status::ok;
+    }
+    /// The oldest sample after t.
+    Status after(uint64_t t, By by, const Record*& rec) const
+    {
+        if (records.empty() && !any_evicted) return Status::not_found;
+        if (any_evicted && t < (by == By::commit ? last_evicted_commit : max_evicted_data)) return Status::evicted;
+        const size_t i = by == By::commit ? records.first_after(t, true) : data_after(t, true);
+        if (i == records.size()) return Status::not_yet;
+        rec = by == By::commit ? &records[i] : &entry(by_data[i]);
+        return Status::ok;
+    }
+    Found found(Which which, uint64_t t, By by) const
+    {
+        const Record* rec = nullptr;
+        const Status st = locate(which, t, by, rec);
+        return st == Status::ok ? Found{st, copy(*rec)} : Found{st, {}};
+    }
+    SampleView view(const Record& r) const
+    {
+        return {r.commit, r.data, r.valid_after, r.source, bytes.at(r.pos), r.size};
     }
 };
 
@@ -397,7 +426,7 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
                               static_cast<uint32_t>(in.size)});
         // Mostly in order: append; else after every entry with a data time <= this one's.
         if (o->by_data.empty() || o->entry(o->by_data.back()).data <= in.data_ns) o->by_data.push_back(uint32_t(seq));
-        else o->by_data.insert(o->by_data.begin() + std::ptrdiff_t(o->data_after(in.data_ns, true)), uint32_t(seq));
+        else o->by_data.insert(o->data_after(in.data_ns, true), uint32_t(seq));
         o->bytes_held += in.size;
         ++o->samples_total;
         o->first_commit_ever = std::min(o->first_commit_ever, commit_ns);
@@ -430,6 +459,7 @@ void Store::expire(uint64_t now_ns)
             std::unique_lock ol(o->mutex);
             evict_window(*o, now_ns);
             o->records.shrink();
+            o->by_data.shrink();
             if (o->info.deleted_ts && o->info.deleted_ts + o->retention.window_ns < now_ns) purge.push_back(o->info.oid);
         }
     }
@@ -451,29 +481,29 @@ void Store::notify()
     if (waiters_) wait_cv_.notify_all();
 }
 
-Found Store::latest(Oid oid) const
+Status Store::view_with(Oid oid, Which which, uint64_t t, By by, void (*fn)(void*, const SampleView&), void* ctx) const
 {
-    return read(oid, [](const Object* o) -> Found {
-        if (!o) return {Status::unknown_object, {}};
-        if (o->records.empty()) return {o->any_evicted ? Status::evicted : Status::not_found, {}};
-        return o->found(o->records.back());
+    return read(oid, [&](const Object* o) {
+        if (!o) return Status::unknown_object;
+        const Record* rec = nullptr;
+        const Status st = o->locate(which, t, by, rec);
+        if (st == Status::ok) fn(ctx, o->view(*rec));
+        return st;
     });
 }
 
-Found Store::at(Oid oid, uint64_t t, By by) const
+Found Store::copy_of(Oid oid, Which which, uint64_t t, By by) const
 {
-    return read(oid, [&](const Object* o) { return o ? o->at(t, by, true) : Found{Status::unknown_object, {}}; });
+    return read(oid, [&](const Object* o) { return o ? o->found(which, t, by) : Found{Status::unknown_object, {}}; });
 }
 
-Found Store::older(Oid oid, uint64_t t, By by) const
-{
-    return read(oid, [&](const Object* o) { return o ? o->at(t, by, false) : Found{Status::unknown_object, {}}; });
-}
+Found Store::latest(Oid oid) const { return copy_of(oid, Which::latest, 0, By::commit); }
 
-Found Store::younger(Oid oid, uint64_t t, By by) const
-{
-    return read(oid, [&](const Object* o) { return o ? o->younger(t, by) : Found{Status::unknown_object, {}}; });
-}
+Found Store::at(Oid oid, uint64_t t, By by) const { return copy_of(oid, Which::at, t, by); }
+
+Found Store::older(Oid oid, uint64_t t, By by) const { return copy_of(oid, Which::older, t, by); }
+
+Found Store::younger(Oid oid, uint64_t t, By by) const { return copy_of(oid, Which::younger, t, by); }
 
 Range Store::range(Oid oid, uint64_t t0, uint64_t t1, By by, size_t limit) const
 {
@@ -534,12 +564,12 @@ Found Store::wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout,
         f = read(oid, [&](const Object* o) -> Found {
             if (!o) return {Status::unknown_object, {}};
             if (exact) {
-                Found next = o->younger(after, By::commit);
+                Found next = o->found(Which::younger, after, By::commit);
                 if (next.status == Status::evicted) next.status = Status::gap;
                 if (next.status == Status::not_found) next.status = Status::not_yet;  // nothing stored yet: wait
                 return next;
             }
-            if (!o->records.empty() && o->records.back().commit > after) return o->found(o->records.back());
+            if (!o->records.empty() && o->records.back().commit > after) return o->found(Which::latest, 0, By::commit);
             return {Status::not_yet, {}};
         });
         return f.status != Status::not_yet;
@@ -565,7 +595,7 @@ std::vector<Found> Store::snapshot(uint64_t t, const std::vector<Oid>& oids, By 
     std::vector<std::shared_lock<std::shared_mutex>> locks;
     for (const Object* o : order) locks.emplace_back(o->mutex);
     std::vector<Found> out;
-    for (const Object* o : objs) out.push_back(o ? o->at(t, by, true) : Found{Status::unknown_object, {}});
+    for (const Object* o : objs) out.push_back(o ? o->found(Which::at, t, by) : Found{Status::unknown_object, {}});
     return out;
 }
 

@@ -53,7 +53,7 @@ std::string answer(const Range& r)
     return s;
 }
 
-std::string ask(const Store& s, Oid oid, Q q, uint64_t t, By by)
+std::string ask_copy(const Store& s, Oid oid, Q q, uint64_t t, By by)
 {
     switch (q) {
     case Q::latest: return answer(s.latest(oid));
@@ -63,6 +63,30 @@ std::string ask(const Store& s, Oid oid, Q q, uint64_t t, By by)
     case Q::range: return answer(s.range(oid, t, t + 100, by));
     }
     return "";
+}
+
+/// The same query seen in place (Store::view).
+std::string viewed(const Store& s, Oid oid, Which which, uint64_t t, By by)
+{
+    Found f;
+    int calls = 0;
+    f.status = s.view(oid, which, t, by, [&](const SampleView& v) {
+        ++calls;
+        f.sample = {v.commit_ns, v.data_ns, v.valid_after_ns, v.source_ns, std::vector<uint8_t>(v.data, v.data + v.size)};
+    });
+    EXPECT_EQ(calls, f.ok() ? 1 : 0);
+    return answer(f);
+}
+
+/// The answer of the copying call, checked to be the same as the one seen in place.
+std::string ask(const Store& s, Oid oid, Q q, uint64_t t, By by)
+{
+    const std::string copied = ask_copy(s, oid, q, t, by);
+    if (q != Q::range) {
+        const Which which = q == Q::latest ? Which::latest : q == Q::at ? Which::at : q == Q::older ? Which::older : Which::younger;
+        EXPECT_EQ(viewed(s, oid, which, t, by), copied) << "Store::view answers differently";
+    }
+    return copied;
 }
 
 struct Case

@@ -30,6 +30,7 @@
 #include <optional>
 #include <shared_mutex>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace cpm::rtdb {
@@ -51,6 +52,22 @@ struct StoredSample
     uint64_t source_ns = 0;       ///< the writer's source timestamp (0 if unknown)
     std::vector<uint8_t> payload; ///< serialized as received
 };
+
+/// A held sample seen in place: the times and the payload bytes inside the store, valid only
+/// while the visitor that received it runs (the object's lock is held meanwhile, so it is never
+/// torn; keep the visitor short, the ingest of that object waits for it).
+struct SampleView
+{
+    uint64_t commit_ns = 0;
+    uint64_t data_ns = 0;
+    uint64_t valid_after_ns = 0;
+    uint64_t source_ns = 0;
+    const uint8_t* data = nullptr;
+    size_t size = 0;
+};
+
+/// The single-sample queries.
+enum class Which { latest, at, older, younger };
 
 struct Found
 {
@@ -167,6 +184,15 @@ public:
     Found at(Oid oid, uint64_t t, By by = By::commit) const;
     Found older(Oid oid, uint64_t t, By by = By::commit) const;
     Found younger(Oid oid, uint64_t t, By by = By::commit) const;
+    /// The same queries without copying: f(const SampleView&) runs on the sample in place
+    /// (only when the status is ok), like sqlite3_column_blob's pointer. t is ignored for
+    /// Which::latest.
+    template <typename F>
+    Status view(Oid oid, Which which, uint64_t t, By by, F&& f) const
+    {
+        return view_with(oid, which, t, by, [](void* fp, const SampleView& v) { (*static_cast<std::remove_reference_t<F>*>(fp))(v); },
+                         const_cast<void*>(static_cast<const void*>(&f)));
+    }
     /// Samples with time in [t0, t1), oldest first, at most `limit`.
     Range range(Oid oid, uint64_t t0, uint64_t t1, By by = By::commit, size_t limit = 10000) const;
     /// The newest sample committed after `after`, waiting up to `timeout` for one.
@@ -195,6 +221,8 @@ private:
     /// object's shared locks.
     template <typename F>
     auto read(Oid oid, F&& f) const;
+    Status view_with(Oid oid, Which which, uint64_t t, By by, void (*fn)(void*, const SampleView&), void* ctx) const;
+    Found copy_of(Oid oid, Which which, uint64_t t, By by) const;
     static Range range_of(const Object& o, uint64_t t0, uint64_t t1, By by, size_t limit);
     // Eviction (ingest thread; the object's lock held, except evict_for_budget, which locks).
     void evict_oldest(Object& o);
