@@ -4,6 +4,7 @@
 #include <cstring>
 #include <limits>
 #include <regex>
+#include <stdexcept>
 
 namespace cpm::rtdb {
 
@@ -191,11 +192,10 @@ public:
     }
 };
 
-}  // namespace
-
-struct Store::Object
+/// What the store holds of one object; Store::Object adds its lock. A purged object's state is
+/// reset to this (its memory given back) and its slot taken by the next new object.
+struct ObjectState
 {
-    mutable std::shared_mutex mutex;
     ObjectInfo info;  // deleted_ts and the counters change under mutex
     Retention retention;
     uint64_t* topic_bytes = nullptr;  ///< its topic's payload bytes (a node of Store::topic_bytes_)
@@ -297,18 +297,64 @@ struct Store::Object
     {
         return {r.commit, r.data, r.valid_after, r.source, bytes.at(r.pos), r.size};
     }
+    /// The info block with the counters filled in.
+    ObjectInfo described() const
+    {
+        ObjectInfo i = info;
+        i.samples_held = records.size();
+        i.bytes_held = bytes_held;
+        i.samples_total = samples_total;
+        i.newest_commit_ns = records.empty() ? 0 : records.back().commit;
+        i.avg_cycle_s = samples_total > 1 ? double(cycle_sum) * 1e-9 / double(samples_total - 1) : 0;
+        i.max_cycle_s = double(cycle_max) * 1e-9;
+        return i;
+    }
+};
+
+}  // namespace
+
+struct Store::Object : ObjectState
+{
+    mutable std::shared_mutex mutex;
+    uint32_t generation = 0;  ///< how often its slot was taken: the oid's high 32 bits
 };
 
 Store::Store(StoreOptions options) : options_(options) {}
-Store::~Store() = default;
+
+Store::~Store()
+{
+    for (Object* o : slots()) delete o;
+    for (Object** block : blocks_) delete[] block;
+}
+
+Store::Object* Store::slot(Oid oid) const
+{
+    const uint32_t n = uint32_t(oid);
+    if (n == 0 || n >= slots_used_.load(std::memory_order_acquire)) return nullptr;
+    return blocks_[n >> kBlockBits][n & ((1u << kBlockBits) - 1)];
+}
+
+Store::Object* Store::live(Oid oid) const
+{
+    Object* o = slot(oid);
+    return o && o->info.oid == oid ? o : nullptr;
+}
+
+std::vector<Store::Object*> Store::slots() const
+{
+    std::vector<Object*> all;
+    const uint32_t n = slots_used_.load(std::memory_order_acquire);
+    for (uint32_t i = 1; i < n; ++i) all.push_back(slot(i));
+    return all;
+}
 
 void Store::set_retention(const std::string& topic, Retention r)
 {
     std::unique_lock lock(registry_mutex_);
     retention_[topic] = r;
-    for (auto& o : objects_) {
-        if (!o || o->info.topic != topic) continue;
+    for (Object* o : slots()) {
         std::unique_lock ol(o->mutex);
+        if (o->info.oid == kNoOid || o->info.topic != topic) continue;
         o->retention = r;
         o->info.history_interval_ns = r.window_ns;
     }
@@ -323,35 +369,45 @@ Retention Store::retention(const std::string& topic) const
 
 Oid Store::add_object(ObjectInfo info)
 {
-    auto o = std::make_shared<Object>();
-    o->retention = retention(info.topic);
+    const Retention retention = this->retention(info.topic);
+    Oid oid;
     {
         std::unique_lock lock(registry_mutex_);
-        info.oid = objects_.size();
-        info.history_interval_ns = o->retention.window_ns;
+        Object* o;
+        uint32_t n;
+        if (!free_slots_.empty()) {
+            n = free_slots_.back();
+            free_slots_.pop_back();
+            o = slot(n);
+        } else {
+            n = slots_used_.load(std::memory_order_relaxed);
+            if ((n >> kBlockBits) >= kBlocks) throw std::length_error("cpm::rtdb::Store: more than " + std::to_string(kBlocks << kBlockBits) + " objects held at once");
+            Object**& block = blocks_[n >> kBlockBits];
+            if (!block) block = new Object*[size_t(1) << kBlockBits]();
+            o = block[n & ((1u << kBlockBits) - 1)] = new Object;
+        }
+        std::unique_lock ol(o->mutex);
+        oid = Oid(o->generation) << 32 | n;
+        info.oid = oid;
+        info.history_interval_ns = retention.window_ns;
         if (info.name.empty()) info.name = info.key.empty() ? info.topic : info.topic + "/" + info.key;
+        o->retention = retention;
         o->topic_bytes = &topic_bytes_[info.topic];
+        if (info.kind == ObjectKind::instance) by_name_[{info.topic, info.key}] = oid;  // the newest of that name
         o->info = std::move(info);
-        objects_.push_back(o);
+        if (n == slots_used_.load(std::memory_order_relaxed)) slots_used_.store(n + 1, std::memory_order_release);
     }
     notify();
-    return o->info.oid;
-}
-
-std::shared_ptr<Store::Object> Store::object(Oid oid) const
-{
-    std::shared_lock lock(registry_mutex_);
-    return oid < objects_.size() ? objects_[oid] : nullptr;
+    return oid;
 }
 
 template <typename F>
 auto Store::read(Oid oid, F&& f) const
 {
-    std::shared_lock lock(registry_mutex_);
-    const Object* o = oid < objects_.size() ? objects_[oid].get() : nullptr;
+    const Object* o = slot(oid);
     if (!o) return f(nullptr);
     std::shared_lock ol(o->mutex);
-    return f(o);
+    return f(o->info.oid == oid ? o : nullptr);
 }
 
 void Store::evict_oldest(Object& o)
@@ -381,12 +437,9 @@ void Store::evict_for_budget(Object& obj, uint64_t needed)
         // Evict the oldest samples in scope until 1/16 of the budget is free again, so that a
         // flood pays for the scan once per many samples.
         const uint64_t goal = budget - std::min(budget, needed + budget / 16);
-        std::vector<std::shared_ptr<Object>> scope;
-        {
-            std::shared_lock lock(registry_mutex_);
-            for (auto& o : objects_) {
-                if (o && (whole_store || o->topic_bytes == obj.topic_bytes)) scope.push_back(o);
-            }
+        std::vector<Object*> scope;
+        for (Object* o : slots()) {
+            if (whole_store || o->topic_bytes == obj.topic_bytes) scope.push_back(o);
         }
         while (used(whole_store) > goal) {
             Object* oldest = nullptr;
@@ -395,7 +448,7 @@ void Store::evict_for_budget(Object& obj, uint64_t needed)
                 std::shared_lock ol(o->mutex);
                 if (!o->records.empty() && o->records.front().commit < oldest_commit) {
                     oldest_commit = o->records.front().commit;
-                    oldest = o.get();
+                    oldest = o;
                 }
             }
             if (!oldest) break;
@@ -407,7 +460,7 @@ void Store::evict_for_budget(Object& obj, uint64_t needed)
 
 uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
 {
-    auto o = object(oid);
+    Object* o = live(oid);
     if (!o) return 0;
     evict_for_budget(*o, in.size);
     uint64_t commit_ns;
@@ -440,7 +493,7 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
 
 void Store::mark_deleted(Oid oid, uint64_t t_ns)
 {
-    auto o = object(oid);
+    Object* o = live(oid);
     if (!o) return;
     {
         std::unique_lock lock(o->mutex);
@@ -451,25 +504,26 @@ void Store::mark_deleted(Oid oid, uint64_t t_ns)
 
 void Store::expire(uint64_t now_ns)
 {
-    std::vector<Oid> purge;
-    {
-        std::shared_lock lock(registry_mutex_);
-        for (auto& o : objects_) {
-            if (!o) continue;
-            std::unique_lock ol(o->mutex);
-            evict_window(*o, now_ns);
-            o->records.shrink();
-            o->by_data.shrink();
-            if (o->info.deleted_ts && o->info.deleted_ts + o->retention.window_ns < now_ns) purge.push_back(o->info.oid);
-        }
+    std::vector<Object*> purge;
+    for (Object* o : slots()) {
+        std::unique_lock ol(o->mutex);
+        if (o->info.oid == kNoOid) continue;
+        evict_window(*o, now_ns);
+        o->records.shrink();
+        o->by_data.shrink();
+        if (o->info.deleted_ts && o->info.deleted_ts + o->retention.window_ns < now_ns) purge.push_back(o);
     }
     if (purge.empty()) return;
     std::unique_lock lock(registry_mutex_);
-    for (Oid oid : purge) {
-        auto& o = objects_[oid];
+    for (Object* o : purge) {
+        std::unique_lock ol(o->mutex);
         total_bytes_ -= o->bytes_held;
         *o->topic_bytes -= o->bytes_held;
-        o.reset();
+        auto named = by_name_.find({o->info.topic, o->info.key});
+        if (named != by_name_.end() && named->second == o->info.oid) by_name_.erase(named);
+        free_slots_.push_back(uint32_t(o->info.oid));
+        static_cast<ObjectState&>(*o) = ObjectState{};  // oid none; records and payload given back
+        ++o->generation;
         ++purged_;
     }
 }
@@ -583,11 +637,10 @@ Found Store::successor(Oid oid, uint64_t after, std::chrono::nanoseconds timeout
 
 std::vector<Found> Store::snapshot(uint64_t t, const std::vector<Oid>& oids, By by) const
 {
-    std::shared_lock lock(registry_mutex_);
     // Lock every object (in address order, the same for every reader) before answering any.
     std::vector<const Object*> objs, order;
     for (Oid oid : oids) {
-        objs.push_back(oid < objects_.size() ? objects_[oid].get() : nullptr);
+        objs.push_back(slot(oid));
         if (objs.back()) order.push_back(objs.back());
     }
     std::sort(order.begin(), order.end());
@@ -595,33 +648,19 @@ std::vector<Found> Store::snapshot(uint64_t t, const std::vector<Oid>& oids, By 
     std::vector<std::shared_lock<std::shared_mutex>> locks;
     for (const Object* o : order) locks.emplace_back(o->mutex);
     std::vector<Found> out;
-    for (const Object* o : objs) out.push_back(o ? o->found(Which::at, t, by) : Found{Status::unknown_object, {}});
+    for (size_t i = 0; i < oids.size(); ++i) {
+        const Object* o = objs[i];
+        out.push_back(o && o->info.oid == oids[i] ? o->found(Which::at, t, by) : Found{Status::unknown_object, {}});
+    }
     return out;
 }
 
-namespace {
-
-ObjectInfo described(const ObjectInfo& base, uint64_t held, uint64_t bytes, uint64_t total, uint64_t newest,
-                     uint64_t cycle_sum, uint64_t cycle_max)
-{
-    ObjectInfo i = base;
-    i.samples_held = held;
-    i.bytes_held = bytes;
-    i.samples_total = total;
-    i.newest_commit_ns = newest;
-    i.avg_cycle_s = total > 1 ? double(cycle_sum) * 1e-9 / double(total - 1) : 0;
-    i.max_cycle_s = double(cycle_max) * 1e-9;
-    return i;
-}
-
-}  // namespace
 
 std::optional<ObjectInfo> Store::info(Oid oid) const
 {
     return read(oid, [](const Object* o) -> std::optional<ObjectInfo> {
         if (!o) return std::nullopt;
-        return described(o->info, o->records.size(), o->bytes_held, o->samples_total,
-                         o->records.empty() ? 0 : o->records.back().commit, o->cycle_sum, o->cycle_max);
+        return o->described();
     });
 }
 
@@ -629,16 +668,13 @@ std::vector<ObjectInfo> Store::search(const Criteria& c) const
 {
     std::optional<std::regex> re;
     if (c.name_regex) re.emplace(*c.name_regex, std::regex::ECMAScript | std::regex::icase);  // throws std::regex_error
-    std::vector<std::shared_ptr<Object>> all;
-    {
-        std::shared_lock lock(registry_mutex_);
-        for (auto& o : objects_) {
-            if (o) all.push_back(o);
-        }
-    }
     std::vector<ObjectInfo> out;
-    for (auto& o : all) {
-        auto i = info(o->info.oid);
+    for (const Object* o : slots()) {
+        std::optional<ObjectInfo> i;
+        {
+            std::shared_lock ol(o->mutex);
+            if (o->info.oid != kNoOid) i = o->described();
+        }
         if (!i) continue;
         if (re && !std::regex_search(i->name, *re)) continue;
         if (c.type_name && i->type_name != *c.type_name) continue;
@@ -661,10 +697,9 @@ std::optional<ObjectInfo> Store::wait_for_object(const Criteria& c, std::chrono:
 std::optional<Oid> Store::find(const std::string& topic, const std::string& key) const
 {
     std::shared_lock lock(registry_mutex_);
-    for (auto& o : objects_) {
-        if (o && o->info.kind == ObjectKind::instance && o->info.topic == topic && o->info.key == key) return o->info.oid;
-    }
-    return std::nullopt;
+    auto it = by_name_.find({topic, key});
+    if (it == by_name_.end()) return std::nullopt;
+    return it->second;
 }
 
 Changes Store::changes_since(uint64_t t_ns) const
@@ -680,10 +715,9 @@ Changes Store::changes_since(uint64_t t_ns) const
 StoreStats Store::stats() const
 {
     StoreStats s;
-    std::shared_lock lock(registry_mutex_);
-    for (auto& o : objects_) {
-        if (!o) continue;
+    for (const Object* o : slots()) {
         std::shared_lock ol(o->mutex);
+        if (o->info.oid == kNoOid) continue;
         ++s.objects;
         if (!o->info.deleted_ts) ++s.alive;
         s.samples += o->records.size();

@@ -232,4 +232,67 @@ TEST(StoreRegistry, DeletedObjectsStayReadableForTheirWindowThenArePurged)
     EXPECT_EQ(store.stats().purged_objects, 1u);
 }
 
+TEST(StoreRegistry, APurgedObjectsOidStaysUnknownWhenANewObjectTakesItsPlace)
+{
+    Store store;
+    store.set_retention("t", {1'000, 1 << 20});
+    const Oid old_oid = store.add_object({.topic = "t", .key = "1", .created_ts = 1});
+    put(store, old_oid, 1, {1}, 100);
+    store.mark_deleted(old_oid, 200);
+    store.expire(1'201);
+    const Oid new_oid = store.add_object({.topic = "t", .key = "1", .created_ts = 1'300});
+    put(store, new_oid, 2, {2}, 1'400);
+    EXPECT_NE(new_oid, old_oid);
+    EXPECT_EQ(store.latest(old_oid).status, Status::unknown_object);
+    EXPECT_FALSE(store.info(old_oid));
+    EXPECT_EQ(store.view(old_oid, Which::latest, 0, By::commit, [](const SampleView&) { ADD_FAILURE() << "purged object answered"; }),
+              Status::unknown_object);
+    EXPECT_EQ(store.snapshot(1'500, {old_oid, new_oid})[0].status, Status::unknown_object);
+    EXPECT_EQ(store.latest(new_oid).sample.payload, std::vector<uint8_t>{2});
+    EXPECT_EQ(store.find("t", "1"), new_oid);
+    EXPECT_EQ(store.stats().objects, 1u);
+}
+
+TEST(StoreRegistry, ReadersNeverSeeAnotherObjectsSamplesWhileObjectsArePurgedAndReplaced)
+{
+    // The ingest thread keeps creating an object, filling it with payloads of its own byte,
+    // deleting and purging it; readers asking the old oids get that object's bytes or
+    // "unknown object", never a later object's.
+    Store store;
+    store.set_retention("t", {10, 1 << 20});
+    std::atomic<bool> stop{false};
+    std::vector<Oid> oids(1);  // oids[g]: the object of generation g; filled before it is published
+    oids.reserve(10'001);   // never moves while readers look
+    std::atomic<size_t> published{0};
+    std::thread ingest([&] {
+        uint64_t t = 1'000;
+        for (uint8_t g = 1; !stop; ++g) {
+            const Oid oid = store.add_object({.topic = "t", .key = std::to_string(g), .created_ts = t});
+            const uint8_t own = uint8_t(oid >> 32) ^ uint8_t(oid);  // the byte of this oid
+            for (int i = 0; i < 20; ++i) put(store, oid, t, std::vector<uint8_t>(64, own), t++);
+            store.mark_deleted(oid, t);
+            store.expire(t += 20);  // purged: its slot is free for the next
+            if (published < 10'000) {
+                oids.push_back(oid);  // readers only look below `published`
+                published = oids.size() - 1;
+            }
+        }
+    });
+    uint64_t seen = 0, unknown = 0;
+    while (seen + unknown < 200'000 && published < 2'000) {
+        const size_t n = published;
+        if (n == 0) continue;
+        const Oid oid = oids[1 + (seen + unknown) % n];
+        const uint8_t own = uint8_t(oid >> 32) ^ uint8_t(oid);
+        const Status st = store.view(oid, Which::latest, 0, By::commit, [&](const SampleView& v) {
+            for (size_t i = 0; i < v.size; ++i) ASSERT_EQ(v.data[i], own) << "oid " << oid << " answered with another object's bytes";
+        });
+        (st == Status::ok ? seen : unknown)++;
+    }
+    stop = true;
+    ingest.join();
+    EXPECT_GT(unknown, 0u);  // purged objects were asked for
+    EXPECT_GT(published.load(), 100u);  // and the slots really were taken again and again
+}
+
 }  // namespace

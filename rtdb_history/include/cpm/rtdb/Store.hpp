@@ -14,10 +14,11 @@
 // samples at or before t were stored but are gone (out of the window), not_yet when asking
 // past the newest.
 //
-// Concurrency: one ingest path (commit/mark_deleted/expire), any number of readers. Each
-// object has its own reader/writer lock; readers copy what they return under it, so they never
-// see a torn sample. snapshot() holds every asked object's lock at once, so no commit can slip
-// in between its answers.
+// Concurrency: one ingest path (add_object/commit/mark_deleted/expire), any number of readers.
+// Readers find an object's slot without a lock and take only that object's reader lock; they
+// copy what they return under it (or see it in place, view()), so they never see a torn sample.
+// snapshot() holds every asked object's lock at once, so no commit can slip in between its
+// answers.
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -29,6 +30,7 @@
 #include <mutex>
 #include <optional>
 #include <shared_mutex>
+#include <utility>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -216,9 +218,13 @@ public:
 
 private:
     struct Object;
-    std::shared_ptr<Object> object(Oid oid) const;
-    /// Runs f(const Object*) (nullptr if unknown or purged) under the registry's and the
-    /// object's shared locks.
+    /// The object in oid's slot, whichever oid it holds now (nullptr if the slot was never used).
+    Object* slot(Oid oid) const;
+    /// The object of oid if it is held; ingest thread only (only it changes what a slot holds).
+    Object* live(Oid oid) const;
+    /// Every slot's object, held or free.
+    std::vector<Object*> slots() const;
+    /// Runs f(const Object*) (nullptr if unknown or purged) under the object's shared lock.
     template <typename F>
     auto read(Oid oid, F&& f) const;
     Status view_with(Oid oid, Which which, uint64_t t, By by, void (*fn)(void*, const SampleView&), void* ctx) const;
@@ -235,10 +241,18 @@ private:
     Found wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout, bool exact) const;
 
     StoreOptions options_;
-    mutable std::shared_mutex registry_mutex_;
-    std::vector<std::shared_ptr<Object>> objects_{nullptr};  ///< index: oid (0 is none); nullptr once purged
+    // Objects live in slots that readers find without a lock: an oid is generation << 32 | slot;
+    // a purged object's slot is given to a later one with the next generation, so a reader
+    // holding an old oid finds the slot's oid changed. Slot objects are freed with the store.
+    static constexpr unsigned kBlockBits = 10;
+    static constexpr size_t kBlocks = 4096;  ///< at most 4M objects held at once
+    Object** blocks_[kBlocks] = {};          ///< written before slots_used_ grows past them
+    std::atomic<uint32_t> slots_used_{1};    ///< slot 0 is none
+    mutable std::shared_mutex registry_mutex_;  ///< add_object and purge; guards the maps below
+    std::vector<uint32_t> free_slots_;
     std::map<std::string, Retention> retention_;
     std::map<std::string, uint64_t> topic_bytes_;  ///< objects point at their topic's node
+    std::map<std::pair<std::string, std::string>, Oid> by_name_;  ///< topic and key: the newest instance object
     uint64_t total_bytes_ = 0;
     std::atomic<uint64_t> evicted_{0}, purged_{0};
 
