@@ -78,7 +78,7 @@ bool wants_help(const std::vector<std::string>& args)
 uint64_t parse_duration(const std::string& flag, const std::string& text)
 {
     static const std::map<std::string, uint64_t> units{
-        {"ns", 1}, {"us", 1'000}, {"ms", 1'000'000}, {"s", 1'000'000'000}, {"m", 60'000'000'000}};
+        {"ns", 1}, {"us", 1'000}, {"ms", 1'000'000}, {"s", 1'000'000'000}, {"m", 60'000'000'000}, {"h", 3'600'000'000'000}};
     size_t end = 0;
     double value = 0;
     try {
@@ -88,7 +88,7 @@ uint64_t parse_duration(const std::string& flag, const std::string& text)
     }
     const auto unit = units.find(text.substr(end));
     if (end == 0 || unit == units.end() || !(value >= 0)) {
-        throw UsageError(flag + ": '" + text + "' is not a duration (a number with ns, us, ms, s or m, e.g. 10s)");
+        throw UsageError(flag + ": '" + text + "' is not a duration (a number with ns, us, ms, s, m or h, e.g. 10s)");
     }
     return static_cast<uint64_t>(value * double(unit->second));
 }

@@ -21,6 +21,7 @@
 #include <atomic>
 #include <csignal>
 #include <thread>
+#include <set>
 #include <sstream>
 
 CPM_REGISTER_TYPE(LabOnlyThing)
@@ -157,6 +158,35 @@ TEST_F(HistoryService, TheCommandPrintsEveryFieldAsJsonAndDumpListsTheObjects)
     Process usage({built_program("cpm"), "history", "at", "--topic", "vehicleState", "--time", "yesterday"});
     EXPECT_EQ(usage.wait(20s), 2);
     EXPECT_NE(usage.errors().find("--time 'yesterday'"), std::string::npos) << usage.errors();
+}
+
+TEST_F(HistoryService, TheCommandWaitsForAnObjectToAppearAndListsWhatChangedSince)
+{
+    const uint64_t before = cpm::get_time_ns();
+    Process waiting({built_program("cpm"), "history", "wait-object", "--name", "^lateThing/", "--timeout", "30s", "--json"});
+    std::this_thread::sleep_for(500ms);  // asking before the object exists
+    Process w = writer({"--type", "lab_only", "--topic", "lateThing", "--vehicle", "2", "--count", "3"});
+    ASSERT_EQ(w.wait(30s), 0) << w.errors();
+    ASSERT_EQ(waiting.wait(30s), 0) << waiting.errors() << service.errors();
+    auto found = nlohmann::json::parse(waiting.output());
+    EXPECT_EQ(found["name"], "lateThing/2");
+    EXPECT_EQ(found["type"], "LabOnlyThing");
+
+    Process changes({built_program("cpm"), "history", "changes", "--since", std::to_string(before), "--json"});
+    ASSERT_EQ(changes.wait(20s), 0) << changes.errors();
+    std::set<std::string> names;
+    std::istringstream lines(changes.output());
+    for (std::string line; std::getline(lines, line);) names.insert(nlohmann::json::parse(line)["name"].get<std::string>());
+    EXPECT_TRUE(names.count("lateThing/2")) << changes.output();
+    EXPECT_TRUE(names.count("history_writer_lab_only")) << changes.output();  // its process, created since too
+
+    Process later({built_program("cpm"), "history", "changes", "--since", "+1h", "--json"});
+    ASSERT_EQ(later.wait(20s), 0) << later.errors();
+    EXPECT_EQ(later.output(), "");
+
+    Process never({built_program("cpm"), "history", "wait-object", "--name", "^neverThere", "--timeout", "300ms"});
+    EXPECT_EQ(never.wait(20s), 1);
+    EXPECT_NE(never.errors().find("timeout"), std::string::npos) << never.errors();
 }
 
 TEST_F(HistoryService, RecordsATypeItWasNeverCompiledWith)

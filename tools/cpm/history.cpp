@@ -17,11 +17,14 @@
 namespace cpm::tools {
 
 const char* kHistoryHelp =
-    "usage: cpm history list|search|latest|at|older|younger|range|wait|successor|snapshot [flags] [--json]\n"
+    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot\n"
+    "                   [flags] [--json]\n"
     "\n"
     "Asks the history service (cpm_history, on this domain) about the recent past.\n"
     "  list                                 every object held (alive and deleted-but-held)\n"
     "  search [--name REGEX] [--type T] [--parent OID] [--creator NAME|GUID] [--alive-at T]\n"
+    "  wait-object [search flags] [--timeout 10s]   the first object matching, once one exists\n"
+    "  changes --since T                    objects created or deleted after T\n"
     "  latest --topic NAME [--key K]\n"
     "  at|older|younger --topic NAME [--key K] --time T [--by commit|data]\n"
     "                                       newest at or before / strictly before / after T\n"
@@ -244,13 +247,15 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
                                         {"--parent", true},
                                         {"--creator", true},
                                         {"--alive-at", true},
+                                        {"--since", true},
                                         {"--json", false}},
                                        command);
     if (!parsed.positional.empty()) throw UsageError(command + ": unexpected argument '" + parsed.positional[0] + "'");
     static const std::map<std::string, std::string> kinds{{"list", "list"},     {"at", "at"},         {"older", "older"},
                                                           {"younger", "younger"}, {"range", "range"}, {"latest", "latest"},
                                                           {"wait", "wait_next"}, {"search", "search"}, {"snapshot", "snapshot"},
-                                                          {"successor", "successor"}};
+                                                          {"successor", "successor"}, {"wait-object", "wait_object"},
+                                                          {"changes", "changes"}};
     auto kind = kinds.find(verb);
     if (kind == kinds.end()) throw UsageError("unknown command 'history " + verb + "' (see cpm history --help)");
     HistoryRequest rq;
@@ -261,7 +266,8 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     const std::string by = parsed.get("--by", "commit");
     if (by != "commit" && by != "data") throw UsageError(command + ": --by '" + by + "': expected commit or data");
     rq.by(by);
-    const bool object_query = verb != "list" && verb != "search" && verb != "snapshot";
+    const bool about_objects = verb == "list" || verb == "search" || verb == "wait-object" || verb == "changes";
+    const bool object_query = !about_objects && verb != "snapshot";
     if (object_query && rq.topic().empty() && !rq.oid()) throw UsageError(command + ": --topic NAME (and --key K) is required");
     const bool timed = verb == "at" || verb == "older" || verb == "younger" || verb == "snapshot";
     if (timed) {
@@ -275,8 +281,12 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
         if (rq.t1() < rq.t0()) throw UsageError(command + ": --to is before --from");
     }
     if (verb == "wait" || verb == "successor") rq.t0(parsed.has("--time") ? parse_time("--time", parsed.get("--time")) : cpm::get_time_ns());
+    if (verb == "changes") {
+        if (!parsed.has("--since")) throw UsageError(command + ": --since T is required");
+        rq.t0(parse_time("--since", parsed.get("--since")));
+    }
     if (parsed.has("--timeout")) rq.timeout_ns(cpm::cli::parse_duration("--timeout", parsed.get("--timeout")));
-    else if (verb == "wait" || verb == "successor") rq.timeout_ns(10'000'000'000ull);
+    else if (verb == "wait" || verb == "successor" || verb == "wait-object") rq.timeout_ns(10'000'000'000ull);
     if (parsed.has("--limit")) rq.limit(uint32_t(cpm::cli::parse_integer("--limit", parsed.get("--limit"), 1, 100000)));
     if (verb == "snapshot") {
         if (!parsed.has("--objects")) throw UsageError(command + ": --objects TOPIC[/KEY],... is required");
@@ -295,7 +305,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
         std::fprintf(stderr, "cpm history %s: %s: %s\n", verb.c_str(), reply.status().c_str(), reply.error().c_str());
         return 1;
     }
-    if (verb == "list" || verb == "search") print_objects(reply, json);
+    if (about_objects) print_objects(reply, json);
     else print_samples(reply, json);
     if (reply.truncated()) std::fprintf(stderr, "cpm history %s: more samples matched than --limit; the oldest are shown\n", verb.c_str());
     if (reply.status() != "ok") {

@@ -70,7 +70,7 @@ const char* kClockHelp =
     "stops every timer.\n"
     "Simulated (--simulated): drives the lab clock from 0 to --until through the nodes' announced\n"
     "ticks as fast as they compute, then stops every timer. Nodes must run with --simulated_time.\n"
-    "DURATION: a number with ns, us, ms, s or m (e.g. 500ms, 10s).\n";
+    "DURATION: a number with ns, us, ms, s, m or h (e.g. 500ms, 10s).\n";
 
 const char* kParamHelp =
     "usage: cpm param serve FILE.json [--dds_domain N]\n"
