@@ -214,7 +214,7 @@ TEST_F(HistoryService, TruncatedSamplesAreCountedAndSkippedAndBadRequestsAnswere
 {
     cpm::ReaderAbstract<HistoryStatus> status(participant, "historyStatus", {.reliable = true, .history_depth = 1, .transient_local = true});
     Process tiny = writer({"--type", "tiny", "--topic", "tinyThing", "--count", "3"});
-    ASSERT_EQ(tiny.wait(30s), 0) << tiny.errors();
+    ASSERT_EQ(tiny.wait(30s), 0) << tiny.errors() << service.errors();
     uint64_t dropped = 0;
     EXPECT_TRUE(cpm_test::wait_until([&] {
         for (auto& s : status.take()) dropped = s.dropped();

@@ -94,7 +94,12 @@ int main(int argc, char** argv)
         if (!writer->write(sample)) return 4;
         std::this_thread::sleep_for(std::chrono::milliseconds(2));  // distinct commit times, a realistic pace
     }
-    if (writer->wait_for_acknowledgments({10, 0}) != ReturnCode_t::RETCODE_OK) return 5;
+    if (writer->wait_for_acknowledgments({10, 0}) != ReturnCode_t::RETCODE_OK) {
+        writer->get_publication_matched_status(matched);
+        std::fprintf(stderr, "history_writer: %d samples not acknowledged within 10 s by %d matched readers\n", count,
+                     matched.current_count);
+        return 5;
+    }
     std::printf("written %d\n", count);
     std::fflush(stdout);
     if (dispose) {
