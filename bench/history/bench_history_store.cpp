@@ -179,32 +179,20 @@ void BM_Sqlite_Append(benchmark::State& state)
     auto& w = append_sqlite();
     for (auto _ : state) w.put(0, w.next++);
 }
-template <cpm::rtdb::By by>
-void BM_Store_At(benchmark::State& state)
+// The four ways of asking `at`, object k at time t; each side does the same work.
+using cpm::rtdb::By;
+/// Store::at: the sample with its payload copied out.
+size_t store_copied(int k, uint64_t t, By by) { return store_work().store.at(store_work().oids[k], t, by).sample.payload.size(); }
+/// SQLite: the row with its blob copied out.
+size_t sqlite_copied(int k, uint64_t t, By by)
 {
-    auto& w = store_work();
-    Times times;
-    int k = 0;
-    for (auto _ : state) {
-        auto f = w.store.at(w.oids[k], times.t(), by);
-        benchmark::DoNotOptimize(f);
-        k = (k + 1) % kObjects;
-    }
-}
-template <bool by_data>
-void BM_Sqlite_At(benchmark::State& state)
-{
-    auto& w = sqlite_work();
-    Times times;
-    int k = 0;
-    for (auto _ : state) {
-        benchmark::DoNotOptimize(w.query(by_data ? w.at_data : w.at_commit, k, times.t()));
-        k = (k + 1) % kObjects;
-    }
+    auto& q = sqlite_work();
+    return q.query(by == By::data ? q.at_data : q.at_commit, k, t);
 }
 /// Store::view: the sample's times and where its payload lies, nothing copied.
-size_t store_view(StoreWork& w, int k, uint64_t t, cpm::rtdb::By by)
+size_t store_in_place(int k, uint64_t t, By by)
 {
+    auto& w = store_work();
     size_t size = 0;
     w.store.view(w.oids[k], cpm::rtdb::Which::at, t, by, [&](const cpm::rtdb::SampleView& v) {
         benchmark::DoNotOptimize(v);
@@ -212,25 +200,23 @@ size_t store_view(StoreWork& w, int k, uint64_t t, cpm::rtdb::By by)
     });
     return size;
 }
-template <cpm::rtdb::By by>
-void BM_Store_AtInPlace(benchmark::State& state)
+/// SQLite: the row's times and sqlite3_column_blob's pointer, nothing copied.
+size_t sqlite_in_place(int k, uint64_t t, By by)
 {
-    auto& w = store_work();
-    Times times;
-    int k = 0;
-    for (auto _ : state) {
-        benchmark::DoNotOptimize(store_view(w, k, times.t(), by));
-        k = (k + 1) % kObjects;
-    }
+    auto& q = sqlite_work();
+    return q.view(by == By::data ? q.at_data : q.at_commit, k, t);
 }
-template <bool by_data>
-void BM_Sqlite_AtInPlace(benchmark::State& state)
+
+using AtOp = size_t (*)(int, uint64_t, By);
+
+/// Asks `op` once per iteration, object after object, at times drawn before timing.
+template <AtOp op, By by>
+void BM_At(benchmark::State& state)
 {
-    auto& w = sqlite_work();
     Times times;
     int k = 0;
     for (auto _ : state) {
-        benchmark::DoNotOptimize(w.view(by_data ? w.at_data : w.at_commit, k, times.t()));
+        benchmark::DoNotOptimize(op(k, times.t(), by));
         k = (k + 1) % kObjects;
     }
 }
@@ -256,14 +242,14 @@ void BM_Sqlite_Range100(benchmark::State& state)
 
 BENCHMARK(BM_Store_Append);
 BENCHMARK(BM_Sqlite_Append);
-BENCHMARK(BM_Store_At<cpm::rtdb::By::commit>)->Name("BM_Store_AtCommit");
-BENCHMARK(BM_Sqlite_At<false>)->Name("BM_Sqlite_AtCommit");
-BENCHMARK(BM_Store_At<cpm::rtdb::By::data>)->Name("BM_Store_AtData");
-BENCHMARK(BM_Sqlite_At<true>)->Name("BM_Sqlite_AtData");
-BENCHMARK(BM_Store_AtInPlace<cpm::rtdb::By::commit>)->Name("BM_Store_AtCommitInPlace");
-BENCHMARK(BM_Sqlite_AtInPlace<false>)->Name("BM_Sqlite_AtCommitInPlace");
-BENCHMARK(BM_Store_AtInPlace<cpm::rtdb::By::data>)->Name("BM_Store_AtDataInPlace");
-BENCHMARK(BM_Sqlite_AtInPlace<true>)->Name("BM_Sqlite_AtDataInPlace");
+BENCHMARK(BM_At<store_copied, By::commit>)->Name("BM_Store_AtCommit");
+BENCHMARK(BM_At<sqlite_copied, By::commit>)->Name("BM_Sqlite_AtCommit");
+BENCHMARK(BM_At<store_copied, By::data>)->Name("BM_Store_AtData");
+BENCHMARK(BM_At<sqlite_copied, By::data>)->Name("BM_Sqlite_AtData");
+BENCHMARK(BM_At<store_in_place, By::commit>)->Name("BM_Store_AtCommitInPlace");
+BENCHMARK(BM_At<sqlite_in_place, By::commit>)->Name("BM_Sqlite_AtCommitInPlace");
+BENCHMARK(BM_At<store_in_place, By::data>)->Name("BM_Store_AtDataInPlace");
+BENCHMARK(BM_At<sqlite_in_place, By::data>)->Name("BM_Sqlite_AtDataInPlace");
 BENCHMARK(BM_Store_Range100);
 BENCHMARK(BM_Sqlite_Range100);
 
@@ -318,14 +304,18 @@ void print_percentiles()
                     what, store.first, store.second, sqlite.first, sqlite.second, sqlite.first / store.first);
     };
     line("append", [&] { sa.put(2, sa.next++); }, [&] { qa.put(2, qa.next++); });
-    line("at commit, copied", [&] { benchmark::DoNotOptimize(s.store.at(s.oids[k = (k + 1) % kObjects], times.t())); },
-         [&] { q.query(q.at_commit, k = (k + 1) % kObjects, times.t()); });
-    line("at data, copied", [&] { benchmark::DoNotOptimize(s.store.at(s.oids[k = (k + 1) % kObjects], times.t(), cpm::rtdb::By::data)); },
-         [&] { q.query(q.at_data, k = (k + 1) % kObjects, times.t()); });
-    line("at commit, in place", [&] { store_view(s, k = (k + 1) % kObjects, times.t(), cpm::rtdb::By::commit); },
-         [&] { q.view(q.at_commit, k = (k + 1) % kObjects, times.t()); });
-    line("at data, in place", [&] { store_view(s, k = (k + 1) % kObjects, times.t(), cpm::rtdb::By::data); },
-         [&] { q.view(q.at_data, k = (k + 1) % kObjects, times.t()); });
+    struct AtCase
+    {
+        const char* what;
+        AtOp store, sqlite;
+        By by;
+    };
+    for (const AtCase& c : {AtCase{"at commit, copied", store_copied, sqlite_copied, By::commit},
+                            AtCase{"at data, copied", store_copied, sqlite_copied, By::data},
+                            AtCase{"at commit, in place", store_in_place, sqlite_in_place, By::commit},
+                            AtCase{"at data, in place", store_in_place, sqlite_in_place, By::data}}) {
+        line(c.what, [&] { c.store(k = (k + 1) % kObjects, times.t(), c.by); }, [&] { c.sqlite(k = (k + 1) % kObjects, times.t(), c.by); });
+    }
     line("range 100", [&] { const uint64_t t0 = times.t(); s.store.range(s.oids[1], t0, t0 + 100 * kCycle); },
          [&] { const uint64_t t0 = times.t(); q.query(q.range, 1, t0, t0 + 100 * kCycle); }, 20'000);
     {
