@@ -30,6 +30,7 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <stdexcept>
 #include <thread>
 
 
@@ -439,9 +440,14 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
                 auto proc = processes.find(writer.guidPrefix);
                 const ProcessRec creator = proc == processes.end() ? ProcessRec{} : proc->second;
                 inst = InstanceRec{};
-                inst.oid = store_.add_object({.topic = t.name, .key = key_text(info.instance_handle, t.keyed), .type_name = t.type_name,
-                                              .parent = creator.oid, .creator = creator.name,
-                                              .creator_guid = prefix_text(writer.guidPrefix), .created_ts = now});
+                try {
+                    inst.oid = store_.add_object({.topic = t.name, .key = key_text(info.instance_handle, t.keyed), .type_name = t.type_name,
+                                                  .parent = creator.oid, .creator = creator.name,
+                                                  .creator_guid = prefix_text(writer.guidPrefix), .created_ts = now});
+                } catch (const std::length_error&) {  // millions of instances held at once: counted, not stored
+                    ++dropped;
+                    continue;
+                }
             }
             inst.writers.insert(writer);
             const uint64_t source = uint64_t(info.source_timestamp.seconds()) * 1'000'000'000ull + info.source_timestamp.nanosec();

@@ -381,7 +381,9 @@ Oid Store::add_object(ObjectInfo info)
             o = slot(n);
         } else {
             n = slots_used_.load(std::memory_order_relaxed);
-            if ((n >> kBlockBits) >= kBlocks) throw std::length_error("cpm::rtdb::Store: more than " + std::to_string(kBlocks << kBlockBits) + " objects held at once");
+            if ((n >> kBlockBits) >= kBlocks) {
+                throw std::length_error("cpm::rtdb::Store: more than " + std::to_string(kBlocks << kBlockBits) + " objects held at once");
+            }
             Object**& block = blocks_[n >> kBlockBits];
             if (!block) block = new Object*[size_t(1) << kBlockBits]();
             o = block[n & ((1u << kBlockBits) - 1)] = new Object;
