@@ -44,16 +44,7 @@ std::string csv_quoted(const std::string& text)
 
 struct Logging::Impl
 {
-    Impl()
-        : node_id(init_settings().node_id),
-          log_writer(Participant::default_participant(), "log", log_options()),
-          level_reader(
-              [this](std::vector<LogLevel>& levels) {
-                  for (const auto& l : levels) {
-                      if (l.log_level() >= 1 && l.log_level() <= 4) level = l.log_level();
-                  }
-              },
-              Participant::default_participant(), "logLevel", level_options())
+    Impl() : node_id(init_settings().node_id)
     {
         if (const char* path = std::getenv("CPM_LOG_FILE"); path != nullptr && *path != '\0') open_file(path);
     }
@@ -72,12 +63,73 @@ struct Logging::Impl
         file = f;
     }
 
+    /// The log's DDS entities on the default participant.
+    struct Dds
+    {
+        explicit Dds(std::atomic<uint16_t>& level)
+            : log_writer(Participant::default_participant(), "log", log_options()),
+              level_reader(
+                  [&level](std::vector<LogLevel>& levels) {
+                      for (const auto& l : levels) {
+                          if (l.log_level() >= 1 && l.log_level() <= 4) level = l.log_level();
+                      }
+                  },
+                  Participant::default_participant(), "logLevel", level_options())
+        {
+        }
+        Writer<Log> log_writer;
+        AsyncReader<LogLevel> level_reader;
+    };
+
+    /// Creates the DDS entities if no thread has begun to. Nobody waits for another thread's
+    /// creation: the waiting thread may be a reader's listener, holding the very reader that
+    /// Fast DDS pairs a new writer with — a deadlock. Messages written meanwhile wait in
+    /// `pending` and are published once the writer exists.
+    void start()
+    {
+        if (dds.load(std::memory_order_acquire) != nullptr || creating.exchange(true)) return;
+        Dds* d = nullptr;
+        try {
+            d = new Dds(level);  // never destroyed, like Logging itself
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "[error] %s: Logging: no `log` topic (%s); messages go to stderr and the file only\n",
+                         node_id.c_str(), e.what());
+        }
+        std::vector<Log> waiting;
+        {
+            std::lock_guard<std::mutex> lock(pending_mutex);
+            dds.store(d, std::memory_order_release);
+            failed = d == nullptr;
+            waiting.swap(pending);
+        }
+        if (d != nullptr) {
+            for (const auto& w : waiting) d->log_writer.write(w);
+        }
+    }
+
+    void publish(const Log& log)
+    {
+        Dds* d = dds.load(std::memory_order_acquire);
+        if (d == nullptr) {
+            std::lock_guard<std::mutex> lock(pending_mutex);
+            d = dds.load(std::memory_order_relaxed);
+            if (d == nullptr) {
+                if (!failed) pending.push_back(log);
+                return;
+            }
+        }
+        d->log_writer.write(log);  // never under pending_mutex: a reader in this process may log from the write
+    }
+
     const std::string node_id;
     std::atomic<uint16_t> level{static_cast<uint16_t>(Severity::info)};
     std::mutex file_mutex;
     std::FILE* file = nullptr;
-    Writer<Log> log_writer;
-    AsyncReader<LogLevel> level_reader;  // last: its thread uses the members above
+    std::atomic<Dds*> dds{nullptr};
+    std::atomic<bool> creating{false};
+    std::mutex pending_mutex;
+    std::vector<Log> pending;  ///< under pending_mutex, while another thread creates `dds`
+    bool failed = false;       ///< under pending_mutex
 };
 
 Logging& Logging::instance()
@@ -104,6 +156,7 @@ void Logging::write(Severity severity, const char* format, ...)
 
 void Logging::vwrite(Severity severity, const char* format, va_list args)
 {
+    impl_->start();  // also the logLevel reader, so that a level change can let this message's kind pass
     if (static_cast<uint16_t>(severity) > impl_->level.load()) return;
     char buffer[2048];
     std::vsnprintf(buffer, sizeof buffer, format, args);
@@ -125,7 +178,7 @@ void Logging::vwrite(Severity severity, const char* format, va_list args)
     log.content(content);
     log.stamp().nanoseconds(now);
     log.log_level(static_cast<uint16_t>(severity));
-    impl_->log_writer.write(log);
+    impl_->publish(log);
 }
 
 void Logging::set_level(Severity level) { impl_->level = static_cast<uint16_t>(level); }

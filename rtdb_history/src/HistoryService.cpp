@@ -153,13 +153,6 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
 
     void start()
     {
-        // The log's writer and reader are created now, before any recording reader exists.
-        // Created lazily, the first message could come from a reader's listener (a skipped
-        // sample) while the control thread is creating them (its first "recording topic"):
-        // creating a writer pairs it with this process's readers, which waits for the
-        // listener's reader, whose thread waits for Logging's construction. Seen as a service
-        // that never acknowledged a writer's samples.
-        Logging::instance();
         ParticipantOptions rec = options.participant;
         rec.name = (rec.name.empty() ? std::string("cpm_history") : rec.name) + "_recorder";
         rec.discovery_listener = this;

@@ -13,8 +13,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -138,4 +140,27 @@ TEST_F(LoggingTest, LongMessageArrivesWhole)
     auto logs = messages_with(monitor, "long-", 1);
     ASSERT_EQ(logs.size(), 1u) << "a 1005-character message did not reach the topic";
     EXPECT_EQ(logs[0].content(), text);
+}
+
+TEST_F(LoggingTest, MessagesWrittenWhileAnotherThreadCreatesTheTopicWriterAreAllPublished)
+{
+    // The first message creates the log's writer; threads writing meanwhile do not wait for it
+    // (their messages are queued and published once it exists). None may be lost.
+    cpm::ReaderAbstract<Log> monitor(monitor_side, "log", kMonitor);
+    constexpr int kThreads = 8;
+    std::atomic<int> ready{0};
+    std::vector<std::thread> threads;
+    for (int i = 0; i < kThreads; ++i) {
+        threads.emplace_back([&, i] {
+            ++ready;
+            while (ready < kThreads) {}
+            CPM_LOG_INFO("burst-%d", i);
+        });
+    }
+    for (auto& t : threads) t.join();
+    auto logs = messages_with(monitor, "burst-", kThreads);
+    std::vector<std::string> contents;
+    for (const auto& l : logs) contents.push_back(l.content());
+    std::sort(contents.begin(), contents.end());
+    EXPECT_EQ(contents, (std::vector<std::string>{"burst-0", "burst-1", "burst-2", "burst-3", "burst-4", "burst-5", "burst-6", "burst-7"}));
 }

@@ -13,10 +13,10 @@ enum class Severity : uint16_t { error = 1, warn = 2, info = 3, debug = 4 };
 /// id and the lab time (cpm::get_time_ns), written to stderr, to a CSV file if one is set, and
 /// to the `log` topic (reliable, transient-local: a monitor that starts late still gets the
 /// last 100). A `LogLevel` sample on `logLevel` changes the level of every node at run time.
-/// Thread-safe; never throws from write. Created on first use on the default participant:
-/// a program whose reader callbacks log should call instance() once before it creates those
-/// readers, since creating the log's writer while a callback waits for it deadlocks in Fast DDS
-/// (the writer is paired with every reader of the process, the callback holds its reader).
+/// Thread-safe; never throws from write. The topic's writer (and the logLevel reader) are
+/// created on the default participant by the first thread that writes; what other threads
+/// write meanwhile is queued and published after, never waited for (a reader callback that
+/// waited would deadlock Fast DDS, which pairs the new writer with that callback's reader).
 class Logging
 {
 public:
