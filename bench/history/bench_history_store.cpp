@@ -11,6 +11,8 @@
 // p50/p99 and the ratios the issue names (at: p50 <= 200 ns and >= 50x SQLite; append >= 20x).
 #include <cpm/rtdb/Store.hpp>
 
+#include "bench_common.hpp"
+
 #include <benchmark/benchmark.h>
 #include <sqlite3.h>
 
@@ -260,14 +262,14 @@ template <typename F>
 std::pair<double, double> percentiles(F&& op, double clock_ns, int n = 200'000)
 {
     for (int i = 0; i < n; ++i) op();
-    std::vector<uint32_t> ns(n);
+    std::vector<double> ns(n);
     for (int i = 0; i < n; ++i) {
         const auto t0 = std::chrono::steady_clock::now();
         op();
-        ns[i] = uint32_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
+        ns[i] = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
     }
-    std::sort(ns.begin(), ns.end());
-    return {ns[n / 2] - clock_ns, ns[n * 99 / 100] - clock_ns};
+    const bench::Stats st = bench::stats_of(std::move(ns));  // its unit is whatever is given: ns here
+    return {st.p50 - clock_ns, st.p99 - clock_ns};
 }
 
 /// This machine's latency of one dependent load at random within `bytes` (a pointer chase):

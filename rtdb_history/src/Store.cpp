@@ -222,8 +222,8 @@ struct ObjectState
 
     StoredSample copy(const Record& r) const
     {
-        const uint8_t* p = bytes.at(r.pos);
-        return {r.commit, r.data, r.valid_after, r.source, std::vector<uint8_t>(p, p + r.size)};
+        const SampleView v = view(r);
+        return {v.commit_ns, v.data_ns, v.valid_after_ns, v.source_ns, std::vector<uint8_t>(v.data, v.data + v.size)};
     }
 
     /// Evicts the oldest sample by commit time; returns its payload size.
