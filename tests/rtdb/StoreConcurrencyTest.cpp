@@ -256,43 +256,52 @@ TEST(StoreRegistry, APurgedObjectsOidStaysUnknownWhenANewObjectTakesItsPlace)
 TEST(StoreRegistry, ReadersNeverSeeAnotherObjectsSamplesWhileObjectsArePurgedAndReplaced)
 {
     // The ingest thread keeps creating an object, filling it with payloads of its own byte,
-    // deleting and purging it; readers asking the old oids get that object's bytes or
-    // "unknown object", never a later object's.
+    // deleting and purging it; readers asking any oid handed out so far get that object's
+    // bytes, no sample yet, or "unknown object", never a later object's.
+    // How far each side gets depends on scheduling, so the readers go on until they have asked
+    // kQueries times *and* once more for every one of the kObjects oids the ingest hands out.
+    constexpr size_t kObjects = 2'000;
+    constexpr uint64_t kQueries = 200'000;
     Store store;
     store.set_retention("t", {10, 1 << 20});
     std::atomic<bool> stop{false};
     std::vector<Oid> oids(1);  // oids[g]: the object of generation g; filled before it is published
-    oids.reserve(10'001);   // never moves while readers look
+    oids.reserve(kObjects + 1);  // never moves while readers look
     std::atomic<size_t> published{0};
     std::thread ingest([&] {
         uint64_t t = 1'000;
         for (uint8_t g = 1; !stop; ++g) {
             const Oid oid = store.add_object({.topic = "t", .key = std::to_string(g), .created_ts = t});
-            const uint8_t own = uint8_t(oid >> 32) ^ uint8_t(oid);  // the byte of this oid
-            for (int i = 0; i < 20; ++i) put(store, oid, t, std::vector<uint8_t>(64, own), t++);
-            store.mark_deleted(oid, t);
-            store.expire(t += 20);  // purged: its slot is free for the next
-            if (published < 10'000) {
-                oids.push_back(oid);  // readers only look below `published`
+            if (published < kObjects) {
+                oids.push_back(oid);  // readers only look at 1..published
                 published = oids.size() - 1;
             }
+            const uint8_t own = uint8_t(oid >> 32) ^ uint8_t(oid);  // the byte of this oid
+            for (int i = 0; i < 20; ++i, ++t) put(store, oid, t, std::vector<uint8_t>(64, own), t);
+            store.mark_deleted(oid, t);
+            store.expire(t += 20);  // purged: its slot is free for the next
         }
     });
-    uint64_t seen = 0, unknown = 0;
-    while (seen + unknown < 200'000 && published < 2'000) {
+    uint64_t seen = 0, unknown = 0, empty = 0, asked = 0, asked_of_all = 0;
+    const auto deadline = std::chrono::steady_clock::now() + 60s;
+    while (asked < kQueries || asked_of_all < kObjects) {
         const size_t n = published;
         if (n == 0) continue;
-        const Oid oid = oids[1 + (seen + unknown) % n];
+        if (asked % 4096 == 0 && std::chrono::steady_clock::now() > deadline) break;
+        if (n == kObjects) ++asked_of_all;
+        const Oid oid = oids[1 + asked++ % n];
         const uint8_t own = uint8_t(oid >> 32) ^ uint8_t(oid);
         const Status st = store.view(oid, Which::latest, 0, By::commit, [&](const SampleView& v) {
             for (size_t i = 0; i < v.size; ++i) ASSERT_EQ(v.data[i], own) << "oid " << oid << " answered with another object's bytes";
         });
-        (st == Status::ok ? seen : unknown)++;
+        (st == Status::ok ? seen : st == Status::unknown_object ? unknown : empty)++;
     }
     stop = true;
     ingest.join();
-    EXPECT_GT(unknown, 0u);  // purged objects were asked for
-    EXPECT_GT(published.load(), 100u);  // and the slots really were taken again and again
+    ASSERT_EQ(published.load(), kObjects) << "the ingest thread handed out too few objects within 60 s";
+    EXPECT_EQ(seen + unknown + empty, asked);
+    // The last kObjects questions asked for every oid once; all but the newest were purged.
+    EXPECT_GE(unknown, kObjects - 1);
 }
 
 }  // namespace
