@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <malloc.h>
+
 #include <atomic>
 #include <functional>
 #include <regex>
@@ -128,6 +130,27 @@ TEST(StoreRetention, KeepsTheTimeWindowOfEachTopic)
     store.expire(20'000'000'000ull);
     EXPECT_EQ(store.info(slow)->samples_held, 0u);
     EXPECT_EQ(store.latest(slow).status, Status::evicted);
+}
+
+TEST(StoreRetention, PayloadMemoryIsGivenBackWhenAnEmptiedObjectTakesLargerSamples)
+{
+    // A small sample, evicted by the window, then 1 MiB samples each evicting the one before:
+    // the store must hold about one of them, not every one it was ever given.
+    Store store;
+    store.set_retention("camera", {1'000, 1ull << 32});
+    const Oid oid = store.add_object({.topic = "camera"});
+    put(store, oid, 1, {1}, 1);
+    const std::vector<uint8_t> frame(1 << 20, 9);
+    auto heap = [] {
+        const auto m = mallinfo2();
+        return m.uordblks + m.hblkhd;  // in the arena and mapped apart (large blocks)
+    };
+    const size_t heap_before = heap();
+    for (uint64_t i = 1; i <= 100; ++i) put(store, oid, i * 10'000, frame, i * 10'000);
+    const size_t grown = heap() - heap_before;
+    EXPECT_EQ(store.info(oid)->samples_held, 1u);
+    EXPECT_EQ(store.latest(oid).sample.payload, frame);
+    EXPECT_LT(grown, size_t(4 << 20)) << "heap grew by " << grown << " bytes for one held 1 MiB sample";
 }
 
 TEST(StoreRetention, AFloodOfLargeSamplesStaysWithinTheByteBudgets)

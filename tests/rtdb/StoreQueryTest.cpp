@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <random>
 #include <string>
 
 using namespace cpm::rtdb;
@@ -191,6 +193,66 @@ TEST(StoreQuery, RangeHonoursItsLimitAndSaysSo)
     EXPECT_EQ(answer(r), "c100 c200");
     EXPECT_TRUE(r.truncated);
     EXPECT_EQ(answer(f.store.range(f.oid, 300, 200)), "not found");  // t1 < t0 is empty
+}
+
+TEST(StoreQuery, DataTimeQueriesMatchAScanOfTheHeldSamplesWhileLateSamplesComeAndAreEvicted)
+{
+    // 4000 samples, a window of 300 of them. Data times run ahead with the commits except in
+    // the middle stretch, where one sample in ten is late by up to 50 cycles; then they are in
+    // order again long enough for every late one to be evicted. After every sample, data-time
+    // `at`, `older`, `younger` and `range` are checked against a scan of what the window holds.
+    constexpr uint64_t kCycle = 10, kHeld = 300;
+    Store store{StoreOptions{{kHeld * kCycle - 1, 1ull << 30}, 1ull << 30}};
+    const Oid oid = store.add_object({.topic = "t"});
+    struct Sample
+    {
+        uint64_t commit, data;
+    };
+    std::vector<Sample> all;
+    uint64_t max_evicted_data = 0;
+    bool any_evicted = false;
+    std::mt19937_64 rng(7);
+    auto check = [&](uint64_t t) {
+        // The held samples sorted by (data time, commit): the order the store answers in.
+        std::vector<Sample> held;
+        for (const Sample& s : all) {
+            if (s.commit + kHeld * kCycle - 1 >= all.back().commit) held.push_back(s);
+        }
+        std::stable_sort(held.begin(), held.end(), [](const Sample& a, const Sample& b) { return a.data < b.data; });
+        auto commit_of = [](const Found& f) { return f.ok() ? f.sample.commit_ns : 0; };
+        uint64_t at = 0, older = 0, younger = 0;
+        for (const Sample& s : held) {
+            if (s.data <= t) at = s.commit;
+            if (s.data < t) older = s.commit;
+            if (s.data > t && !younger) younger = s.commit;
+        }
+        EXPECT_EQ(commit_of(store.at(oid, t, By::data)), at) << "at " << t;
+        EXPECT_EQ(commit_of(store.older(oid, t, By::data)), older) << "older " << t;
+        const Found y = store.younger(oid, t, By::data);
+        if (any_evicted && t < max_evicted_data) EXPECT_EQ(y.status, Status::evicted) << "younger " << t;
+        else EXPECT_EQ(commit_of(y), younger) << "younger " << t;
+        std::vector<uint64_t> want, got;
+        for (const Sample& s : held) {
+            if (s.data >= t && s.data < t + 40 * kCycle) want.push_back(s.commit);
+        }
+        for (const StoredSample& s : store.range(oid, t, t + 40 * kCycle, By::data).samples) got.push_back(s.commit_ns);
+        EXPECT_EQ(got, want) << "range from " << t;
+    };
+    for (uint64_t n = 1; n <= 4000 && !HasFailure(); ++n) {
+        const uint64_t commit = n * kCycle;
+        uint64_t data = 1'000 + commit;
+        if (n > 1000 && n < 2000 && rng() % 10 == 0) data -= kCycle * (1 + rng() % 50);
+        const uint8_t byte = uint8_t(n);
+        ASSERT_EQ(store.commit(oid, {data, data, 0, &byte, 1}, commit), commit);
+        for (const Sample& s : all) {
+            if (s.commit + kHeld * kCycle - 1 < commit && s.commit + kHeld * kCycle - 1 >= commit - kCycle) {
+                any_evicted = true;
+                max_evicted_data = std::max(max_evicted_data, s.data);
+            }
+        }
+        all.push_back({commit, data});
+        for (int q = 0; q < 3; ++q) check(1'000 + commit - rng() % (kHeld * kCycle + 100 * kCycle) + rng() % (5 * kCycle));
+    }
 }
 
 TEST(StoreQuery, UnknownObjectIsNamedAsSuch)
