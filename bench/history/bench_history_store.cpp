@@ -211,6 +211,18 @@ size_t sqlite_in_place(int k, uint64_t t, By by)
 
 using AtOp = size_t (*)(int, uint64_t, By);
 
+/// The four ways of asking `at`, each with its SQLite counterpart.
+struct AtCase
+{
+    const char* what;
+    AtOp store, sqlite;
+    By by;
+};
+const AtCase kAtCases[] = {{"at commit, copied", store_copied, sqlite_copied, By::commit},
+                           {"at data, copied", store_copied, sqlite_copied, By::data},
+                           {"at commit, in place", store_in_place, sqlite_in_place, By::commit},
+                           {"at data, in place", store_in_place, sqlite_in_place, By::data}};
+
 /// Asks `op` once per iteration, object after object, at times drawn before timing.
 template <AtOp op, By by>
 void BM_At(benchmark::State& state)
@@ -290,6 +302,41 @@ double load_latency_ns(size_t bytes)
     return std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() / loads;
 }
 
+/// Mean ns per call of a block of n calls, after as many untimed.
+template <typename F>
+double block_ns(F&& op, int n)
+{
+    for (int i = 0; i < n; ++i) op();
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int i = 0; i < n; ++i) op();
+    return std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() / n;
+}
+
+/// A single run's ratio swings with what the machine's neighbours leave in the shared cache
+/// (25-83x for the same build), so each `at` case is also run in rounds that alternate store
+/// and SQLite blocks; within one run the rounds agree closely, and their median is the run's ratio.
+void print_rounds()
+{
+    constexpr int kRounds = 7, kStoreCalls = 200'000, kSqliteCalls = 20'000;
+    Times times;
+    int k = 0;
+    std::printf("interleaved rounds (%d; each a block of %d store calls, then %d SQLite calls, each warmed up first), mean ns a call:\n",
+                kRounds, kStoreCalls, kSqliteCalls);
+    for (const AtCase& c : kAtCases) {
+        std::vector<double> store, sqlite, ratio;
+        for (int r = 0; r < kRounds; ++r) {
+            store.push_back(block_ns([&] { c.store(k = (k + 1) % kObjects, times.t(), c.by); }, kStoreCalls));
+            sqlite.push_back(block_ns([&] { c.sqlite(k = (k + 1) % kObjects, times.t(), c.by); }, kSqliteCalls));
+            ratio.push_back(sqlite.back() / store.back());
+        }
+        auto [slo, shi] = std::minmax_element(store.begin(), store.end());
+        auto [qlo, qhi] = std::minmax_element(sqlite.begin(), sqlite.end());
+        std::sort(ratio.begin(), ratio.end());
+        std::printf("%-20s store %6.0f-%-6.0f ns | sqlite %6.0f-%-6.0f ns | sqlite/store per round %5.1f-%-5.1fx, median %5.1fx\n",
+                    c.what, *slo, *shi, *qlo, *qhi, ratio.front(), ratio.back(), ratio[kRounds / 2]);
+    }
+}
+
 void print_percentiles()
 {
     auto& s = store_work();
@@ -306,16 +353,7 @@ void print_percentiles()
                     what, store.first, store.second, sqlite.first, sqlite.second, sqlite.first / store.first);
     };
     line("append", [&] { sa.put(2, sa.next++); }, [&] { qa.put(2, qa.next++); });
-    struct AtCase
-    {
-        const char* what;
-        AtOp store, sqlite;
-        By by;
-    };
-    for (const AtCase& c : {AtCase{"at commit, copied", store_copied, sqlite_copied, By::commit},
-                            AtCase{"at data, copied", store_copied, sqlite_copied, By::data},
-                            AtCase{"at commit, in place", store_in_place, sqlite_in_place, By::commit},
-                            AtCase{"at data, in place", store_in_place, sqlite_in_place, By::data}}) {
+    for (const AtCase& c : kAtCases) {
         line(c.what, [&] { c.store(k = (k + 1) % kObjects, times.t(), c.by); }, [&] { c.sqlite(k = (k + 1) % kObjects, times.t(), c.by); });
     }
     line("range 100", [&] { const uint64_t t0 = times.t(); s.store.range(s.oids[1], t0, t0 + 100 * kCycle); },
@@ -348,5 +386,6 @@ int main(int argc, char** argv)
                 kObjects, kSamples, kPayload);
     benchmark::RunSpecifiedBenchmarks();
     print_percentiles();
+    print_rounds();
     return 0;
 }
