@@ -132,7 +132,8 @@ nlohmann::json object_json(const HistoryObject& o, uint64_t now)
             {"samples_held", o.samples_held()},
             {"bytes_held", o.bytes_held()},
             {"samples_total", o.samples_total()},
-            {"rate_hz", o.avg_cycle_s() > 0 ? 1.0 / o.avg_cycle_s() : 0.0},
+            {"rate_hz", cpm::update_rate_hz(o, now)},
+            {"avg_cycle_s", o.avg_cycle_s()},
             {"max_cycle_s", o.max_cycle_s()},
             {"newest_age_s", o.newest_commit_ns() ? double(now - std::min(now, o.newest_commit_ns())) * 1e-9 : -1.0}};
 }
