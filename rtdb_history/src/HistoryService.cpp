@@ -110,7 +110,8 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
     std::vector<std::regex> include, exclude;
 
     std::unique_ptr<Participant> recorder;  // raw readers only
-    std::unique_ptr<Participant> serving;   // request, reply, status
+    Participant* serving = nullptr;          // request, reply, status
+    std::unique_ptr<Participant> own_serving;  // serving, when the options name one
     dds::Subscriber* raw_subscriber = nullptr;
 
     std::mutex events_mutex;
@@ -153,15 +154,20 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
 
     void start()
     {
-        ParticipantOptions rec = options.participant;
+        ParticipantOptions rec = options.participant.value_or(ParticipantOptions::from_init());
         rec.name = (rec.name.empty() ? std::string("cpm_history") : rec.name) + "_recorder";
         rec.discovery_listener = this;
         recorder = std::make_unique<Participant>(rec);
         raw_subscriber = recorder->native()->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
         if (!raw_subscriber) throw Error("cpm_history: cannot create the recording subscriber");
-        ParticipantOptions srv = options.participant;
-        if (srv.name.empty()) srv.name = "cpm_history";
-        serving = std::make_unique<Participant>(srv);
+        if (options.participant) {
+            ParticipantOptions srv = *options.participant;
+            if (srv.name.empty()) srv.name = "cpm_history";
+            own_serving = std::make_unique<Participant>(srv);
+            serving = own_serving.get();
+        } else {
+            serving = &Participant::default_participant();
+        }
         // Transient-local: a client whose reader the writer has not matched yet when the reply
         // goes out still gets it on matching.
         replies = std::make_unique<Writer<HistoryReply>>(*serving, "historyReply",

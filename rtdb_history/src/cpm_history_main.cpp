@@ -56,7 +56,6 @@ int run(int argc, char** argv)
         cpm::cli::parse_integer("--max-bytes-per-topic", parsed.get("--max-bytes-per-topic", "134217728"), 1024, 1LL << 40));
     options.status_period_ns = cpm::cli::parse_duration("--status-period", parsed.get("--status-period", "1s"));
     cpm::init(argc, argv);
-    options.participant = cpm::ParticipantOptions::from_init();
 
     cpm::cli::stop_on_signals();
     cpm::rtdb::HistoryService service(options);

@@ -7,6 +7,7 @@
 
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,7 +23,10 @@ struct ServiceOptions
     std::map<std::string, uint64_t> topic_windows_ns;  ///< topics keeping another window than window_ns
     uint64_t status_period_ns = 1'000'000'000ull;
     size_t workers = 4;  ///< threads answering requests that may wait
-    ParticipantOptions participant = ParticipantOptions::from_init();
+    /// Unset: requests, replies and status go through the process's default participant (the one
+    /// cpm::init's settings make, which cpm::Logging uses too), so the process shows as one
+    /// participant of its name besides its recorder. Set: a participant of these options.
+    std::optional<ParticipantOptions> participant;
 };
 
 struct ServiceCounters
