@@ -137,6 +137,7 @@ TEST_F(HistoryService, TheCommandPrintsEveryFieldAsJsonAndDumpListsTheObjects)
     Process dump({built_program("cpm"), "dump", "--json"});
     ASSERT_EQ(dump.wait(20s), 0) << dump.errors();
     bool found = false, writer_process = false;
+    int service_processes = 0;
     std::istringstream objects(dump.output());
     for (std::string line; std::getline(objects, line);) {
         auto o = nlohmann::json::parse(line);
@@ -148,9 +149,11 @@ TEST_F(HistoryService, TheCommandPrintsEveryFieldAsJsonAndDumpListsTheObjects)
             EXPECT_GT(o["parent"].get<uint64_t>(), 0u);
         }
         if (o["kind"] == "process" && o["name"] == "history_writer_vehicle") writer_process = true;
+        if (o["kind"] == "process" && o["name"] == "cpm_history") ++service_processes;
     }
     EXPECT_TRUE(found) << dump.output();
     EXPECT_TRUE(writer_process) << dump.output();
+    EXPECT_EQ(service_processes, 1) << "the service shows as one participant of its name\n" << dump.output();
 
     Process unknown({built_program("cpm"), "history", "latest", "--topic", "noSuchTopic"});
     EXPECT_EQ(unknown.wait(20s), 1);
