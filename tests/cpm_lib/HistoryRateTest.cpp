@@ -37,13 +37,15 @@ TEST(HistoryRate, ADeletedObjectShowsTheRateItHadUntilItsDeletion)
     EXPECT_DOUBLE_EQ(cpm::update_rate_hz(object(1000 * kS, 1050 * kS, 500), 1055 * kS), 50.0);
 }
 
-TEST(HistoryRate, ProcessesEmptyObjectsAndClocksAheadShowNoRate)
+TEST(HistoryRate, ProcessesEmptyObjectsShortLivesAndClocksAheadShowNoRate)
 {
     HistoryObject process = object(1000 * kS, 0, 5);
     process.is_process(true);
     EXPECT_EQ(cpm::update_rate_hz(process, 1003 * kS), 0.0);
     EXPECT_EQ(cpm::update_rate_hz(object(1000 * kS, 0, 0), 1003 * kS), 0.0);
     EXPECT_EQ(cpm::update_rate_hz(object(1000 * kS, 0, 5), 999 * kS), 0.0);  // created "after" now
+    // Two stop requests 3 ms apart, then deleted: too short a life to tell a rate.
+    EXPECT_EQ(cpm::update_rate_hz(object(1000 * kS, 1000 * kS + 3'000'000, 2), 1005 * kS), 0.0);
 }
 
 }  // namespace

@@ -188,10 +188,12 @@ void print_objects(const HistoryReply& reply, bool json)
     for (const auto& o : reply.objects()) {
         const auto j = object_json(o, now);
         char rate[32];
-        std::snprintf(rate, sizeof rate, "%.1f Hz", j["rate_hz"].get<double>());
+        const double hz = j["rate_hz"].get<double>();
+        if (hz > 0) std::snprintf(rate, sizeof rate, "%.1f Hz", hz);
+        else std::snprintf(rate, sizeof rate, "-");
         std::printf("%-5llu %-28s %-22s %-20s %-12s %-12s %8llu %9s %10s\n", (unsigned long long)o.oid(), o.name().c_str(),
                     o.type_name().c_str(), o.creator().c_str(), time_text(o.created_ts()).c_str(), time_text(o.deleted_ts()).c_str(),
-                    (unsigned long long)o.samples_held(), o.is_process() ? "-" : rate, age_text(j["newest_age_s"]).c_str());
+                    (unsigned long long)o.samples_held(), rate, age_text(j["newest_age_s"]).c_str());
     }
 }
 
