@@ -130,7 +130,6 @@ struct SqliteWork
         sqlite3_bind_int64(s, 1, object);
         sqlite3_bind_int64(s, 2, int64_t(t0));
         if (t1) sqlite3_bind_int64(s, 3, int64_t(t1));
-        size_t rows = 0;
         std::vector<cpm::rtdb::StoredSample> out;
         while (sqlite3_step(s) == SQLITE_ROW) {
             cpm::rtdb::StoredSample x{uint64_t(sqlite3_column_int64(s, 0)), uint64_t(sqlite3_column_int64(s, 1)),
@@ -138,10 +137,9 @@ struct SqliteWork
             auto* b = static_cast<const uint8_t*>(sqlite3_column_blob(s, 4));
             x.payload.assign(b, b + sqlite3_column_bytes(s, 4));
             out.push_back(std::move(x));
-            ++rows;
         }
         sqlite3_reset(s);
-        return rows;
+        return out.size();
     }
 };
 
@@ -163,12 +161,20 @@ struct Times
 {
     std::vector<uint64_t> table = std::vector<uint64_t>(1 << 16);
     size_t i = 0;
+    int k = 0;  ///< the object asked last
     Times()
     {
         std::mt19937_64 rng{42};
         for (auto& t : table) t = kSamples * kCycle - kCycle * (100 + rng() % (kSamples - 200));
     }
     uint64_t t() { return table[i++ & (table.size() - 1)]; }
+    /// op(object, time, by) about the next object, object after object, at the next time.
+    template <typename Op>
+    size_t ask(Op op, cpm::rtdb::By by)
+    {
+        k = (k + 1) % kObjects;
+        return op(k, t(), by);
+    }
 };
 
 void BM_Store_Append(benchmark::State& state)
@@ -228,11 +234,7 @@ template <AtOp op, By by>
 void BM_At(benchmark::State& state)
 {
     Times times;
-    int k = 0;
-    for (auto _ : state) {
-        benchmark::DoNotOptimize(op(k, times.t(), by));
-        k = (k + 1) % kObjects;
-    }
+    for (auto _ : state) benchmark::DoNotOptimize(times.ask(op, by));
 }
 void BM_Store_Range100(benchmark::State& state)
 {
@@ -319,14 +321,13 @@ void print_rounds()
 {
     constexpr int kRounds = 7, kStoreCalls = 200'000, kSqliteCalls = 20'000;
     Times times;
-    int k = 0;
     std::printf("interleaved rounds (%d; each a block of %d store calls, then %d SQLite calls, each warmed up first), mean ns a call:\n",
                 kRounds, kStoreCalls, kSqliteCalls);
     for (const AtCase& c : kAtCases) {
         std::vector<double> store, sqlite, ratio;
         for (int r = 0; r < kRounds; ++r) {
-            store.push_back(block_ns([&] { c.store(k = (k + 1) % kObjects, times.t(), c.by); }, kStoreCalls));
-            sqlite.push_back(block_ns([&] { c.sqlite(k = (k + 1) % kObjects, times.t(), c.by); }, kSqliteCalls));
+            store.push_back(block_ns([&] { times.ask(c.store, c.by); }, kStoreCalls));
+            sqlite.push_back(block_ns([&] { times.ask(c.sqlite, c.by); }, kSqliteCalls));
             ratio.push_back(sqlite.back() / store.back());
         }
         auto [slo, shi] = std::minmax_element(store.begin(), store.end());
@@ -344,7 +345,6 @@ void print_percentiles()
     auto& sa = append_store();
     auto& qa = append_sqlite();
     Times times;
-    int k = 0;
     const double clock = percentiles([] {}, 0).first;
     std::printf("single calls, %.0f ns of reading the clock around each subtracted:\n", clock);
     auto line = [&](const char* what, auto&& store_op, auto&& sqlite_op, int n = 200'000) {
@@ -354,7 +354,7 @@ void print_percentiles()
     };
     line("append", [&] { sa.put(2, sa.next++); }, [&] { qa.put(2, qa.next++); });
     for (const AtCase& c : kAtCases) {
-        line(c.what, [&] { c.store(k = (k + 1) % kObjects, times.t(), c.by); }, [&] { c.sqlite(k = (k + 1) % kObjects, times.t(), c.by); });
+        line(c.what, [&] { times.ask(c.store, c.by); }, [&] { times.ask(c.sqlite, c.by); });
     }
     line("range 100", [&] { const uint64_t t0 = times.t(); s.store.range(s.oids[1], t0, t0 + 100 * kCycle); },
          [&] { const uint64_t t0 = times.t(); q.query(q.range, 1, t0, t0 + 100 * kCycle); }, 20'000);

@@ -345,7 +345,7 @@ Store::Object* Store::slot(Oid oid) const
 {
     const uint32_t n = uint32_t(oid);
     if (n == 0 || n >= slots_used_.load(std::memory_order_acquire)) return nullptr;
-    return blocks_[n >> kBlockBits][n & ((1u << kBlockBits) - 1)];
+    return blocks_[n >> kBlockBits][n & kBlockMask];
 }
 
 Store::Object* Store::live(Oid oid) const
@@ -400,7 +400,7 @@ Oid Store::add_object(ObjectInfo info)
             }
             Object**& block = blocks_[n >> kBlockBits];
             if (!block) block = new Object*[size_t(1) << kBlockBits]();
-            o = block[n & ((1u << kBlockBits) - 1)] = new Object;
+            o = block[n & kBlockMask] = new Object;
         }
         std::unique_lock ol(o->mutex);
         oid = Oid(o->generation) << 32 | n;
@@ -485,7 +485,7 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
         const uint64_t last = o->records.empty() ? (o->samples_total ? o->last_evicted_commit : 0) : o->records.back().commit;
         commit_ns = o->samples_total ? std::max(now_ns, last + 1) : now_ns;
         if (o->samples_total) {
-            const uint64_t cycle = commit_ns - (o->records.empty() ? last : o->records.back().commit);
+            const uint64_t cycle = commit_ns - last;
             o->cycle_sum += cycle;
             o->cycle_max = std::max(o->cycle_max, cycle);
         }
@@ -581,29 +581,28 @@ Range Store::range(Oid oid, uint64_t t0, uint64_t t1, By by, size_t limit) const
     return read(oid, [&](const Object* o) { return o ? range_of(*o, t0, t1, by, limit) : Range{Status::unknown_object, {}, false}; });
 }
 
-Range Store::range_of(const Object& obj, uint64_t t0, uint64_t t1, By by, size_t limit)
+Range Store::range_of(const Object& o, uint64_t t0, uint64_t t1, By by, size_t limit)
 {
-    const Object* o = &obj;
     Range r;
     auto add = [&](const Record& rec) {
         if (r.samples.size() == limit) {
             r.truncated = true;
             return false;
         }
-        r.samples.push_back(o->copy(rec));
+        r.samples.push_back(o.copy(rec));
         return true;
     };
     if (t1 > t0 && by == By::commit) {
-        const size_t end = o->records.first_after(t1, false);
-        for (size_t i = o->records.first_after(t0, false); i < end && add(o->records[i]); ++i) {}
+        const size_t end = o.records.first_after(t1, false);
+        for (size_t i = o.records.first_after(t0, false); i < end && add(o.records[i]); ++i) {}
     } else if (t1 > t0) {
-        const size_t end = o->data_after(t1, false);
-        for (size_t i = o->data_after(t0, false); i < end && add(o->nth_by_data(i)); ++i) {}
+        const size_t end = o.data_after(t1, false);
+        for (size_t i = o.data_after(t0, false); i < end && add(o.nth_by_data(i)); ++i) {}
     }
     if (!r.samples.empty()) r.status = Status::ok;
-    else if (t1 > t0 && o->nothing_at_or_before(t1, by, false) == Status::evicted &&
-             (by == By::commit ? t0 <= o->last_evicted_commit : t0 <= o->max_evicted_data)) r.status = Status::evicted;
-    else if (!o->records.empty() && t0 > (by == By::commit ? o->records.back().commit : o->nth_by_data(o->records.size() - 1).data)) r.status = Status::not_yet;
+    else if (t1 > t0 && o.nothing_at_or_before(t1, by, false) == Status::evicted &&
+             (by == By::commit ? t0 <= o.last_evicted_commit : t0 <= o.max_evicted_data)) r.status = Status::evicted;
+    else if (!o.records.empty() && t0 > (by == By::commit ? o.records.back().commit : o.nth_by_data(o.records.size() - 1).data)) r.status = Status::not_yet;
     else r.status = Status::not_found;
     return r;
 }

@@ -201,8 +201,8 @@ TEST(StoreQuery, DataTimeQueriesMatchAScanOfTheHeldSamplesWhileLateSamplesComeAn
     // the middle stretch, where one sample in ten is late by up to 50 cycles; then they are in
     // order again long enough for every late one to be evicted. After every sample, data-time
     // `at`, `older`, `younger` and `range` are checked against a scan of what the window holds.
-    constexpr uint64_t kCycle = 10, kHeld = 300;
-    Store store{StoreOptions{{kHeld * kCycle - 1, 1ull << 30}, 1ull << 30}};
+    constexpr uint64_t kCycle = 10, kHeld = 300, kWindow = kHeld * kCycle - 1;
+    Store store{StoreOptions{{kWindow, 1ull << 30}, 1ull << 30}};
     const Oid oid = store.add_object({.topic = "t"});
     struct Sample
     {
@@ -216,7 +216,7 @@ TEST(StoreQuery, DataTimeQueriesMatchAScanOfTheHeldSamplesWhileLateSamplesComeAn
         // The held samples sorted by (data time, commit): the order the store answers in.
         std::vector<Sample> held;
         for (const Sample& s : all) {
-            if (s.commit + kHeld * kCycle - 1 >= all.back().commit) held.push_back(s);
+            if (s.commit + kWindow >= all.back().commit) held.push_back(s);
         }
         std::stable_sort(held.begin(), held.end(), [](const Sample& a, const Sample& b) { return a.data < b.data; });
         auto commit_of = [](const Found& f) { return f.ok() ? f.sample.commit_ns : 0; };
@@ -245,7 +245,7 @@ TEST(StoreQuery, DataTimeQueriesMatchAScanOfTheHeldSamplesWhileLateSamplesComeAn
         const uint8_t byte = uint8_t(n);
         ASSERT_EQ(store.commit(oid, {data, data, 0, &byte, 1}, commit), commit);
         for (const Sample& s : all) {
-            if (s.commit + kHeld * kCycle - 1 < commit && s.commit + kHeld * kCycle - 1 >= commit - kCycle) {
+            if (s.commit + kWindow < commit && s.commit + kWindow >= commit - kCycle) {  // evicted by this commit
                 any_evicted = true;
                 max_evicted_data = std::max(max_evicted_data, s.data);
             }

@@ -245,6 +245,7 @@ private:
     // a purged object's slot is given to a later one with the next generation, so a reader
     // holding an old oid finds the slot's oid changed. Slot objects are freed with the store.
     static constexpr unsigned kBlockBits = 10;
+    static constexpr uint32_t kBlockMask = (1u << kBlockBits) - 1;  ///< a slot's place in its block
     static constexpr size_t kBlocks = 4096;  ///< at most 4M objects held at once
     Object** blocks_[kBlocks] = {};          ///< written before slots_used_ grows past them
     std::atomic<uint32_t> slots_used_{1};    ///< slot 0 is none
