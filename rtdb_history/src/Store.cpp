@@ -82,20 +82,32 @@ private:
     std::deque<Chunk> chunks_;
 };
 
+/// Where a search of n sorted keys first looks for t: by interpolation between the first and the
+/// last key. Kept up to date by the writer, so that a query neither waits for both ends' keys
+/// nor divides before its first probe; it only steers that probe, so a stale one costs time,
+/// never a wrong answer.
+struct Spread
+{
+    uint64_t first = 0;
+    double per_ns = 0;  ///< (n - 1) / (last - first)
+
+    static Spread of(size_t n, uint64_t first, uint64_t last) { return {first, last > first ? double(n - 1) / double(last - first) : 0.0}; }
+    /// The interpolated index of t, at most `max`.
+    size_t guess(uint64_t t, size_t max) const { return size_t(std::min(double(t - std::min(t, first)) * per_ns, double(max))); }
+};
+
 /// Index of the first of n sorted keys with key > t (inclusive) or >= t (!inclusive); n if none.
 /// Samples mostly come periodically, so it first guesses by interpolation between the ends and
 /// then gallops out from the guess: a few neighbouring probes instead of log2(n) scattered
 /// cache misses; O(log n) at worst.
 template <typename Key>
-size_t search_sorted(size_t n, Key key, uint64_t t, bool inclusive)
+size_t search_sorted(size_t n, Key key, uint64_t t, bool inclusive, const Spread& spread)
 {
     auto left_of = [&](size_t i) { return inclusive ? key(i) <= t : key(i) < t; };  // the answer is right of i
     if (n == 0 || !left_of(0)) return 0;
     if (left_of(n - 1)) return n;
     // Now key(0) is left of the answer and key(n - 1) is not: the answer is in (0, n - 1].
-    const uint64_t k0 = key(0), k1 = key(n - 1);
-    size_t guess = k1 > k0 ? size_t(double(t - std::min(t, k0)) / double(k1 - k0) * double(n - 1)) : 0;
-    guess = std::min(guess, n - 2);
+    const size_t guess = spread.guess(t, n - 2);
     size_t lo, hi;  // left_of(lo) holds, left_of(hi) does not
     if (left_of(guess)) {
         lo = guess;
@@ -180,17 +192,6 @@ private:
     size_t head_ = 0, n_ = 0;
 };
 
-/// Records by commit time.
-class RecordRing : public Ring<Record>
-{
-public:
-    /// Index of the first record with commit > t (inclusive) or >= t (!inclusive); size() if none.
-    size_t first_after(uint64_t t, bool inclusive) const
-    {
-        return search_sorted(size(), [this](size_t i) { return (*this)[i].commit; }, t, inclusive);
-    }
-};
-
 /// What the store holds of one object; Store::Object adds its lock. A purged object's state is
 /// reset to this (its memory given back) and its slot taken by the next new object.
 struct ObjectState
@@ -198,12 +199,14 @@ struct ObjectState
     ObjectInfo info;  // deleted_ts and the counters change under mutex
     Retention retention;
     uint64_t* topic_bytes = nullptr;  ///< its topic's payload bytes (a node of Store::topic_bytes_)
-    RecordRing records;  // by commit time; records[i] has sequence head_seq + i
+    Ring<Record> records;  // by commit time; records[i] has sequence head_seq + i
     uint64_t head_seq = 0;
     /// The data-time index: the low 32 bits of each held sample's sequence number, ordered by
     /// (data time, sequence): 4 bytes a sample.
     Ring<uint32_t> by_data;
     ByteChunks bytes;
+    /// The search guides of records (by commit time) and of by_data (by data time).
+    Spread commit_spread, data_spread;
     uint64_t bytes_held = 0;
     uint64_t samples_total = 0;
     uint64_t first_commit_ever = kNever, min_data_ever = kNever;
@@ -222,16 +225,33 @@ struct ObjectState
     bool data_in_commit_order() const { return head_seq >= last_descent_seq; }
     /// The i-th held sample by (data time, sequence).
     const Record& nth_by_data(size_t i) const { return data_in_commit_order() ? records[i] : entry(by_data[i]); }
+    /// Index of the first record with commit > t (inclusive) or >= t (!inclusive); size() if none.
+    size_t commit_after(uint64_t t, bool inclusive) const
+    {
+        return search_sorted(records.size(), [this](size_t i) { return records[i].commit; }, t, inclusive, commit_spread);
+    }
     /// Index, in data-time order, of the first sample with data time > t (inclusive) or >= t.
     size_t data_after(uint64_t t, bool inclusive) const
     {
-        if (data_in_commit_order()) return search_sorted(records.size(), [this](size_t i) { return records[i].data; }, t, inclusive);
+        if (data_in_commit_order()) {
+            return search_sorted(records.size(), [this](size_t i) { return records[i].data; }, t, inclusive, data_spread);
+        }
         return index_after(t, inclusive);
     }
     /// Index in by_data of the first entry with data time > t (inclusive) or >= t.
     size_t index_after(uint64_t t, bool inclusive) const
     {
-        return search_sorted(by_data.size(), [this](size_t i) { return entry(by_data[i]).data; }, t, inclusive);
+        return search_sorted(by_data.size(), [this](size_t i) { return entry(by_data[i]).data; }, t, inclusive, data_spread);
+    }
+    /// Brings the search guides up to date after samples came or went.
+    void respread()
+    {
+        if (records.empty()) {
+            commit_spread = data_spread = {};
+            return;
+        }
+        commit_spread = Spread::of(records.size(), records.front().commit, records.back().commit);
+        data_spread = Spread::of(by_data.size(), entry(by_data.front()).data, entry(by_data.back()).data);
     }
 
     StoredSample copy(const Record& r) const
@@ -252,6 +272,7 @@ struct ObjectState
         }
         records.pop_front();
         ++head_seq;
+        respread();
         bytes.pop();
         bytes_held -= r.size;
         any_evicted = true;
@@ -286,7 +307,7 @@ struct ObjectState
     /// The newest sample at or before t (inclusive) / before t.
     Status before(uint64_t t, By by, bool inclusive, const Record*& rec) const
     {
-        const size_t i = by == By::commit ? records.first_after(t, inclusive) : data_after(t, inclusive);
+        const size_t i = by == By::commit ? commit_after(t, inclusive) : data_after(t, inclusive);
         if (i == 0) return nothing_at_or_before(t, by, inclusive);
         rec = by == By::commit ? &records[i - 1] : &nth_by_data(i - 1);
         return Status::ok;
@@ -296,7 +317,7 @@ struct ObjectState
     {
         if (records.empty() && !any_evicted) return Status::not_found;
         if (any_evicted && t < (by == By::commit ? last_evicted_commit : max_evicted_data)) return Status::evicted;
-        const size_t i = by == By::commit ? records.first_after(t, true) : data_after(t, true);
+        const size_t i = by == By::commit ? commit_after(t, true) : data_after(t, true);
         if (i == records.size()) return Status::not_yet;
         rec = by == By::commit ? &records[i] : &nth_by_data(i);
         return Status::ok;
@@ -497,6 +518,7 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
         // Mostly in order: append; else after every entry with a data time <= this one's.
         if (o->by_data.empty() || o->entry(o->by_data.back()).data <= in.data_ns) o->by_data.push_back(uint32_t(seq));
         else o->by_data.insert(o->index_after(in.data_ns, true), uint32_t(seq));
+        o->respread();
         o->bytes_held += in.size;
         ++o->samples_total;
         o->first_commit_ever = std::min(o->first_commit_ever, commit_ns);
@@ -593,8 +615,8 @@ Range Store::range_of(const Object& o, uint64_t t0, uint64_t t1, By by, size_t l
         return true;
     };
     if (t1 > t0 && by == By::commit) {
-        const size_t end = o.records.first_after(t1, false);
-        for (size_t i = o.records.first_after(t0, false); i < end && add(o.records[i]); ++i) {}
+        const size_t end = o.commit_after(t1, false);
+        for (size_t i = o.commit_after(t0, false); i < end && add(o.records[i]); ++i) {}
     } else if (t1 > t0) {
         const size_t end = o.data_after(t1, false);
         for (size_t i = o.data_after(t0, false); i < end && add(o.nth_by_data(i)); ++i) {}
