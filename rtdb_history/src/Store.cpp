@@ -241,6 +241,10 @@ struct ObjectState
     /// Index in by_data of the first entry with data time > t (inclusive) or >= t.
     size_t index_after(uint64_t t, bool inclusive) const
     {
+        // A probe reads by_data[i], then the record it names: mostly records[i] or a neighbour
+        // (few samples come late), so that record is fetched along with the first probe's entry.
+        const size_t guess = data_spread.guess(t, records.size());
+        if (guess < records.size()) __builtin_prefetch(&records[guess]);
         return search_sorted(by_data.size(), [this](size_t i) { return entry(by_data[i]).data; }, t, inclusive, data_spread);
     }
     /// Brings the search guides up to date after samples came or went.
