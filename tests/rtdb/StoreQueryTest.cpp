@@ -195,64 +195,99 @@ TEST(StoreQuery, RangeHonoursItsLimitAndSaysSo)
     EXPECT_EQ(answer(f.store.range(f.oid, 300, 200)), "not found");  // t1 < t0 is empty
 }
 
+/// What a store holding `window` of the samples a test commits must answer, found by scanning
+/// them: the reference the scan tests hold the store's searches to.
+struct Scan
+{
+    struct Sample
+    {
+        uint64_t commit, data;
+    };
+    uint64_t window;
+    std::vector<Sample> all;
+    size_t first_held = 0;
+    uint64_t max_evicted[2] = {0, 0};  // by commit, by data
+    bool any_evicted = false;
+
+    static uint64_t key(const Sample& s, By by) { return by == By::commit ? s.commit : s.data; }
+    /// Commits the sample to the store and to the scan's own account.
+    void commit(Store& store, Oid oid, Sample s)
+    {
+        const uint8_t byte = uint8_t(all.size());
+        ASSERT_EQ(store.commit(oid, {s.data, s.data, 0, &byte, 1}, s.commit), s.commit);
+        all.push_back(s);
+        for (; all[first_held].commit + window < s.commit; ++first_held) {  // evicted by this commit
+            any_evicted = true;
+            for (By by : {By::commit, By::data}) max_evicted[int(by)] = std::max(max_evicted[int(by)], key(all[first_held], by));
+        }
+    }
+    /// Checks `at`, `older`, `younger` and a range [t, t + span) by `by` against the scan.
+    void check(const Store& store, Oid oid, uint64_t t, By by, uint64_t span) const
+    {
+        // The held samples sorted by (time, commit): the order the store answers in.
+        std::vector<Sample> held(all.begin() + ptrdiff_t(first_held), all.end());
+        std::stable_sort(held.begin(), held.end(), [by](const Sample& a, const Sample& b) { return key(a, by) < key(b, by); });
+        auto commit_of = [](const Found& f) { return f.ok() ? f.sample.commit_ns : 0; };
+        uint64_t at = 0, older = 0, younger = 0;
+        std::vector<uint64_t> want, got;
+        for (const Sample& s : held) {
+            if (key(s, by) <= t) at = s.commit;
+            if (key(s, by) < t) older = s.commit;
+            if (key(s, by) > t && !younger) younger = s.commit;
+            if (key(s, by) >= t && key(s, by) < t + span) want.push_back(s.commit);
+        }
+        const char* how = by == By::commit ? " by commit" : " by data";
+        EXPECT_EQ(commit_of(store.at(oid, t, by)), at) << "at " << t << how;
+        EXPECT_EQ(commit_of(store.older(oid, t, by)), older) << "older " << t << how;
+        const Found y = store.younger(oid, t, by);
+        if (any_evicted && t < max_evicted[int(by)]) EXPECT_EQ(y.status, Status::evicted) << "younger " << t << how;
+        else EXPECT_EQ(commit_of(y), younger) << "younger " << t << how;
+        for (const StoredSample& x : store.range(oid, t, t + span, by).samples) got.push_back(x.commit_ns);
+        EXPECT_EQ(got, want) << "range from " << t << how;
+    }
+};
+
 TEST(StoreQuery, DataTimeQueriesMatchAScanOfTheHeldSamplesWhileLateSamplesComeAndAreEvicted)
 {
     // 4000 samples, a window of 300 of them. Data times run ahead with the commits except in
     // the middle stretch, where one sample in ten is late by up to 50 cycles; then they are in
     // order again long enough for every late one to be evicted. After every sample, data-time
     // `at`, `older`, `younger` and `range` are checked against a scan of what the window holds.
-    constexpr uint64_t kCycle = 10, kHeld = 300, kWindow = kHeld * kCycle - 1;
-    Store store{StoreOptions{{kWindow, 1ull << 30}, 1ull << 30}};
+    constexpr uint64_t kCycle = 10, kHeld = 300;
+    Scan scan{kHeld * kCycle - 1};
+    Store store{StoreOptions{{scan.window, 1ull << 30}, 1ull << 30}};
     const Oid oid = store.add_object({.topic = "t"});
-    struct Sample
-    {
-        uint64_t commit, data;
-    };
-    std::vector<Sample> all;
-    uint64_t max_evicted_data = 0;
-    bool any_evicted = false;
     std::mt19937_64 rng(7);
-    auto check = [&](uint64_t t) {
-        // The held samples sorted by (data time, commit): the order the store answers in.
-        std::vector<Sample> held;
-        for (const Sample& s : all) {
-            if (s.commit + kWindow >= all.back().commit) held.push_back(s);
-        }
-        std::stable_sort(held.begin(), held.end(), [](const Sample& a, const Sample& b) { return a.data < b.data; });
-        auto commit_of = [](const Found& f) { return f.ok() ? f.sample.commit_ns : 0; };
-        uint64_t at = 0, older = 0, younger = 0;
-        for (const Sample& s : held) {
-            if (s.data <= t) at = s.commit;
-            if (s.data < t) older = s.commit;
-            if (s.data > t && !younger) younger = s.commit;
-        }
-        EXPECT_EQ(commit_of(store.at(oid, t, By::data)), at) << "at " << t;
-        EXPECT_EQ(commit_of(store.older(oid, t, By::data)), older) << "older " << t;
-        const Found y = store.younger(oid, t, By::data);
-        if (any_evicted && t < max_evicted_data) EXPECT_EQ(y.status, Status::evicted) << "younger " << t;
-        else EXPECT_EQ(commit_of(y), younger) << "younger " << t;
-        std::vector<uint64_t> want, got;
-        for (const Sample& s : held) {
-            if (s.data >= t && s.data < t + 40 * kCycle) want.push_back(s.commit);
-        }
-        for (const StoredSample& s : store.range(oid, t, t + 40 * kCycle, By::data).samples) got.push_back(s.commit_ns);
-        EXPECT_EQ(got, want) << "range from " << t;
-    };
     for (uint64_t n = 1; n <= 4000 && !HasFailure(); ++n) {
         const uint64_t commit = n * kCycle;
         uint64_t data = 1'000 + commit;
         if (n > 1000 && n < 2000 && rng() % 10 == 0) data -= kCycle * (1 + rng() % 50);
-        const uint8_t byte = uint8_t(n);
-        ASSERT_EQ(store.commit(oid, {data, data, 0, &byte, 1}, commit), commit);
-        for (const Sample& s : all) {
-            if (s.commit + kWindow < commit && s.commit + kWindow >= commit - kCycle) {  // evicted by this commit
-                any_evicted = true;
-                max_evicted_data = std::max(max_evicted_data, s.data);
-            }
+        scan.commit(store, oid, {commit, data});
+        for (int q = 0; q < 3; ++q) {
+            scan.check(store, oid, 1'000 + commit - rng() % (kHeld * kCycle + 100 * kCycle) + rng() % (5 * kCycle), By::data, 40 * kCycle);
         }
-        all.push_back({commit, data});
-        for (int q = 0; q < 3; ++q) check(1'000 + commit - rng() % (kHeld * kCycle + 100 * kCycle) + rng() % (5 * kCycle));
     }
+}
+
+TEST(StoreQuery, QueriesMatchAScanWhenSamplesComeInBurstsAndPauses)
+{
+    // The searches first look where evenly spaced samples would lie. Here samples come in bursts
+    // 1 ns apart with pauses of up to 100,000 ns between, data times repeat within a burst and
+    // some come late, so that first look is mostly wrong: the answers must not be.
+    Scan scan{400'000};
+    Store store{StoreOptions{{scan.window, 1ull << 30}, 1ull << 30}};
+    const Oid oid = store.add_object({.topic = "t"});
+    std::mt19937_64 rng(11);
+    uint64_t commit = 1'000'000;
+    for (int n = 1; n <= 3000 && !HasFailure(); ++n) {
+        commit += rng() % 8 ? 1 : 1 + rng() % 100'000;
+        const uint64_t data = commit / 4 * 4 - (rng() % 20 ? 0 : rng() % 50'000);
+        scan.commit(store, oid, {commit, data});
+        for (By by : {By::commit, By::data}) {
+            for (int q = 0; q < 2; ++q) scan.check(store, oid, commit + 1'000 - rng() % (scan.window + 100'000), by, 20'000);
+        }
+    }
+    EXPECT_TRUE(scan.any_evicted);
 }
 
 TEST(StoreQuery, UnknownObjectIsNamedAsSuch)
