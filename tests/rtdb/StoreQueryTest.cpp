@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <map>
 #include <random>
 #include <string>
 
@@ -288,6 +289,37 @@ TEST(StoreQuery, QueriesMatchAScanWhenSamplesComeInBurstsAndPauses)
         }
     }
     EXPECT_TRUE(scan.any_evicted);
+}
+
+TEST(StoreQuery, CopiesCarryTheirSamplesBytesWhileSizesChangeAndSamplesAreEvicted)
+{
+    // A copying query fetches the payload where it most likely lies while samples are all of one
+    // size. Here the size stays the same for a while, changes, and varies; every copy must
+    // still be its own sample's bytes, whichever sample the query named.
+    Store store{StoreOptions{{5'000, 1ull << 30}, 1ull << 30}};
+    const Oid oid = store.add_object({.topic = "t"});
+    auto bytes_of = [](uint64_t commit, size_t size) {
+        std::vector<uint8_t> b(size);
+        for (size_t i = 0; i < size; ++i) b[i] = uint8_t(commit * 31 + i);
+        return b;
+    };
+    std::map<uint64_t, size_t> size_of;  // commit -> payload size
+    std::mt19937_64 rng(5);
+    for (uint64_t n = 1; n <= 4500 && !HasFailure(); ++n) {
+        const uint64_t commit = n * 10;
+        const size_t size = n < 2000 ? 150 : n < 3000 ? 151 : n < 4000 ? 1 + rng() % 400 : 20'000;
+        const std::vector<uint8_t> b = bytes_of(commit, size);
+        ASSERT_EQ(store.commit(oid, {commit, commit, 0, b.data(), b.size()}, commit), commit);
+        size_of[commit] = size;
+        for (int q = 0; q < 4; ++q) {
+            const uint64_t t = commit + 100 - rng() % 6'000;
+            for (const Found& f : {store.at(oid, t, By::commit), store.older(oid, t, By::data), store.younger(oid, t, By::commit),
+                                   store.latest(oid)}) {
+                if (!f.ok()) continue;
+                ASSERT_EQ(f.sample.payload, bytes_of(f.sample.commit_ns, size_of.at(f.sample.commit_ns))) << "sample c" << f.sample.commit_ns;
+            }
+        }
+    }
 }
 
 TEST(StoreQuery, UnknownObjectIsNamedAsSuch)
