@@ -114,8 +114,8 @@ private:
 };
 
 /// Where a search of n sorted keys first looks for t: by interpolation between the first and the
-/// last key. Kept up to date by the writer, so that a query neither waits for both ends' keys
-/// nor divides before its first probe; it only steers that probe, so a stale one costs time,
+/// last key. Kept up to date by the writer, so that a query's first probe waits neither for
+/// both ends' keys nor for a division; it only steers that probe, so a stale one costs time,
 /// never a wrong answer.
 struct Spread
 {
