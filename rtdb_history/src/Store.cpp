@@ -53,10 +53,10 @@ public:
             // An emptied only chunk too small for this sample goes, so the front always holds the oldest.
             if (!chunks_.empty() && chunks_.back().samples == 0) chunks_.pop_back();
             const size_t cap = std::max(kChunk, size);
-            chunks_.push_back({std::unique_ptr<uint8_t[]>(new uint8_t[cap]), cap, 0, 0, seq, 0, size});
+            chunks_.push_back({std::unique_ptr<uint8_t[]>(new uint8_t[cap]), cap, 0, 0, 0, 0, 0});
         }
         Chunk& c = chunks_.back();
-        if (c.used == 0) {  // the only chunk, emptied and begun again
+        if (c.used == 0) {  // a new chunk, or the only one, emptied and begun again
             c.first_seq = seq;
             c.pushed = 0;
             c.stride = size;
@@ -128,17 +128,17 @@ struct Spread
 };
 
 /// Index of the first of n sorted keys with key > t (inclusive) or >= t (!inclusive); n if none.
-/// Samples mostly come periodically, so it first guesses by interpolation between the ends and
-/// then gallops out from the guess: a few neighbouring probes instead of log2(n) scattered
-/// cache misses; O(log n) at worst.
+/// Samples mostly come periodically, so it first probes at `first_probe` (the caller's guess by
+/// interpolation, Spread::guess) and then gallops out from there: a few neighbouring probes
+/// instead of log2(n) scattered cache misses; O(log n) at worst, whatever the guess.
 template <typename Key>
-size_t search_sorted(size_t n, Key key, uint64_t t, bool inclusive, const Spread& spread)
+size_t search_sorted(size_t n, Key key, uint64_t t, bool inclusive, size_t first_probe)
 {
     auto left_of = [&](size_t i) { return inclusive ? key(i) <= t : key(i) < t; };  // the answer is right of i
     if (n == 0 || !left_of(0)) return 0;
     if (left_of(n - 1)) return n;
     // Now key(0) is left of the answer and key(n - 1) is not: the answer is in (0, n - 1].
-    const size_t guess = spread.guess(t, n - 2);
+    const size_t guess = std::min(first_probe, n - 2);
     size_t lo, hi;  // left_of(lo) holds, left_of(hi) does not
     if (left_of(guess)) {
         lo = guess;
@@ -249,8 +249,10 @@ struct ObjectState
     /// held, records are not in data-time order and data-time queries go through by_data.
     uint64_t last_descent_seq = 0;
 
-    /// The record of an index entry (sequence numbers held span far less than 2^32).
-    const Record& entry(uint32_t seq32) const { return records[uint32_t(seq32 - uint32_t(head_seq))]; }
+    /// The index in records of an index entry (sequence numbers held span far less than 2^32).
+    size_t index_of(uint32_t seq32) const { return uint32_t(seq32 - uint32_t(head_seq)); }
+    /// The record of an index entry.
+    const Record& entry(uint32_t seq32) const { return records[index_of(seq32)]; }
     /// Whether the records held are in data-time order too (the usual case): by_data is then
     /// 0, 1, 2, … and a data-time query reads the records directly, one load a probe, not two.
     bool data_in_commit_order() const { return head_seq >= last_descent_seq; }
@@ -259,13 +261,15 @@ struct ObjectState
     /// Index of the first record with commit > t (inclusive) or >= t (!inclusive); size() if none.
     size_t commit_after(uint64_t t, bool inclusive) const
     {
-        return search_sorted(records.size(), [this](size_t i) { return records[i].commit; }, t, inclusive, commit_spread);
+        return search_sorted(records.size(), [this](size_t i) { return records[i].commit; }, t, inclusive,
+                             commit_spread.guess(t, records.size()));
     }
     /// Index, in data-time order, of the first sample with data time > t (inclusive) or >= t.
     size_t data_after(uint64_t t, bool inclusive) const
     {
         if (data_in_commit_order()) {
-            return search_sorted(records.size(), [this](size_t i) { return records[i].data; }, t, inclusive, data_spread);
+            return search_sorted(records.size(), [this](size_t i) { return records[i].data; }, t, inclusive,
+                                 data_spread.guess(t, records.size()));
         }
         return index_after(t, inclusive);
     }
@@ -276,7 +280,7 @@ struct ObjectState
         // (few samples come late), so that record is fetched along with the first probe's entry.
         const size_t guess = data_spread.guess(t, records.size());
         if (guess < records.size()) __builtin_prefetch(&records[guess]);
-        return search_sorted(by_data.size(), [this](size_t i) { return entry(by_data[i]).data; }, t, inclusive, data_spread);
+        return search_sorted(by_data.size(), [this](size_t i) { return entry(by_data[i]).data; }, t, inclusive, guess);
     }
     /// The sequence number of the held sample a query most likely names, from the search guides
     /// and at most one index entry; records not empty.
@@ -286,8 +290,7 @@ struct ObjectState
         if (which == Which::latest) return head_seq + last;
         size_t i = (by == By::commit ? commit_spread : data_spread).guess(t, last);
         if (which == Which::younger) i = std::min(i + 1, last);
-        if (by == By::commit || data_in_commit_order()) return head_seq + i;
-        return head_seq + uint32_t(by_data[i] - uint32_t(head_seq));
+        return head_seq + (by == By::commit || data_in_commit_order() ? i : index_of(by_data[i]));
     }
     /// Brings the search guides up to date after samples came or went.
     void respread()
