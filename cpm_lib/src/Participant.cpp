@@ -64,6 +64,7 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
     udp->maxInitialPeersRange = static_cast<uint32_t>(std::max(options.max_initial_peers_range, 1));
     const bool open_network = !options.interfaces.empty() || !options.initial_peers.empty() ||
                               !options.discovery_server.empty();
+    for (const auto& name : options.interfaces) check_local_interface(name, "participant option interfaces");
     if (!open_network || !options.interfaces.empty()) {
         udp->interfaceWhiteList.push_back("127.0.0.1");
         for (const auto& name : options.interfaces) udp->interfaceWhiteList.push_back(name);

@@ -1,14 +1,20 @@
 #include <cpm/init.hpp>
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
 
 #include "lab_clock.hpp"
+
+#include <arpa/inet.h>
+#include <ifaddrs.h>
+#include <netinet/in.h>
 
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
 #include <mutex>
 #include <optional>
+#include <set>
 
 namespace cpm {
 namespace {
@@ -110,9 +116,42 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
     return settings;
 }
 
+void check_local_interface(const std::string& interface, const std::string& source)
+{
+    ifaddrs* list = nullptr;
+    if (getifaddrs(&list) != 0) return;  // cannot tell: leave it to Fast DDS
+    std::set<std::string> known;
+    bool found = false;
+    for (ifaddrs* a = list; a != nullptr; a = a->ifa_next) {
+        std::string entry = a->ifa_name;
+        if (a->ifa_addr != nullptr && a->ifa_addr->sa_family == AF_INET) {
+            char text[INET_ADDRSTRLEN] = {};
+            inet_ntop(AF_INET, &reinterpret_cast<const sockaddr_in*>(a->ifa_addr)->sin_addr, text, sizeof text);
+            found = found || interface == text;
+            entry += std::string(" (") + text + ")";
+        }
+        found = found || interface == a->ifa_name;
+        known.insert(entry);
+    }
+    freeifaddrs(list);
+    if (found) return;
+    std::string names;
+    for (const auto& k : known) names += (names.empty() ? "" : ", ") + k;
+    throw Error(source + ": '" + interface + "' is neither an interface nor an IPv4 address of this host (it has: " +
+                names + ")");
+}
+
 void init(int argc, char* argv[])
 {
-    InitSettings settings = parse_init_settings(argc, argv, std::getenv("CPM_DOMAIN_ID"));
+    InitSettings settings;
+    try {
+        settings = parse_init_settings(argc, argv, std::getenv("CPM_DOMAIN_ID"));
+        for (const auto& interface : settings.interfaces) check_local_interface(interface, "--dds_interface");
+    } catch (const cli::UsageError&) {
+        throw;
+    } catch (const Error& e) {
+        throw cli::UsageError(e.what());
+    }
     detail::use_simulated_clock(settings.simulated_time);
     std::lock_guard<std::mutex> lock(g_settings_mutex);
     g_settings = std::move(settings);

@@ -1,3 +1,4 @@
+#include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/init.hpp>
 #include <cpm/stamp_message.hpp>
@@ -73,6 +74,28 @@ TEST(Init, BadValuesAreErrorsNamingTheirSource)
     EXPECT_THAT(error_of({"--simulated_time=maybe"}), HasSubstr("--simulated_time: 'maybe'"));
     EXPECT_THAT(error_of({"--node_id"}), HasSubstr("--node_id: missing value"));
     EXPECT_THAT(error_of({"--node_id="}), HasSubstr("--node_id: empty value"));
+}
+
+TEST(Init, AnInterfaceThisHostDoesNotHaveIsRefusedNamingIt)
+{
+    EXPECT_NO_THROW(cpm::check_local_interface("127.0.0.1", "--dds_interface"));
+    EXPECT_NO_THROW(cpm::check_local_interface("lo", "--dds_interface"));
+    try {
+        cpm::check_local_interface("10.0.0.1", "--dds_interface");
+        ADD_FAILURE() << "10.0.0.1 accepted";
+    } catch (const cpm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("--dds_interface: '10.0.0.1' is neither an interface nor an IPv4 address of this host"));
+        EXPECT_THAT(e.what(), HasSubstr("lo (127.0.0.1)"));
+    }
+    EXPECT_THROW(cpm::check_local_interface("eth9", "--dds_interface"), cpm::Error);
+}
+
+TEST(Init, ACommandLineErrorIsAUsageErrorSoProgramsExitWithTwo)
+{
+    const char* bad_domain[] = {"/usr/bin/my_node", "--dds_domain", "abc"};
+    EXPECT_THROW(cpm::init(3, const_cast<char**>(bad_domain)), cpm::cli::UsageError);
+    const char* bad_interface[] = {"/usr/bin/my_node", "--dds_interface=10.0.0.1"};
+    EXPECT_THROW(cpm::init(2, const_cast<char**>(bad_interface)), cpm::cli::UsageError);
 }
 
 TEST(StampMessage, SetsCreateAndValidAfterStamps)

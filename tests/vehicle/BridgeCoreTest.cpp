@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <algorithm>
 #include <functional>
 
 using namespace cpm::vehicle;
@@ -54,6 +55,7 @@ StatePacket moving(uint32_t tick, double speed)
     StatePacket p;
     p.tick = tick;
     p.speed_mm_s = int16_t(speed * 1000);
+    p.battery_mv = 7900;
     return p;
 }
 
@@ -167,7 +169,8 @@ TEST(BridgeCore, PublishesStateAndRangesInLabUnits)
     p.us_right_mm = 3000;
     p.odometer_steps = 100;
     sut.on_state_packet(p, kSecond, {});
-    p.odometer_steps = 100 + 300;  // 0.5 m at 600 ticks per metre
+    p.tick += 1000;
+    p.odometer_steps = 100 + 300;  // 0.5 m at 600 ticks per metre, in a second
     auto cycle = sut.on_state_packet(p, 2 * kSecond, {});
     EXPECT_EQ(cycle.state.vehicle_id(), kId);
     EXPECT_DOUBLE_EQ(cycle.state.speed(), -0.25);
@@ -266,4 +269,159 @@ TEST(BridgeCore, PathTrackingConvergesOntoThePathAndStopsAtItsEnd)
     EXPECT_NEAR(loop.sim.model().pose().y, 0.0, 0.02);
     EXPECT_NEAR(loop.sim.model().pose().x, 4.0, 0.1);
     EXPECT_NEAR(loop.sim.model().speed(), 0.0, 0.01);
+}
+
+namespace {
+
+/// Counts the notices of one kind in a cycle.
+size_t count(const BridgeCycle& cycle, Anomaly kind)
+{
+    return size_t(std::count_if(cycle.notices.begin(), cycle.notices.end(), [&](const Notice& n) { return n.kind == kind; }));
+}
+
+}  // namespace
+
+TEST(BridgeCore, ANaNSpeedIsRefusedOnceAndTheNextValidCommandDrivesTheCar)
+{
+    BridgeCore sut(kId, Calibration{});
+    uint64_t now = 50 * kSecond;
+    uint32_t tick = 1000;
+    CommandInputs inputs;
+    inputs.speed_curvature = fresh(speed_curvature(0.5, 0.0), now - 10'000'000, now);
+    for (int i = 0; i < 10; ++i, tick += 20, now += 20'000'000) {
+        inputs.speed_curvature = fresh(speed_curvature(0.5, 0.0), now - 10'000'000, now);
+        sut.on_state_packet(moving(tick, 0.3), now, inputs);
+    }
+    // One NaN command: refused, reported once though it stays the newest for several cycles.
+    const uint64_t nan_created = now - 5'000'000;
+    size_t refused = 0;
+    for (int i = 0; i < 5; ++i, tick += 20, now += 20'000'000) {
+        inputs.speed_curvature = fresh(speed_curvature(std::nan(""), 0.0), nan_created, now);
+        auto cycle = sut.on_state_packet(moving(tick, 0.3), now, inputs);
+        refused += count(cycle, Anomaly::RefusedCommand);
+        if (i == 0) {
+            ASSERT_EQ(cycle.notices.size(), 1u);
+            EXPECT_NE(cycle.notices[0].message.find("speed = nan is not a finite number"), std::string::npos)
+                << cycle.notices[0].message;
+        }
+        EXPECT_EQ(cycle.active, ActiveCommand::None);
+        EXPECT_EQ(cycle.command.motor_mode, MotorMode::Brake);
+        EXPECT_TRUE(std::isfinite(cycle.state.motor_throttle()));
+    }
+    EXPECT_EQ(refused, 1u);
+    EXPECT_EQ(sut.anomalies(Anomaly::RefusedCommand), 1u);
+    // A valid command right after it is obeyed at once, with a finite, forward throttle.
+    inputs.speed_curvature = fresh(speed_curvature(0.5, 0.0), now - 1'000'000, now);
+    auto cycle = sut.on_state_packet(moving(tick, 0.3), now, inputs);
+    EXPECT_EQ(cycle.active, ActiveCommand::SpeedCurvature);
+    EXPECT_EQ(cycle.command.motor_mode, MotorMode::Forward);
+    EXPECT_GT(cycle.command.motor_pwm, 100);
+    EXPECT_TRUE(std::isfinite(cycle.state.motor_throttle()));
+}
+
+TEST(BridgeCore, EveryCommandTypeRefusesNonFiniteAndOutOfRangeFieldsNamingThem)
+{
+    const Calibration c;
+    EXPECT_EQ(command_problem(direct(0.5, -1.0), c), "");
+    EXPECT_EQ(command_problem(direct(INFINITY, 0), c), "motor_throttle = inf is not a finite number");
+    EXPECT_EQ(command_problem(direct(0, 1.5), c), "steering_servo = 1.5 is outside [-1, 1]");
+    EXPECT_EQ(command_problem(speed_curvature(-0.3, 2.0), c), "");
+    EXPECT_EQ(command_problem(speed_curvature(1e300, 0), c), "speed = 1e+300 is outside [-3, 3]");
+    EXPECT_EQ(command_problem(speed_curvature(0.5, -INFINITY), c), "curvature = -inf is not a finite number");
+    VehicleCommandTrajectory trajectory;
+    trajectory.trajectory_points({point(kSecond, 0, 0, 1, 0), point(2 * kSecond, 1, std::nan(""), 1, 0)});
+    EXPECT_EQ(command_problem(trajectory, c), "trajectory_points[1].py = nan is not a finite number");
+    VehicleCommandPathTracking path;
+    path.path(std::vector<PathPoint>(3));
+    path.speed(0.5);
+    EXPECT_EQ(command_problem(path, c), "");
+    path.path()[2].pose().yaw(std::nan(""));
+    EXPECT_EQ(command_problem(path, c), "path[2].pose.yaw = nan is not a finite number");
+    path.path()[2].pose().yaw(0);
+    path.speed(-INFINITY);
+    EXPECT_EQ(command_problem(path, c), "speed = -inf is not a finite number");
+
+    // A refused higher-priority command leaves the car to the next fresh one.
+    BridgeCore sut(kId, c);
+    uint64_t now = 50 * kSecond;
+    CommandInputs inputs;
+    inputs.direct = fresh(direct(std::nan(""), 0), now - 1'000'000, now);
+    inputs.speed_curvature = fresh(speed_curvature(0.5, 0.0), now - 10'000'000, now);
+    auto cycle = sut.on_state_packet(moving(1000, 0.0), now, inputs);
+    EXPECT_EQ(cycle.active, ActiveCommand::SpeedCurvature);
+    ASSERT_EQ(count(cycle, Anomaly::RefusedCommand), 1u);
+    EXPECT_NE(cycle.notices[0].message.find("direct command"), std::string::npos) << cycle.notices[0].message;
+}
+
+TEST(BridgeCore, ANegativeSpeedReversesTheCar)
+{
+    ClosedLoop loop({0, 0, 0});
+    loop.run(3.0, [&](uint64_t t) {
+        CommandInputs in;
+        in.speed_curvature = fresh(speed_curvature(-0.3, 0.0), t - 5'000'000, t);
+        return in;
+    });
+    EXPECT_NEAR(loop.sim.model().speed(), -0.3, 0.02);
+    EXPECT_LT(loop.sim.model().pose().x, -0.5);
+    EXPECT_LT(loop.bridge.pose().x, -0.5);  // the estimate went backwards too
+}
+
+TEST(BridgeCore, AControllerRestartRebasesTheOdometerAndKeepsThePose)
+{
+    BridgeCore sut(kId, Calibration{});
+    StatePacket p = moving(60'000, 0.5);
+    uint64_t now = 100 * kSecond;
+    for (int i = 0; i < 50; ++i, p.tick += 20, now += 20'000'000) {
+        p.odometer_steps = 6000 + 6 * i;  // 1 cm per cycle
+        EXPECT_TRUE(sut.on_state_packet(p, now, {}).notices.empty());
+    }
+    const double x_before = sut.pose().x;
+    EXPECT_NEAR(x_before, 0.49, 1e-9);
+    p.tick = 20;  // the controller restarted: tick and odometer begin again
+    p.odometer_steps = 6;
+    auto cycle = sut.on_state_packet(p, now, {});
+    ASSERT_EQ(count(cycle, Anomaly::ControllerRestart), 1u);
+    EXPECT_NE(cycle.notices[0].message.find("tick 60980 -> 20"), std::string::npos) << cycle.notices[0].message;
+    EXPECT_DOUBLE_EQ(sut.pose().x, x_before);  // not moved back by the 10 m the old count stood at
+    p.tick += 20;
+    p.odometer_steps = 12;
+    sut.on_state_packet(p, now + 20'000'000, {});
+    EXPECT_NEAR(sut.pose().x, x_before + 0.01, 1e-9);
+    EXPECT_EQ(sut.anomalies(Anomaly::ControllerRestart), 1u);
+}
+
+TEST(BridgeCore, AnOdometerJumpOfKilometresIsIgnoredAndTheCountRebased)
+{
+    BridgeCore sut(kId, Calibration{});
+    StatePacket p = moving(1000, 0.5);
+    p.odometer_steps = 0;
+    sut.on_state_packet(p, kSecond, {});
+    p.tick += 20;
+    p.odometer_steps = 600 * 5000;  // 5 km in 20 ms
+    auto cycle = sut.on_state_packet(p, kSecond + 20'000'000, {});
+    ASSERT_EQ(count(cycle, Anomaly::OdometerJump), 1u);
+    EXPECT_NE(cycle.notices[0].message.find("odometer jumped by 5000.00 m in 20 ms"), std::string::npos)
+        << cycle.notices[0].message;
+    EXPECT_DOUBLE_EQ(cycle.state.odometer_distance(), 0.0);
+    EXPECT_DOUBLE_EQ(sut.pose().x, 0.0);
+    p.tick += 20;
+    p.odometer_steps += 6;  // an ordinary step from the new count
+    cycle = sut.on_state_packet(p, kSecond + 40'000'000, {});
+    EXPECT_TRUE(cycle.notices.empty());
+    EXPECT_NEAR(cycle.state.odometer_distance(), 0.01, 1e-12);
+}
+
+TEST(BridgeCore, ABatteryReadingOfZeroVoltsIsNotPublished)
+{
+    BridgeCore sut(kId, Calibration{});
+    StatePacket p = moving(1000, 0.0);
+    p.battery_mv = 8100;
+    EXPECT_DOUBLE_EQ(sut.on_state_packet(p, kSecond, {}).state.battery_voltage(), 8.1);
+    p.tick += 20;
+    p.battery_mv = 0;
+    auto cycle = sut.on_state_packet(p, kSecond + 20'000'000, {});
+    EXPECT_DOUBLE_EQ(cycle.state.battery_voltage(), 8.1);
+    ASSERT_EQ(count(cycle, Anomaly::BatteryOutOfRange), 1u);
+    EXPECT_NE(cycle.notices[0].message.find("battery reads 0.000 V, outside [3, 20] V"), std::string::npos)
+        << cycle.notices[0].message;
 }

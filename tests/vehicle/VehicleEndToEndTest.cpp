@@ -9,6 +9,10 @@
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm/vehicle/Protocol.hpp>
+#include <cpm/vehicle/SerialPort.hpp>
+
+#include <nlohmann/json.hpp>
 
 #include <RangeSensors.h>
 #include <VehicleCommandDirect.h>
@@ -222,6 +226,17 @@ double fitted_radius(const std::vector<VehicleObservation>& points)
     return std::sqrt(c + a * a / 4 + b * b / 4);
 }
 
+/// The last line of a program's output that is a JSON object (its statistics); null if none.
+nlohmann::json last_json_line(const std::string& output)
+{
+    nlohmann::json last;
+    std::istringstream in(output);
+    for (std::string line; std::getline(in, line);) {
+        if (!line.empty() && line[0] == '{') last = nlohmann::json::parse(line);
+    }
+    return last;
+}
+
 double speed_between(const VehicleObservation& a, const VehicleObservation& b)
 {
     double dt = double(b.header().create_stamp().nanoseconds() - a.header().create_stamp().nanoseconds()) * 1e-9;
@@ -396,10 +411,16 @@ TEST_F(VehicleEndToEnd, CorruptBytesOnTheLineAreSurvivedBothWays)
     car.sim->kill(SIGTERM);
     ASSERT_EQ(car.bridge->wait(5s), 0);
     ASSERT_EQ(car.sim->wait(5s), 0);
-    auto bridge_stats = car.bridge->output();
-    auto sim_stats = car.sim->output();
-    EXPECT_EQ(bridge_stats.find("\"decoder_errors\": 0}"), std::string::npos) << bridge_stats;
-    EXPECT_EQ(sim_stats.find("\"bad_cobs\": 0, \"too_short\": 0, \"bad_crc\": 0"), std::string::npos) << sim_stats;
+    // Both ends counted what they threw away (their statistics are one JSON line each).
+    auto bridge_stats = last_json_line(car.bridge->output());
+    auto sim_stats = last_json_line(car.sim->output());
+    EXPECT_GT(bridge_stats.at("decoder_errors").get<int>(), 0) << bridge_stats;
+    EXPECT_GT(bridge_stats.at("cycles").get<int>(), 50) << bridge_stats;
+    const auto& sim_errors = sim_stats.at("decoder_errors");
+    EXPECT_GT(sim_errors.at("bad_cobs").get<int>() + sim_errors.at("too_short").get<int>() +
+                  sim_errors.at("bad_crc").get<int>() + sim_errors.at("oversize").get<int>(),
+              0)
+        << sim_stats;
 }
 
 TEST_F(VehicleEndToEnd, BridgeStopsPublishingWhenTheLinkIsLostAndReconnects)
@@ -485,9 +506,154 @@ TEST_F(VehicleEndToEnd, CpmVehicleSimStartsCarsThatSeeEachOther)
     EXPECT_EQ(front[7], 3.0);
     sut.kill(SIGINT);
     EXPECT_EQ(sut.wait(10s), 0) << sut.errors();
-    auto out = sut.output();
-    for (const char* line : {"\"vehicle_id\": 7, \"cycles\"", "\"vehicle_id\": 8, \"cycles\"",
-                             "\"vehicle_id\": 7, \"state_packets\"", "\"vehicle_id\": 8, \"state_packets\""}) {
-        EXPECT_NE(out.find(line), std::string::npos) << line << "\n" << out;
+    // Each car's bridge and simulator print their statistics as one JSON line when stopped.
+    std::map<std::pair<int, std::string>, nlohmann::json> stats;
+    std::istringstream out(sut.output());
+    for (std::string line; std::getline(out, line);) {
+        if (line.empty() || line[0] != '{') continue;
+        auto j = nlohmann::json::parse(line);
+        stats[{j["vehicle_id"].get<int>(), j.contains("cycles") ? "bridge" : "sim"}] = j;
     }
+    for (int id : {7, 8}) {
+        const std::pair<int, std::string> bridge{id, "bridge"}, sim{id, "sim"};
+        ASSERT_TRUE(stats.count(bridge)) << id << "\n" << sut.output();
+        ASSERT_TRUE(stats.count(sim)) << id << "\n" << sut.output();
+        EXPECT_GT(stats[bridge]["cycles"].get<int>(), 0);
+        EXPECT_GT(stats[sim]["state_packets"].get<int>(), 0);
+    }
+}
+
+namespace {
+
+/// The test as the car's microcontroller: crafted state frames into a real pseudo-terminal, at
+/// 50 Hz of the test's own clock, and the bridge's command packets read back from it.
+class CraftedController
+{
+public:
+    const std::string& device() const { return pty_.device_path(); }
+    /// Writes one state frame and collects the commands the bridge sent so far.
+    void send(const cpm::vehicle::StatePacket& packet)
+    {
+        auto frame = cpm::vehicle::encode_frame(packet);
+        pty_.write_frame(frame.data(), frame.size());
+        uint8_t buffer[512];
+        for (long n; (n = pty_.read_available(buffer, sizeof buffer)) > 0;) {
+            decoder_.feed(buffer, size_t(n), [&](const cpm::vehicle::Packet& p) {
+                if (auto* c = std::get_if<cpm::vehicle::CommandPacket>(&p)) commands_.push_back(*c);
+            });
+        }
+    }
+    const std::vector<cpm::vehicle::CommandPacket>& commands() const { return commands_; }
+
+private:
+    cpm::vehicle::PseudoTerminal pty_;
+    cpm::vehicle::FrameDecoder decoder_;
+    std::vector<cpm::vehicle::CommandPacket> commands_;
+};
+
+size_t count_of(const std::string& text, const std::string& what)
+{
+    size_t n = 0;
+    for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    return n;
+}
+
+}  // namespace
+
+TEST_F(VehicleEndToEnd, CraftedFramesOnAPtyAreCheckedRebasedAndLoggedOnceASecond)
+{
+    Watcher watch(participant);
+    CraftedController controller;
+    Process bridge({built_program("vehicle_bridge"), "--vehicle_id", std::to_string(kId), "--device", controller.device()});
+    cpm::vehicle::StatePacket p;
+    p.vehicle_id = kId;
+    p.tick = 100'000;
+    p.battery_mv = 8000;
+    p.speed_mm_s = 500;
+    cpm::vehicle::StatePacket foreign = p;
+    foreign.vehicle_id = 9;
+    int sent = 0, foreign_sent = 0;
+    auto step = [&](bool with_foreign) {  // one 20 ms period: 1 cm further
+        p.tick += 20;
+        p.odometer_steps += 6;
+        controller.send(p);
+        if (with_foreign) {
+            foreign.tick = p.tick;
+            controller.send(foreign);
+            ++foreign_sent;
+        }
+        ++sent;
+        std::this_thread::sleep_for(20ms);
+    };
+    for (int i = 0; i < 500 && watch.states().empty(); ++i) step(false);
+    ASSERT_FALSE(watch.states().empty()) << bridge.errors();
+
+    // Another car's frame every 10th period (5 per second) for 3 s: ignored, the line is kept.
+    const size_t states_before = watch.states().size();
+    for (int i = 0; i < 150; ++i) step(i % 10 == 0);
+    ASSERT_TRUE(cpm_test::wait_until([&] { return watch.states().size() >= states_before + 140; }, 5s))
+        << watch.states().size() - states_before << " states in 150 periods\n" << bridge.errors();
+
+    // One NaN speed, then a valid command: the NaN never drives, the valid one does at once.
+    cpm::Writer<VehicleCommandSpeedCurvature> commands(participant, "vehicleCommandSpeedCurvature");
+    ASSERT_TRUE(commands.wait_for_matched(1, 10s));
+    auto command = speed_curvature(std::nan(""), 0);
+    command.vehicle_id(kId);
+    cpm::stamp_message(command, cpm::get_time_ns(), 0);
+    ASSERT_TRUE(commands.write(command));
+    for (int i = 0; i < 15; ++i) step(false);
+    const size_t commands_before_valid = controller.commands().size();
+    for (const auto& c : controller.commands()) ASSERT_EQ(c.motor_mode, cpm::vehicle::MotorMode::Brake);
+    command.speed(0.5);
+    for (int i = 0; i < 25; ++i) {
+        cpm::stamp_message(command, cpm::get_time_ns(), 0);
+        ASSERT_TRUE(commands.write(command));
+        step(false);
+    }
+    auto after_valid = std::vector<cpm::vehicle::CommandPacket>(controller.commands().begin() + long(commands_before_valid),
+                                                                controller.commands().end());
+    ASSERT_FALSE(after_valid.empty());
+    EXPECT_EQ(after_valid.back().motor_mode, cpm::vehicle::MotorMode::Forward);
+    EXPECT_GT(after_valid.back().motor_pwm, 0);
+
+    // The controller restarts (tick and odometer from zero), then an odometer jump of 5 km with
+    // a battery reading of 0 V: the pose never moves back, the odometer never leaps, no 0 V.
+    p.tick = 0;
+    p.odometer_steps = 0;
+    for (int i = 0; i < 10; ++i) step(false);
+    p.odometer_steps += 600 * 5000;
+    p.battery_mv = 0;
+    step(false);
+    p.battery_mv = 8000;
+    for (int i = 0; i < 10; ++i) step(false);
+
+    bridge.kill(SIGTERM);
+    ASSERT_EQ(bridge.wait(10s), 0) << bridge.errors();
+    const auto states = watch.states();
+    double x = -1e9;
+    for (const auto& s : states) {
+        EXPECT_GE(s.pose().x(), x - 1e-9) << "the pose moved back";
+        x = std::max(x, s.pose().x());
+        EXPECT_LT(s.odometer_distance(), 10.0);
+        EXPECT_DOUBLE_EQ(s.battery_voltage(), 8.0);
+        EXPECT_TRUE(std::isfinite(s.motor_throttle()));
+    }
+    auto stats = last_json_line(bridge.output());
+    EXPECT_EQ(stats["refused_commands"], 1) << stats;
+    EXPECT_EQ(stats["controller_restarts"], 1) << stats;
+    EXPECT_EQ(stats["odometer_jumps"], 1) << stats;
+    EXPECT_EQ(stats["battery_out_of_range"], 1) << stats;
+    EXPECT_EQ(stats["foreign_packets"], foreign_sent) << stats;
+    EXPECT_EQ(stats["foreign_controller"], 0) << stats;
+    const auto log = bridge.errors();
+    EXPECT_EQ(count_of(log, "leaving the line"), 0u) << log;
+    EXPECT_EQ(count_of(log, "serial link open"), 1u) << log;  // never left and rejoined
+    // 15 foreign frames over 3 s: reported at most once a second.
+    EXPECT_GE(count_of(log, "ignored a state packet from the controller of vehicle 9"), 1u) << log;
+    EXPECT_LE(count_of(log, "ignored a state packet from the controller of vehicle 9"), 4u) << log;
+    EXPECT_EQ(count_of(log, "refused a speed_curvature command"), 1u) << log;
+    EXPECT_NE(log.find("speed = nan is not a finite number"), std::string::npos) << log;
+    EXPECT_EQ(count_of(log, "the controller restarted"), 1u) << log;
+    EXPECT_EQ(count_of(log, "odometer jumped by 5000.01 m"), 1u) << log;
+    EXPECT_EQ(count_of(log, "battery reads 0.000 V"), 1u) << log;
 }

@@ -2,8 +2,94 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace cpm::vehicle {
+
+namespace {
+
+/// Finds the first field of a command that is not finite or not within its range.
+class FieldCheck
+{
+public:
+    void finite(const std::string& name, double value)
+    {
+        if (problem.empty() && !std::isfinite(value)) problem = name + " = " + text(value) + " is not a finite number";
+    }
+    void within(const std::string& name, double value, double lo, double hi)
+    {
+        finite(name, value);
+        if (problem.empty() && (value < lo || value > hi))
+            problem = name + " = " + text(value) + " is outside [" + text(lo) + ", " + text(hi) + "]";
+    }
+    std::string problem;
+
+private:
+    static std::string text(double v)
+    {
+        char buffer[32];
+        std::snprintf(buffer, sizeof buffer, "%g", v);
+        return buffer;
+    }
+};
+
+}  // namespace
+
+std::string command_problem(const VehicleCommandDirect& command, const Calibration&)
+{
+    FieldCheck check;
+    check.within("motor_throttle", command.motor_throttle(), -1, 1);
+    check.within("steering_servo", command.steering_servo(), -1, 1);
+    return check.problem;
+}
+
+std::string command_problem(const VehicleCommandSpeedCurvature& command, const Calibration& c)
+{
+    FieldCheck check;
+    check.within("speed", command.speed(), -c.max_speed, c.max_speed);
+    check.finite("curvature", command.curvature());
+    return check.problem;
+}
+
+std::string command_problem(const VehicleCommandTrajectory& command, const Calibration& c)
+{
+    FieldCheck check;
+    const auto& points = command.trajectory_points();
+    for (size_t i = 0; i < points.size() && check.problem.empty(); ++i) {
+        const std::string at = "trajectory_points[" + std::to_string(i) + "].";
+        check.finite(at + "px", points[i].px());
+        check.finite(at + "py", points[i].py());
+        check.within(at + "vx", points[i].vx(), -c.max_speed, c.max_speed);
+        check.within(at + "vy", points[i].vy(), -c.max_speed, c.max_speed);
+    }
+    return check.problem;
+}
+
+std::string command_problem(const VehicleCommandPathTracking& command, const Calibration& c)
+{
+    FieldCheck check;
+    check.within("speed", command.speed(), -c.max_speed, c.max_speed);
+    const auto& path = command.path();
+    for (size_t i = 0; i < path.size() && check.problem.empty(); ++i) {
+        const std::string at = "path[" + std::to_string(i) + "].";
+        check.finite(at + "pose.x", path[i].pose().x());
+        check.finite(at + "pose.y", path[i].pose().y());
+        check.finite(at + "pose.yaw", path[i].pose().yaw());
+        check.finite(at + "s", path[i].s());
+    }
+    return check.problem;
+}
+
+const char* to_string(Anomaly anomaly)
+{
+    switch (anomaly) {
+    case Anomaly::RefusedCommand: return "refused_commands";
+    case Anomaly::ControllerRestart: return "controller_restarts";
+    case Anomaly::OdometerJump: return "odometer_jumps";
+    case Anomaly::BatteryOutOfRange: return "battery_out_of_range";
+    }
+    return "?";
+}
 
 const char* to_string(ActiveCommand command)
 {
@@ -50,14 +136,32 @@ uint64_t BridgeCore::measured_time(uint32_t tick, uint64_t received_ns)
     return uint64_t(int64_t(tick_ns) + offsets_.front().second);
 }
 
-void BridgeCore::dead_reckon(const StatePacket& packet, uint64_t t_ns)
+void BridgeCore::notice(std::vector<Notice>& notices, Anomaly kind, std::string message)
+{
+    ++anomaly_counts_[size_t(kind)];
+    notices.push_back({kind, std::move(message)});
+}
+
+void BridgeCore::dead_reckon(const StatePacket& packet, uint64_t t_ns, double tick_dt, std::vector<Notice>& notices)
 {
     double imu_yaw = packet.imu_yaw_e4 * 1e-4;
+    // No car drives further than twice its top speed allows in the time between two packets
+    // (at least one 50 Hz period, plus a centimetre for the odometer's resolution).
+    const double ds = last_steps_ ? (double(packet.odometer_steps) - double(*last_steps_)) / c_.ticks_per_metre : 0.0;
+    const double ds_max = 2 * c_.max_speed * std::max(tick_dt, 0.02) + 0.01;
+    if (last_steps_ && std::abs(ds) > ds_max) {
+        char message[160];
+        std::snprintf(message, sizeof message,
+                      "odometer jumped by %.2f m in %.0f ms (at most %.2f m is possible): step ignored, odometer rebased",
+                      ds, tick_dt * 1e3, ds_max);
+        notice(notices, Anomaly::OdometerJump, message);
+        last_steps_.reset();
+    }
     if (!last_steps_) {
-        // New link: keep the pose, rebase odometer and IMU heading on this packet.
+        // New link, restarted controller or implausible step: keep the pose, rebase odometer
+        // and IMU heading on this packet.
         yaw_offset_ = wrap_angle(pose_.yaw - imu_yaw);
     } else {
-        double ds = double(packet.odometer_steps - *last_steps_) / c_.ticks_per_metre;
         double yaw_new = wrap_angle(imu_yaw + yaw_offset_);
         double yaw_mid = pose_.yaw + 0.5 * wrap_angle(yaw_new - pose_.yaw);
         pose_.x += ds * std::cos(yaw_mid);
@@ -99,7 +203,7 @@ BridgeCore::Actuation BridgeCore::drive(const MotionRequest& request, double spe
 {
     Actuation a;
     a.steering = steering_for_curvature(c_, request.curvature);
-    if (request.speed <= 0 && std::abs(speed) < 0.05) {
+    if (std::abs(request.speed) < 1e-3 && std::abs(speed) < 0.05) {
         speed_controller_.reset();
         return a;  // brake: nothing to drive to
     }
@@ -108,25 +212,40 @@ BridgeCore::Actuation BridgeCore::drive(const MotionRequest& request, double spe
     return a;
 }
 
-BridgeCore::Actuation BridgeCore::choose(const CommandInputs& in, uint64_t t_ns, double speed, double dt,
-                                         ActiveCommand& active)
+template <class T>
+bool BridgeCore::obeyable(const SampleResult<T>& command, ActiveCommand kind, const CommandInputs& in,
+                          std::vector<Notice>& notices)
 {
-    auto is_fresh = [&](const auto& result) {
-        return result.valid && fresh(result.age_ns, result.sample.header().create_stamp().nanoseconds(), in);
-    };
-    if (is_fresh(in.direct)) {
+    const uint64_t created = command.sample.header().create_stamp().nanoseconds();
+    if (!command.valid || !fresh(command.age_ns, created, in)) return false;
+    std::string problem = command_problem(command.sample, c_);
+    if (problem.empty()) return true;
+    // The same sample stays the newest until another arrives: report it once.
+    if (refused_stamp_[size_t(kind)] != created) {
+        refused_stamp_[size_t(kind)] = created;
+        notice(notices, Anomaly::RefusedCommand,
+               std::string("refused a ") + to_string(kind) + " command created at " + std::to_string(created) + ": " +
+                   problem);
+    }
+    return false;
+}
+
+BridgeCore::Actuation BridgeCore::choose(const CommandInputs& in, uint64_t t_ns, double speed, double dt,
+                                         ActiveCommand& active, std::vector<Notice>& notices)
+{
+    if (obeyable(in.direct, ActiveCommand::Direct, in, notices)) {
         active = ActiveCommand::Direct;
         Actuation a;
-        a.throttle = std::clamp(in.direct.sample.motor_throttle(), -1.0, 1.0);
-        a.steering = std::clamp(in.direct.sample.steering_servo(), -1.0, 1.0);
+        a.throttle = in.direct.sample.motor_throttle();
+        a.steering = in.direct.sample.steering_servo();
         a.brake = false;
         return a;
     }
-    if (is_fresh(in.speed_curvature)) {
+    if (obeyable(in.speed_curvature, ActiveCommand::SpeedCurvature, in, notices)) {
         active = ActiveCommand::SpeedCurvature;
         return drive({in.speed_curvature.sample.speed(), in.speed_curvature.sample.curvature()}, speed, dt);
     }
-    if (is_fresh(in.trajectory)) {
+    if (obeyable(in.trajectory, ActiveCommand::Trajectory, in, notices)) {
         active = ActiveCommand::Trajectory;
         uint64_t t_ref = t_ns + static_cast<uint64_t>(c_.lookahead_time * 1e9);
         if (auto reference = interpolate_trajectory(in.trajectory.sample.trajectory_points(), t_ref)) {
@@ -134,7 +253,7 @@ BridgeCore::Actuation BridgeCore::choose(const CommandInputs& in, uint64_t t_ns,
         }
         return drive({}, speed, dt);  // the trajectory does not cover now: stop
     }
-    if (is_fresh(in.path_tracking)) {
+    if (obeyable(in.path_tracking, ActiveCommand::PathTracking, in, notices)) {
         active = ActiveCommand::PathTracking;
         const auto& command = in.path_tracking.sample;
         if (auto request = track_path(c_, command.path(), command.speed(), pose_, speed)) {
@@ -147,32 +266,55 @@ BridgeCore::Actuation BridgeCore::choose(const CommandInputs& in, uint64_t t_ns,
     return {};
 }
 
+double BridgeCore::plausible_battery(uint16_t battery_mv, std::vector<Notice>& notices)
+{
+    const double v = battery_mv * 1e-3;
+    if (v >= c_.battery_min_voltage && v <= c_.battery_max_voltage) return battery_v_ = v;
+    char message[160];
+    std::snprintf(message, sizeof message,
+                  "battery reads %.3f V, outside [%g, %g] V (a sensor fault): publishing the last plausible reading "
+                  "(%.3f V) instead",
+                  v, c_.battery_min_voltage, c_.battery_max_voltage, battery_v_);
+    notice(notices, Anomaly::BatteryOutOfRange, message);
+    return battery_v_;
+}
+
 CommandPacket BridgeCore::to_packet(const Actuation& a)
 {
     CommandPacket packet;
     packet.tick = ++command_tick_;
     packet.vehicle_id = vehicle_id_;
-    if (a.brake) {
+    if (a.brake || !std::isfinite(a.throttle) || !std::isfinite(a.steering)) {
         packet.motor_mode = MotorMode::Brake;
     } else {
         packet.motor_mode = a.throttle >= 0 ? MotorMode::Forward : MotorMode::Reverse;
         packet.motor_pwm = static_cast<uint16_t>(std::lround(std::min(std::abs(a.throttle), 1.0) * 1000));
     }
-    double servo = c_.servo_centre_us + a.steering * c_.servo_range_us;
+    double servo = c_.servo_centre_us + (std::isfinite(a.steering) ? a.steering : 0.0) * c_.servo_range_us;
     packet.servo_us = static_cast<uint16_t>(std::lround(std::clamp(servo, 0.0, 65535.0)));
     return packet;
 }
 
 BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns, const CommandInputs& commands)
 {
-    double dt = last_tick_ ? std::clamp((packet.tick - *last_tick_) * 1e-3, 1e-3, 0.1) : 0.02;
+    // Ticks are unsigned 32-bit ms: a small step back is a restart, a large one a wrap.
+    const uint32_t tick_step = last_tick_ ? packet.tick - *last_tick_ : 20;
+    const bool restarted = tick_step > 0x80000000u;
+    const double tick_dt = restarted ? 0.02 : tick_step * 1e-3;
+    double dt = std::clamp(tick_dt, 1e-3, 0.1);
     BridgeCycle out;
+    if (restarted) {
+        notice(out.notices, Anomaly::ControllerRestart,
+               "the controller restarted (tick " + std::to_string(*last_tick_) + " -> " + std::to_string(packet.tick) +
+                   "): odometer and heading rebased, pose kept");
+        last_steps_.reset();
+    }
     out.measured_ns = measured_time(packet.tick, t_ns);
     last_tick_ = packet.tick;
-    dead_reckon(packet, t_ns);
+    dead_reckon(packet, t_ns, tick_dt, out.notices);
     double speed = packet.speed_mm_s * 1e-3;
 
-    Actuation a = choose(commands, t_ns, speed, dt, out.active);
+    Actuation a = choose(commands, t_ns, speed, dt, out.active, out.notices);
     if (out.active != last_active_) speed_controller_.reset();
     last_active_ = out.active;
     out.command = to_packet(a);
@@ -189,7 +331,7 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     s.imu_yaw(packet.imu_yaw_e4 * 1e-4);
     s.imu_yaw_rate(packet.imu_yaw_rate_e3 * 1e-3);
     s.speed(speed);
-    s.battery_voltage(packet.battery_mv * 1e-3);
+    s.battery_voltage(plausible_battery(packet.battery_mv, out.notices));
     s.motor_current(packet.motor_current_ma * 1e-3);
     s.motor_throttle(a.brake ? 0.0 : a.throttle);
     s.steering_servo(a.steering);

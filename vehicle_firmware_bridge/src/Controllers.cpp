@@ -34,8 +34,13 @@ Calibration Calibration::parse(const std::string& json_text, const std::string& 
     members.number("path_stop_deceleration", c.path_stop_deceleration, 0.01);
     members.number("command_timeout", c.command_timeout, 0.01);
     members.number("publish_delay", c.publish_delay, 0, 1);
+    members.number("max_speed", c.max_speed, 0.01, 100);
+    members.number("battery_min_voltage", c.battery_min_voltage, 0);
+    members.number("battery_max_voltage", c.battery_max_voltage, 0);
     members.finish();
     if (c.servo_range_us == 0) throw Error(source + ": servo_range_us must not be 0");
+    if (c.battery_min_voltage >= c.battery_max_voltage)
+        throw Error(source + ": battery_min_voltage must be below battery_max_voltage");
     return c;
 }
 
@@ -43,6 +48,11 @@ double SpeedController::update(double v_ref, double v_measured, double dt)
 {
     double error = v_ref - v_measured;
     double limit = c_.speed_ki > 0 ? c_.speed_integral_limit / c_.speed_ki : 0;
+    if (!std::isfinite(error) || !std::isfinite(dt)) {
+        // Never let a non-finite input into the integral: it would stay NaN for good.
+        integral_ = 0;
+        return 0;
+    }
     integral_ = std::clamp(integral_ + error * dt, -limit, limit);
     double throttle = v_ref * c_.throttle_per_speed + c_.speed_kp * error + c_.speed_ki * integral_;
     return std::clamp(throttle, -1.0, 1.0);

@@ -17,7 +17,8 @@ struct InitSettings
 
 /// Reads cpm's flags (`--flag=value` or `--flag value`) from the command line and
 /// CPM_DOMAIN_ID from the environment; other flags are left to the program.
-/// Throws cpm::Error naming the flag and value when a value is malformed or out of range.
+/// Throws cpm::cli::UsageError (a cpm::Error; cpm's programs exit 2 on it) naming the flag and
+/// value when a value is malformed or out of range, or an interface is not on this host.
 /// Call before the first Participant is created (the default participant uses these).
 void init(int argc, char* argv[]);
 
@@ -31,6 +32,10 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
 /// `takes_value` says whether a separate value follows it (--simulated_time stands alone).
 /// Lets programs with flags of their own pass cpm's through.
 bool is_init_flag(const std::string& flag, bool& takes_value);
+
+/// Throws cpm::Error naming `source` and the value unless `interface` is the name or an IPv4
+/// address of one of this host's network interfaces (then the error lists the ones it has).
+void check_local_interface(const std::string& interface, const std::string& source);
 
 /// Checks a DDS domain id: Fast DDS accepts 233 and above but then never discovers anyone.
 /// `source` names where the value came from in the error message.

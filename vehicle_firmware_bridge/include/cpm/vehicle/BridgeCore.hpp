@@ -13,10 +13,13 @@
 #include <VehicleCommandTrajectory.h>
 #include <VehicleState.h>
 
+#include <array>
 #include <cstdint>
 #include <deque>
+#include <limits>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace cpm::vehicle {
 
@@ -34,6 +37,31 @@ struct CommandInputs
 enum class ActiveCommand { None, Stopped, Direct, SpeedCurvature, Trajectory, PathTracking };
 const char* to_string(ActiveCommand command);
 
+/// Why a command cannot be obeyed: the first field that is NaN, infinite or out of range,
+/// named with its value (e.g. "speed = nan is not a finite number"); empty when it can be.
+/// Direct commands must lie in -1..1, speeds within ±calibration.max_speed.
+std::string command_problem(const VehicleCommandDirect& command, const Calibration& calibration);
+std::string command_problem(const VehicleCommandSpeedCurvature& command, const Calibration& calibration);
+std::string command_problem(const VehicleCommandTrajectory& command, const Calibration& calibration);
+std::string command_problem(const VehicleCommandPathTracking& command, const Calibration& calibration);
+
+/// What the bridge noticed and did not take as given.
+enum class Anomaly {
+    RefusedCommand,     ///< a command with a non-finite or out-of-range field: not obeyed
+    ControllerRestart,  ///< the controller's tick went backwards: odometer and heading rebased
+    OdometerJump,       ///< an odometer step no car can drive in that time: ignored, rebased
+    BatteryOutOfRange,  ///< a battery reading outside the calibration's range: not published
+};
+constexpr size_t kAnomalyKinds = 4;
+const char* to_string(Anomaly anomaly);
+
+/// One anomaly of one cycle, with a message that names the value seen.
+struct Notice
+{
+    Anomaly kind;
+    std::string message;
+};
+
 /// What one cycle of the bridge produces.
 struct BridgeCycle
 {
@@ -42,6 +70,7 @@ struct BridgeCycle
     CommandPacket command;
     ActiveCommand active = ActiveCommand::None;
     uint64_t measured_ns = 0;  ///< when the controller measured the state, in host time
+    std::vector<Notice> notices;  ///< anomalies first seen in this cycle (a refused command once)
 };
 
 /// vehicle_bridge without serial port or DDS: unit conversion, pose estimate (odometer + IMU,
@@ -66,6 +95,8 @@ public:
     void link_restarted();
 
     const Pose& pose() const { return pose_; }
+    /// How many anomalies of this kind were noticed so far (a refused command counts once).
+    uint64_t anomalies(Anomaly kind) const { return anomaly_counts_[size_t(kind)]; }
 
 private:
     struct Estimate
@@ -80,9 +111,14 @@ private:
         bool brake = true;
     };
 
-    void dead_reckon(const StatePacket& packet, uint64_t t_ns);
+    void dead_reckon(const StatePacket& packet, uint64_t t_ns, double tick_dt, std::vector<Notice>& notices);
     uint64_t measured_time(uint32_t tick, uint64_t received_ns);
-    Actuation choose(const CommandInputs& commands, uint64_t t_ns, double speed, double dt, ActiveCommand& active);
+    double plausible_battery(uint16_t battery_mv, std::vector<Notice>& notices);
+    template <class T>
+    bool obeyable(const SampleResult<T>& command, ActiveCommand kind, const CommandInputs& in, std::vector<Notice>& notices);
+    void notice(std::vector<Notice>& notices, Anomaly kind, std::string message);
+    Actuation choose(const CommandInputs& commands, uint64_t t_ns, double speed, double dt, ActiveCommand& active,
+                     std::vector<Notice>& notices);
     Actuation drive(const MotionRequest& request, double speed, double dt);
     bool fresh(uint64_t age_ns, uint64_t create_ns, const CommandInputs& commands) const;
     CommandPacket to_packet(const Actuation& actuation);
@@ -100,6 +136,9 @@ private:
     std::deque<Estimate> history_;
     uint64_t tick_epoch_ms_ = 0;  // controller ticks are 32-bit ms; they wrap after 49 days
     std::deque<std::pair<uint64_t, int64_t>> offsets_;  // (received, offset), offsets increasing
+    std::array<uint64_t, kAnomalyKinds> anomaly_counts_{};
+    std::array<uint64_t, 6> refused_stamp_{};  // per ActiveCommand: create_stamp of the last refused one
+    double battery_v_ = std::numeric_limits<double>::quiet_NaN();  // the last plausible reading
 };
 
 }  // namespace cpm::vehicle

@@ -26,6 +26,10 @@ struct Calibration
     double path_stop_deceleration = 1.0;///< m/s^2, how the car slows for the end of a path
     double command_timeout = 1.0;       ///< s, a command older than this is not fresh
     double publish_delay = 0.001;       ///< s, expected DDS delivery added to valid_after_stamp
+    double max_speed = 3.0;             ///< m/s; a command asking for more is refused, and an
+                                        ///< odometer step faster than twice this is implausible
+    double battery_min_voltage = 3.0;   ///< V; a reading outside [min, max] is a sensor fault
+    double battery_max_voltage = 20.0;  ///< V
 
     /// Reads a JSON object of the members above; members not given keep their defaults.
     /// Throws cpm::Error naming the file and member on unknown members or wrong values.
