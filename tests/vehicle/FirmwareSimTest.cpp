@@ -214,3 +214,47 @@ TEST(FirmwareSim, BadCrcAndOtherVehiclesCommandsAreFlaggedAndIgnored)
     EXPECT_EQ(sut.stats().wrong_vehicle, 1u);
     EXPECT_EQ(sut.stats().decoder.total(), 1u);
 }
+
+TEST(FirmwareSim, ACarDrivingIntoAWallStopsAgainstItAndTheContactIsCountedOnce)
+{
+    FirmwareSim sut(noiseless(), walls(), {0, 0, 0}, 3, 1);
+    CommandPacket full{1, 3, MotorMode::Forward, 1000, 1500};
+    for (int i = 0; i < 150; ++i) {  // 3 s at full throttle, commands at 50 Hz
+        full.tick = uint32_t(i + 1);
+        send(sut, full);
+        run_for(sut, 0.02);
+        // The front of the body (length - rear overhang ahead of the axle) never passes x = 1.
+        ASSERT_LE(sut.model().pose().x + sut.parameters().length - sut.parameters().rear_overhang, 1.0 + 1e-9)
+            << "through the wall after " << (i + 1) * 20 << " ms";
+    }
+    EXPECT_GT(sut.model().pose().x, 0.6);  // it got there, and stands right at the wall
+    EXPECT_EQ(sut.model().speed(), 0.0);
+    EXPECT_TRUE(sut.against_wall());
+    EXPECT_EQ(sut.stats().wall_collisions, 1u);
+    auto collisions = sut.take_collisions();
+    ASSERT_EQ(collisions.size(), 1u);
+    EXPECT_EQ(collisions[0].wall.x1, 1.0);
+    EXPECT_TRUE(sut.take_collisions().empty());
+
+    // Backing away and driving in again is a second contact.
+    CommandPacket reverse{200, 3, MotorMode::Reverse, 300, 1500};
+    for (int i = 0; i < 50; ++i, ++reverse.tick) {
+        send(sut, reverse);
+        run_for(sut, 0.02);
+    }
+    EXPECT_LT(sut.model().pose().x, 0.4);
+    EXPECT_FALSE(sut.against_wall());
+    for (int i = 0; i < 100; ++i, ++full.tick) {
+        send(sut, full);
+        run_for(sut, 0.02);
+    }
+    EXPECT_EQ(sut.stats().wall_collisions, 2u);
+}
+
+TEST(World, SegmentsThatCrossOrTouchIntersectAndParallelOnesDoNot)
+{
+    EXPECT_TRUE(segments_intersect({0, 0, 2, 2}, {0, 2, 2, 0}));
+    EXPECT_TRUE(segments_intersect({0, 0, 1, 0}, {1, -1, 1, 1}));  // touching at an end
+    EXPECT_FALSE(segments_intersect({0, 0, 1, 0}, {0, 1, 1, 1}));
+    EXPECT_FALSE(segments_intersect({0, 0, 1, 0}, {2, -1, 2, 1}));
+}

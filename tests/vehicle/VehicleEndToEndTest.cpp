@@ -27,6 +27,7 @@
 #include <cmath>
 #include <csignal>
 #include <fcntl.h>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -378,7 +379,7 @@ TEST_F(VehicleEndToEnd, KillingTheBridgeLetsTheWatchdogBrakeWithin250ms)
     EXPECT_LT(after, 0.3);
     car.sim->kill(SIGTERM);
     ASSERT_EQ(car.sim->wait(5s), 0);
-    EXPECT_NE(car.sim->output().find("\"watchdog_stops\": 1"), std::string::npos) << car.sim->output();
+    EXPECT_EQ(last_json_line(car.sim->output()).at("watchdog_stops"), 1) << car.sim->output();
     std::printf("watchdog braked %.0f ms after the bridge was killed\n", after * 1000);
 }
 
@@ -656,4 +657,34 @@ TEST_F(VehicleEndToEnd, CraftedFramesOnAPtyAreCheckedRebasedAndLoggedOnceASecond
     EXPECT_EQ(count_of(log, "the controller restarted"), 1u) << log;
     EXPECT_EQ(count_of(log, "odometer jumped by 5000.01 m"), 1u) << log;
     EXPECT_EQ(count_of(log, "battery reads 0.000 V"), 1u) << log;
+}
+
+TEST_F(VehicleEndToEnd, ACarDrivenIntoAWallStopsAgainstItAndTheSimulatorReportsIt)
+{
+    Watcher watch(participant);
+    const std::string map = "/tmp/cpm_vehicle_wall_" + std::to_string(::getpid()) + ".json";
+    {
+        std::ofstream out(map);
+        out << R"({"walls": [[1.0, -2.0, 1.0, 2.0]]})";  // across the road, 1 m ahead of the rear axle
+    }
+    Car car({"--map", map});
+    ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    {
+        Repeater<VehicleCommandSpeedCurvature> command(participant, "vehicleCommandSpeedCurvature", speed_curvature(1.0, 0));
+        ASSERT_TRUE(cpm_test::wait_until([&] { return car.sim->errors().find("hit the wall") != std::string::npos; }, 10s))
+            << car.sim->errors();
+        std::this_thread::sleep_for(1s);  // still commanded forward, against the wall
+    }
+    car.bridge->kill(SIGTERM);
+    car.sim->kill(SIGTERM);
+    ASSERT_EQ(car.sim->wait(5s), 0);
+    ::unlink(map.c_str());
+    const double front = 0.40 - 0.07;  // body length minus rear overhang: the bumper ahead of the axle
+    double furthest = -1;
+    for (const auto& o : watch.observations()) furthest = std::max(furthest, o.pose().x());
+    EXPECT_LE(furthest + front, 1.0 + 1e-6);  // never through it
+    EXPECT_GT(furthest + front, 0.95);        // but right up against it
+    EXPECT_EQ(last_json_line(car.sim->output()).at("wall_collisions"), 1) << car.sim->output();
+    EXPECT_NE(car.sim->errors().find("vehicle 7: hit the wall [1.000, -2.000, 1.000, 2.000]"), std::string::npos)
+        << car.sim->errors();
 }

@@ -54,7 +54,20 @@ void FirmwareSim::on_command(const CommandPacket& command)
 void FirmwareSim::step()
 {
     double dt = 1.0 / p_.physics_rate;
+    const Pose before = model_.pose();
+    const double distance_before = model_.distance();
     model_.step(dt);
+    const Segment* wall = world_.wall_hit(body_outline(p_, model_.pose()));
+    if (wall != nullptr) {
+        model_.stop_at(before, distance_before);
+        // A car pushing against the wall creeps up to it and is stopped again and again: one
+        // contact lasts until it has been clear of every wall for half a second.
+        if (!against_wall()) {
+            ++stats_.wall_collisions;
+            collisions_.push_back({model_.time(), before, *wall});
+        }
+        last_contact_t_ = model_.time();
+    }
     imu_yaw_ = wrap_angle(imu_yaw_ + (model_.yaw_rate() + noise(p_.imu_yaw_rate_noise)) * dt);
     if (!watchdog_active_ && model_.time() - last_command_t_ > p_.watchdog_timeout) {
         watchdog_active_ = true;
@@ -62,6 +75,13 @@ void FirmwareSim::step()
         motor_command_ = {MotorMode::Brake, 0};
         model_.command(model_.time(), MotorMode::Brake, 0, 1500);
     }
+}
+
+std::vector<Collision> FirmwareSim::take_collisions()
+{
+    std::vector<Collision> out;
+    out.swap(collisions_);
+    return out;
 }
 
 double FirmwareSim::noise(double sigma)

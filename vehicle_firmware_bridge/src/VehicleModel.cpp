@@ -95,6 +95,13 @@ double VehicleModel::battery_voltage() const
     return p_.battery_full * (1.0 - 0.25 * used) - p_.battery_internal_resistance * motor_current();
 }
 
+void VehicleModel::stop_at(const Pose& pose, double distance)
+{
+    pose_ = pose;
+    distance_ = distance;
+    v_ = accel_ = yaw_rate_ = 0;
+}
+
 void VehicleModel::step(double dt)
 {
     t_ += dt;

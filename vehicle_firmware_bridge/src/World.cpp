@@ -125,4 +125,32 @@ double World::cast_ray(double x, double y, double angle, double max_range, const
     return best;
 }
 
+bool segments_intersect(const Segment& a, const Segment& b)
+{
+    // Orientation tests (O'Rourke, Computational Geometry in C, 1998, §1.5).
+    auto cross = [](double ox, double oy, double px, double py, double qx, double qy) {
+        return (px - ox) * (qy - oy) - (py - oy) * (qx - ox);
+    };
+    auto on_segment = [](double ox, double oy, double px, double py, double qx, double qy) {
+        return std::min(ox, px) <= qx && qx <= std::max(ox, px) && std::min(oy, py) <= qy && qy <= std::max(oy, py);
+    };
+    double d1 = cross(b.x1, b.y1, b.x2, b.y2, a.x1, a.y1), d2 = cross(b.x1, b.y1, b.x2, b.y2, a.x2, a.y2);
+    double d3 = cross(a.x1, a.y1, a.x2, a.y2, b.x1, b.y1), d4 = cross(a.x1, a.y1, a.x2, a.y2, b.x2, b.y2);
+    if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0))) return true;
+    return (d1 == 0 && on_segment(b.x1, b.y1, b.x2, b.y2, a.x1, a.y1)) ||
+           (d2 == 0 && on_segment(b.x1, b.y1, b.x2, b.y2, a.x2, a.y2)) ||
+           (d3 == 0 && on_segment(a.x1, a.y1, a.x2, a.y2, b.x1, b.y1)) ||
+           (d4 == 0 && on_segment(a.x1, a.y1, a.x2, a.y2, b.x2, b.y2));
+}
+
+const Segment* World::wall_hit(const std::vector<Segment>& outline) const
+{
+    for (const auto& wall : walls_) {
+        for (const auto& side : outline) {
+            if (segments_intersect(wall, side)) return &wall;
+        }
+    }
+    return nullptr;
+}
+
 }  // namespace cpm::vehicle

@@ -18,7 +18,16 @@ struct FirmwareStats
     uint64_t watchdog_stops = 0;    ///< times the watchdog braked the motor
     uint64_t state_packets = 0;     ///< state packets produced
     uint64_t unanswered_states = 0; ///< state packets not answered by a command before the next one
+    uint64_t wall_collisions = 0;   ///< times the body ran into a wall (each contact counted once)
     DecoderErrors decoder;
+};
+
+/// The car's body ran into a wall: where it stopped and which wall.
+struct Collision
+{
+    double t = 0;  ///< model time, s
+    Pose pose;
+    Segment wall;
 };
 
 /// The car's microcontroller without its serial port or clock: the vehicle model, its
@@ -31,8 +40,13 @@ public:
 
     /// Bytes from the host (any chunking); commands act on the model from now.
     void receive(const uint8_t* data, size_t size);
-    /// One physics step of 1 / physics_rate seconds; runs the watchdog.
+    /// One physics step of 1 / physics_rate seconds; runs the watchdog. A step that would
+    /// take the body into a wall is undone: the car stops against it (a Collision).
     void step();
+    /// The collisions since the last call (a car that stays against a wall counts once).
+    std::vector<Collision> take_collisions();
+    /// True while the body is against a wall (touched one within the last half second).
+    bool against_wall() const { return model_.time() - last_contact_t_ <= 0.5; }
     /// Samples the sensors now and returns the state packet to send.
     StatePacket make_state_packet();
 
@@ -78,6 +92,8 @@ private:
     uint32_t command_tick_ = 0;
     std::pair<MotorMode, uint16_t> motor_command_{MotorMode::Brake, 0};
     double imu_yaw_ = 0;
+    double last_contact_t_ = -1e9;
+    std::vector<Collision> collisions_;
 };
 
 }  // namespace cpm::vehicle

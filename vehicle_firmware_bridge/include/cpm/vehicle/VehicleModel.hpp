@@ -85,6 +85,10 @@ public:
     MotorMode motor_mode() const { return applied_.mode; }
     uint16_t motor_pwm() const { return applied_.pwm; }
 
+    /// Puts the car back at `pose` with `distance` driven, standing still: the body hit
+    /// something during the last step and stops against it.
+    void stop_at(const Pose& pose, double distance);
+
     /// The steering angle a servo pulse asks for (clamped to max_steering_angle).
     double steering_for_servo(uint16_t servo_us) const;
 

@@ -37,6 +37,8 @@ public:
     /// segment, or max_range when nothing is closer. O(walls + extra).
     double cast_ray(double x, double y, double angle, double max_range,
                     const std::vector<Segment>& extra = {}) const;
+    /// The first wall that crosses or touches one of `outline`'s segments, if any. O(walls × outline).
+    const Segment* wall_hit(const std::vector<Segment>& outline) const;
 
 private:
     std::vector<Segment> walls_;
@@ -46,5 +48,8 @@ private:
 /// Distance along the ray from (x, y) in direction (dx, dy) (unit vector) to the segment,
 /// or a negative value when it misses.
 double ray_segment_distance(double x, double y, double dx, double dy, const Segment& s);
+
+/// True when the two segments cross or touch.
+bool segments_intersect(const Segment& a, const Segment& b);
 
 }  // namespace cpm::vehicle
