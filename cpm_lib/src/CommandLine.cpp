@@ -1,7 +1,12 @@
 #include <cpm/CommandLine.hpp>
 #include <cpm/init.hpp>
 
+#include <cctype>
+#include <cerrno>
 #include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <ctime>
 #include <csignal>
 #include <cstdio>
 #include <sstream>
@@ -55,7 +60,9 @@ ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<Fl
             continue;
         }
         if (eq == std::string::npos) {
-            if (i + 1 >= args.size()) throw UsageError(command + ": " + name + " needs a value");
+            // `--topic --key 1`: the next word is a flag, not the value --topic needs.
+            if (i + 1 >= args.size() || args[i + 1].rfind("--", 0) == 0)
+                throw UsageError(command + ": " + name + " needs a value");
             value = args[++i];
         }
         auto [it, inserted] = parsed.flags.emplace(name, value);
@@ -87,10 +94,77 @@ uint64_t parse_duration(const std::string& flag, const std::string& text)
         end = 0;
     }
     const auto unit = units.find(text.substr(end));
-    if (end == 0 || unit == units.end() || !(value >= 0)) {
-        throw UsageError(flag + ": '" + text + "' is not a duration (a number with ns, us, ms, s, m or h, e.g. 10s)");
+    if (end == 0 || unit == units.end() || !(value >= 0) || !std::isdigit(static_cast<unsigned char>(text[0])) ||
+        !(value * double(unit->second) < 18446744073709551615.0)) {
+        throw UsageError(flag + ": '" + text +
+                         "' is not a duration (a number of at most 2^64 ns with ns, us, ms, s, m or h, e.g. 10s)");
     }
     return static_cast<uint64_t>(value * double(unit->second));
+}
+
+uint64_t parse_time(const std::string& flag, const std::string& text, uint64_t now_ns)
+{
+    const std::string kinds = "nanoseconds, ISO-8601 (2026-11-23T14:05:00.25Z, +02:00 offsets too) or relative (-2s, now)";
+    auto fail = [&](const std::string& why) { return UsageError(flag + ": '" + text + "' " + why); };
+    if (text == "now") return now_ns;
+    if (!text.empty() && (text[0] == '-' || text[0] == '+')) {
+        uint64_t d = 0;
+        try {
+            d = parse_duration(flag, text.substr(1));
+        } catch (const UsageError&) {
+            throw fail("is not a relative time (a sign and a duration with its unit: -2s, +500ms)");
+        }
+        if (text[0] == '-' && d > now_ns) throw fail("lies before 1970, which nanoseconds since the epoch cannot hold");
+        if (text[0] == '+' && d > UINT64_MAX - now_ns) throw fail("lies beyond what 64-bit nanoseconds can hold");
+        return text[0] == '-' ? now_ns - d : now_ns + d;
+    }
+    if (!text.empty() && text.find_first_not_of("0123456789") == std::string::npos) {
+        errno = 0;
+        const unsigned long long v = std::strtoull(text.c_str(), nullptr, 10);
+        if (errno == ERANGE) throw fail("is more nanoseconds than 64 bits hold (at most 18446744073709551615)");
+        return v;
+    }
+    std::tm tm{};
+    const char* rest = ::strptime(text.c_str(), "%Y-%m-%dT%H:%M:%S", &tm);
+    if (rest == nullptr) throw fail("is not a time: expected " + kinds);
+    const std::tm asked = tm;
+    uint64_t frac_ns = 0;
+    if (*rest == '.') {
+        ++rest;
+        uint64_t scale = 100'000'000;
+        if (!std::isdigit(static_cast<unsigned char>(*rest))) throw fail("has no digits after its decimal point");
+        while (std::isdigit(static_cast<unsigned char>(*rest))) {
+            frac_ns += uint64_t(*rest - '0') * scale;
+            scale /= 10;
+            ++rest;
+        }
+    }
+    long long offset_s = 0;
+    if (*rest == 'Z') {
+        ++rest;
+    } else if (*rest == '+' || *rest == '-') {
+        const int sign = *rest == '-' ? -1 : 1;
+        int hh = 0, mm = 0, used = 0;
+        if (std::sscanf(rest + 1, "%2d:%2d%n", &hh, &mm, &used) != 2 || used != 5) {
+            used = 0;
+            if (std::sscanf(rest + 1, "%2d%2d%n", &hh, &mm, &used) != 2 || used != 4)
+                throw fail("has a zone offset that is not +HH:MM or +HHMM");
+        }
+        if (hh > 23 || mm > 59) throw fail("has a zone offset beyond 23:59");
+        offset_s = sign * (hh * 3600LL + mm * 60LL);
+        rest += 1 + used;
+    }
+    if (*rest != '\0') throw fail("has '" + std::string(rest) + "' after the time: expected " + kinds);
+    const long long utc = static_cast<long long>(::timegm(&tm));
+    // timegm normalises 30 February into 2 March: a date that does not exist comes back changed.
+    if (tm.tm_mday != asked.tm_mday || tm.tm_mon != asked.tm_mon || tm.tm_hour != asked.tm_hour ||
+        tm.tm_min != asked.tm_min || tm.tm_sec != asked.tm_sec) {
+        throw fail("is not a date and time that exists");
+    }
+    const long long seconds = utc - offset_s;
+    if (seconds < 0) throw fail("lies before 1970, which nanoseconds since the epoch cannot hold");
+    if (seconds > 18'446'744'072LL) throw fail("lies beyond what 64-bit nanoseconds can hold (2554)");
+    return uint64_t(seconds) * 1'000'000'000ull + frac_ns;
 }
 
 double parse_number(const std::string& flag, const std::string& text, double min, double max)

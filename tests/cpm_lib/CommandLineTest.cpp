@@ -59,3 +59,46 @@ TEST(CommandLine, NumbersIntegersAndListsAreCheckedAgainstTheirRange)
 }
 
 }  // namespace
+
+TEST(CommandLine, TimesAreNanosecondsIsoWithOffsetsOrRelative)
+{
+    const uint64_t now = 1'795'446'323'725'000'000ull;
+    EXPECT_EQ(parse_time("--time", "1795446323725000000", now), 1'795'446'323'725'000'000ull);
+    EXPECT_EQ(parse_time("--time", "18446744073709551615", now), UINT64_MAX);
+    EXPECT_EQ(parse_time("--time", "now", now), now);
+    EXPECT_EQ(parse_time("--time", "-2s", now), now - 2'000'000'000ull);
+    EXPECT_EQ(parse_time("--time", "+500ms", now), now + 500'000'000ull);
+    EXPECT_EQ(parse_time("--time", "1970-01-01T00:00:00Z", now), 0u);
+    EXPECT_EQ(parse_time("--time", "2026-11-23T14:05:00.25Z", now), 1'795'442'700'250'000'000ull);
+    EXPECT_EQ(parse_time("--time", "2026-11-23T14:05:00.25", now), 1'795'442'700'250'000'000ull);
+    EXPECT_EQ(parse_time("--time", "2026-11-23T16:05:00.25+02:00", now), 1'795'442'700'250'000'000ull);
+    EXPECT_EQ(parse_time("--time", "2026-11-23T09:05:00.25-0500", now), 1'795'442'700'250'000'000ull);
+    EXPECT_EQ(parse_time("--time", "2024-02-29T00:00:00Z", now), 1'709'164'800'000'000'000ull);  // a leap day
+}
+
+TEST(CommandLine, WhatIsNotATimeIsRefusedQuotingTheArgumentAsGiven)
+{
+    const uint64_t now = 1'795'446'323'725'000'000ull;
+    auto error = [&](const std::string& text) { return usage_error([&] { parse_time("--time", text, now); }); };
+    EXPECT_THAT(error("1969-12-31T23:59:59Z"), HasSubstr("--time: '1969-12-31T23:59:59Z' lies before 1970"));
+    EXPECT_THAT(error("18446744073709551616"), HasSubstr("--time: '18446744073709551616' is more nanoseconds than 64 bits hold"));
+    EXPECT_THAT(error("99999999999999999999999"), HasSubstr("more nanoseconds than 64 bits hold"));
+    EXPECT_THAT(error("2026-02-30T00:00:00Z"), HasSubstr("--time: '2026-02-30T00:00:00Z' is not a date and time that exists"));
+    EXPECT_THAT(error("2026-11-23T25:00:00Z"), HasSubstr("'2026-11-23T25:00:00Z'"));
+    EXPECT_THAT(error("-2"), HasSubstr("--time: '-2' is not a relative time"));
+    EXPECT_THAT(error("-1000000h"), HasSubstr("--time: '-1000000h' lies before 1970"));
+    EXPECT_THAT(error("yesterday"), HasSubstr("--time: 'yesterday' is not a time"));
+    EXPECT_THAT(error("2026-11-23T14:05:00+2"), HasSubstr("zone offset"));
+    EXPECT_THAT(error("2026-11-23T14:05:00Zjunk"), HasSubstr("has 'junk' after the time"));
+    EXPECT_THAT(error("2026-11-23T14:05:00."), HasSubstr("no digits after its decimal point"));
+    EXPECT_THAT(usage_error([] { parse_duration("--timeout", "1e30h"); }), HasSubstr("--timeout: '1e30h' is not a duration"));
+    EXPECT_THAT(usage_error([] { parse_duration("--timeout", "infs"); }), HasSubstr("is not a duration"));
+}
+
+TEST(CommandLine, AFlagFollowedByAnotherFlagIsToldItNeedsAValue)
+{
+    const std::vector<FlagSpec> known{{"--topic", true}, {"--key", true}};
+    EXPECT_THAT(usage_error([&] { parse_args({"at", "--topic", "--key", "1"}, known, "cpm history at"); }),
+                HasSubstr("cpm history at: --topic needs a value"));
+    EXPECT_EQ(parse_args({"--key", "-2"}, known, "x").get("--key"), "-2");  // a negative value is a value
+}

@@ -160,7 +160,14 @@ TEST_F(HistoryService, TheCommandPrintsEveryFieldAsJsonAndDumpListsTheObjects)
     EXPECT_NE(unknown.errors().find("unknown object: no object 'noSuchTopic'"), std::string::npos) << unknown.errors();
     Process usage({built_program("cpm"), "history", "at", "--topic", "vehicleState", "--time", "yesterday"});
     EXPECT_EQ(usage.wait(20s), 2);
-    EXPECT_NE(usage.errors().find("--time 'yesterday'"), std::string::npos) << usage.errors();
+    EXPECT_NE(usage.errors().find("--time: 'yesterday' is not a time"), std::string::npos) << usage.errors();
+    // A time before 1970 used to wrap into the future and answer the newest sample with exit 0.
+    Process before_1970({built_program("cpm"), "history", "at", "--topic", "vehicleState", "--key", "5", "--time",
+                         "1969-12-31T23:59:59Z"});
+    EXPECT_EQ(before_1970.wait(20s), 2);
+    EXPECT_NE(before_1970.errors().find("--time: '1969-12-31T23:59:59Z' lies before 1970"), std::string::npos)
+        << before_1970.errors();
+    EXPECT_EQ(before_1970.output(), "");
 }
 
 TEST_F(HistoryService, TheCommandWaitsForAnObjectToAppearAndListsWhatChangedSince)

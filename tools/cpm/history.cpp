@@ -51,37 +51,10 @@ namespace {
 
 using cpm::cli::UsageError;
 
-/// A time as nanoseconds since the epoch: digits (ns), ISO-8601 UTC
-/// (2026-11-23T14:05:00.250Z) or relative to now (-2s, +500ms, now).
+/// A time flag's value (see cpm::cli::parse_time) against the lab's clock now.
 uint64_t parse_time(const std::string& flag, const std::string& text)
 {
-    if (text == "now") return cpm::get_time_ns();
-    if (!text.empty() && (text[0] == '-' || text[0] == '+')) {
-        const uint64_t d = cpm::cli::parse_duration(flag, text.substr(1));
-        const uint64_t now = cpm::get_time_ns();
-        return text[0] == '-' ? (d > now ? 0 : now - d) : now + d;
-    }
-    if (!text.empty() && text.find_first_not_of("0123456789") == std::string::npos) {
-        return std::stoull(text);
-    }
-    std::tm tm{};
-    const char* rest = ::strptime(text.c_str(), "%Y-%m-%dT%H:%M:%S", &tm);
-    if (!rest) {
-        throw UsageError(flag + " '" + text + "': expected nanoseconds, ISO-8601 (2026-11-23T14:05:00.25Z) or relative (-2s)");
-    }
-    uint64_t frac_ns = 0;
-    if (*rest == '.') {
-        ++rest;
-        uint64_t scale = 100'000'000;
-        while (*rest >= '0' && *rest <= '9') {
-            frac_ns += uint64_t(*rest - '0') * scale;
-            scale /= 10;
-            ++rest;
-        }
-    }
-    if (*rest == 'Z') ++rest;
-    if (*rest != '\0') throw UsageError(flag + " '" + text + "': only UTC times (ending in Z or nothing) are accepted");
-    return uint64_t(::timegm(&tm)) * 1'000'000'000ull + frac_ns;
+    return cpm::cli::parse_time(flag, text, cpm::get_time_ns());
 }
 
 std::string base64(const std::vector<uint8_t>& b)

@@ -47,8 +47,18 @@ ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<Fl
 /// True when --help or -h is among the arguments.
 bool wants_help(const std::vector<std::string>& args);
 
-/// "500ms", "10s", "2m", "100ns", "20us" → nanoseconds; throws UsageError naming the flag.
+/// "500ms", "10s", "2m", "100ns", "20us", "1.5s" → nanoseconds; throws UsageError naming the
+/// flag and the text as given when it is not one, is negative or does not fit in 64 bits.
 uint64_t parse_duration(const std::string& flag, const std::string& text);
+
+/// A point in time as nanoseconds since the Unix epoch, from
+/// - nanoseconds: `1795446323725000000` (at most 2^64 - 1);
+/// - ISO-8601 with a date and a time, in UTC (`2026-11-23T14:05:00.25Z`, or no zone) or with an
+///   offset (`2026-11-23T16:05:00+02:00`, `-0500`); the date must exist (no 30 February);
+/// - relative to `now_ns`: `now`, `-2s`, `+500ms`.
+/// Throws UsageError quoting the flag and the text as given for anything else, and for a time
+/// before 1970 (which nanoseconds since the epoch cannot hold).
+uint64_t parse_time(const std::string& flag, const std::string& text, uint64_t now_ns);
 
 /// A number within [min, max]; throws UsageError naming the flag and the value.
 double parse_number(const std::string& flag, const std::string& text, double min, double max);
