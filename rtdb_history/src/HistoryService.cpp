@@ -5,6 +5,7 @@
 #include <cpm/Logging.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/rtdb/IdlDecoder.hpp>
 #include <cpm/rtdb/Requests.hpp>
 #include <cpm/stamp_message.hpp>
 
@@ -92,6 +93,8 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         Impl* service = nullptr;
         std::string name, type_name;
         bool keyed = false;
+        bool known = false;  ///< the lab's IDL describes the type: keys and stamps decoded exactly
+        std::optional<bool> has_header;  ///< decided from the IDL, else from the first sample
         dds::Topic* topic = nullptr;
         dds::DataReader* reader = nullptr;
         uint64_t received = 0, received_at_last_status = 0;
@@ -345,9 +348,12 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         rec->name = e.topic;
         rec->type_name = e.type_name;
         rec->keyed = e.keyed;
+        const IdlDecoder* types = IdlDecoder::lab_types();
+        rec->known = types && types->knows(e.type_name);
+        if (rec->known) rec->has_header = types->has_header(e.type_name);
         auto* participant = recorder->native();
         if (participant->find_type(e.type_name).empty()) {
-            dds::TypeSupport type(new RawType(e.type_name, e.keyed));
+            dds::TypeSupport type(new RawType(e.type_name, e.keyed, types));
             type->auto_fill_type_information(false);
             type->auto_fill_type_object(false);
             if (type.register_type(participant) != ReturnCode_t::RETCODE_OK) {
@@ -434,23 +440,41 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
                 for (size_t i = 0; i < 8; ++i) v |= uint64_t(b[at + (little ? i : 7 - i)]) << (8 * i);
                 return v;
             };
+            const uint64_t source = uint64_t(info.source_timestamp.seconds()) * 1'000'000'000ull + info.source_timestamp.nanosec();
+            // A type the IDL does not describe is taken to begin with a Header when its first
+            // sample's stamps look like one (valid after created, by less than an hour, and not
+            // from the future); a Log's string or a Parameter's name do not.
+            if (!t.has_header) {
+                const uint64_t create = u64(4), valid_after = u64(12);
+                t.has_header = create <= now + 3'600'000'000'000ull && valid_after >= create &&
+                               valid_after - create <= 3'600'000'000'000ull;
+                if (!*t.has_header)
+                    CPM_LOG_INFO("cpm_history: topic '%s' (type '%s') has no Header: its data time is the writer's "
+                                 "source timestamp", t.name.c_str(), t.type_name.c_str());
+            }
             auto& inst = t.instances[info.instance_handle];
             if (inst.oid == kNoOid || inst.deleted) {
                 auto proc = processes.find(writer.guidPrefix);
                 const ProcessRec creator = proc == processes.end() ? ProcessRec{} : proc->second;
                 inst = InstanceRec{};
+                std::string key = key_text(info.instance_handle, t.keyed);
+                if (t.keyed && t.known) key = IdlDecoder::lab_types()->key_text(t.type_name, b.data(), b.size()).value_or(key);
                 try {
-                    inst.oid = store_.add_object({.topic = t.name, .key = key_text(info.instance_handle, t.keyed), .type_name = t.type_name,
+                    inst.oid = store_.add_object({.topic = t.name, .key = key, .type_name = t.type_name,
                                                   .parent = creator.oid, .creator = creator.name,
-                                                  .creator_guid = prefix_text(writer.guidPrefix), .created_ts = now});
+                                                  .creator_guid = prefix_text(writer.guidPrefix), .created_ts = now,
+                                                  .data_time = *t.has_header ? "create_stamp" : "source_timestamp"});
                 } catch (const std::length_error&) {  // millions of instances held at once: counted, not stored
                     ++dropped;
                     continue;
                 }
             }
             inst.writers.insert(writer);
-            const uint64_t source = uint64_t(info.source_timestamp.seconds()) * 1'000'000'000ull + info.source_timestamp.nanosec();
-            store_.commit(inst.oid, {u64(4), u64(12), source, b.data(), b.size()}, now);
+            if (*t.has_header) {
+                store_.commit(inst.oid, {u64(4), u64(12), source, b.data(), b.size()}, now);
+            } else {
+                store_.commit(inst.oid, {source, source, source, b.data(), b.size()}, now);
+            }
         }
     }
 

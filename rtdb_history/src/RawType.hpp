@@ -1,9 +1,14 @@
 #pragma once
 // A DDS type that keeps the serialized payload as it came off the wire, for topics of types
 // cpm_history was never compiled with. The instance key of a keyed type comes from the
-// writer's key hash when it sends one; otherwise it is taken as a lab type's (the octet
-// vehicle_id right after the 16-byte Header).
+// writer's key hash when it sends one. Otherwise, for a type whose IDL the service knows, it
+// is computed from the @key members exactly as DDS does (XTypes 1.3 §7.6.8: big-endian CDR,
+// MD5 when the key may exceed 16 bytes), so it equals the writer's own; for an unknown type
+// it is the octet right after a 16-byte Header (a lab type's vehicle_id).
+#include <cpm/rtdb/IdlDecoder.hpp>
+
 #include <fastdds/dds/topic/TopicDataType.hpp>
+#include <fastrtps/utils/md5.h>
 
 #include <cstring>
 #include <vector>
@@ -18,7 +23,8 @@ struct RawSample
 class RawType : public eprosima::fastdds::dds::TopicDataType
 {
 public:
-    RawType(const std::string& type_name, bool keyed)
+    RawType(const std::string& type_name, bool keyed, const IdlDecoder* types)
+        : type_name_(type_name), types_(types && types->knows(type_name) ? types : nullptr)
     {
         setName(type_name.c_str());
         m_typeSize = 4096;  // the initial buffer; larger samples get larger buffers
@@ -47,9 +53,27 @@ public:
     {
         const auto& b = static_cast<RawSample*>(data)->bytes;
         for (size_t i = 0; i < 16; ++i) handle->value[i] = 0;
+        if (types_) {
+            const auto key = types_->key_bytes(type_name_, b.data(), b.size());
+            if (!key) return false;
+            if (key->md5) {
+                ::MD5 md5;
+                md5.init();
+                md5.update(key->bytes.data(), static_cast<unsigned int>(key->bytes.size()));
+                md5.finalize();
+                for (size_t i = 0; i < 16; ++i) handle->value[i] = md5.digest[i];
+            } else {
+                for (size_t i = 0; i < 16 && i < key->bytes.size(); ++i) handle->value[i] = key->bytes[i];
+            }
+            return true;
+        }
         if (b.size() > 4 + 16) handle->value[0] = b[4 + 16];
         return true;
     }
+
+private:
+    std::string type_name_;
+    const IdlDecoder* types_;
 };
 
 }  // namespace cpm::rtdb

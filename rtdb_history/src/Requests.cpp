@@ -196,6 +196,7 @@ HistoryObject to_wire(const ObjectInfo& i)
     w.newest_commit_ns(i.newest_commit_ns);
     w.avg_cycle_s(i.avg_cycle_s);
     w.max_cycle_s(i.max_cycle_s);
+    w.data_time(i.data_time);
     return w;
 }
 

@@ -5,6 +5,7 @@
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 
 #include <cpm_test/Dds.hpp>
@@ -12,6 +13,8 @@
 #include <cpm_test/Process.hpp>
 
 #include <HistoryStatus.h>
+#include <Log.h>
+#include <Parameter.h>
 #include <LabOnlyThingPubSubTypes.h>
 #include <VehicleState.h>
 
@@ -331,3 +334,68 @@ TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReada
 }
 
 }  // namespace
+
+TEST_F(HistoryService, KeysObjectsByTheWritersRealKeyAndStampsHeaderlessTypesWithTheSourceTime)
+{
+    // Forty parameters, keyed by name (a string), and a log line: neither type has a Header.
+    cpm::Writer<Parameter> parameters(participant, "parameter", {.reliable = true, .history_depth = 1, .transient_local = true});
+    for (int i = 0; i < 40; ++i) {
+        Parameter p;
+        p.name(i == 7 ? "max_speed" : "p" + std::to_string(i));
+        p.type(ParameterType_Double);
+        p.values_double({0.1 * i});
+        ASSERT_TRUE(parameters.write(p));
+    }
+    cpm::Writer<Log> logs(participant, "log", {.reliable = true, .history_depth = 10, .transient_local = true});
+    Log line;
+    line.id("history_test");
+    line.content("a line to find");
+    line.stamp().nanoseconds(cpm::get_time_ns());
+    line.log_level(3);
+    const uint64_t before_log = cpm::get_time_ns();
+    ASSERT_TRUE(logs.write(line));
+    const uint64_t after_log = cpm::get_time_ns();
+
+    ASSERT_TRUE(wait_for_samples("parameter", "max_speed", 1)) << service.errors();
+    HistoryRequest search;
+    search.kind("search");
+    search.name_regex("^parameter/");
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        try {
+            return client.request(search).objects().size() >= 40;
+        } catch (const std::exception&) {
+            return false;
+        }
+    }, 20s)) << service.errors();
+    auto found = client.request(search);
+    std::set<std::string> names;
+    for (const auto& o : found.objects()) names.insert(o.name());
+    EXPECT_EQ(names.size(), 40u);
+    EXPECT_TRUE(names.count("parameter/max_speed"));
+    EXPECT_TRUE(names.count("parameter/p39"));
+
+    Process by_name({built_program("cpm"), "history", "latest", "--topic", "parameter", "--key", "max_speed", "--json"});
+    ASSERT_EQ(by_name.wait(20s), 0) << by_name.errors();
+    auto p = nlohmann::json::parse(by_name.output());
+    EXPECT_EQ(p["key"], "max_speed");
+    EXPECT_EQ(p["data"]["name"], "max_speed");
+    EXPECT_DOUBLE_EQ(p["data"]["values_double"][0].get<double>(), 0.7);
+    EXPECT_EQ(p["data_time"], "source_timestamp");
+
+    // The log line's data time is when it was written (its source timestamp), not year 2187.
+    ASSERT_TRUE(wait_for_samples("log", "", 1)) << service.errors();
+    Process log({built_program("cpm"), "history", "range", "--topic", "log", "--by", "data", "--from",
+                 std::to_string(before_log - 1'000'000'000ull), "--to", std::to_string(after_log + 1'000'000'000ull), "--json"});
+    ASSERT_EQ(log.wait(20s), 0) << log.errors();
+    bool seen = false;
+    std::istringstream lines(log.output());
+    for (std::string l; std::getline(lines, l);) {
+        auto j = nlohmann::json::parse(l);
+        if (j["data"]["content"] != "a line to find") continue;
+        seen = true;
+        EXPECT_EQ(j["data_time"], "source_timestamp");
+        EXPECT_GE(j["data_ns"].get<uint64_t>(), before_log - 1'000'000ull);
+        EXPECT_LE(j["data_ns"].get<uint64_t>(), after_log + 1'000'000ull);
+    }
+    EXPECT_TRUE(seen) << log.output();
+}

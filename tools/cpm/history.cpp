@@ -1,7 +1,7 @@
 // cpm history ... and cpm dump: the history service's answers on the command line.
 #include "history.hpp"
 
-#include "IdlDecoder.hpp"
+#include <cpm/rtdb/IdlDecoder.hpp>
 
 #include <cpm/CommandLine.hpp>
 #include <cpm/HistoryClient.hpp>
@@ -71,21 +71,11 @@ std::string base64(const std::vector<uint8_t>& b)
     return out;
 }
 
-const IdlDecoder& decoder()
+const cpm::rtdb::IdlDecoder& decoder()
 {
-    static std::unique_ptr<IdlDecoder> d = [] {
-        std::vector<std::string> dirs;
-        if (const char* env = std::getenv("CPM_IDL_DIR")) dirs.push_back(env);
-        dirs.push_back(CPM_IDL_SOURCE_DIR);
-        dirs.push_back(CPM_IDL_INSTALL_DIR);
-        for (const auto& dir : dirs) {
-            struct stat st{};
-            if (::stat(dir.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) return std::make_unique<IdlDecoder>(dir);
-        }
-        return std::unique_ptr<IdlDecoder>();
-    }();
-    if (!d) throw std::runtime_error("cannot find the lab's IDL files (set CPM_IDL_DIR)");
-    return *d;
+    const auto* types = cpm::rtdb::IdlDecoder::lab_types();
+    if (!types) throw std::runtime_error("cannot find the lab's IDL files (set CPM_IDL_DIR)");
+    return *types;
 }
 
 nlohmann::json object_json(const HistoryObject& o, uint64_t now)
@@ -99,8 +89,9 @@ nlohmann::json object_json(const HistoryObject& o, uint64_t now)
             {"parent", o.parent()},
             {"creator", o.creator()},
             {"creator_guid", o.creator_guid()},
-            {"created_ts", o.created_ts()},
-            {"deleted_ts", o.deleted_ts()},
+            {"created_ns", o.created_ts()},
+            {"deleted_ns", o.deleted_ts()},
+            {"data_time", o.data_time()},
             {"history_interval_ns", o.history_interval_ns()},
             {"samples_held", o.samples_held()},
             {"bytes_held", o.bytes_held()},
@@ -119,6 +110,8 @@ nlohmann::json sample_json(const HistorySample& s, const HistoryObject* o)
         j["topic"] = o->topic();
         j["key"] = o->key();
         j["type"] = o->type_name();
+        // A type without a Header has no create_stamp: data_ns is the writer's source timestamp.
+        if (o->data_time() == "source_timestamp") j["data_time"] = "source_timestamp";
         if (auto data = decoder().decode(o->type_name(), s.payload())) {
             j["data"] = *data;
             return j;

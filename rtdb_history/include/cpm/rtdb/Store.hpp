@@ -112,6 +112,9 @@ struct ObjectInfo
     uint64_t created_ts = 0;
     uint64_t deleted_ts = 0;  ///< 0 while alive
     uint64_t history_interval_ns = 0;
+    /// Where the data time comes from: "create_stamp" (the sample's Header) or, for a type
+    /// without a Header, "source_timestamp" (the writer's, as DDS delivered it).
+    std::string data_time = "create_stamp";
     // Filled in by info()/search():
     uint64_t samples_held = 0;
     uint64_t bytes_held = 0;

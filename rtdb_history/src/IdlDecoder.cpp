@@ -1,0 +1,297 @@
+#include <cpm/rtdb/IdlDecoder.hpp>
+
+#include <algorithm>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <sys/stat.h>
+#include <dirent.h>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <stdexcept>
+
+namespace cpm::rtdb {
+
+/// Reads plain CDR: each primitive aligned to its size from the start of the data (after the
+/// 4-byte encapsulation header), in the encapsulation's byte order.
+class CdrCursor
+{
+public:
+    CdrCursor(const uint8_t* data, size_t size) : b_(data), size_(size), little_(size >= 2 && (data[1] & 1)) {}
+    template <typename T>
+    T get()
+    {
+        align(sizeof(T));
+        need(sizeof(T));
+        uint8_t raw[sizeof(T)];
+        for (size_t i = 0; i < sizeof(T); ++i) raw[i] = b_[at_ + (little_ ? i : sizeof(T) - 1 - i)];
+        at_ += sizeof(T);
+        T v;
+        std::memcpy(&v, raw, sizeof(T));
+        return v;
+    }
+    std::string string()
+    {
+        const uint32_t n = get<uint32_t>();
+        need(n);
+        std::string s(reinterpret_cast<const char*>(b_ + at_), n ? n - 1 : 0);
+        at_ += n;
+        return s;
+    }
+    bool ok() const { return size_ >= 4; }
+
+private:
+    void align(size_t n) { at_ = 4 + (at_ - 4 + n - 1) / n * n; }
+    void need(size_t n)
+    {
+        if (n > size_ || at_ > size_ - n) throw std::out_of_range("payload ends early");
+    }
+    const uint8_t* b_;
+    size_t size_;
+    bool little_;
+    size_t at_ = 4;
+};
+
+IdlDecoder::IdlDecoder(const std::string& dir)
+{
+    DIR* d = ::opendir(dir.c_str());
+    if (!d) throw std::runtime_error("cannot read the IDL folder " + dir);
+    std::vector<std::string> files;
+    while (dirent* e = ::readdir(d)) {
+        std::string name = e->d_name;
+        if (name.size() > 4 && name.substr(name.size() - 4) == ".idl") files.push_back(dir + "/" + name);
+    }
+    ::closedir(d);
+    for (const auto& f : files) {
+        std::ifstream in(f);
+        std::stringstream text;
+        text << in.rdbuf();
+        parse(text.str(), f);
+    }
+}
+
+void IdlDecoder::parse(const std::string& text, const std::string& file)
+{
+    // Drop comments, preprocessor lines and annotations; then read enum and struct blocks.
+    std::string clean;
+    std::istringstream lines(text);
+    for (std::string line; std::getline(lines, line);) {
+        if (auto c = line.find("//"); c != std::string::npos) line.erase(c);
+        auto first = line.find_first_not_of(" \t");
+        if (first != std::string::npos && line[first] == '#') continue;
+        clean += line + "\n";
+    }
+    clean = std::regex_replace(clean, std::regex(R"(/\*[\s\S]*?\*/)"), " ");
+    clean = std::regex_replace(clean, std::regex(R"(@key\b(\s*\(\s*TRUE\s*\))?)", std::regex::icase), " KEY_MEMBER ");
+    clean = std::regex_replace(clean, std::regex(R"(@\w+(\([^)]*\))?)"), " ");
+    static const std::regex block(R"((struct|enum)\s+(\w+)\s*\{([^}]*)\}\s*;)");
+    static const std::regex member(R"(^\s*((?:unsigned\s+)?(?:long\s+long|long|short)|sequence\s*<[^>]*>|\w+)\s+(\w+)\s*(?:\[\s*(\d+)\s*\])?\s*$)");
+    for (std::sregex_iterator it(clean.begin(), clean.end(), block), end; it != end; ++it) {
+        const std::string kind = (*it)[1], name = (*it)[2], body = (*it)[3];
+        if (kind == "enum") {
+            std::vector<std::string> values;
+            std::istringstream items(body);
+            for (std::string v; std::getline(items, v, ',');) {
+                v = std::regex_replace(v, std::regex(R"(\s+)"), "");
+                if (!v.empty()) values.push_back(v);
+            }
+            enums_[name] = values;
+            continue;
+        }
+        std::vector<Member> members;
+        std::istringstream decls(body);
+        for (std::string decl; std::getline(decls, decl, ';');) {
+            if (decl.find_first_not_of(" \t\n") == std::string::npos) continue;
+            std::smatch m;
+            std::string flat = std::regex_replace(decl, std::regex(R"(\s+)"), " ");
+            const auto key_at = flat.find("KEY_MEMBER");
+            if (key_at != std::string::npos) flat.erase(key_at, 10);
+            if (!std::regex_match(flat, m, member)) throw std::runtime_error(file + ": struct " + name + ": cannot read member '" + flat + "'");
+            Member mem{m[2], std::regex_replace(std::string(m[1]), std::regex(R"(\s+)"), " "), m[3].matched ? std::stoul(m[3]) : 0,
+                       key_at != std::string::npos};
+            members.push_back(mem);
+        }
+        structs_[name] = members;
+    }
+}
+
+nlohmann::json IdlDecoder::read(const std::string& type, CdrCursor& c) const
+{
+    if (type == "boolean") return c.get<uint8_t>() != 0;
+    if (type == "octet" || type == "char") return c.get<uint8_t>();
+    if (type == "short") return c.get<int16_t>();
+    if (type == "unsigned short") return c.get<uint16_t>();
+    if (type == "long") return c.get<int32_t>();
+    if (type == "unsigned long") return c.get<uint32_t>();
+    if (type == "long long") return c.get<int64_t>();
+    if (type == "unsigned long long") return c.get<uint64_t>();
+    if (type == "float") return c.get<float>();
+    if (type == "double") return c.get<double>();
+    if (type == "string") return c.string();
+    if (type.rfind("sequence", 0) == 0) {
+        std::smatch m;
+        static const std::regex seq(R"(sequence\s*<\s*([^,>]+?)\s*(?:,\s*\d+\s*)?>)");
+        if (!std::regex_match(type, m, seq)) throw std::runtime_error("cannot read type " + type);
+        const uint32_t n = c.get<uint32_t>();
+        nlohmann::json out = nlohmann::json::array();
+        for (uint32_t i = 0; i < n; ++i) out.push_back(read(m[1], c));
+        return out;
+    }
+    if (auto e = enums_.find(type); e != enums_.end()) {
+        const uint32_t v = c.get<uint32_t>();
+        return v < e->second.size() ? nlohmann::json(e->second[v]) : nlohmann::json(v);
+    }
+    auto s = structs_.find(type);
+    if (s == structs_.end()) throw std::runtime_error("unknown type " + type);
+    nlohmann::json out = nlohmann::json::object();
+    for (const auto& m : s->second) {
+        if (m.array) {
+            nlohmann::json arr = nlohmann::json::array();
+            for (size_t i = 0; i < m.array; ++i) arr.push_back(read(m.type, c));
+            out[m.name] = arr;
+        } else {
+            out[m.name] = read(m.type, c);
+        }
+    }
+    return out;
+}
+
+std::optional<nlohmann::json> IdlDecoder::decode(const std::string& type_name, const std::vector<uint8_t>& payload) const
+{
+    return decode(type_name, payload.data(), payload.size());
+}
+
+std::optional<nlohmann::json> IdlDecoder::decode(const std::string& type_name, const uint8_t* data, size_t size) const
+{
+    if (!knows(type_name)) return std::nullopt;
+    CdrCursor c(data, size);
+    if (!c.ok()) return std::nullopt;
+    try {
+        return read(type_name, c);
+    } catch (const std::exception&) {
+        return std::nullopt;
+    }
+}
+
+bool IdlDecoder::has_header(const std::string& type_name) const
+{
+    auto s = structs_.find(type_name);
+    return s != structs_.end() && !s->second.empty() && s->second[0].name == "header" && s->second[0].type == "Header";
+}
+
+std::vector<std::string> IdlDecoder::key_members(const std::string& type_name) const
+{
+    std::vector<std::string> out;
+    if (auto s = structs_.find(type_name); s != structs_.end()) {
+        for (const auto& m : s->second) {
+            if (m.key) out.push_back(m.name);
+        }
+    }
+    return out;
+}
+
+std::string IdlDecoder::member_type(const std::string& type_name, const std::string& member) const
+{
+    if (auto s = structs_.find(type_name); s != structs_.end()) {
+        for (const auto& m : s->second) {
+            if (m.name == member) return m.type;
+        }
+    }
+    return "";
+}
+
+std::optional<std::string> IdlDecoder::key_text(const std::string& type_name, const uint8_t* data, size_t size) const
+{
+    const auto keys = key_members(type_name);
+    if (keys.empty()) return std::nullopt;
+    auto sample = decode(type_name, data, size);
+    if (!sample) return std::nullopt;
+    std::string text;
+    for (const auto& k : keys) {
+        const auto& v = (*sample)[k];
+        text += (text.empty() ? "" : ",") + (v.is_string() ? v.get<std::string>() : v.dump());
+    }
+    return text;
+}
+
+std::optional<IdlDecoder::KeyBytes> IdlDecoder::key_bytes(const std::string& type_name, const uint8_t* data,
+                                                          size_t size) const
+{
+    const auto keys = key_members(type_name);
+    if (keys.empty()) return std::nullopt;
+    auto sample = decode(type_name, data, size);
+    if (!sample) return std::nullopt;
+    static const std::map<std::string, size_t> kSizes{
+        {"boolean", 1}, {"octet", 1},  {"char", 1},          {"short", 2}, {"unsigned short", 2}, {"long", 4},
+        {"unsigned long", 4}, {"float", 4}, {"long long", 8}, {"unsigned long long", 8}, {"double", 8}};
+    KeyBytes out;
+    size_t max_size = 0;
+    auto align = [&](size_t n) {
+        while (out.bytes.size() % n) out.bytes.push_back(0);
+        max_size = (max_size + n - 1) / n * n;
+    };
+    auto put = [&](uint64_t bits, size_t n) {
+        align(n);
+        for (size_t i = 0; i < n; ++i) out.bytes.push_back(uint8_t(bits >> (8 * (n - 1 - i))));
+        max_size += n;
+    };
+    for (const auto& k : keys) {
+        const std::string type = member_type(type_name, k);
+        const auto& v = (*sample)[k];
+        if (type == "string") {
+            const std::string text = v.get<std::string>();
+            put(text.size() + 1, 4);
+            out.bytes.insert(out.bytes.end(), text.begin(), text.end());
+            out.bytes.push_back(0);
+            max_size = SIZE_MAX / 2;  // unbounded
+        } else if (auto e = enums_.find(type); e != enums_.end()) {
+            const auto at = std::find(e->second.begin(), e->second.end(), v.is_string() ? v.get<std::string>() : "");
+            put(at != e->second.end() ? uint64_t(at - e->second.begin()) : v.get<uint64_t>(), 4);
+        } else if (auto n = kSizes.find(type); n != kSizes.end()) {
+            uint64_t bits = 0;
+            if (type == "double") {
+                const double d = v.get<double>();
+                std::memcpy(&bits, &d, 8);
+            } else if (type == "float") {
+                const float f = v.get<float>();
+                uint32_t b32 = 0;
+                std::memcpy(&b32, &f, 4);
+                bits = b32;
+            } else if (v.is_boolean()) {
+                bits = v.get<bool>() ? 1 : 0;
+            } else {
+                bits = v.is_number_unsigned() ? v.get<uint64_t>() : uint64_t(v.get<int64_t>());
+            }
+            put(bits, n->second);
+        } else {
+            return std::nullopt;
+        }
+    }
+    out.md5 = max_size > 16;
+    return out;
+}
+
+const IdlDecoder* IdlDecoder::lab_types()
+{
+    static const std::unique_ptr<IdlDecoder> types = []() -> std::unique_ptr<IdlDecoder> {
+        std::vector<std::string> dirs;
+        if (const char* env = std::getenv("CPM_IDL_DIR")) dirs.push_back(env);
+        dirs.push_back(CPM_IDL_SOURCE_DIR);
+        dirs.push_back(CPM_IDL_INSTALL_DIR);
+        for (const auto& dir : dirs) {
+            struct stat st{};
+            if (::stat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) continue;
+            try {
+                return std::make_unique<IdlDecoder>(dir);
+            } catch (const std::exception&) {
+                continue;  // unreadable: try the next place
+            }
+        }
+        return nullptr;
+    }();
+    return types.get();
+}
+
+}  // namespace cpm::rtdb
