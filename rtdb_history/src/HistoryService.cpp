@@ -23,6 +23,7 @@
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
+#include <fastrtps/xmlparser/XMLProfileManager.h>
 
 #include <condition_variable>
 #include <deque>
@@ -97,7 +98,8 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         std::optional<bool> has_header;  ///< decided from the IDL, else from the first sample
         dds::Topic* topic = nullptr;
         dds::DataReader* reader = nullptr;
-        uint64_t received = 0, received_at_last_status = 0;
+        uint64_t received = 0, received_at_last_status = 0, lost = 0;
+        std::map<rtps::GUID_t, uint64_t> last_sequence;  ///< per writer: the newest sequence number taken
         std::map<rtps::InstanceHandle_t, InstanceRec> instances;  // under ingest_mutex
         void on_data_available(dds::DataReader* r) override { service->ingest(*this, r); }
     };
@@ -126,7 +128,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
     std::mutex ingest_mutex;
     std::map<std::string, std::unique_ptr<TopicRec>> topics;
     std::map<rtps::GuidPrefix_t, ProcessRec> processes;
-    std::atomic<uint64_t> received{0}, dropped{0}, requests{0}, bad_requests{0};
+    std::atomic<uint64_t> received{0}, dropped{0}, lost{0}, requests{0}, bad_requests{0};
 
     std::unique_ptr<Writer<HistoryReply>> replies;
     std::unique_ptr<Writer<HistoryStatus>> status;
@@ -157,6 +159,15 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
 
     void start()
     {
+        // Fast DDS 2.9 delivers between participants of one process by direct calls. After the
+        // process was stopped for longer than a lease (SIGSTOP, a debugger, a stalled VM) the
+        // reliable path from the service's own writers (historyStatus, its log) to its recorder
+        // never delivers again, while the same writers still reach other processes. Through
+        // the transports, as from every other process, it recovers: the service pays one
+        // loopback hop for its own few samples a second.
+        auto library = eprosima::fastrtps::xmlparser::XMLProfileManager::library_settings();
+        library.intraprocess_delivery = eprosima::fastrtps::INTRAPROCESS_OFF;
+        eprosima::fastrtps::xmlparser::XMLProfileManager::library_settings(library);
         ParticipantOptions rec = options.participant.value_or(ParticipantOptions::from_init());
         rec.name = (rec.name.empty() ? std::string("cpm_history") : rec.name) + "_recorder";
         rec.discovery_listener = this;
@@ -304,7 +315,12 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         const uint64_t now = cpm::get_time_ns();
         switch (e.kind) {
         case Event::process_found: {
-            if (processes.count(e.guid.guidPrefix)) return;
+            // A participant seen again after it was lost (its lease ran out while this process
+            // or it was stopped) is a new process object, as in KogMo-RTDB.
+            if (auto known = processes.find(e.guid.guidPrefix); known != processes.end()) {
+                auto info = store_.info(known->second.oid);
+                if (info && info->deleted_ts == 0) return;
+            }
             processes[e.guid.guidPrefix] = {store_.add_object({.kind = ObjectKind::process, .name = e.name, .type_name = "participant",
                                                                .creator = e.name, .creator_guid = prefix_text(e.guid.guidPrefix),
                                                                .created_ts = now}),
@@ -417,6 +433,19 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             const uint64_t now = cpm::get_time_ns();
             rtps::GUID_t writer;
             rtps::iHandle2GUID(writer, info.publication_handle);
+            // A writer numbers everything it sends: a jump means samples that never arrived
+            // (a best-effort sample dropped, a reliable writer's history overwritten while the
+            // service could not keep up). Counted, and marked before the next one of the object.
+            const uint64_t seq = info.sample_identity.sequence_number().to64long();
+            uint64_t lost_before = 0;
+            if (auto last = t.last_sequence.find(writer); last != t.last_sequence.end()) {
+                if (seq > last->second + 1) lost_before = seq - last->second - 1;
+                last->second = std::max(last->second, seq);
+            } else {
+                t.last_sequence.emplace(writer, seq);
+            }
+            t.lost += lost_before;
+            lost += lost_before;
             if (!info.valid_data) {
                 auto it = t.instances.find(info.instance_handle);
                 if (it != t.instances.end() && !it->second.deleted && info.instance_state != dds::ALIVE_INSTANCE_STATE) {
@@ -471,9 +500,9 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             }
             inst.writers.insert(writer);
             if (*t.has_header) {
-                store_.commit(inst.oid, {u64(4), u64(12), source, b.data(), b.size()}, now);
+                store_.commit(inst.oid, {u64(4), u64(12), source, b.data(), b.size(), lost_before}, now);
             } else {
-                store_.commit(inst.oid, {source, source, source, b.data(), b.size()}, now);
+                store_.commit(inst.oid, {source, source, source, b.data(), b.size(), lost_before}, now);
             }
         }
     }
@@ -529,6 +558,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         s.bytes(st.bytes);
         s.evicted(st.evicted);
         s.dropped(dropped);
+        s.lost(lost);
         s.requests(requests);
         s.bad_requests(bad_requests);
         {
@@ -539,6 +569,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
                 ts.topic(name);
                 ts.type_name(t->type_name);
                 ts.samples(t->received);
+                ts.lost(t->lost);
                 ts.rate_hz(double(t->received - t->received_at_last_status) / period_s);
                 t->received_at_last_status = t->received;
                 s.topics().push_back(ts);
@@ -557,7 +588,7 @@ const Store& HistoryService::store() const { return impl_->store_; }
 ServiceCounters HistoryService::counters() const
 {
     std::lock_guard lock(impl_->ingest_mutex);
-    return {impl_->topics.size(), impl_->received, impl_->dropped, impl_->requests, impl_->bad_requests};
+    return {impl_->topics.size(), impl_->received, impl_->dropped, impl_->requests, impl_->bad_requests, impl_->lost};
 }
 
 }  // namespace cpm::rtdb

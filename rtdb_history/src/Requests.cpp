@@ -164,6 +164,7 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
         auto r = store.range(oid, rq.t0(), rq.t1(), by, rq.limit() ? rq.limit() : kDefaultLimit);
         reply.status(to_string(r.status));
         reply.truncated(r.truncated);
+        reply.lost(r.lost);
         for (const auto& s : r.samples) reply.samples().push_back(to_wire(s, Status::ok));
     }
 }
@@ -193,6 +194,7 @@ HistoryObject to_wire(const ObjectInfo& i)
     w.samples_held(i.samples_held);
     w.bytes_held(i.bytes_held);
     w.samples_total(i.samples_total);
+    w.samples_lost(i.samples_lost);
     w.newest_commit_ns(i.newest_commit_ns);
     w.avg_cycle_s(i.avg_cycle_s);
     w.max_cycle_s(i.max_cycle_s);

@@ -244,6 +244,23 @@ struct ObjectState
     uint64_t last_evicted_commit = 0, max_evicted_data = 0;
     bool any_evicted = false;
     uint64_t cycle_sum = 0, cycle_max = 0;
+    /// Where samples were lost: (commit time of the sample after the hole, how many), oldest
+    /// first; entries before the oldest held sample are dropped by expire(). Rare: a deque.
+    std::deque<std::pair<uint64_t, uint64_t>> gaps;
+    uint64_t lost_total = 0;
+    /// Samples lost just before the one committed at `commit` (0: none).
+    uint64_t lost_before(uint64_t commit) const
+    {
+        auto it = std::lower_bound(gaps.begin(), gaps.end(), std::make_pair(commit, uint64_t(0)));
+        return it != gaps.end() && it->first == commit ? it->second : 0;
+    }
+    /// Samples lost before the ones committed in (from, to].
+    uint64_t lost_within(uint64_t from, uint64_t to) const
+    {
+        uint64_t n = 0;
+        for (const auto& [c, k] : gaps) n += c > from && c <= to ? k : 0;
+        return n;
+    }
 
     /// The newest sample committed with an older data time than the one before it; while it is
     /// held, records are not in data-time order and data-time queries go through by_data.
@@ -389,6 +406,7 @@ struct ObjectState
         i.samples_held = records.size();
         i.bytes_held = bytes_held;
         i.samples_total = samples_total;
+        i.samples_lost = lost_total;
         i.newest_commit_ns = records.empty() ? 0 : records.back().commit;
         i.avg_cycle_s = samples_total > 1 ? double(cycle_sum) * 1e-9 / double(samples_total - 1) : 0;
         i.max_cycle_s = double(cycle_max) * 1e-9;
@@ -571,6 +589,11 @@ uint64_t Store::commit(Oid oid, const Incoming& in, uint64_t now_ns)
         o->respread();
         o->bytes_held += in.size;
         ++o->samples_total;
+        if (in.lost_before) {
+            o->gaps.emplace_back(commit_ns, in.lost_before);
+            o->lost_total += in.lost_before;
+            lost_ += in.lost_before;
+        }
         o->first_commit_ever = std::min(o->first_commit_ever, commit_ns);
         o->min_data_ever = std::min(o->min_data_ever, in.data_ns);
     }
@@ -598,6 +621,7 @@ void Store::expire(uint64_t now_ns)
         std::unique_lock ol(o->mutex);
         if (o->info.oid == kNoOid) continue;
         evict_window(*o, now_ns);
+        while (!o->gaps.empty() && (o->records.empty() || o->gaps.front().first < o->records.front().commit)) o->gaps.pop_front();
         o->records.shrink();
         o->by_data.shrink();
         if (o->info.deleted_ts && o->info.deleted_ts + o->retention.window_ns < now_ns) purge.push_back(o);
@@ -671,6 +695,14 @@ Range Store::range_of(const Object& o, uint64_t t0, uint64_t t1, By by, size_t l
         const size_t end = o.data_after(t1, false);
         for (size_t i = o.data_after(t0, false); i < end && add(o.nth_by_data(i)); ++i) {}
     }
+    if (!r.samples.empty()) {
+        uint64_t first = UINT64_MAX, last = 0;
+        for (const auto& s : r.samples) {
+            first = std::min(first, s.commit_ns);
+            last = std::max(last, s.commit_ns);
+        }
+        r.lost = o.lost_within(first, last);
+    }
     if (!r.samples.empty()) r.status = Status::ok;
     else if (t1 > t0 && o.nothing_at_or_before(t1, by, false) == Status::evicted &&
              (by == By::commit ? t0 <= o.last_evicted_commit : t0 <= o.max_evicted_data)) r.status = Status::evicted;
@@ -708,6 +740,8 @@ Found Store::wait_for(Oid oid, uint64_t after, std::chrono::nanoseconds timeout,
             if (exact) {
                 Found next = o->found(Which::younger, after, By::commit);
                 if (next.status == Status::evicted) next.status = Status::gap;
+                // Samples lost right before the next one: it is not the successor.
+                if (next.ok() && o->lost_before(next.sample.commit_ns) > 0) next = {Status::gap, {}};
                 if (next.status == Status::not_found) next.status = Status::not_yet;  // nothing stored yet: wait
                 return next;
             }
@@ -813,6 +847,7 @@ StoreStats Store::stats() const
     }
     s.evicted = evicted_;
     s.purged_objects = purged_;
+    s.lost = lost_;
     return s;
 }
 

@@ -7,6 +7,7 @@
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/stamp_message.hpp>
 
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
@@ -398,4 +399,140 @@ TEST_F(HistoryService, KeysObjectsByTheWritersRealKeyAndStampsHeaderlessTypesWit
         EXPECT_LE(j["data_ns"].get<uint64_t>(), after_log + 1'000'000ull);
     }
     EXPECT_TRUE(seen) << log.output();
+}
+
+namespace {
+
+/// Writes vehicle 5's VehicleState, best effort as a car does, 20 samples every 10 ms (pose.x
+/// counts them) from a thread of the test until destroyed.
+class FastCar
+{
+public:
+    explicit FastCar(cpm::Participant& p) : writer_(p, "vehicleState"), thread_([this] { run(); }) {}
+    ~FastCar()
+    {
+        stop_ = true;
+        thread_.join();
+    }
+    uint64_t written() const { return written_; }
+
+private:
+    void run()
+    {
+        VehicleState s;
+        s.vehicle_id(5);
+        while (!stop_) {
+            for (int i = 0; i < 20; ++i) {
+                s.pose().x(double(written_));
+                cpm::stamp_message(s, cpm::get_time_ns(), 0);
+                (void)writer_.write(s);
+                ++written_;
+            }
+            std::this_thread::sleep_for(10ms);
+        }
+    }
+    cpm::Writer<VehicleState> writer_;
+    std::atomic<uint64_t> written_{0};
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+}  // namespace
+
+TEST_F(HistoryService, SamplesLostWhileTheServiceWasFrozenAreCountedAndMarkedAsAGap)
+{
+    {
+        FastCar car(participant);
+        ASSERT_TRUE(wait_for_samples("vehicleState", "5", 200)) << service.errors();
+        service.kill(SIGSTOP);  // 3 s: about 6000 samples, more than the socket buffers hold
+        std::this_thread::sleep_for(3s);
+        service.kill(SIGCONT);
+        std::this_thread::sleep_for(1s);
+    }
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        auto r = client.latest("vehicleState", "5");
+        return !r.objects().empty() && r.objects()[0].samples_lost() > 0;
+    }, 10s)) << service.errors();
+    std::this_thread::sleep_for(500ms);  // the last samples in flight
+    auto latest = client.latest<VehicleState>("vehicleState", 5);
+    ASSERT_TRUE(latest.ok());
+    auto info = client.latest("vehicleState", "5").objects().at(0);
+    auto all = client.request([&] {
+        HistoryRequest rq;
+        rq.kind("range");
+        rq.topic("vehicleState");
+        rq.key("5");
+        rq.t0(0);
+        rq.t1(UINT64_MAX);
+        rq.limit(100000);
+        return rq;
+    }());
+    ASSERT_EQ(all.status(), "ok");
+    ASSERT_FALSE(all.truncated());
+    std::vector<double> x;
+    for (const auto& s : all.samples()) {
+        VehicleState v;
+        ASSERT_TRUE(cpm::HistoryClient::decode_payload(s.payload(), v));
+        x.push_back(v.pose().x());
+    }
+    // Every sample from the first one recorded to the last is either held or counted as lost.
+    EXPECT_EQ(double(info.samples_total() + info.samples_lost()), x.back() - x.front() + 1)
+        << info.samples_total() << " held, " << info.samples_lost() << " lost, x " << x.front() << ".." << x.back();
+    EXPECT_EQ(all.lost(), info.samples_lost());
+    // The successor of the sample before the first hole is not the one after it: a gap.
+    size_t hole = 1;
+    while (hole < x.size() && x[hole] == x[hole - 1] + 1) ++hole;
+    ASSERT_LT(hole, x.size());
+    HistoryRequest successor;
+    successor.kind("successor");
+    successor.topic("vehicleState");
+    successor.key("5");
+    successor.t0(all.samples()[hole - 1].commit_ns());
+    successor.timeout_ns(1'000'000'000ull);
+    EXPECT_EQ(client.request(successor).status(), "gap");
+    successor.t0(all.samples()[hole - 2].commit_ns());
+    EXPECT_EQ(client.request(successor).status(), "ok");
+
+    // historyStatus says so too, per topic.
+    cpm::ReaderAbstract<HistoryStatus> status(participant, "historyStatus", {.reliable = true, .transient_local = true});
+    HistoryStatus last;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        for (auto& s : status.take()) last = s;
+        return last.lost() >= info.samples_lost();
+    }, 10s)) << last.lost();
+    bool topic_lost = false;
+    for (const auto& t : last.topics()) topic_lost = topic_lost || (t.topic() == "vehicleState" && t.lost() >= info.samples_lost());
+    EXPECT_TRUE(topic_lost);
+}
+
+TEST_F(HistoryService, AfterAFreezeLongerThanTheLeaseItRecordsEverythingAgainItsOwnStatusIncluded)
+{
+    FastCar car(participant);
+    ASSERT_TRUE(wait_for_samples("vehicleState", "5", 100)) << service.errors();
+    service.kill(SIGSTOP);
+    std::this_thread::sleep_for(12s);  // past the 10 s lease: the lab drops the service's participants
+    service.kill(SIGCONT);
+    const uint64_t resumed = cpm::get_time_ns();
+    auto newest = [&](const std::string& topic, const std::string& key) -> uint64_t {
+        try {
+            HistoryRequest rq;
+            rq.kind("search");
+            rq.name_regex("^" + topic + (key.empty() ? "$" : "/" + key + "$"));
+            uint64_t t = 0;
+            for (const auto& o : client.request(rq).objects()) t = std::max(t, o.newest_commit_ns());
+            return t;
+        } catch (const std::exception&) {
+            return 0;
+        }
+    };
+    EXPECT_TRUE(cpm_test::wait_until([&] { return newest("vehicleState", "5") > resumed + 1'000'000'000ull; }, 15s))
+        << service.errors();
+    EXPECT_TRUE(cpm_test::wait_until([&] { return newest("historyStatus", "") > resumed + 1'000'000'000ull; }, 15s))
+        << "its own status is no longer recorded\n" << service.errors();
+    // The service's own process is known again (a new object, the one before it lost).
+    HistoryRequest processes;
+    processes.kind("search");
+    processes.name_regex("^cpm_history$");
+    processes.alive_at(cpm::get_time_ns());
+    EXPECT_TRUE(cpm_test::wait_until([&] { return !client.request(processes).objects().empty(); }, 10s));
 }

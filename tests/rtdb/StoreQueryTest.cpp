@@ -330,3 +330,23 @@ TEST(StoreQuery, UnknownObjectIsNamedAsSuch)
 }
 
 }  // namespace
+
+TEST(StoreGaps, SamplesLostBeforeOneMakeItsPredecessorsSuccessorAGapAndAreCounted)
+{
+    Store sut{StoreOptions{{1'000'000, 1 << 20}, 1 << 30}};
+    const Oid oid = sut.add_object({.topic = "vehicleState", .key = "5", .created_ts = 1});
+    const uint8_t byte = 7;
+    sut.commit(oid, {10, 10, 10, &byte, 1}, 100);
+    sut.commit(oid, {20, 20, 20, &byte, 1}, 200);
+    sut.commit(oid, {50, 50, 50, &byte, 1, 2}, 500);  // two samples never arrived before this one
+    sut.commit(oid, {60, 60, 60, &byte, 1}, 600);
+    EXPECT_EQ(sut.successor(oid, 100, std::chrono::nanoseconds(0)).status, Status::ok);
+    EXPECT_EQ(sut.successor(oid, 200, std::chrono::nanoseconds(0)).status, Status::gap);
+    EXPECT_EQ(sut.successor(oid, 500, std::chrono::nanoseconds(0)).sample.commit_ns, 600u);
+    EXPECT_EQ(sut.info(oid)->samples_lost, 2u);
+    EXPECT_EQ(sut.stats().lost, 2u);
+    EXPECT_EQ(sut.range(oid, 0, 1000).lost, 2u);
+    EXPECT_EQ(sut.range(oid, 0, 300).lost, 0u);  // the hole lies after the last sample it returns
+    EXPECT_EQ(sut.range(oid, 500, 700).lost, 0u);  // ... or before the first
+    EXPECT_EQ(sut.range(oid, 10, 60, By::data).lost, 2u);
+}

@@ -96,6 +96,7 @@ nlohmann::json object_json(const HistoryObject& o, uint64_t now)
             {"samples_held", o.samples_held()},
             {"bytes_held", o.bytes_held()},
             {"samples_total", o.samples_total()},
+            {"samples_lost", o.samples_lost()},
             {"rate_hz", cpm::update_rate_hz(o, now)},
             {"avg_cycle_s", o.avg_cycle_s()},
             {"max_cycle_s", o.max_cycle_s()},
@@ -149,17 +150,17 @@ void print_objects(const HistoryReply& reply, bool json)
         for (const auto& o : reply.objects()) std::printf("%s\n", object_json(o, now).dump().c_str());
         return;
     }
-    std::printf("%-5s %-28s %-22s %-20s %-12s %-12s %8s %9s %10s\n", "oid", "name", "type", "creator", "created", "deleted",
-                "samples", "rate", "newest");
+    std::printf("%-5s %-28s %-22s %-20s %-12s %-12s %8s %6s %9s %10s\n", "oid", "name", "type", "creator", "created", "deleted",
+                "samples", "lost", "rate", "newest");
     for (const auto& o : reply.objects()) {
         const auto j = object_json(o, now);
         char rate[32];
         const double hz = j["rate_hz"].get<double>();
         if (hz > 0) std::snprintf(rate, sizeof rate, "%.1f Hz", hz);
         else std::snprintf(rate, sizeof rate, "-");
-        std::printf("%-5llu %-28s %-22s %-20s %-12s %-12s %8llu %9s %10s\n", (unsigned long long)o.oid(), o.name().c_str(),
+        std::printf("%-5llu %-28s %-22s %-20s %-12s %-12s %8llu %6llu %9s %10s\n", (unsigned long long)o.oid(), o.name().c_str(),
                     o.type_name().c_str(), o.creator().c_str(), time_text(o.created_ts()).c_str(), time_text(o.deleted_ts()).c_str(),
-                    (unsigned long long)o.samples_held(), rate, age_text(j["newest_age_s"]).c_str());
+                    (unsigned long long)o.samples_held(), (unsigned long long)o.samples_lost(), rate, age_text(j["newest_age_s"]).c_str());
     }
 }
 
@@ -277,6 +278,9 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     if (about_objects) print_objects(reply, json);
     else print_samples(reply, json);
     if (reply.truncated()) std::fprintf(stderr, "cpm history %s: more samples matched than --limit; the oldest are shown\n", verb.c_str());
+    if (reply.lost() > 0)
+        std::fprintf(stderr, "cpm history %s: %llu samples between the first and the last shown never reached the service\n",
+                     verb.c_str(), (unsigned long long)reply.lost());
     if (reply.status() != "ok") {
         const std::string what = rq.topic().empty() ? "" : rq.topic() + (rq.key().empty() ? "" : "/" + rq.key()) + ": ";
         std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(), what.c_str(), reply.status().c_str());

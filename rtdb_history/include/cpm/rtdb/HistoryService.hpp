@@ -31,7 +31,7 @@ struct ServiceOptions
 
 struct ServiceCounters
 {
-    uint64_t topics = 0, received = 0, dropped = 0, requests = 0, bad_requests = 0;
+    uint64_t topics = 0, received = 0, dropped = 0, requests = 0, bad_requests = 0, lost = 0;
 };
 
 class HistoryService

@@ -83,6 +83,7 @@ struct Range
     Status status = Status::not_found;
     std::vector<StoredSample> samples;
     bool truncated = false;  ///< more matched than the limit
+    uint64_t lost = 0;       ///< samples the store never got between the first and the last returned
 };
 
 /// What a new sample brings; the payload is copied.
@@ -93,6 +94,9 @@ struct Incoming
     uint64_t source_ns = 0;
     const uint8_t* data = nullptr;
     size_t size = 0;
+    /// Samples its writer sent before this one that never arrived (a gap in its sequence
+    /// numbers): successor() of the sample before it answers gap, and they are counted.
+    uint64_t lost_before = 0;
 };
 
 enum class ObjectKind { instance, process };
@@ -119,6 +123,7 @@ struct ObjectInfo
     uint64_t samples_held = 0;
     uint64_t bytes_held = 0;
     uint64_t samples_total = 0;     ///< ever committed
+    uint64_t samples_lost = 0;      ///< ever sent by its writers and never received (Incoming::lost_before)
     uint64_t newest_commit_ns = 0;
     double avg_cycle_s = 0;         ///< observed mean time between commits
     double max_cycle_s = 0;
@@ -149,7 +154,7 @@ struct StoreOptions
 
 struct StoreStats
 {
-    uint64_t objects = 0, alive = 0, samples = 0, bytes = 0, evicted = 0, purged_objects = 0;
+    uint64_t objects = 0, alive = 0, samples = 0, bytes = 0, evicted = 0, purged_objects = 0, lost = 0;
 };
 
 /// What changed since a point: objects created or deleted after it.
@@ -203,7 +208,7 @@ public:
     /// The newest sample committed after `after`, waiting up to `timeout` for one.
     Found wait_next(Oid oid, uint64_t after, std::chrono::nanoseconds timeout) const;
     /// Exactly the sample committed next after `after` (waiting up to `timeout`), or gap when
-    /// it was evicted.
+    /// it was evicted or samples were lost in between.
     Found successor(Oid oid, uint64_t after, std::chrono::nanoseconds timeout) const;
     /// Each object's sample at t, in one consistent cut.
     std::vector<Found> snapshot(uint64_t t, const std::vector<Oid>& oids, By by = By::commit) const;
@@ -258,7 +263,7 @@ private:
     std::map<std::string, uint64_t> topic_bytes_;  ///< objects point at their topic's node
     std::map<std::pair<std::string, std::string>, Oid> by_name_;  ///< topic and key: the newest instance object
     uint64_t total_bytes_ = 0;
-    std::atomic<uint64_t> evicted_{0}, purged_{0};
+    std::atomic<uint64_t> evicted_{0}, purged_{0}, lost_{0};
 
     mutable std::mutex wait_mutex_;
     mutable std::condition_variable wait_cv_;
