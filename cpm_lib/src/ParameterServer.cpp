@@ -1,4 +1,5 @@
 #include <cpm/ParameterServer.hpp>
+#include <cpm/read_text_file.hpp>
 
 #include <cpm/AsyncReader.hpp>
 #include <cpm/Error.hpp>
@@ -268,11 +269,10 @@ void ParameterServer::set_doubles(const std::string& name, const std::vector<dou
 
 size_t ParameterServer::load_json_file(const std::string& path)
 {
-    std::ifstream in(path);
-    if (!in) throw Error("parameter file '" + path + "': cannot be opened");
+    const std::string text = read_text_file(path, "parameter file");
     nlohmann::json doc;
     try {
-        doc = nlohmann::json::parse(in);
+        doc = nlohmann::json::parse(text);
     } catch (const nlohmann::json::parse_error& e) {
         throw Error("parameter file '" + path + "': not valid JSON: " + e.what());
     }

@@ -3,12 +3,16 @@
 #include "Elements.hpp"
 
 #include <cpm/fsm/Uxf.hpp>
+#include <cpm/Error.hpp>
+#include <cpm/read_text_file.hpp>
 
 #include <cstring>
 
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <climits>
+#include <sstream>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -79,6 +83,13 @@ bool check_parameters(Context& ctx, const json& element, const std::string& path
         } else if (!kind_ok(p->kind, it.value())) {
             ctx.error(path + "." + it.key(), kind_error(p->kind) + ", got " + it.value().dump());
             ok = false;
+        } else if ((p->kind == "number" || p->kind == "integer") &&
+                   !(it.value().get<double>() >= p->min && it.value().get<double>() <= p->max)) {
+            std::ostringstream range;
+            range << "expected " << (p->kind == "integer" ? "an integer" : "a number") << " in " << p->min << ".."
+                  << p->max << " (" << p->meaning << "), got " << it.value().dump();
+            ctx.error(path + "." + it.key(), range.str());
+            ok = false;
         } else {
             params[it.key()] = it.value();
         }
@@ -101,11 +112,15 @@ std::optional<int> integer_member(Context& ctx, const json& e, const std::string
         ctx.error(path, std::string("missing \"") + name + "\"");
         return std::nullopt;
     }
-    if (!e[name].is_number_integer()) {
-        ctx.error(path + "." + name, "expected an integer, got " + e[name].dump());
+    const json& v = e[name];
+    // Ids are 32-bit: 4294967299 would silently become 3.
+    if (!v.is_number_integer() || (v.is_number_unsigned() && v.get<uint64_t>() > uint64_t(INT32_MAX)) ||
+        (!v.is_number_unsigned() && (v.get<int64_t>() < INT32_MIN || v.get<int64_t>() > INT32_MAX))) {
+        ctx.error(path + "." + name, "expected an integer in " + std::to_string(INT32_MIN) + ".." + std::to_string(INT32_MAX) +
+                                         ", got " + v.dump());
         return std::nullopt;
     }
-    return e[name].get<int>();
+    return v.get<int>();
 }
 
 std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::string& at);
@@ -186,7 +201,8 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
         else settings.tick_period = j["tick_period"].get<double>();
     }
     if (j.contains("throttle_per_speed")) {
-        if (!j["throttle_per_speed"].is_number()) ctx.error(at + ".throttle_per_speed", "expected a number");
+        if (!j["throttle_per_speed"].is_number() || !(j["throttle_per_speed"].get<double>() > 0 && j["throttle_per_speed"].get<double>() <= 10))
+            ctx.error(at + ".throttle_per_speed", "expected a number in 0..10 (throttle per m/s), got " + j["throttle_per_speed"].dump());
         else settings.throttle_per_speed = j["throttle_per_speed"].get<double>();
     }
     auto root = integer_member(ctx, j, at, "root");
@@ -199,6 +215,8 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
     auto exists = [&](int id) { return state_types.count(id) || untyped_ids.count(id); };
     if (!j.contains("states") || !j["states"].is_array()) {
         ctx.error(at + ".states", "expected an array of states");
+    } else if (j["states"].empty()) {
+        ctx.error(at + ".states", "the machine has no states (an empty drawing?)");
     } else {
         for (size_t k = 0; k < j["states"].size(); ++k) {
             const json& e = j["states"][k];
@@ -360,10 +378,13 @@ LoadResult load_json(const std::string& json_text, const std::string& source, co
 
 LoadResult load_file(const std::string& path)
 {
-    auto text = read_file(path);
-    if (!text) {
+    std::optional<std::string> text;
+    try {
+        text = cpm::read_text_file(path, "state machine file");
+    } catch (const cpm::Error& e) {
         LoadResult result;
-        result.errors.push_back({path, "cannot open the file"});
+        const std::string message = e.what();
+        result.errors.push_back({path, message.substr(path.size() + 2)});  // the path is the diagnostic's place
         return result;
     }
     std::error_code ec;

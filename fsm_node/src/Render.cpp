@@ -59,7 +59,7 @@ DotResult machine_to_dot(const std::string& path)
         if (id == root) label += " (root)";
         std::string params = parameters(s, {"id", "type", "final", "root"}, "\n");
         if (!params.empty()) label += "\n" + params;
-        dot << "  s" << id << " [label=\"" << escape(label) << "\"";
+        dot << "  \"s" << id << "\" [label=\"" << escape(label) << "\"";
         if (id == root) dot << ", style=\"rounded,bold\"";
         if (s.value("final", false)) dot << ", peripheries=2";
         dot << "];\n";
@@ -68,7 +68,7 @@ DotResult machine_to_dot(const std::string& path)
         std::string label = std::to_string(t["id"].get<int>()) + ": " + t["type"].get<std::string>();
         std::string params = parameters(t, {"id", "type", "from", "to"}, ", ");
         if (!params.empty()) label += "\n" + params;
-        dot << "  s" << t["from"].get<int>() << " -> s" << t["to"].get<int>() << " [label=\"" << escape(label) << "\"];\n";
+        dot << "  \"s" << t["from"].get<int>() << "\" -> \"s" << t["to"].get<int>() << "\" [label=\"" << escape(label) << "\"];\n";
     }
     dot << "}\n";
     result.dot = dot.str();

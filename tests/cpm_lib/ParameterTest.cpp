@@ -143,7 +143,7 @@ TEST_F(ParameterTest, BadFilesAreErrorsNamingFileAndPlaceAndLoadNothing)
     EXPECT_THAT(error_of([&] { sut.load_json_file(broken); }), HasSubstr("'" + broken + "': not valid JSON"));
     EXPECT_THAT(error_of([&] { sut.load_json_file(bad_value); }), HasSubstr("at /b"));
     EXPECT_THAT(error_of([&] { sut.load_json_file(mixed); }), HasSubstr("at /a"));
-    EXPECT_THAT(error_of([&] { sut.load_json_file("/nonexistent.json"); }), HasSubstr("cannot be opened"));
+    EXPECT_THAT(error_of([&] { sut.load_json_file("/nonexistent.json"); }), HasSubstr("/nonexistent.json: cannot open the parameter file: no such file"));
     EXPECT_EQ(sut.size(), 0u) << "a file with an error must load nothing";
 }
 

@@ -86,7 +86,7 @@ TEST(FsmLoader, MissingRootAndBadJsonAreNamed)
     EXPECT_NE(broken.errors[0].text().find("b.json: not valid JSON"), std::string::npos);
     auto missing = load_file("/nonexistent/machine.json");
     ASSERT_EQ(missing.errors.size(), 1u);
-    EXPECT_EQ(missing.errors[0].text(), "/nonexistent/machine.json: cannot open the file");
+    EXPECT_EQ(missing.errors[0].text(), "/nonexistent/machine.json: cannot open the state machine file: no such file");
 }
 
 TEST(FsmLoader, WarnsAboutUnreachableStatesAndStatesWithNoWayOut)
@@ -130,4 +130,44 @@ TEST(FsmLoader, KnownTypesDocumentEveryParameterWithItsDefault)
     }
     EXPECT_EQ(states, 9u);
     EXPECT_EQ(transitions, 6u);
+}
+
+TEST(FsmLoader, ParametersOutOfTheirRangeAndIdsBeyond32BitsAreErrorsWithTheirJsonPath)
+{
+    auto sut = load_json(R"({"root": 0,
+        "states": [{"id": 0, "type": "FollowWall", "clearance": -5, "speed": 1e300},
+                   {"id": 1, "type": "Motor", "steering": 50},
+                   {"id": 4294967299, "type": "Stop"},
+                   {"id": 2, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "Timeout", "from": 0, "to": 1, "seconds": -1},
+                        {"id": 1, "type": "Always", "from": 1, "to": 2}]})",
+                         "car.json");
+    EXPECT_FALSE(sut.ok());
+    EXPECT_TRUE(has(sut.errors, "car.json: $.states[0].clearance", "expected a number in 0.02..3")) << all(sut.errors);
+    EXPECT_TRUE(has(sut.errors, "car.json: $.states[0].clearance", "got -5")) << all(sut.errors);
+    EXPECT_TRUE(has(sut.errors, "car.json: $.states[0].speed", "got 1e+300")) << all(sut.errors);
+    EXPECT_TRUE(has(sut.errors, "car.json: $.states[1].steering", "expected a number in -1..1")) << all(sut.errors);
+    EXPECT_TRUE(has(sut.errors, "car.json: $.states[2].id", "expected an integer in -2147483648..2147483647, got 4294967299"))
+        << all(sut.errors);
+    EXPECT_TRUE(has(sut.errors, "car.json: $.transitions[0].seconds", "expected a number in 0..86400")) << all(sut.errors);
+}
+
+TEST(FsmLoader, EveryNumericParameterHasARange)
+{
+    for (const auto& info : known_types()) {
+        for (const auto& p : info.parameters) {
+            if (p.kind != "number" && p.kind != "integer") continue;
+            EXPECT_GT(p.min, -1e299) << info.type << "." << p.name;
+            EXPECT_LT(p.max, 1e299) << info.type << "." << p.name;
+        }
+    }
+}
+
+TEST(FsmLoader, AMachineWithoutStatesAndADirectoryAreErrorsNamingTheFile)
+{
+    auto empty = load_json(R"({"root": 0, "states": []})", "empty.json");
+    EXPECT_TRUE(has(empty.errors, "empty.json: $.states", "the machine has no states")) << all(empty.errors);
+    auto dir = load_file("/tmp");
+    ASSERT_EQ(dir.errors.size(), 1u);
+    EXPECT_EQ(dir.errors[0].text(), "/tmp: cannot read it as the state machine file: it is a directory");
 }

@@ -476,7 +476,7 @@ TEST_F(VehicleEndToEnd, WrongFilesAndFlagsAreNamedAndExitNonZero)
 {
     Process no_map({built_program("firmware_sim"), "--vehicle_id", "1", "--map", "/nonexistent/map.json"});
     EXPECT_EQ(no_map.wait(10s), 1);
-    EXPECT_NE(no_map.errors().find("/nonexistent/map.json: cannot open the map file"), std::string::npos) << no_map.errors();
+    EXPECT_NE(no_map.errors().find("/nonexistent/map.json: cannot open the map file: no such file"), std::string::npos) << no_map.errors();
     Process bad_start({built_program("firmware_sim"), "--vehicle_id", "1", "--start", "1,2"});
     EXPECT_EQ(bad_start.wait(10s), 2);
     EXPECT_NE(bad_start.errors().find("--start: expected X,Y,YAW"), std::string::npos) << bad_start.errors();

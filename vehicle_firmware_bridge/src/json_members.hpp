@@ -7,6 +7,8 @@
 
 #include <cmath>
 #include <fstream>
+#include <cpm/read_text_file.hpp>
+
 #include <limits>
 #include <set>
 #include <sstream>
@@ -14,14 +16,7 @@
 
 namespace cpm::vehicle {
 
-inline std::string read_text_file(const std::string& path, const std::string& what)
-{
-    std::ifstream in(path);
-    if (!in) throw Error(path + ": cannot open the " + what);
-    std::stringstream text;
-    text << in.rdbuf();
-    return text.str();
-}
+using cpm::read_text_file;
 
 class JsonMembers
 {

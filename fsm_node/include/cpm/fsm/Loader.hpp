@@ -37,6 +37,8 @@ struct ParameterInfo
     std::string kind;       ///< number, integer, bool, side, sensor, direction, machine
     std::string fallback;   ///< the default as text, empty when required
     std::string meaning;
+    double min = -1e300;    ///< number and integer kinds: the range a value must lie in
+    double max = 1e300;
 };
 
 /// Every state and transition type the loader knows, with its parameters.
