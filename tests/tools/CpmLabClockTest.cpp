@@ -74,9 +74,17 @@ TEST(CpmLabClock, BadArgumentsExitWithCode2AndNameTheProblem)
                                     "--until", "ten"});
     cpm_test::Process unknown({cpm_test::built_program("cpm"), "lab", "clocks"});
 
+    cpm_test::Process bad_real_duration({cpm_test::built_program("cpm"), "lab", "clock", "--nodes", "a", "--duration", "abc"});
+
     EXPECT_EQ(no_nodes.wait(10000ms), 2);
+    EXPECT_THAT(no_nodes.errors(), HasSubstr("cpm lab clock: --nodes is required"));
     EXPECT_EQ(bad_duration.wait(10000ms), 2);
+    EXPECT_THAT(bad_duration.errors(), HasSubstr("--until: 'ten' is not a duration"));
     EXPECT_EQ(unknown.wait(10000ms), 2);
+    EXPECT_THAT(unknown.errors(), HasSubstr("unknown command 'cpm lab clocks'"));
+    // Checked before it waits (up to 30 s) for the nodes to be ready.
+    EXPECT_EQ(bad_real_duration.wait(10000ms), 2);
+    EXPECT_THAT(bad_real_duration.errors(), HasSubstr("--duration: 'abc' is not a duration"));
 }
 
 TEST(CpmParamServe, ServesAFileToClientsUntilStopped)
@@ -101,6 +109,7 @@ TEST(CpmParamServe, BadFileExitsNonZeroNamingIt)
     cpm_test::Process sut({cpm_test::built_program("cpm"), "param", "serve", "/nonexistent/params.json"});
 
     EXPECT_EQ(sut.wait(10000ms), 1);
+    EXPECT_THAT(sut.errors(), HasSubstr("/nonexistent/params.json: cannot open the parameter file: no such file"));
 }
 
 TEST(CpmTopicEcho, LogShowsMessagesAsTableAndJson)
@@ -127,4 +136,5 @@ TEST(CpmTopicEcho, UnsupportedTopicExitsWithCode2)
     cpm_test::Process sut({cpm_test::built_program("cpm"), "topic", "echo", "vehicleState"});
 
     EXPECT_EQ(sut.wait(10000ms), 2);
+    EXPECT_THAT(sut.errors(), HasSubstr("topic 'vehicleState' is not supported yet"));
 }

@@ -1,5 +1,5 @@
 // cpm history ... and cpm dump: the history service's answers on the command line.
-#include "history.hpp"
+#include "Command.hpp"
 
 #include <cpm/rtdb/IdlDecoder.hpp>
 
@@ -15,8 +15,9 @@
 #include <sys/stat.h>
 
 namespace cpm::tools {
+namespace {
 
-const char* kHistoryHelp =
+const char* const kHistoryHelp =
     "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot\n"
     "                   [flags] [--json]\n"
     "\n"
@@ -40,14 +41,13 @@ const char* kHistoryHelp =
     "Exit code 0 when the answer is ok; 1 with the status (not found, evicted, not yet, timeout,\n"
     "gap) or the service's error on stderr; 2 on a usage error.\n";
 
-const char* kDumpHelp =
+const char* const kDumpHelp =
     "usage: cpm dump [--alive] [--json] [--dds_domain N]\n"
     "\n"
     "One table of every object the history service holds (like kogmo_rtdb_dump -a): name, type,\n"
     "creator, created, deleted, samples held, rate, age of the newest sample. Processes are\n"
     "objects too. --alive: only objects alive now.\n";
 
-namespace {
 
 using cpm::cli::UsageError;
 
@@ -196,7 +196,6 @@ cpm::Participant& client_participant()
     return p;
 }
 
-}  // namespace
 
 int history_command(const std::string& verb, const std::vector<std::string>& args)
 {
@@ -308,6 +307,21 @@ int dump_command(const std::vector<std::string>& args)
     }
     print_objects(reply, parsed.has("--json"));
     return 0;
+}
+
+int history_verb(const std::vector<std::string>& args)
+{
+    if (args.empty() || args[0].rfind("--", 0) == 0) throw UsageError("cpm history: which query? (see cpm history --help)");
+    return history_command(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
+}
+
+}  // namespace
+
+std::vector<Command> history_commands()
+{
+    return {{"history", "", "ask the history service about the recent past: list, search, latest, at, older, younger, range, "
+                            "wait, successor, snapshot, changes, wait-object", kHistoryHelp, history_verb},
+            {"dump", "", "one table of every object the history service holds", kDumpHelp, dump_command}};
 }
 
 }  // namespace cpm::tools

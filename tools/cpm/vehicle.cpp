@@ -1,5 +1,5 @@
 // cpm vehicle sim: one simulated car (firmware_sim + vehicle_bridge joined by a pty) or several.
-#include "vehicle_sim.hpp"
+#include "Command.hpp"
 
 #include <cpm/CommandLine.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
@@ -77,9 +77,7 @@ std::string read_line(int fd)
     return line;
 }
 
-}  // namespace
-
-const char* kVehicleSimHelp =
+const char* const kVehicleSimHelp =
     "usage: cpm vehicle sim --id N [--count K] [--map FILE] [--start X,Y,YAW] [--spacing M]\n"
     "                       [--params FILE] [--calibration FILE] [--dds_domain N]\n"
     "\n"
@@ -178,3 +176,15 @@ int vehicle_sim(const std::vector<std::string>& args)
     for (auto& t : copiers) t.join();
     return exit_code;
 }
+
+}  // namespace
+
+namespace cpm::tools {
+
+std::vector<Command> vehicle_commands()
+{
+    return {{"vehicle", "sim", "start simulated cars: firmware simulator + vehicle bridge over a pty", kVehicleSimHelp,
+             vehicle_sim}};
+}
+
+}  // namespace cpm::tools

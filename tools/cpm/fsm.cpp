@@ -1,0 +1,119 @@
+// cpm fsm …: checking, converting and drawing state machines.
+#include "Command.hpp"
+
+#include <cpm/fsm/Loader.hpp>
+#include <cpm/fsm/Render.hpp>
+
+#include <cstdio>
+#include <fstream>
+#include <stdexcept>
+#include <sys/wait.h>
+
+namespace cpm::tools {
+namespace {
+
+using cpm::cli::FlagSpec;
+using cpm::cli::ParsedArgs;
+using cpm::cli::UsageError;
+using cpm::cli::parse_args;
+using cpm::cli::parse_duration;
+using cpm::cli::split_list;
+
+const char* kFsmCheckHelp =
+    "usage: cpm fsm check FILE.json\n"
+    "\n"
+    "Loads and checks a state machine as fsm_node would, and prints every error and warning with\n"
+    "its file and JSON path. Exit code 0 when it has no errors (warnings allowed), 1 otherwise.\n"
+    "The state and transition types and their parameters: fsm_node/README.md.\n";
+
+const char* kFsmConvertHelp =
+    "usage: cpm fsm convert FILE.uxf\n"
+    "\n"
+    "Prints the state machine of a UMLet drawing as JSON (the format fsm_node reads), after the\n"
+    "same check as `cpm fsm check`; errors name the drawing's element. Exit code 1 on errors.\n";
+
+const char* kFsmRenderHelp =
+    "usage: cpm fsm render FILE.json|FILE.uxf -o|--output OUT.svg|OUT.png|OUT.dot\n"
+    "\n"
+    "Draws a checked state machine with Graphviz (`dot`, Debian package graphviz): states as\n"
+    "boxes with id, type and parameters (the root bold, final states double-framed),\n"
+    "transitions as arrows labelled with id, type and condition. Exit code 1 on errors.\n";
+
+int fsm_check(const std::vector<std::string>& args)
+{
+    const std::string file = only_positional(parse_args(args, {}, "cpm fsm check"), "cpm fsm check", "machine file");
+    auto result = cpm::fsm::load_file(file);
+    for (const auto& e : result.errors) std::printf("error: %s\n", e.text().c_str());
+    for (const auto& w : result.warnings) std::printf("warning: %s\n", w.text().c_str());
+    if (!result.ok()) {
+        std::printf("%s: %zu error(s), %zu warning(s)\n", file.c_str(), result.errors.size(), result.warnings.size());
+        return 1;
+    }
+    std::printf("%s: ok (%zu states, %zu transitions, %zu warning(s))\n", file.c_str(), result.machine->states().size(),
+                result.machine->transitions().size(), result.warnings.size());
+    return 0;
+}
+
+int fsm_convert(const std::vector<std::string>& args)
+{
+    const std::string file = only_positional(parse_args(args, {}, "cpm fsm convert"), "cpm fsm convert", ".uxf file");
+    auto checked = cpm::fsm::load_file(file);
+    for (const auto& e : checked.errors) std::fprintf(stderr, "error: %s\n", e.text().c_str());
+    for (const auto& w : checked.warnings) std::fprintf(stderr, "warning: %s\n", w.text().c_str());
+    if (!checked.ok()) return 1;
+    std::printf("%s\n", checked.json.c_str());
+    return 0;
+}
+
+int fsm_render(const std::vector<std::string>& args)
+{
+    std::vector<std::string> spelled = args;
+    for (auto& a : spelled) {
+        if (a == "-o") a = "--output";  // the short form, as in dot and cc
+    }
+    const auto parsed = parse_args(spelled, {{"--output", true}}, "cpm fsm render");
+    const std::string file = only_positional(parsed, "cpm fsm render", "machine file");
+    const std::string out = parsed.get("--output");
+    if (out.empty()) throw UsageError("cpm fsm render: -o OUT.svg|OUT.png|OUT.dot is required");
+    const std::string format = out.substr(out.rfind('.') == std::string::npos ? out.size() : out.rfind('.') + 1);
+    if (format != "svg" && format != "png" && format != "dot") {
+        throw UsageError("cpm fsm render: -o " + out + ": the name must end in .svg, .png or .dot");
+    }
+    auto result = cpm::fsm::machine_to_dot(file);
+    for (const auto& e : result.errors) std::fprintf(stderr, "error: %s\n", e.text().c_str());
+    if (!result.errors.empty()) return 1;
+    if (format == "dot") {
+        std::ofstream(out) << result.dot;
+    } else {
+        const std::string command = "dot -T" + format + " -o '" + out + "'";
+        FILE* pipe = popen(command.c_str(), "w");
+        if (!pipe) throw std::runtime_error("cannot run Graphviz's dot (install the Debian package graphviz)");
+        std::fputs(result.dot.c_str(), pipe);
+        const int status = pclose(pipe);
+        if (status != 0) throw std::runtime_error("Graphviz's dot failed (exit " + std::to_string(WEXITSTATUS(status)) +
+                                                  "; is the Debian package graphviz installed?)");
+    }
+    std::printf("%s: wrote %s\n", file.c_str(), out.c_str());
+    return 0;
+}
+
+}  // namespace
+
+std::vector<Command> fsm_commands()
+{
+    return {{"fsm", "check", "check a state machine file (.json or UMLet .uxf): every error and warning", kFsmCheckHelp, fsm_check},
+            {"fsm", "convert", "print a UMLet drawing's state machine as JSON", kFsmConvertHelp, fsm_convert},
+            {"fsm", "render", "draw a state machine with Graphviz (-o OUT.svg|png|dot)", kFsmRenderHelp, fsm_render}};
+}
+
+std::string only_positional(const cpm::cli::ParsedArgs& parsed, const std::string& command, const std::string& what)
+{
+    if (parsed.positional.empty()) throw cpm::cli::UsageError(command + ": no " + what + " given (see --help)");
+    if (parsed.positional.size() > 1) {
+        throw cpm::cli::UsageError(command + ": unexpected argument '" + parsed.positional[1] + "'");
+    }
+    return parsed.positional[0];
+}
+
+
+}  // namespace cpm::tools

@@ -1,0 +1,82 @@
+// cpm lab …: the lab's clock.
+#include "Command.hpp"
+
+#include <cpm/Participant.hpp>
+#include <cpm/TimeMaster.hpp>
+#include <cpm/get_time_ns.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <thread>
+
+namespace cpm::tools {
+namespace {
+
+using cpm::cli::FlagSpec;
+using cpm::cli::ParsedArgs;
+using cpm::cli::UsageError;
+using cpm::cli::parse_args;
+using cpm::cli::parse_duration;
+using cpm::cli::split_list;
+
+const char* kClockHelp =
+    "usage: cpm lab clock --nodes ID[,ID...] [--simulated --until DURATION]\n"
+    "                     [--start-delay DURATION] [--duration DURATION] [--dds_domain N]\n"
+    "\n"
+    "Real time (default): waits until every named node's timer announced it is ready, sends the\n"
+    "start (now + --start-delay, default 1s), runs for --duration (default: until Ctrl-C), then\n"
+    "stops every timer.\n"
+    "Simulated (--simulated): drives the lab clock from 0 to --until through the nodes' announced\n"
+    "ticks as fast as they compute, then stops every timer. Nodes must run with --simulated_time.\n"
+    "DURATION: a number with ns, us, ms, s, m or h (e.g. 500ms, 10s).\n";
+
+int lab_clock(const std::vector<std::string>& args)
+{
+    const auto parsed = parse_args(
+        args, {{"--nodes", true}, {"--simulated", false}, {"--until", true}, {"--start-delay", true}, {"--duration", true}},
+        "cpm lab clock");
+    if (!parsed.positional.empty()) {
+        throw UsageError("cpm lab clock: unexpected argument '" + parsed.positional[0] + "'");
+    }
+    const auto& flags = parsed.flags;
+    if (!flags.count("--nodes")) throw UsageError("cpm lab clock: --nodes is required (the timers' node ids)");
+    const auto nodes = split_list("--nodes", flags.at("--nodes"));
+    // Every flag is checked before anything waits.
+    if (flags.count("--simulated") && !flags.count("--until")) throw UsageError("cpm lab clock --simulated: --until is required");
+    const uint64_t until = flags.count("--until") ? parse_duration("--until", flags.at("--until")) : 0;
+    const uint64_t delay = flags.count("--start-delay") ? parse_duration("--start-delay", flags.at("--start-delay"))
+                                                         : 1'000'000'000ull;
+    const uint64_t duration = flags.count("--duration") ? parse_duration("--duration", flags.at("--duration")) : 0;
+    cpm::Participant participant;
+    cpm::TimeMaster master(participant);
+
+    if (flags.count("--simulated")) {
+        const auto t0 = std::chrono::steady_clock::now();
+        const uint64_t steps = master.run_simulated(nodes, until);
+        const double real = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        std::printf("simulated %.3f s in %.3f real s (%llu steps, %.1fx real time); stopped all timers\n",
+                    double(until) * 1e-9, real, static_cast<unsigned long long>(steps),
+                    real > 0 ? double(until) * 1e-9 / real : 0.0);
+        return 0;
+    }
+    const uint64_t start =
+        master.start_real_time(nodes, std::chrono::milliseconds(delay / 1'000'000), std::chrono::seconds(30));
+    std::printf("all %zu nodes ready; start at %llu ns\n", nodes.size(), static_cast<unsigned long long>(start));
+    std::fflush(stdout);
+    cpm::cli::stop_on_signals();
+    const uint64_t end = flags.count("--duration") ? start + duration : UINT64_MAX;
+    while (!cpm::cli::stop_requested() && cpm::get_time_ns() < end) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    master.stop_all();
+    std::printf("stopped all timers\n");
+    return 0;
+}
+
+}  // namespace
+
+std::vector<Command> lab_commands()
+{
+    return {{"lab", "clock", "drive the lab's timers: a synchronised real-time start and stop, or a simulated clock", kClockHelp,
+             lab_clock}};
+}
+
+}  // namespace cpm::tools

@@ -1,0 +1,49 @@
+// cpm param …: serving the lab's parameters.
+#include "Command.hpp"
+
+#include <cpm/ParameterServer.hpp>
+#include <cpm/Participant.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <thread>
+
+namespace cpm::tools {
+namespace {
+
+using cpm::cli::FlagSpec;
+using cpm::cli::ParsedArgs;
+using cpm::cli::UsageError;
+using cpm::cli::parse_args;
+using cpm::cli::parse_duration;
+using cpm::cli::split_list;
+
+const char* kParamHelp =
+    "usage: cpm param serve FILE.json [--dds_domain N]\n"
+    "\n"
+    "Serves the file's parameters on topic 'parameter' and answers 'parameterRequest' until\n"
+    "Ctrl-C. FILE: {\"name\": value, ...} with the type taken from the value, or\n"
+    "{\"name\": {\"type\": \"bool|int|uint64|double|string|ints|doubles\", \"value\": ...}}.\n";
+
+int param_serve(const std::vector<std::string>& args)
+{
+    const std::string file = only_positional(parse_args(args, {}, "cpm param serve"), "cpm param serve",
+                                             "parameter file");
+    cpm::Participant participant;
+    cpm::ParameterServer server(participant);
+    const size_t n = server.load_file(file);
+    std::printf("serving %zu parameters from %s\n", n, file.c_str());
+    std::fflush(stdout);
+    cpm::cli::stop_on_signals();
+    while (!cpm::cli::stop_requested()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    return 0;
+}
+
+}  // namespace
+
+std::vector<Command> param_commands()
+{
+    return {{"param", "serve", "serve the parameters of a JSON file until Ctrl-C", kParamHelp, param_serve}};
+}
+
+}  // namespace cpm::tools
