@@ -273,6 +273,26 @@ std::optional<IdlDecoder::KeyBytes> IdlDecoder::key_bytes(const std::string& typ
     return out;
 }
 
+nlohmann::json IdlDecoder::describe(const std::string& type_name, const std::vector<uint8_t>& payload) const
+{
+    if (auto data = decode(type_name, payload)) return {{"data", *data}};
+    return {{"payload_base64", base64(payload)}};
+}
+
+std::string base64(const std::vector<uint8_t>& b)
+{
+    static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string out;
+    for (size_t i = 0; i < b.size(); i += 3) {
+        const uint32_t v = uint32_t(b[i]) << 16 | (i + 1 < b.size() ? uint32_t(b[i + 1]) << 8 : 0) | (i + 2 < b.size() ? b[i + 2] : 0);
+        out += t[v >> 18 & 63];
+        out += t[v >> 12 & 63];
+        out += i + 1 < b.size() ? t[v >> 6 & 63] : '=';
+        out += i + 2 < b.size() ? t[v & 63] : '=';
+    }
+    return out;
+}
+
 const IdlDecoder* IdlDecoder::lab_types()
 {
     static const std::unique_ptr<IdlDecoder> types = []() -> std::unique_ptr<IdlDecoder> {

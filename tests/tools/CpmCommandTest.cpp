@@ -1,10 +1,21 @@
 // The `cpm` command as a user meets it: --help and --version, every command-line error with exit
 // code 2 and one prefix, and output that cannot be written is an error.
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
+#include <cpm/stamp_message.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 
+#include <VehicleState.h>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <sstream>
+#include <thread>
 
 using namespace std::chrono_literals;
 using ::testing::HasSubstr;
@@ -13,7 +24,7 @@ using cpm_test::Process;
 
 namespace {
 
-Process cpm(std::vector<std::string> args)
+Process run_cpm(std::vector<std::string> args)
 {
     args.insert(args.begin(), cpm_test::built_program("cpm"));
     return Process(args);
@@ -22,19 +33,19 @@ Process cpm(std::vector<std::string> args)
 TEST(CpmCommand, AnswersVersionAndHelpForEveryGroup)
 {
     cpm_test::test_domain_id();
-    auto version = cpm({"--version"});
+    auto version = run_cpm({"--version"});
     EXPECT_EQ(version.wait(10s), 0);
     EXPECT_THAT(version.output(), HasSubstr("cpm 0."));
     EXPECT_THAT(version.output(), HasSubstr("Fast DDS 2."));
     for (const char* group : {"lab", "topic", "param", "fsm", "vehicle"}) {
-        auto help = cpm({group, "--help"});
+        auto help = run_cpm({group, "--help"});
         EXPECT_EQ(help.wait(10s), 0) << group << help.errors();
         EXPECT_THAT(help.output(), HasSubstr(std::string("cpm ") + group + " VERB")) << group;
     }
-    auto top = cpm({"--help"});
+    auto top = run_cpm({"--help"});
     EXPECT_EQ(top.wait(10s), 0);
     EXPECT_THAT(top.output(), HasSubstr("fsm render"));
-    auto history = cpm({"history", "at", "--help"});
+    auto history = run_cpm({"history", "at", "--help"});
     EXPECT_EQ(history.wait(10s), 0);
     EXPECT_THAT(history.output(), HasSubstr("usage: cpm history"));
 }
@@ -42,22 +53,22 @@ TEST(CpmCommand, AnswersVersionAndHelpForEveryGroup)
 TEST(CpmCommand, CommandLineErrorsExitWithTwoAndNameWhatIsWrongOnce)
 {
     cpm_test::test_domain_id();
-    auto domain = cpm({"dump", "--dds_domain", "abc"});
+    auto domain = run_cpm({"dump", "--dds_domain", "abc"});
     EXPECT_EQ(domain.wait(10s), 2);
     EXPECT_THAT(domain.errors(), HasSubstr("cpm: --dds_domain: 'abc' is not a whole number"));
-    auto domain_first = cpm({"--dds_domain", "abc", "dump"});
+    auto domain_first = run_cpm({"--dds_domain", "abc", "dump"});
     EXPECT_EQ(domain_first.wait(10s), 2);
     EXPECT_THAT(domain_first.errors(), HasSubstr("--dds_domain: 'abc'"));
-    auto interface = cpm({"dump", "--dds_interface", "10.0.0.1"});
+    auto interface = run_cpm({"dump", "--dds_interface", "10.0.0.1"});
     EXPECT_EQ(interface.wait(10s), 2);
     EXPECT_THAT(interface.errors(), HasSubstr("'10.0.0.1' is neither an interface nor an IPv4 address of this host"));
-    auto missing = cpm({"history", "at", "--topic", "--key", "1"});
+    auto missing = run_cpm({"history", "at", "--topic", "--key", "1"});
     EXPECT_EQ(missing.wait(10s), 2);
     EXPECT_EQ(missing.errors(), "cpm history at: --topic needs a value\n");  // one prefix, not "cpm: cpm history at:"
-    auto unknown = cpm({"history", "nope"});
+    auto unknown = run_cpm({"history", "nope"});
     EXPECT_EQ(unknown.wait(10s), 2);
     EXPECT_THAT(unknown.errors(), HasSubstr("unknown command 'history nope'"));
-    auto group_only = cpm({"fsm"});
+    auto group_only = run_cpm({"fsm"});
     EXPECT_EQ(group_only.wait(10s), 2);
     EXPECT_THAT(group_only.errors(), HasSubstr("fsm check"));
 }
@@ -68,9 +79,101 @@ TEST(CpmCommand, OutputThatCannotBeWrittenIsAnError)
     Process full({"/bin/sh", "-c", cpm_test::built_program("cpm") + " fsm check " + CPM_SOURCE_DIR "/scenarios/fsm/corridor.json > /dev/full"});
     EXPECT_EQ(full.wait(10s), 1);
     EXPECT_THAT(full.errors(), HasSubstr("cpm: cannot write the output: No space left on device"));
-    auto fine = cpm({"fsm", "check", CPM_SOURCE_DIR "/scenarios/fsm/corridor.json"});
+    auto fine = run_cpm({"fsm", "check", CPM_SOURCE_DIR "/scenarios/fsm/corridor.json"});
     EXPECT_EQ(fine.wait(10s), 0);
     EXPECT_THAT(fine.errors(), Not(HasSubstr("cannot write")));
 }
 
 }  // namespace
+
+namespace {
+
+/// Writes vehicle 3's state on `topic` at about 50 Hz from a thread until destroyed.
+class StateWriter
+{
+public:
+    explicit StateWriter(const std::string& topic) : writer_(topic), thread_([this] { run(); }) {}
+    ~StateWriter()
+    {
+        stop_ = true;
+        thread_.join();
+    }
+
+private:
+    void run()
+    {
+        VehicleState s;
+        s.vehicle_id(3);
+        for (int i = 0; !stop_; ++i) {
+            s.pose().x(0.25);
+            s.speed(1.5);
+            cpm::stamp_message(s, cpm::get_time_ns(), 0);
+            (void)writer_.write(s);
+            std::this_thread::sleep_for(20ms);
+        }
+    }
+    cpm::Writer<VehicleState> writer_;
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+}  // namespace
+
+TEST(CpmTopic, ListInfoEchoAndHzSeeATopicFromDiscoveryAlone)
+{
+    cpm_test::test_domain_id();
+    const std::string topic = cpm_test::unique_topic("probeState");
+    StateWriter writer(topic);
+
+    auto list = run_cpm({"topic", "list", "--json"});
+    ASSERT_EQ(list.wait(20s), 0) << list.errors();
+    bool listed = false;
+    std::istringstream lines(list.output());
+    for (std::string l; std::getline(lines, l);) {
+        auto j = nlohmann::json::parse(l);
+        if (j["topic"] == topic) {
+            listed = true;
+            EXPECT_EQ(j["type"], "VehicleState");
+            EXPECT_EQ(j["writers"], 1);
+            EXPECT_EQ(j["keyed"], true);
+        }
+    }
+    EXPECT_TRUE(listed) << list.output();
+
+    auto info = run_cpm({"topic", "info", topic, "--json"});
+    ASSERT_EQ(info.wait(20s), 0) << info.errors();
+    auto i = nlohmann::json::parse(info.output());
+    EXPECT_EQ(i["key"], nlohmann::json::array({"vehicle_id"}));
+    ASSERT_EQ(i["writers"].size(), 1u);
+    EXPECT_EQ(i["writers"][0]["reliability"], "best_effort");
+
+    auto echo = run_cpm({"topic", "echo", topic, "--json", "--count", "3"});
+    ASSERT_EQ(echo.wait(20s), 0) << echo.errors();
+    std::istringstream samples(echo.output());
+    int n = 0;
+    for (std::string l; std::getline(samples, l); ++n) {
+        auto j = nlohmann::json::parse(l);
+        EXPECT_EQ(j["data"]["vehicle_id"], 3);
+        EXPECT_DOUBLE_EQ(j["data"]["pose"]["x"].get<double>(), 0.25);
+        EXPECT_DOUBLE_EQ(j["data"]["speed"].get<double>(), 1.5);
+    }
+    EXPECT_EQ(n, 3);
+
+    auto hz = run_cpm({"topic", "hz", topic, "--json", "--duration", "2500ms"});
+    ASSERT_EQ(hz.wait(20s), 0) << hz.errors();
+    std::istringstream reports(hz.output());
+    std::string last;
+    for (std::string l; std::getline(reports, l);) last = l;
+    ASSERT_FALSE(last.empty()) << hz.output();
+    auto r = nlohmann::json::parse(last);
+    // A 20 ms sleep loop on a shared 2-core machine: loose bounds; what matters is that it is measured.
+    EXPECT_GT(r["rate_hz"].get<double>(), 10.0);
+    EXPECT_LT(r["rate_hz"].get<double>(), 60.0);
+    EXPECT_LE(r["min_s"].get<double>(), r["mean_s"].get<double>());
+    EXPECT_GE(r["max_s"].get<double>(), r["mean_s"].get<double>());
+    EXPECT_GT(r["samples"].get<int>(), 20);
+
+    auto nobody = run_cpm({"topic", "echo", cpm_test::unique_topic("nobody"), "--wait", "300ms"});
+    EXPECT_EQ(nobody.wait(20s), 1);
+    EXPECT_THAT(nobody.errors(), HasSubstr("no writer of topic"));
+}

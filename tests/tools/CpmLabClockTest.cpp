@@ -130,11 +130,11 @@ TEST(CpmTopicEcho, LogShowsMessagesAsTableAndJson)
     EXPECT_THAT(json.output(), HasSubstr(R"("log_level":2)"));
 }
 
-TEST(CpmTopicEcho, UnsupportedTopicExitsWithCode2)
+TEST(CpmTopicEcho, ATopicNobodyWritesIsNamedWithExitCode1)
 {
     cpm_test::test_domain_id();
-    cpm_test::Process sut({cpm_test::built_program("cpm"), "topic", "echo", "vehicleState"});
+    cpm_test::Process sut({cpm_test::built_program("cpm"), "topic", "echo", "vehicleState", "--wait", "300ms"});
 
-    EXPECT_EQ(sut.wait(10000ms), 2);
-    EXPECT_THAT(sut.errors(), HasSubstr("topic 'vehicleState' is not supported yet"));
+    EXPECT_EQ(sut.wait(10000ms), 1);
+    EXPECT_THAT(sut.errors(), HasSubstr("no writer of topic 'vehicleState' appeared"));
 }

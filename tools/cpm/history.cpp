@@ -57,20 +57,6 @@ uint64_t parse_time(const std::string& flag, const std::string& text)
     return cpm::cli::parse_time(flag, text, cpm::get_time_ns());
 }
 
-std::string base64(const std::vector<uint8_t>& b)
-{
-    static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    std::string out;
-    for (size_t i = 0; i < b.size(); i += 3) {
-        const uint32_t v = uint32_t(b[i]) << 16 | (i + 1 < b.size() ? uint32_t(b[i + 1]) << 8 : 0) | (i + 2 < b.size() ? b[i + 2] : 0);
-        out += t[v >> 18 & 63];
-        out += t[v >> 12 & 63];
-        out += i + 1 < b.size() ? t[v >> 6 & 63] : '=';
-        out += i + 2 < b.size() ? t[v & 63] : '=';
-    }
-    return out;
-}
-
 const cpm::rtdb::IdlDecoder& decoder()
 {
     const auto* types = cpm::rtdb::IdlDecoder::lab_types();
@@ -113,12 +99,10 @@ nlohmann::json sample_json(const HistorySample& s, const HistoryObject* o)
         j["type"] = o->type_name();
         // A type without a Header has no create_stamp: data_ns is the writer's source timestamp.
         if (o->data_time() == "source_timestamp") j["data_time"] = "source_timestamp";
-        if (auto data = decoder().decode(o->type_name(), s.payload())) {
-            j["data"] = *data;
-            return j;
-        }
+        j.update(decoder().describe(o->type_name(), s.payload()));
+        return j;
     }
-    j["payload_base64"] = base64(s.payload());
+    j["payload_base64"] = cpm::rtdb::base64(s.payload());
     return j;
 }
 

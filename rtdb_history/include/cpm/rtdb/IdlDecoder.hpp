@@ -31,6 +31,10 @@ public:
     bool has_header(const std::string& type_name) const;
     /// The names of the type's @key members, in order (none: an unkeyed or unknown type).
     std::vector<std::string> key_members(const std::string& type_name) const;
+    /// A sample for people and scripts: {"data": {…fields…}} when the type is known and the bytes
+    /// decode, else {"payload_base64": "…"}.
+    nlohmann::json describe(const std::string& type_name, const std::vector<uint8_t>& payload) const;
+
     /// The IDL type of a struct's member ("octet", "string", "sequence<double>", …); "" if none.
     std::string member_type(const std::string& type_name, const std::string& member) const;
     /// The instance key of a sample as text: the @key members' values, strings as they are,
@@ -62,5 +66,8 @@ private:
     std::map<std::string, std::vector<Member>> structs_;
     std::map<std::string, std::vector<std::string>> enums_;
 };
+
+/// RFC 4648 base64 of the bytes, with padding.
+std::string base64(const std::vector<uint8_t>& bytes);
 
 }  // namespace cpm::rtdb

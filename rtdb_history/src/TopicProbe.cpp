@@ -1,0 +1,210 @@
+#include <cpm/rtdb/TopicProbe.hpp>
+
+#include <cpm/Error.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/rtdb/IdlDecoder.hpp>
+
+#include "RawType.hpp"
+
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <sstream>
+
+namespace cpm::rtdb {
+
+namespace dds = eprosima::fastdds::dds;
+namespace rtps = eprosima::fastrtps::rtps;
+
+namespace {
+
+struct Seen
+{
+    std::string topic, type_name;
+    bool keyed = false, reliable = false, transient_local = false, is_writer = false;
+};
+
+}  // namespace
+
+struct TopicProbe::Impl : public dds::DomainParticipantListener  // a DataReaderListener too
+{
+    // Discovery, filled by Fast DDS's threads.
+    mutable std::mutex discovery_mutex;
+    std::condition_variable discovered;
+    std::map<rtps::GUID_t, Seen> endpoints;
+    std::map<rtps::GuidPrefix_t, std::string> participant_names;
+
+    // Samples, filled by the reader's listener (which holds the reader's lock: only our mutex
+    // is taken under it, and nothing DDS is called under our mutex).
+    std::mutex samples_mutex;
+    std::condition_variable arrived;
+    std::deque<ProbeSample> samples;
+
+    std::unique_ptr<Participant> participant;
+    dds::Subscriber* subscriber = nullptr;
+    dds::Topic* topic = nullptr;
+    dds::DataReader* reader = nullptr;
+
+    void on_participant_discovery(dds::DomainParticipant*, rtps::ParticipantDiscoveryInfo&& info) override
+    {
+        std::lock_guard lock(discovery_mutex);
+        const auto prefix = info.info.m_guid.guidPrefix;
+        if (info.status == rtps::ParticipantDiscoveryInfo::DISCOVERED_PARTICIPANT) {
+            participant_names[prefix] = info.info.m_participantName.to_string();
+        } else if (info.status == rtps::ParticipantDiscoveryInfo::REMOVED_PARTICIPANT ||
+                   info.status == rtps::ParticipantDiscoveryInfo::DROPPED_PARTICIPANT) {
+            participant_names.erase(prefix);
+            std::erase_if(endpoints, [&](const auto& e) { return e.first.guidPrefix == prefix; });
+        }
+    }
+
+    template <class Info>
+    void endpoint(const rtps::GUID_t& guid, const Info& info, bool is_writer, bool gone)
+    {
+        std::lock_guard lock(discovery_mutex);
+        if (gone) {
+            endpoints.erase(guid);
+            return;
+        }
+        endpoints[guid] = {info.topicName().to_string(), info.typeName().to_string(), info.topicKind() == rtps::WITH_KEY,
+                           info.m_qos.m_reliability.kind == dds::RELIABLE_RELIABILITY_QOS,
+                           info.m_qos.m_durability.kind != dds::VOLATILE_DURABILITY_QOS, is_writer};
+        discovered.notify_all();
+    }
+
+    void on_publisher_discovery(dds::DomainParticipant*, rtps::WriterDiscoveryInfo&& info) override
+    {
+        endpoint(info.info.guid(), info.info, true, info.status == rtps::WriterDiscoveryInfo::REMOVED_WRITER);
+    }
+
+    void on_subscriber_discovery(dds::DomainParticipant*, rtps::ReaderDiscoveryInfo&& info) override
+    {
+        endpoint(info.info.guid(), info.info, false, info.status == rtps::ReaderDiscoveryInfo::REMOVED_READER);
+    }
+
+    void on_data_available(dds::DataReader* r) override
+    {
+        RawSample raw;
+        dds::SampleInfo info;
+        while (r->take_next_sample(&raw, &info) == ReturnCode_t::RETCODE_OK) {
+            if (!info.valid_data) continue;
+            ProbeSample s;
+            s.payload = std::move(raw.bytes);
+            s.source_ns = uint64_t(info.source_timestamp.seconds()) * 1'000'000'000ull + info.source_timestamp.nanosec();
+            s.received_ns = get_time_ns();
+            std::lock_guard lock(samples_mutex);
+            samples.push_back(std::move(s));
+            arrived.notify_all();
+        }
+    }
+
+    std::string name_of(const rtps::GuidPrefix_t& prefix) const
+    {
+        if (auto n = participant_names.find(prefix); n != participant_names.end()) return n->second;
+        std::ostringstream s;
+        s << prefix;
+        return s.str();
+    }
+};
+
+TopicProbe::TopicProbe(const ParticipantOptions& options) : impl_(std::make_unique<Impl>())
+{
+    ParticipantOptions o = options;
+    if (o.name.empty()) o.name = "cpm_topic_probe";
+    o.discovery_listener = impl_.get();
+    impl_->participant = std::make_unique<Participant>(o);
+}
+
+TopicProbe::~TopicProbe()
+{
+    auto* p = impl_->participant->native();
+    if (impl_->reader) {
+        impl_->reader->set_listener(nullptr);
+        impl_->subscriber->delete_datareader(impl_->reader);
+    }
+    if (impl_->subscriber) p->delete_subscriber(impl_->subscriber);
+    if (impl_->topic) p->delete_topic(impl_->topic);
+    p->set_listener(nullptr);
+}
+
+std::vector<TopicInfo> TopicProbe::topics() const
+{
+    std::lock_guard lock(impl_->discovery_mutex);
+    const auto own = impl_->participant->native()->guid().guidPrefix;
+    std::map<std::string, TopicInfo> by_name;
+    for (const auto& [guid, e] : impl_->endpoints) {
+        if (guid.guidPrefix == own) continue;
+        auto& t = by_name[e.topic];
+        t.name = e.topic;
+        t.type_name = e.type_name;
+        t.keyed = t.keyed || e.keyed;
+        (e.is_writer ? t.writers : t.readers).push_back({impl_->name_of(guid.guidPrefix), e.reliable, e.transient_local});
+    }
+    std::vector<TopicInfo> out;
+    for (auto& [name, t] : by_name) out.push_back(std::move(t));
+    return out;
+}
+
+bool TopicProbe::subscribe(const std::string& topic_name, std::chrono::milliseconds timeout)
+{
+    Seen writer;
+    {
+        std::unique_lock lock(impl_->discovery_mutex);
+        const auto own = impl_->participant->native()->guid().guidPrefix;
+        auto find = [&] {
+            for (const auto& [guid, e] : impl_->endpoints) {
+                if (e.is_writer && e.topic == topic_name && guid.guidPrefix != own) {
+                    writer = e;
+                    return true;
+                }
+            }
+            return false;
+        };
+        if (!impl_->discovered.wait_for(lock, timeout, find)) return false;
+    }
+    auto* p = impl_->participant->native();
+    if (p->find_type(writer.type_name).empty()) {
+        dds::TypeSupport type(new RawType(writer.type_name, writer.keyed, IdlDecoder::lab_types()));
+        type->auto_fill_type_information(false);
+        type->auto_fill_type_object(false);
+        if (type.register_type(p) != ReturnCode_t::RETCODE_OK)
+            throw Error("topic '" + topic_name + "': cannot register its type '" + writer.type_name + "'");
+    }
+    impl_->topic = p->create_topic(topic_name, writer.type_name, dds::TOPIC_QOS_DEFAULT);
+    if (!impl_->topic) throw Error("topic '" + topic_name + "': cannot create it with type '" + writer.type_name + "'");
+    impl_->subscriber = p->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
+    dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
+    qos.reliability().kind = writer.reliable ? dds::RELIABLE_RELIABILITY_QOS : dds::BEST_EFFORT_RELIABILITY_QOS;
+    qos.durability().kind = writer.transient_local ? dds::TRANSIENT_LOCAL_DURABILITY_QOS : dds::VOLATILE_DURABILITY_QOS;
+    qos.history().kind = dds::KEEP_ALL_HISTORY_QOS;
+    qos.resource_limits().max_samples = 0;
+    qos.resource_limits().max_instances = 0;
+    qos.resource_limits().max_samples_per_instance = 0;
+    qos.endpoint().history_memory_policy = rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
+    qos.data_sharing().off();
+    impl_->reader = impl_->subscriber ? impl_->subscriber->create_datareader(impl_->topic, qos, impl_.get(),
+                                                                             dds::StatusMask::data_available())
+                                      : nullptr;
+    if (!impl_->reader) throw Error("topic '" + topic_name + "': cannot create a reader for it");
+    return true;
+}
+
+std::vector<ProbeSample> TopicProbe::take(std::chrono::milliseconds timeout)
+{
+    std::unique_lock lock(impl_->samples_mutex);
+    impl_->arrived.wait_for(lock, timeout, [&] { return !impl_->samples.empty(); });
+    std::vector<ProbeSample> out(std::make_move_iterator(impl_->samples.begin()), std::make_move_iterator(impl_->samples.end()));
+    impl_->samples.clear();
+    return out;
+}
+
+}  // namespace cpm::rtdb
