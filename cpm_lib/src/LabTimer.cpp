@@ -1,5 +1,7 @@
 #include "LabTimer.hpp"
 
+#include <cpm/Logging.hpp>
+
 #include "lab_clock.hpp"
 #include "lab_topics.hpp"
 
@@ -227,10 +229,16 @@ void LabTimer::run_real_time(const Callback& callback)
                 // Skip every tick that has already passed: no burst of late callbacks.
                 const uint64_t skipped = (now - deadline) / period_ns_ + 1;
                 missed_ += skipped;
-                log_error("timer '" + node_id_ + "': the tick at " + std::to_string(deadline - period_ns_) +
-                          " ns ended " + std::to_string(double(now - (deadline - period_ns_)) * 1e-6) +
-                          " ms after its nominal time (slow callback or late wake-up); skipped " +
-                          std::to_string(skipped) + " tick(s)");
+                // A callback that is always too slow overruns every tick: one warning a second.
+                uint64_t held = 0;
+                if (overrun_log_.allow(now, held)) {
+                    CPM_LOG_WARN("timer '%s': the tick at %llu ns ended %.1f ms after its nominal time (slow callback "
+                                 "or late wake-up); skipped %llu tick(s); %llu more overrun(s) since the last report, "
+                                 "%llu ticks missed in all",
+                                 node_id_.c_str(), (unsigned long long)(deadline - period_ns_),
+                                 double(now - (deadline - period_ns_)) * 1e-6, (unsigned long long)skipped,
+                                 (unsigned long long)held, (unsigned long long)missed_.load());
+                }
                 deadline += skipped * period_ns_;
             }
         }

@@ -1,4 +1,5 @@
 #pragma once
+#include <cpm/LogThrottle.hpp>
 #include <cpm/AsyncReader.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/Writer.hpp>
@@ -57,6 +58,7 @@ private:
     std::atomic<bool> stopping_{false};
     std::atomic<uint64_t> start_time_{0};
     std::atomic<uint64_t> missed_{0};
+    LogThrottle overrun_log_;  ///< the timer's thread only
 
     std::mutex trigger_mutex_;
     std::condition_variable trigger_changed_;

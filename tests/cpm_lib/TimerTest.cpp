@@ -1,5 +1,6 @@
 // cpm::Timer on the real clock, with the lab's start/stop triggers over DDS.
 #include <cpm/Error.hpp>
+#include <cpm/Logging.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/Timer.hpp>
@@ -16,6 +17,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <unistd.h>
 #include <atomic>
 #include <map>
 #include <mutex>
@@ -125,6 +129,31 @@ TEST_F(TimerTest, OverrunningCallbackSkipsTheMissedTicksAndCountsThem)
     for (size_t i = 1; i < actual.size(); ++i) {
         EXPECT_GE(actual[i], nominal[i]) << "tick " << i << " ran before its nominal time (catch-up burst)";
     }
+}
+
+TEST_F(TimerTest, ATimerThatOverrunsEveryTickWarnsOnceASecondWithACount)
+{
+    const std::string log = "/tmp/cpm_timer_overrun_" + std::to_string(::getpid()) + ".csv";
+    cpm::Logging::instance().set_file(log);
+    auto sut = cpm::Timer::create(node, "always_late", 10 * kMs, 0, false, false);
+    sut->start_async(recorder([](size_t) { std::this_thread::sleep_for(25ms); }));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return sut->missed_deadlines() >= 100; }, 20s));
+    sut->stop();
+    cpm::Logging::instance().set_file("");
+    std::ifstream in(log);
+    size_t warnings = 0;
+    std::string first;
+    for (std::string line; std::getline(in, line);) {
+        if (line.find("timer 'always_late'") == std::string::npos) continue;
+        if (warnings++ == 0) first = line;
+    }
+    std::remove(log.c_str());
+    // 100 and more missed ticks took at least 1.5 s (a tick and two skipped per 30 ms): not 50
+    // warnings, one or two a second.
+    EXPECT_GE(warnings, 1u);
+    EXPECT_LE(warnings, 6u) << warnings << " warnings for " << sut->missed_deadlines() << " missed ticks";
+    EXPECT_THAT(first, HasSubstr("skipped"));
+    EXPECT_THAT(first, HasSubstr(",warn,"));  // through the logger (CSV: time, node, level, message)
 }
 
 TEST_F(TimerTest, StopBeforeStartMeansNoCallbackEver)
