@@ -22,6 +22,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <thread>
@@ -535,4 +536,59 @@ TEST_F(HistoryService, AfterAFreezeLongerThanTheLeaseItRecordsEverythingAgainIts
     processes.name_regex("^cpm_history$");
     processes.alive_at(cpm::get_time_ns());
     EXPECT_TRUE(cpm_test::wait_until([&] { return !client.request(processes).objects().empty(); }, 10s));
+}
+
+TEST_F(HistoryService, PeopleReadTablesSortedByCreationTimesInUtcAndSamplesFieldByField)
+{
+    cpm::Writer<VehicleState> writer(participant, "vehicleState", {.reliable = true, .history_depth = 10, .transient_local = true});
+    VehicleState s;
+    s.vehicle_id(6);
+    s.speed(std::nan(""));
+    s.pose().x(1.0 / 3.0);
+    cpm::stamp_message(s, cpm::get_time_ns(), 0);
+    ASSERT_TRUE(writer.write(s));
+    ASSERT_TRUE(wait_for_samples("vehicleState", "6", 1)) << service.errors();
+
+    Process at({built_program("cpm"), "history", "latest", "--topic", "vehicleState", "--key", "6"});
+    ASSERT_EQ(at.wait(20s), 0) << at.errors();
+    const auto text = at.output();
+    EXPECT_NE(text.find("vehicleState/6  (VehicleState)"), std::string::npos) << text;
+    EXPECT_NE(text.find("  speed                            NaN\n"), std::string::npos) << text;
+    EXPECT_NE(text.find("  pose.x                           0.333333\n"), std::string::npos) << text;
+    EXPECT_NE(text.find("Z ("), std::string::npos) << "stamps as ISO times in UTC\n" << text;
+
+    // The dump: oldest first, UTC, and the cpm command's own participants only with --all.
+    Process dump({built_program("cpm"), "dump"});
+    ASSERT_EQ(dump.wait(20s), 0) << dump.errors();
+    std::istringstream rows(dump.output());
+    std::string header, row;
+    std::getline(rows, header);
+    EXPECT_NE(header.find("created (UTC)"), std::string::npos) << header;
+    std::vector<std::string> created;
+    while (std::getline(rows, row)) {
+        EXPECT_NE(row.substr(0, 35).find("cpm "), 7u) << "the cpm command's own participant is listed\n" << dump.output();
+        std::istringstream fields(row);
+        std::string word;
+        while (fields >> word) {
+            if (word.size() == 24 && word[10] == 'T' && word.back() == 'Z') {
+                created.push_back(word);
+                break;
+            }
+        }
+    }
+    ASSERT_GE(created.size(), 2u) << dump.output();
+    EXPECT_TRUE(std::is_sorted(created.begin(), created.end())) << dump.output();
+    Process all({built_program("cpm"), "dump", "--all", "--json"});
+    ASSERT_EQ(all.wait(20s), 0);
+    EXPECT_NE(all.output().find("\"name\":\"cpm\""), std::string::npos) << all.output();
+
+    Process changes({built_program("cpm"), "history", "changes", "--since", "-1h", "--json"});
+    ASSERT_EQ(changes.wait(20s), 0) << changes.errors();
+    std::set<std::pair<uint64_t, std::string>> events;
+    std::istringstream lines(changes.output());
+    for (std::string l; std::getline(lines, l);) {
+        auto j = nlohmann::json::parse(l);
+        EXPECT_TRUE(events.insert({j["oid"].get<uint64_t>(), j["event"].get<std::string>()}).second) << "twice: " << l;
+    }
+    EXPECT_FALSE(events.empty());
 }

@@ -9,9 +9,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <memory>
+#include <set>
 #include <sys/stat.h>
 
 namespace cpm::tools {
@@ -42,11 +45,13 @@ const char* const kHistoryHelp =
     "gap) or the service's error on stderr; 2 on a usage error.\n";
 
 const char* const kDumpHelp =
-    "usage: cpm dump [--alive] [--json] [--dds_domain N]\n"
+    "usage: cpm dump [--alive] [--all] [--json] [--dds_domain N]\n"
     "\n"
-    "One table of every object the history service holds (like kogmo_rtdb_dump -a): name, type,\n"
-    "creator, created, deleted, samples held, rate, age of the newest sample. Processes are\n"
-    "objects too. --alive: only objects alive now.\n";
+    "One table of every object the history service holds (like kogmo_rtdb_dump -a), oldest first:\n"
+    "oid, name, type, creator, created and deleted (UTC), samples held, samples lost, rate, age of\n"
+    "the newest sample. Processes are objects too; the cpm command's own are left out unless --all.\n"
+    "--alive: only objects alive now. An oid prints as its slot, with .generation once the slot was\n"
+    "used before (7, 7.2); --oid and --parent take it as printed.\n";
 
 
 using cpm::cli::UsageError;
@@ -114,37 +119,140 @@ std::string age_text(double s)
     return buf;
 }
 
-std::string time_text(uint64_t ns)
+/// A time for people: ISO-8601 in UTC (what --time accepts back), to ms or ns; "-" for none.
+std::string time_text(uint64_t ns, int decimals = 3)
 {
     if (!ns) return "-";
     const std::time_t secs = std::time_t(ns / 1'000'000'000ull);
     std::tm tm{};
     ::gmtime_r(&secs, &tm);
     char buf[48];
-    std::strftime(buf, sizeof buf, "%H:%M:%S", &tm);
-    char out[64];
-    std::snprintf(out, sizeof out, "%s.%03llu", buf, (unsigned long long)(ns / 1'000'000 % 1000));
-    return out;
+    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%S", &tm);
+    char frac[16];
+    std::snprintf(frac, sizeof frac, "%09llu", (unsigned long long)(ns % 1'000'000'000ull));
+    return std::string(buf) + "." + std::string(frac, size_t(decimals)) + "Z";
 }
 
-void print_objects(const HistoryReply& reply, bool json)
+/// An oid for people: its slot, and ".generation" once the slot was used before ("7", "7.2").
+std::string oid_text(uint64_t oid)
+{
+    const uint64_t slot = oid & 0xffffffffull, generation = oid >> 32;
+    return generation ? std::to_string(slot) + "." + std::to_string(generation) : std::to_string(slot);
+}
+
+/// --oid / --parent: the number as the table prints it ("7", "7.2") or as JSON gives it.
+uint64_t parse_oid(const std::string& flag, const std::string& text)
+{
+    const auto dot = text.find('.');
+    if (dot == std::string::npos) return uint64_t(cpm::cli::parse_integer(flag, text, 1, INT64_MAX));
+    const auto slot = uint64_t(cpm::cli::parse_integer(flag, text.substr(0, dot), 1, UINT32_MAX));
+    const auto generation = uint64_t(cpm::cli::parse_integer(flag, text.substr(dot + 1), 0, UINT32_MAX));
+    return generation << 32 | slot;
+}
+
+/// The processes of cpm's own command and probes: the dump leaves them out unless --all.
+bool own_tool(const HistoryObject& o)
+{
+    return o.is_process() && (o.name() == "cpm" || o.name().rfind("cpm_topic_probe", 0) == 0);
+}
+
+void print_objects(const HistoryReply& reply, bool json, bool show_all = true)
 {
     const uint64_t now = cpm::get_time_ns();
+    std::vector<HistoryObject> rows;
+    for (const auto& o : reply.objects()) {
+        if (show_all || !own_tool(o)) rows.push_back(o);
+    }
+    std::stable_sort(rows.begin(), rows.end(), [](const HistoryObject& a, const HistoryObject& b) { return a.created_ts() < b.created_ts(); });
     if (json) {
-        for (const auto& o : reply.objects()) std::printf("%s\n", object_json(o, now).dump().c_str());
+        for (const auto& o : rows) std::printf("%s\n", object_json(o, now).dump().c_str());
         return;
     }
-    std::printf("%-5s %-28s %-22s %-20s %-12s %-12s %8s %6s %9s %10s\n", "oid", "name", "type", "creator", "created", "deleted",
-                "samples", "lost", "rate", "newest");
-    for (const auto& o : reply.objects()) {
+    std::printf("%-6s %-28s %-22s %-18s %-24s %-24s %8s %6s %9s %10s\n", "oid", "name", "type", "creator", "created (UTC)",
+                "deleted (UTC)", "samples", "lost", "rate", "newest");
+    for (const auto& o : rows) {
         const auto j = object_json(o, now);
         char rate[32];
         const double hz = j["rate_hz"].get<double>();
         if (hz > 0) std::snprintf(rate, sizeof rate, "%.1f Hz", hz);
         else std::snprintf(rate, sizeof rate, "-");
-        std::printf("%-5llu %-28s %-22s %-20s %-12s %-12s %8llu %6llu %9s %10s\n", (unsigned long long)o.oid(), o.name().c_str(),
+        std::printf("%-6s %-28s %-22s %-18s %-24s %-24s %8llu %6llu %9s %10s\n", oid_text(o.oid()).c_str(), o.name().c_str(),
                     o.type_name().c_str(), o.creator().c_str(), time_text(o.created_ts()).c_str(), time_text(o.deleted_ts()).c_str(),
                     (unsigned long long)o.samples_held(), (unsigned long long)o.samples_lost(), rate, age_text(j["newest_age_s"]).c_str());
+    }
+}
+
+/// `history changes`: one row per creation or deletion after `since`, in time order.
+void print_changes(const HistoryReply& reply, bool json, uint64_t since)
+{
+    struct Event
+    {
+        uint64_t t;
+        const char* kind;
+        const HistoryObject* o;
+    };
+    std::vector<Event> events;
+    std::set<uint64_t> seen;  // an object created and deleted since comes in both of the reply's lists
+    for (const auto& o : reply.objects()) {
+        if (!seen.insert(o.oid()).second) continue;
+        if (o.created_ts() > since) events.push_back({o.created_ts(), "created", &o});
+        if (o.deleted_ts() > since) events.push_back({o.deleted_ts(), "deleted", &o});
+    }
+    std::stable_sort(events.begin(), events.end(), [](const Event& a, const Event& b) { return a.t < b.t; });
+    const uint64_t now = cpm::get_time_ns();
+    if (!json) std::printf("%-24s %-8s %-6s %-28s %-22s %s\n", "time (UTC)", "event", "oid", "name", "type", "creator");
+    for (const auto& e : events) {
+        if (json) {
+            auto j = object_json(*e.o, now);
+            j["event"] = e.kind;
+            j["t_ns"] = e.t;
+            std::printf("%s\n", j.dump().c_str());
+        } else {
+            std::printf("%-24s %-8s %-6s %-28s %-22s %s\n", time_text(e.t).c_str(), e.kind, oid_text(e.o->oid()).c_str(),
+                        e.o->name().c_str(), e.o->type_name().c_str(), e.o->creator().c_str());
+        }
+    }
+}
+
+/// A decoded value for people: floats to 6 significant digits, NaN and infinities by name.
+std::string value_text(const nlohmann::json& v)
+{
+    if (v.is_number_float()) {
+        const double d = v.get<double>();
+        if (std::isnan(d)) return "NaN";
+        if (std::isinf(d)) return d > 0 ? "inf" : "-inf";
+        char buf[32];
+        std::snprintf(buf, sizeof buf, "%.6g", d);
+        return buf;
+    }
+    if (v.is_string()) return v.get<std::string>();
+    if (v.is_array()) {
+        std::string out = "[";
+        for (size_t i = 0; i < v.size(); ++i) out += (i ? ", " : "") + value_text(v[i]);
+        return out + "]";
+    }
+    if (v.is_object()) {
+        std::string out = "{";
+        for (auto it = v.begin(); it != v.end(); ++it) out += (it == v.begin() ? "" : ", ") + it.key() + ": " + value_text(it.value());
+        return out + "}";
+    }
+    return v.dump();
+}
+
+/// One field a line, nested structs as dotted names ("pose.x"), time stamps as times.
+void print_fields(const nlohmann::json& data, const std::string& prefix)
+{
+    for (auto it = data.begin(); it != data.end(); ++it) {
+        const std::string name = prefix + it.key();
+        const auto& v = it.value();
+        if (v.is_object() && v.size() == 1 && v.contains("nanoseconds")) {  // a TimeStamp
+            const uint64_t ns = v["nanoseconds"].get<uint64_t>();
+            std::printf("  %-32s %s (%llu ns)\n", name.c_str(), time_text(ns, 9).c_str(), (unsigned long long)ns);
+        } else if (v.is_object()) {
+            print_fields(v, name + ".");
+        } else {
+            std::printf("  %-32s %s\n", name.c_str(), value_text(v).c_str());
+        }
     }
 }
 
@@ -159,11 +267,19 @@ void print_samples(const HistoryReply& reply, bool json)
         auto j = sample_json(s, o);
         if (json) {
             std::printf("%s\n", j.dump().c_str());
-        } else {
-            std::printf("%s%s  commit %llu  data %llu  valid_after %llu  %s\n", o ? o->name().c_str() : "", o ? ":" : "",
-                        (unsigned long long)s.commit_ns(), (unsigned long long)s.data_ns(), (unsigned long long)s.valid_after_ns(),
-                        j.contains("data") ? j["data"].dump().c_str() : ("payload " + j["payload_base64"].get<std::string>()).c_str());
+            continue;
         }
+        if (i > 0) std::printf("\n");
+        std::printf("%s%s%s\n", o ? o->name().c_str() : "(unknown object)", o ? "  " : "",
+                    o ? ("(" + o->type_name() + ")").c_str() : "");
+        if (s.status() != "ok") std::printf("  %-32s %s\n", "status", s.status().c_str());
+        const bool source_time = o && o->data_time() == "source_timestamp";
+        std::printf("  %-32s %s\n", "committed", time_text(s.commit_ns(), 9).c_str());
+        std::printf("  %-32s %s%s\n", "data time", time_text(s.data_ns(), 9).c_str(),
+                    source_time ? "  (the writer's source timestamp: the type has no Header)" : "");
+        if (!source_time) std::printf("  %-32s %s\n", "valid after", time_text(s.valid_after_ns(), 9).c_str());
+        if (j.contains("data")) print_fields(j["data"], "");
+        else std::printf("  %-32s %s\n", "payload_base64", j["payload_base64"].get<std::string>().c_str());
     }
 }
 
@@ -215,7 +331,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     rq.kind(kind->second);
     rq.topic(parsed.get("--topic"));
     rq.key(parsed.get("--key"));
-    if (parsed.has("--oid")) rq.oid(uint64_t(cpm::cli::parse_integer("--oid", parsed.get("--oid"), 1, INT64_MAX)));
+    if (parsed.has("--oid")) rq.oid(parse_oid("--oid", parsed.get("--oid")));
     const std::string by = parsed.get("--by", "commit");
     if (by != "commit" && by != "data") throw UsageError(command + ": --by '" + by + "': expected commit or data");
     rq.by(by);
@@ -247,7 +363,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     }
     rq.name_regex(parsed.get("--name"));
     rq.type_name(parsed.get("--type"));
-    if (parsed.has("--parent")) rq.parent(uint64_t(cpm::cli::parse_integer("--parent", parsed.get("--parent"), 1, INT64_MAX)));
+    if (parsed.has("--parent")) rq.parent(parse_oid("--parent", parsed.get("--parent")));
     rq.creator(parsed.get("--creator"));
     if (parsed.has("--alive-at")) rq.alive_at(parse_time("--alive-at", parsed.get("--alive-at")));
 
@@ -258,7 +374,8 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
         std::fprintf(stderr, "cpm history %s: %s: %s\n", verb.c_str(), reply.status().c_str(), reply.error().c_str());
         return 1;
     }
-    if (about_objects) print_objects(reply, json);
+    if (verb == "changes") print_changes(reply, json, rq.t0());
+    else if (about_objects) print_objects(reply, json);
     else print_samples(reply, json);
     if (reply.truncated()) std::fprintf(stderr, "cpm history %s: more samples matched than --limit; the oldest are shown\n", verb.c_str());
     if (reply.lost() > 0)
@@ -275,7 +392,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
 
 int dump_command(const std::vector<std::string>& args)
 {
-    auto parsed = cpm::cli::parse_args(args, {{"--json", false}, {"--alive", false}}, "cpm dump");
+    auto parsed = cpm::cli::parse_args(args, {{"--json", false}, {"--alive", false}, {"--all", false}}, "cpm dump");
     if (!parsed.positional.empty()) throw UsageError("cpm dump: unexpected argument '" + parsed.positional[0] + "'");
     cpm::HistoryClient client(client_participant());
     HistoryRequest rq;
@@ -289,7 +406,7 @@ int dump_command(const std::vector<std::string>& args)
         std::fprintf(stderr, "cpm dump: %s: %s\n", reply.status().c_str(), reply.error().c_str());
         return 1;
     }
-    print_objects(reply, parsed.has("--json"));
+    print_objects(reply, parsed.has("--json"), parsed.has("--all"));
     return 0;
 }
 
