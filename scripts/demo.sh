@@ -59,9 +59,10 @@ if [ $status -eq 0 ]; then
   "$bin/cpm" history at --topic fsmStatus --key 5 --time -3s || status=$?
   "$bin/cpm" history at --topic vehicleState --key 5 --time -3s || status=$?
   echo
-  echo "      Ask more while it runs: cpm history list | search --name Range | range --topic"
-  echo "      rangeSensors --key 5 --from -5s --to -4s --json | wait --topic vehicleState --key 5;"
-  echo "      'cpm history --help' lists them all."
+  echo "      The demo stops its cpm_history now. To ask more, run one yourself: 'build/bin/cpm_history &'"
+  echo "      keeps the last 10 s of every topic (--window 60s for more), then cpm history list |"
+  echo "      search --name Range | range --topic rangeSensors --key 5 --from -5s --to -4s --json |"
+  echo "      wait --topic vehicleState --key 5 ('cpm history --help' lists them all)."
 else
   echo "demo: the closed loop FAILED (exit $status); the car's log: /tmp/cpm_demo_sim.$$.out" >&2
 fi

@@ -239,7 +239,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         HistoryReply reply = answer(store_, rq);
         cpm::stamp_message(reply, cpm::get_time_ns(), 0);
         ++requests;
-        if (reply.status() == "error" || reply.status() == "unknown object") ++bad_requests;
+        if (reply.status() == "error" || reply.status() == "unknown_object") ++bad_requests;
         replies->write(reply);
     }
 

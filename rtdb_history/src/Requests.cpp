@@ -210,7 +210,7 @@ HistoryReply answer(const Store& store, const HistoryRequest& rq)
     try {
         fill(store, rq, reply);
     } catch (const UnknownObject& e) {
-        reply.status("unknown object");
+        reply.status("unknown_object");
         reply.error(e.what());
     } catch (const std::exception& e) {
         reply.objects().clear();

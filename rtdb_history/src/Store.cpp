@@ -12,12 +12,12 @@ const char* to_string(Status s)
 {
     switch (s) {
     case Status::ok: return "ok";
-    case Status::not_found: return "not found";
+    case Status::not_found: return "not_found";
     case Status::evicted: return "evicted";
-    case Status::not_yet: return "not yet";
+    case Status::not_yet: return "not_yet";
     case Status::timeout: return "timeout";
     case Status::gap: return "gap";
-    case Status::unknown_object: return "unknown object";
+    case Status::unknown_object: return "unknown_object";
     }
     return "?";
 }

@@ -16,3 +16,24 @@ cmake --build "$work/consumer" > "$work/build.log" || { cat "$work/build.log"; e
 ldd "$work/consumer/installed_consumer" | grep -E "libcpm" | grep -q "$work/prefix" \
   || { echo "installed_consumer does not use the installed libcpm:"; ldd "$work/consumer/installed_consumer"; exit 1; }
 "$work/consumer/installed_consumer"
+
+# The README's first C++ example, exactly as printed there, builds against the installed package
+# at the language level the README declares (C++20).
+mkdir -p "$work/readme"
+awk '/^```cpp$/ {inside = 1; next} inside && /^```$/ {exit} inside {print}' "$source_dir/README.md" > "$work/readme/main.cpp"
+[ -s "$work/readme/main.cpp" ] || { echo "README.md has no C++ example"; exit 1; }
+cat > "$work/readme/CMakeLists.txt" <<'CMAKE'
+cmake_minimum_required(VERSION 3.16)
+project(readme_example LANGUAGES CXX)
+find_package(cpm REQUIRED)
+add_executable(readme_example main.cpp)
+target_compile_features(readme_example PRIVATE cxx_std_20)
+target_link_libraries(readme_example PRIVATE cpm::cpm)
+CMAKE
+cmake -S "$work/readme" -B "$work/readme/build" -G Ninja -DCMAKE_PREFIX_PATH="$work/prefix" > "$work/readme.log" \
+  && cmake --build "$work/readme/build" >> "$work/readme.log" || { echo "the README's example does not build:"; cat "$work/readme.log"; exit 1; }
+"$work/readme/build/readme_example"
+
+# The Cyclone DDS configuration the README points foreign programs at is installed.
+[ -f "$work/prefix/share/cpm/cyclonedds-localhost.xml" ] || { echo "share/cpm/cyclonedds-localhost.xml is not installed"; exit 1; }
+echo "installed: the consumer, the README's example and the Cyclone configuration"

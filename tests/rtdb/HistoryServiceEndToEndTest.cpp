@@ -103,8 +103,8 @@ TEST_F(HistoryService, RecordsAWriterProcessAndAnswersTheTypedClientByCommitAndD
     auto again = client.at<VehicleState>("vehicleState", 3, by_commit.commit_ns);
     EXPECT_EQ(again.sample.pose().x(), 30);
     EXPECT_EQ(client.older<VehicleState>("vehicleState", 3, by_commit.commit_ns).sample.pose().x(), 29);
-    EXPECT_EQ(client.at<VehicleState>("vehicleState", 3, 1000).status, "not found");  // before the first
-    EXPECT_EQ(client.younger<VehicleState>("vehicleState", 3, latest.commit_ns).status, "not yet");
+    EXPECT_EQ(client.at<VehicleState>("vehicleState", 3, 1000).status, "not_found");  // before the first
+    EXPECT_EQ(client.younger<VehicleState>("vehicleState", 3, latest.commit_ns).status, "not_yet");
 }
 
 TEST_F(HistoryService, TheCommandPrintsEveryFieldAsJsonAndDumpListsTheObjects)
@@ -162,7 +162,7 @@ TEST_F(HistoryService, TheCommandPrintsEveryFieldAsJsonAndDumpListsTheObjects)
 
     Process unknown({built_program("cpm"), "history", "latest", "--topic", "noSuchTopic"});
     EXPECT_EQ(unknown.wait(20s), 1);
-    EXPECT_NE(unknown.errors().find("unknown object: no object 'noSuchTopic'"), std::string::npos) << unknown.errors();
+    EXPECT_NE(unknown.errors().find("cpm history latest: no object 'noSuchTopic'"), std::string::npos) << unknown.errors();
     Process usage({built_program("cpm"), "history", "at", "--topic", "vehicleState", "--time", "yesterday"});
     EXPECT_EQ(usage.wait(20s), 2);
     EXPECT_NE(usage.errors().find("--time: 'yesterday' is not a time"), std::string::npos) << usage.errors();

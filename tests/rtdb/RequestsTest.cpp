@@ -49,8 +49,8 @@ TEST(HistoryRequests, AnswersCarryTheRequestIdsTheObjectAndTheSamples)
     EXPECT_EQ(r.objects()[0].name(), "vehicleState/3");
     EXPECT_EQ(r.objects()[0].samples_held(), 3u);
     EXPECT_EQ(f.ask("range", 100, 300).samples().size(), 2u);
-    EXPECT_EQ(f.ask("younger", 300).status(), "not yet");
-    EXPECT_EQ(f.ask("older", 100).status(), "not found");
+    EXPECT_EQ(f.ask("younger", 300).status(), "not_yet");
+    EXPECT_EQ(f.ask("older", 100).status(), "not_found");
 }
 
 TEST(HistoryRequests, MalformedRequestsGetAnErrorNamingWhatIsWrong)
@@ -71,7 +71,7 @@ TEST(HistoryRequests, MalformedRequestsGetAnErrorNamingWhatIsWrong)
     rq.topic("vehicleState");
     rq.key("9");
     auto unknown = answer(f.store, rq);
-    EXPECT_EQ(unknown.status(), "unknown object");
+    EXPECT_EQ(unknown.status(), "unknown_object");
     EXPECT_NE(unknown.error().find("no object 'vehicleState/9'"), std::string::npos) << unknown.error();
     rq.kind("search");
     rq.name_regex("(open");
@@ -102,7 +102,7 @@ TEST(HistoryRequests, SnapshotAnswersEachObjectWithItsOwnStatus)
     ASSERT_EQ(r.samples().size(), 2u);
     EXPECT_EQ(r.samples()[0].status(), "ok");
     EXPECT_EQ(r.samples()[0].commit_ns(), 200u);
-    EXPECT_EQ(r.samples()[1].status(), "not found");
+    EXPECT_EQ(r.samples()[1].status(), "not_found");
     EXPECT_EQ(r.objects()[1].name(), "rangeSensors/3");
 }
 

@@ -129,32 +129,32 @@ TEST_P(StoreQueryMatrix, AnswersAsSpecified)
 
 INSTANTIATE_TEST_SUITE_P(
     ByCommitTime, StoreQueryMatrix,
-    ::testing::Values(Case{"empty", By::commit, 150, "not found", "not found", "not found", "not found"},
-                      Case{"before first", By::commit, 50, "not found", "not found", "c100", "c100"},
+    ::testing::Values(Case{"empty", By::commit, 150, "not_found", "not_found", "not_found", "not_found"},
+                      Case{"before first", By::commit, 50, "not_found", "not_found", "c100", "c100"},
                       Case{"equal", By::commit, 200, "c200", "c100", "c300", "c200"},
                       Case{"between", By::commit, 250, "c200", "c200", "c300", "c300"},
-                      Case{"after last", By::commit, 400, "c300", "c300", "not yet", "not yet"},
+                      Case{"after last", By::commit, 400, "c300", "c300", "not_yet", "not_yet"},
                       Case{"evicted", By::commit, 150, "evicted", "evicted", "c200", "c200"},
-                      Case{"evicted", By::commit, 20, "not found", "not found", "evicted", "evicted"},
+                      Case{"evicted", By::commit, 20, "not_found", "not_found", "evicted", "evicted"},
                       Case{"deleted", By::commit, 250, "c200", "c200", "c300", "c300"},
-                      Case{"purged", By::commit, 250, "unknown object", "unknown object", "unknown object", "unknown object"}));
+                      Case{"purged", By::commit, 250, "unknown_object", "unknown_object", "unknown_object", "unknown_object"}));
 
 INSTANTIATE_TEST_SUITE_P(
     ByDataTime, StoreQueryMatrix,
-    ::testing::Values(Case{"empty", By::data, 15, "not found", "not found", "not found", "not found"},
-                      Case{"before first", By::data, 5, "not found", "not found", "c100", "c100 c300 c200"},
+    ::testing::Values(Case{"empty", By::data, 15, "not_found", "not_found", "not_found", "not_found"},
+                      Case{"before first", By::data, 5, "not_found", "not_found", "c100", "c100 c300 c200"},
                       Case{"equal", By::data, 20, "c300", "c100", "c200", "c300 c200"},
                       Case{"between", By::data, 25, "c300", "c300", "c200", "c200"},
-                      Case{"after last", By::data, 40, "c200", "c200", "not yet", "not yet"},
+                      Case{"after last", By::data, 40, "c200", "c200", "not_yet", "not_yet"},
                       Case{"evicted", By::data, 15, "evicted", "evicted", "c300", "c300 c200"},
-                      Case{"evicted", By::data, 5, "not found", "not found", "evicted", "c300 c200"},
+                      Case{"evicted", By::data, 5, "not_found", "not_found", "evicted", "c300 c200"},
                       Case{"deleted", By::data, 25, "c300", "c300", "c200", "c200"},
-                      Case{"purged", By::data, 25, "unknown object", "unknown object", "unknown object", "unknown object"}));
+                      Case{"purged", By::data, 25, "unknown_object", "unknown_object", "unknown_object", "unknown_object"}));
 
 TEST(StoreQuery, LatestInEverySituation)
 {
     Fixture f;
-    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "not found");
+    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "not_found");
     f.fill();
     EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "c300");  // the last committed, whatever its data time
     f.store.mark_deleted(f.oid, 310);
@@ -162,7 +162,7 @@ TEST(StoreQuery, LatestInEverySituation)
     f.store.expire(300 + kWindow + 1);
     EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "evicted");
     f.store.expire(310 + kWindow + 1);
-    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "unknown object");
+    EXPECT_EQ(ask(f.store, f.oid, Q::latest, 0, By::commit), "unknown_object");
 }
 
 TEST(StoreQuery, CommitTimesStrictlyIncreaseWhenTheClockTies)
@@ -193,7 +193,7 @@ TEST(StoreQuery, RangeHonoursItsLimitAndSaysSo)
     auto r = f.store.range(f.oid, 0, 1000, By::commit, 2);
     EXPECT_EQ(answer(r), "c100 c200");
     EXPECT_TRUE(r.truncated);
-    EXPECT_EQ(answer(f.store.range(f.oid, 300, 200)), "not found");  // t1 < t0 is empty
+    EXPECT_EQ(answer(f.store.range(f.oid, 300, 200)), "not_found");  // t1 < t0 is empty
 }
 
 /// What a store holding `window` of the samples a test commits must answer, found by scanning

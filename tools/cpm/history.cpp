@@ -41,7 +41,7 @@ const char* const kHistoryHelp =
     "when the service received it; data: the sample's create_stamp.\n"
     "Output: a table, or one JSON object per line (--json) with every field of a cpm type\n"
     "decoded; a type cpm does not know is shown with its stamps and payload_base64.\n"
-    "Exit code 0 when the answer is ok; 1 with the status (not found, evicted, not yet, timeout,\n"
+    "Exit code 0 when the answer is ok; 1 with the status (not_found, evicted, not_yet, timeout,\n"
     "gap) or the service's error on stderr; 2 on a usage error.\n";
 
 const char* const kDumpHelp =
@@ -370,8 +370,9 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     cpm::HistoryClient client(client_participant());
     const HistoryReply reply = client.request(rq);
     const bool json = parsed.has("--json");
-    if (reply.status() == "error" || reply.status() == "unknown object") {
-        std::fprintf(stderr, "cpm history %s: %s: %s\n", verb.c_str(), reply.status().c_str(), reply.error().c_str());
+    if (reply.status() == "error" || reply.status() == "unknown_object") {
+        std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(),
+                     reply.status() == "error" ? "the service refused the request: " : "", reply.error().c_str());
         return 1;
     }
     if (verb == "changes") print_changes(reply, json, rq.t0());

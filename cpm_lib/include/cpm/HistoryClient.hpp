@@ -27,7 +27,7 @@ namespace cpm {
 template <class T>
 struct HistoryResult
 {
-    std::string status;  ///< ok, not found, evicted, not yet, timeout, gap, unknown object, error
+    std::string status;  ///< ok, not_found, evicted, not_yet, timeout, gap, unknown_object, error (as DESIGN §6 and the JSON spell them)
     std::string error;   ///< why, when the request was refused
     uint64_t commit_ns = 0, data_ns = 0, valid_after_ns = 0, source_ns = 0;
     T sample{};
