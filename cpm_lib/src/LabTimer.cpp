@@ -71,6 +71,9 @@ LabTimer::LabTimer(Participant& participant, std::string node_id, uint64_t perio
     trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
         [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, kSystemTriggerTopic,
         lab_control_reader_options());
+    live_trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
+        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, kSystemTriggerTopic,
+        lab_control_live_reader_options());
 }
 
 LabTimer::~LabTimer()
@@ -84,6 +87,7 @@ LabTimer::~LabTimer()
         }
     }
     trigger_reader_.reset();  // no more on_trigger calls before the descriptors go
+    live_trigger_reader_.reset();
     close(timer_fd_);
     close(stop_fd_);
 }

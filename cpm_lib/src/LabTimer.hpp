@@ -67,6 +67,7 @@ private:
 
     std::unique_ptr<Writer<ReadyStatus>> ready_writer_;
     std::unique_ptr<AsyncReader<SystemTrigger>> trigger_reader_;
+    std::unique_ptr<AsyncReader<SystemTrigger>> live_trigger_reader_;  ///< matches volatile writers too
     std::thread thread_;
 };
 

@@ -21,6 +21,7 @@ struct TimeMaster::Impl
 {
     explicit Impl(Participant& participant)
         : ready(participant, kReadyStatusTopic, lab_control_reader_options()),
+          live_ready(participant, kReadyStatusTopic, lab_control_live_reader_options()),
           trigger(participant, kSystemTriggerTopic, lab_control_writer_options())
     {
     }
@@ -29,9 +30,11 @@ struct TimeMaster::Impl
     // value is the latest: Fast DDS was seen delivering an older announcement after a newer one.
     void collect()
     {
-        for (auto& r : ready.take()) {
-            uint64_t& t = announced[r.source_id()];
-            t = std::max(t, r.next_start_stamp().nanoseconds());
+        for (auto* reader : {&ready, &live_ready}) {
+            for (auto& r : reader->take()) {
+                uint64_t& t = announced[r.source_id()];
+                t = std::max(t, r.next_start_stamp().nanoseconds());
+            }
         }
     }
     std::vector<std::string> missing(const std::vector<std::string>& nodes) const
@@ -49,7 +52,8 @@ struct TimeMaster::Impl
         trigger.write(t);
     }
 
-    ReaderAbstract<ReadyStatus> ready;
+    ReaderAbstract<ReadyStatus> ready;       ///< what was announced before it matched
+    ReaderAbstract<ReadyStatus> live_ready;  ///< every announcement since, volatile writers' too
     Writer<SystemTrigger> trigger;
     std::map<std::string, uint64_t> announced;
 };
@@ -107,8 +111,11 @@ uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uin
             throw Error("TimeMaster: simulated time stuck at " + std::to_string(now) + " ns: no announcement from " +
                         join(waiting_for) + " within " + std::to_string(step_timeout.count()) + " ms");
         }
-        impl_->ready.wait_for_data(std::chrono::duration_cast<std::chrono::milliseconds>(remaining) +
-                                   std::chrono::milliseconds(1));
+        // Every announcement comes to the live reader, except those sent before it matched,
+        // which only the transient-local one holds: wait on the live one, in short slices.
+        impl_->live_ready.wait_for_data(std::min(std::chrono::duration_cast<std::chrono::milliseconds>(remaining) +
+                                                     std::chrono::milliseconds(1),
+                                                 std::chrono::milliseconds(10)));
     }
 }
 
@@ -121,7 +128,7 @@ uint64_t TimeMaster::start_real_time(const std::vector<std::string>& node_ids, s
             throw Error("TimeMaster: not ready within " + std::to_string(ready_timeout.count()) +
                         " ms: " + join(impl_->missing(node_ids)));
         }
-        impl_->ready.wait_for_data(std::chrono::milliseconds(100));
+        impl_->live_ready.wait_for_data(std::chrono::milliseconds(20));
     }
     const uint64_t start = get_time_ns() + static_cast<uint64_t>(start_delay.count()) * 1'000'000ull;
     impl_->send(start);

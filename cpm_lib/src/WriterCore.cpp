@@ -3,6 +3,7 @@
 #include "MatchCounter.hpp"
 #include "ParticipantCore.hpp"
 #include "QosFromOptions.hpp"
+#include "log_internal.hpp"
 
 #include <cpm/Error.hpp>
 
@@ -11,6 +12,9 @@
 #include <fastdds/dds/publisher/Publisher.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TopicDataType.hpp>
+
+#include <mutex>
+#include <set>
 
 namespace cpm::detail {
 
@@ -30,6 +34,21 @@ struct WriterCore::Impl : public dds::DataWriterListener
     {
         matched.set(status.current_count);
     }
+
+    void on_offered_incompatible_qos(dds::DataWriter*, const dds::OfferedIncompatibleQosStatus& status) override
+    {
+        const int policy = static_cast<int>(status.last_policy_id);
+        {
+            std::lock_guard<std::mutex> lock(incompatible_mutex);
+            if (!incompatible_reported.insert(policy).second) return;  // once per policy
+        }
+        log_warning_later(incompatible_qos_message(false, topic_name, policy, reliable, transient_local));
+    }
+
+    std::string topic_name;
+    bool reliable = false, transient_local = false;
+    std::mutex incompatible_mutex;
+    std::set<int> incompatible_reported;
 };
 
 WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
@@ -39,8 +58,12 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
     const std::unique_ptr<dds::TopicDataType> type(make_type());
     const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type);
+    impl_->topic_name = topic;
+    impl_->reliable = options.reliable;
+    impl_->transient_local = options.transient_local;
     impl_->writer = impl_->topic.participant().publisher()->create_datawriter(
-        impl_->topic.topic(), qos, impl_.get(), dds::StatusMask::publication_matched());
+        impl_->topic.topic(), qos, impl_.get(),
+        dds::StatusMask::publication_matched() << dds::StatusMask::offered_incompatible_qos());
     if (impl_->writer == nullptr) {
         throw Error("Writer on topic '" + topic + "': DDS refused to create the writer (inconsistent options?)");
     }

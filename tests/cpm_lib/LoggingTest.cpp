@@ -8,6 +8,7 @@
 
 #include <Log.h>
 #include <LogLevel.h>
+#include <VehicleState.h>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -163,4 +164,30 @@ TEST_F(LoggingTest, MessagesWrittenWhileAnotherThreadCreatesTheTopicWriterAreAll
     for (const auto& l : logs) contents.push_back(l.content());
     std::sort(contents.begin(), contents.end());
     EXPECT_EQ(contents, (std::vector<std::string>{"burst-0", "burst-1", "burst-2", "burst-3", "burst-4", "burst-5", "burst-6", "burst-7"}));
+}
+
+TEST_F(LoggingTest, AnIncompatibleQosMatchIsLoggedOnceNamingTopicPolicyAndBothSides)
+{
+    const std::string file = "/tmp/cpm_log_qos_" + std::to_string(getpid()) + ".csv";
+    cpm::Logging::instance().set_file(file);
+    const std::string topic = cpm_test::unique_topic("qosMismatch");
+    // A reader that wants what was sent before it joined, and a writer that keeps nothing.
+    cpm::ReaderAbstract<VehicleState> wants_history(monitor_side, topic, {.reliable = true, .transient_local = true});
+    cpm::Writer<VehicleState> keeps_nothing(monitor_side, topic, {.reliable = true});
+    const std::string expected = "reader on topic '" + topic +
+                                 "': a writer with incompatible QoS (durability) will not be matched: this reader "
+                                 "requests transient_local, the writer offers volatile";
+    auto count = [&] {
+        std::ifstream in(file);
+        size_t n = 0;
+        for (std::string line; std::getline(in, line);) n += line.find(expected) != std::string::npos;
+        return n;
+    };
+    EXPECT_TRUE(cpm_test::wait_until([&] { return count() >= 1; }, 10000ms)) << "not logged: " << expected;
+    EXPECT_EQ(keeps_nothing.matched_subscriptions(), 0u);
+    cpm::Writer<VehicleState> another(monitor_side, topic, {.reliable = true});  // the same mismatch again
+    std::this_thread::sleep_for(500ms);  // the window in which a second report would come
+    EXPECT_EQ(count(), 1u) << "reported more than once";
+    cpm::Logging::instance().set_file("");
+    std::remove(file.c_str());
 }

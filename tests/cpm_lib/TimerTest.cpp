@@ -229,6 +229,21 @@ TEST_F(TimerTest, StopTriggerEndsARunningTimer)
     EXPECT_TRUE(cpm_test::wait_until([&] { return stopped.load(); }, 5000ms));
 }
 
+TEST_F(TimerTest, APlainReliableTriggerWriterAsCpmLabsStartsTheTimers)
+{
+    // cpm_lab's LCC writes SystemTrigger with a reliable, volatile writer: no transient-local.
+    cpm::Writer<SystemTrigger> lcc(lab, "systemTrigger", {.reliable = true, .history_depth = 1});
+    auto sut = cpm::Timer::create(node, "cpm_lab_node", 10 * kMs, 0, true, false);
+    sut->start_async(recorder());
+    ASSERT_TRUE(saw_ready_from("cpm_lab_node"));
+    ASSERT_TRUE(lcc.wait_for_matched(1, 5000ms)) << "no timer reader matches a volatile writer";
+    SystemTrigger t;
+    t.next_start().nanoseconds(cpm::get_time_ns() + 100 * kMs);
+    ASSERT_TRUE(lcc.write(t));
+    EXPECT_TRUE(cpm_test::wait_until([&] { return calls() >= 3; }, 5000ms)) << "the trigger started no timer";
+    sut->stop();
+}
+
 TEST_F(TimerTest, OffsetNotSmallerThanPeriodIsAnErrorNamingBoth)
 {
     try {
