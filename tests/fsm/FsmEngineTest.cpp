@@ -1,3 +1,4 @@
+#include <cpm/fsm/FsmNode.hpp>
 #include <cpm/fsm/Loader.hpp>
 
 #include <gtest/gtest.h>
@@ -180,4 +181,41 @@ TEST(FsmEngine, SensorLevelFiresOnlyPastTheLevelAndDistanceExactlyAtIt)
     EXPECT_EQ(sut->active().id(), 1);
     sut->tick(at(0.06, 0.25), 0.02);
     EXPECT_EQ(sut->active().id(), 2);
+}
+
+TEST(FsmNode, InputsComeFromTheCarsMessagesAndTheReportMeasuresTheFollowedWall)
+{
+    VehicleState state;
+    state.odometer_distance(2.5);
+    state.pose().yaw(0.25);
+    state.speed(0.5);
+    RangeSensors ranges;
+    ranges.front(1.5);
+    ranges.left(3.0);
+    ranges.right(0.45);
+    ArucoMarkers markers;
+    ArucoMarker m;
+    m.id(7);
+    m.pose().x(1.0);
+    m.distance(1.1);
+    markers.markers({m});
+    auto in = cpm::fsm::inputs_from(state, ranges, &markers, 12.0);
+    EXPECT_EQ(in.t, 12.0);
+    EXPECT_EQ(in.odometer, 2.5);
+    EXPECT_EQ(in.yaw, 0.25);
+    EXPECT_EQ(in.right, 0.45);
+    ASSERT_EQ(in.markers.size(), 1u);
+    EXPECT_EQ(in.markers[0].id, 7);
+    EXPECT_TRUE(cpm::fsm::inputs_from(state, ranges, nullptr, 12.0).markers.empty());
+
+    cpm::fsm::RunReport sut({{0, {"right", 0.5}}});
+    for (int i = 0; i < 10; ++i) {
+        in.odometer = 2.5 + 0.1 * i;
+        in.right = i < 9 ? 0.52 : 0.9;  // one door niche
+        sut.add(in, 0);
+    }
+    const auto text = sut.text();
+    EXPECT_NE(text.find("report: driven 0.90 m, heading changed by 0 deg"), std::string::npos) << text;
+    EXPECT_NE(text.find("state 0, right wall at 0.50 m, 10 ticks"), std::string::npos) << text;
+    EXPECT_NE(text.find("median 0.020, 90 % 0.400, max 0.400 m"), std::string::npos) << text;
 }

@@ -1,0 +1,235 @@
+#include <cpm/fsm/FsmNode.hpp>
+
+#include <cpm/Logging.hpp>
+#include <cpm/Reader.hpp>
+#include <cpm/Timer.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/percentile.hpp>
+#include <cpm/stamp_message.hpp>
+
+#include <FsmStatus.h>
+#include <StopRequest.h>
+#include <VehicleCommandDirect.h>
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdio>
+
+namespace cpm::fsm {
+
+Inputs inputs_from(const VehicleState& state, const RangeSensors& ranges, const ArucoMarkers* markers, double t_s)
+{
+    Inputs in;
+    in.t = t_s;
+    in.odometer = state.odometer_distance();
+    in.yaw = state.pose().yaw();
+    in.speed = state.speed();
+    in.front = ranges.front();
+    in.left = ranges.left();
+    in.right = ranges.right();
+    if (markers) {
+        for (const auto& m : markers->markers()) in.markers.push_back({m.id(), m.pose().x(), m.pose().y(), m.pose().yaw(), m.distance()});
+    }
+    return in;
+}
+
+void RunReport::add(const Inputs& in, int state)
+{
+    if (!started_) {
+        start_odometer_ = in.odometer;
+        start_yaw_ = in.yaw;
+        started_ = true;
+    }
+    odometer_ = in.odometer;
+    yaw_ = in.yaw;
+    ranges_[state].push_back({in.left, in.right});
+}
+
+std::string RunReport::text() const
+{
+    char line[512];
+    const double turned = std::remainder(yaw_ - start_yaw_, 2 * M_PI) * 180 / M_PI;
+    std::snprintf(line, sizeof line, "report: driven %.2f m, heading changed by %.0f deg\n", odometer_ - start_odometer_, turned);
+    std::string out = line;
+    for (const auto& [state, samples] : ranges_) {
+        auto wall = walls_.find(state);
+        if (wall == walls_.end() || samples.empty()) continue;
+        double sum = 0;
+        std::vector<double> deviation;
+        for (const auto& [left, right] : samples) {
+            const double r = wall->second.first == "left" ? left : right;
+            sum += r;
+            deviation.push_back(std::abs(r - wall->second.second));
+        }
+        std::snprintf(line, sizeof line,
+                      "report: state %d, %s wall at %.2f m, %zu ticks: reading mean %.3f m; |reading - clearance| "
+                      "median %.3f, 90 %% %.3f, max %.3f m (raw ranger readings: door niche and corner included)\n",
+                      state, wall->second.first.c_str(), wall->second.second, samples.size(), sum / double(samples.size()),
+                      percentile(deviation, 0.5), percentile(deviation, 0.9), percentile(deviation, 1.0));
+        out += line;
+    }
+    return out;
+}
+
+namespace {
+
+/// The states that follow a wall: id → (side, clearance), from the checked machine's JSON.
+std::map<int, std::pair<std::string, double>> walls_of(const std::string& machine_json)
+{
+    std::map<int, std::pair<std::string, double>> walls;
+    const auto machine = nlohmann::json::parse(machine_json);  // alive through the loop
+    for (const auto& st : machine["states"]) {
+        if (st["type"].get<std::string>().find("FollowWall") != std::string::npos) {
+            walls[st["id"].get<int>()] = {st.value("side", "right"), st.value("clearance", 0.4)};
+        }
+    }
+    return walls;
+}
+
+ReaderOptions for_vehicle(uint8_t id)
+{
+    ReaderOptions o;
+    o.vehicle_id = id;
+    return o;
+}
+
+}  // namespace
+
+struct FsmNode::Impl
+{
+    Impl(FsmNodeOptions o, std::unique_ptr<Machine> m, const std::string& json)
+        : options(o), machine(std::move(m)), report(walls_of(json)), states("vehicleState", for_vehicle(o.vehicle_id)),
+          ranges("rangeSensors", for_vehicle(o.vehicle_id)), markers("arucoMarkers", for_vehicle(o.vehicle_id)),
+          commands("vehicleCommandDirect"), stops("stopRequest"), status("fsmStatus", [] {
+              WriterOptions w;
+              w.reliable = true;
+              w.history_depth = 1;
+              w.transient_local = true;
+              return w;
+          }())
+    {
+    }
+
+    void brake(uint64_t now, bool force = false)
+    {
+        if (!force && now - last_stop_sent < 500'000'000ull) return;  // repeated twice a second while braking
+        StopRequest s;
+        s.vehicle_id(options.vehicle_id);
+        stamp_message(s, now, 0);
+        (void)stops.write(s);
+        last_stop_sent = now;
+    }
+    void publish_status(uint64_t now)
+    {
+        FsmStatus s;
+        s.vehicle_id(options.vehicle_id);
+        stamp_message(s, now, 0);
+        s.state_id(machine->active().id());
+        s.state_type(machine->active().type());
+        s.entered_ns(static_cast<uint64_t>(machine->entered_t() * 1e9));
+        s.last_transition_id(machine->last_transition());
+        (void)status.write(s);
+    }
+    /// Why the input cannot be used now; empty when it can.
+    std::string stale(const SampleResult<VehicleState>& state, const SampleResult<RangeSensors>& range) const
+    {
+        if (!state.valid) return "no VehicleState";
+        if (!range.valid) return "no RangeSensors";
+        if (state.age_ns > options.max_age_ns) return "VehicleState is " + std::to_string(state.age_ns / 1'000'000) + " ms old";
+        if (range.age_ns > options.max_age_ns) return "RangeSensors is " + std::to_string(range.age_ns / 1'000'000) + " ms old";
+        return "";
+    }
+    /// One timer tick; false when the machine stopped in a final state.
+    bool tick();
+
+    FsmNodeOptions options;
+    std::unique_ptr<Machine> machine;
+    RunReport report;
+    Reader<VehicleState> states;
+    Reader<RangeSensors> ranges;
+    Reader<ArucoMarkers> markers;
+    Writer<VehicleCommandDirect> commands;
+    Writer<StopRequest> stops;
+    Writer<FsmStatus> status;
+    std::string stale_reason;
+    uint64_t last_range_stamp = 0, last_stop_sent = 0;
+    int last_state = -1;
+};
+
+bool FsmNode::Impl::tick()
+{
+    const unsigned id = options.vehicle_id;
+    const uint64_t now = get_time_ns();
+    auto state = states.get_sample(now);
+    auto range = ranges.get_sample(now);
+    const std::string reason = stale(state, range);
+    if (!reason.empty()) {
+        if (reason.substr(0, 8) != stale_reason.substr(0, 8)) {
+            CPM_LOG_WARN("vehicle %u: %s; braking until fresh input arrives", id, reason.c_str());
+        }
+        stale_reason = reason;
+        brake(now);
+        return true;
+    }
+    if (!stale_reason.empty()) CPM_LOG_INFO("vehicle %u: input fresh again; running", id);
+    stale_reason.clear();
+    // The machine ticks once per new range sample: the wall followers' derivative term must
+    // see each measurement once (tick_period in the machine = the sensors' period).
+    const uint64_t range_stamp = range.sample.header().create_stamp().nanoseconds();
+    if (range_stamp == last_range_stamp) return true;
+    const double dt = last_range_stamp ? double(range_stamp - last_range_stamp) * 1e-9 : 1.0 / options.rate_hz;
+    last_range_stamp = range_stamp;
+
+    auto seen = markers.get_sample(now);
+    const bool markers_fresh = seen.valid && seen.age_ns <= options.max_age_ns;
+    const Inputs in = inputs_from(state.sample, range.sample, markers_fresh ? &seen.sample : nullptr, double(now) * 1e-9);
+    const int ticked_state = machine->active().id();
+    auto out = machine->tick(in, dt);
+    report.add(in, ticked_state);
+    if (machine->active().id() != last_state) {
+        if (last_state >= 0) {
+            std::printf("%.3f vehicle %u: state %d -> %d (%s) by transition %d at %.2f m driven; front %.2f left %.2f right %.2f\n",
+                        in.t, id, last_state, machine->active().id(), machine->active().type().c_str(),
+                        machine->last_transition(), in.odometer, in.front, in.left, in.right);
+            std::fflush(stdout);
+        }
+        last_state = machine->active().id();
+        publish_status(now);
+    }
+    if (out.brake) {
+        brake(now);
+        return !machine->in_final_state();
+    }
+    last_stop_sent = 0;
+    VehicleCommandDirect c;
+    c.vehicle_id(options.vehicle_id);
+    stamp_message(c, now, 0);
+    c.motor_throttle(out.throttle);
+    c.steering_servo(out.steering);
+    (void)commands.write(c);
+    return true;
+}
+
+FsmNode::FsmNode(FsmNodeOptions options, std::unique_ptr<Machine> machine, const std::string& machine_json)
+    : impl_(std::make_unique<Impl>(options, std::move(machine), machine_json))
+{
+}
+
+FsmNode::~FsmNode() = default;
+
+void FsmNode::run(const std::function<bool()>& stop_requested)
+{
+    const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
+    auto timer = Timer::create("fsm_node_" + std::to_string(impl_->options.vehicle_id), period_ns, 0, false, false);
+    timer->start([&](uint64_t) {
+        if (stop_requested() || !impl_->tick()) timer->stop();
+    });
+    impl_->brake(get_time_ns(), true);  // leave the car braked
+}
+
+const Machine& FsmNode::machine() const { return *impl_->machine; }
+const RunReport& FsmNode::report() const { return impl_->report; }
+
+}  // namespace cpm::fsm
