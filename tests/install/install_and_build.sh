@@ -37,3 +37,27 @@ cmake -S "$work/readme" -B "$work/readme/build" -G Ninja -DCMAKE_PREFIX_PATH="$w
 # The Cyclone DDS configuration the README points foreign programs at is installed.
 [ -f "$work/prefix/share/cpm/cyclonedds-localhost.xml" ] || { echo "share/cpm/cyclonedds-localhost.xml is not installed"; exit 1; }
 echo "installed: the consumer, the README's example and the Cyclone configuration"
+
+# A program using Reader, Writer and HistoryClient reads no Fast DDS header (the generated types
+# may read Fast CDR's): their type support is compiled into cpm::idl.
+cat > "$work/light.cpp" <<'CPP'
+#include <cpm/HistoryClient.hpp>
+#include <cpm/Reader.hpp>
+#include <cpm/Writer.hpp>
+#include <VehicleState.h>
+int main()
+{
+    cpm::Writer<VehicleState> writer("vehicleState");
+    cpm::Reader<VehicleState> reader("vehicleState");
+    cpm::HistoryClient history;
+    (void)writer.write(reader.get_sample(0).sample);
+    return history.latest<VehicleState>("vehicleState", 1).ok() ? 0 : 1;
+}
+CPP
+g++ -std=c++17 -H -fsyntax-only -I"$work/prefix/include" -I"$work/prefix/include/cpm/idl" "$work/light.cpp" 2> "$work/headers.txt" \
+  || { cat "$work/headers.txt"; exit 1; }
+if grep -E "(fastdds|fastrtps)/" "$work/headers.txt"; then
+  echo "a program using cpm's public headers reads the Fast DDS headers above"
+  exit 1
+fi
+echo "light: $(grep -c '^\.' "$work/headers.txt") headers read, none of Fast DDS"

@@ -14,8 +14,6 @@
 #include <HistoryRequest.h>
 #include <cpm_topic_types.hpp>
 
-#include <fastdds/rtps/common/SerializedPayload.h>
-
 #include <chrono>
 #include <cstring>
 #include <memory>
@@ -108,11 +106,7 @@ public:
     template <class T>
     static bool decode_payload(const std::vector<uint8_t>& bytes, T& out)
     {
-        typename TopicType<T>::PubSubType type;
-        eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(bytes.size()));
-        std::memcpy(payload.data, bytes.data(), bytes.size());
-        payload.length = static_cast<uint32_t>(bytes.size());
-        return type.deserialize(&payload, &out);
+        return TopicType<T>::decode(bytes, out);
     }
 
     static HistoryRequest make(const std::string& kind, const std::string& topic, const std::string& key, uint64_t t0 = 0,

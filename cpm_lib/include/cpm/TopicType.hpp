@@ -1,24 +1,68 @@
 #pragma once
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace eprosima::fastdds::dds {
+class TopicDataType;
+}
 
 namespace cpm {
 
-/// Maps a message type to its DDS type support (the fastddsgen-generated `TPubSubType`).
-/// Specialised for every lab type in <cpm_topic_types.hpp>; for a type of your own
-/// generated with fastddsgen, write CPM_REGISTER_TYPE(MyType) at global scope.
+/// What cpm needs to know of a message type T, without the user's code reading a Fast DDS
+/// header: a specialisation provides
+///   static eprosima::fastdds::dds::TopicDataType* make_type_support();  // new, caller owns
+///   static bool decode(const std::vector<uint8_t>& cdr, T& out);         // encapsulation included
+/// Every lab type is declared in <cpm_topic_types.hpp> and defined in the compiled cpm::idl.
+/// For a type of your own generated with fastddsgen, write CPM_REGISTER_TYPE(MyType) at global
+/// scope in a file that includes its MyTypePubSubTypes.h.
 template <class T>
 struct TopicType;
 
 }  // namespace cpm
 
+/// Declares TopicType<T>; CPM_DEFINE_TYPE_AS defines it in one compiled file.
+#define CPM_DECLARE_TYPE(T)                                                                        \
+    namespace cpm {                                                                                \
+    template <>                                                                                    \
+    struct TopicType<T>                                                                            \
+    {                                                                                              \
+        static ::eprosima::fastdds::dds::TopicDataType* make_type_support();                       \
+        static bool decode(const std::vector<uint8_t>& cdr, T& out);                              \
+    };                                                                                             \
+    }
+
+/// The definitions for a declared type T whose type support class is PubSub (needs PubSub's
+/// header, and with it Fast DDS's).
+#define CPM_DEFINE_TYPE_AS(T, PubSub)                                                              \
+    ::eprosima::fastdds::dds::TopicDataType* cpm::TopicType<T>::make_type_support() { return new PubSub(); } \
+    bool cpm::TopicType<T>::decode(const std::vector<uint8_t>& cdr, T& out)                       \
+    {                                                                                              \
+        PubSub type;                                                                               \
+        ::eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(cdr.size())); \
+        for (size_t i = 0; i < cdr.size(); ++i) payload.data[i] = cdr[i];                         \
+        payload.length = static_cast<uint32_t>(cdr.size());                                        \
+        return type.deserialize(&payload, &out);                                                   \
+    }
+
 /// Registers a global-namespace type T whose type support class is T##PubSubType.
 #define CPM_REGISTER_TYPE(T) CPM_REGISTER_TYPE_AS(T, T##PubSubType)
 
-/// Registers type T (fully qualified) with the type support class PubSub.
-#define CPM_REGISTER_TYPE_AS(T, PubSub)      \
-    namespace cpm {                          \
-    template <>                              \
-    struct TopicType<T>                      \
-    {                                        \
-        using PubSubType = PubSub;           \
-    };                                       \
+/// Registers type T (fully qualified) with the type support class PubSub, declared and defined
+/// at once (inline): for a file that includes PubSub's header.
+#define CPM_REGISTER_TYPE_AS(T, PubSub)                                                            \
+    namespace cpm {                                                                                \
+    template <>                                                                                    \
+    struct TopicType<T>                                                                            \
+    {                                                                                              \
+        static ::eprosima::fastdds::dds::TopicDataType* make_type_support() { return new PubSub(); } \
+        static bool decode(const std::vector<uint8_t>& cdr, T& out)                                \
+        {                                                                                          \
+            PubSub type;                                                                           \
+            ::eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(cdr.size())); \
+            for (size_t i = 0; i < cdr.size(); ++i) payload.data[i] = cdr[i];                     \
+            payload.length = static_cast<uint32_t>(cdr.size());                                    \
+            return type.deserialize(&payload, &out);                                               \
+        }                                                                                          \
+    };                                                                                             \
     }

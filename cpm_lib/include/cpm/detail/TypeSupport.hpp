@@ -18,7 +18,7 @@ using MakeTypeSupport = eprosima::fastdds::dds::TopicDataType* (*)();
 template <class T>
 eprosima::fastdds::dds::TopicDataType* make_type_support()
 {
-    return new typename TopicType<T>::PubSubType();
+    return TopicType<T>::make_type_support();
 }
 
 template <class T, class = void>
