@@ -85,7 +85,7 @@ int relay(int domain)
             VehicleCommandDirect c;
             c.vehicle_id(r.vehicle_id());
             cpm::stamp_message(c, cpm::get_time_ns(), 0);
-            commands.write(c);
+            (void)commands.write(c);
         }
     }
 }
@@ -95,15 +95,17 @@ std::vector<double> command_latency(cpm::Participant& p, int count)
     cpm::Writer<RangeSensors> ranges(p, "rangeSensors");
     cpm::Writer<VehicleState> states(p, "vehicleState");
     cpm::ReaderAbstract<VehicleCommandDirect> commands(p, "vehicleCommandDirect", {.keep_all = true});
-    commands.wait_for_matched(1, 10s);
-    ranges.wait_for_matched(1, 10s);
+    if (!commands.wait_for_matched(1, 10s) || !ranges.wait_for_matched(1, 10s)) {
+        std::fprintf(stderr, "bench_fsm: fsm_node did not match within 10 s\n");
+        return {};
+    }
     std::vector<double> us;
     for (int i = 0; i < count + 50; ++i) {
         uint64_t now = cpm::get_time_ns();
         VehicleState s;
         s.vehicle_id(1);
         cpm::stamp_message(s, now, 0);
-        states.write(s);
+        (void)states.write(s);
         RangeSensors r;
         r.vehicle_id(1);
         r.front(3.0);
@@ -112,7 +114,7 @@ std::vector<double> command_latency(cpm::Participant& p, int count)
         commands.take();
         now = cpm::get_time_ns();
         cpm::stamp_message(r, now, 0);
-        ranges.write(r);
+        (void)ranges.write(r);
         const auto deadline = std::chrono::steady_clock::now() + 20ms;
         bool seen = false;
         while (!seen && std::chrono::steady_clock::now() < deadline) {

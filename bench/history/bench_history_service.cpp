@@ -72,7 +72,7 @@ int echo(int domain)
                 r.client_id(rq.client_id());
                 r.request_id(rq.request_id());
                 cpm::stamp_message(r, cpm::get_time_ns(), 0);
-                replies.write(r);
+                (void)replies.write(r);
             }
         },
         p, "historyRequest", ro);
@@ -103,7 +103,7 @@ uint64_t write_at(cpm::Writer<VehicleState>& w, double rate, double seconds, dou
             s.vehicle_id(uint8_t(written % 100));
             cpm::stamp_message(s, cpm::get_time_ns(), 0);
             s.pose().x(tag++);
-            w.write(s);
+            (void)w.write(s);
         }
         std::this_thread::sleep_for(std::chrono::microseconds(200));
     }

@@ -68,7 +68,7 @@ void pong_cpm(int domain)
     cpm::Writer<BenchPayload> pong(participant, "pong", kWriterOptions);
     cpm::AsyncReader<BenchPayload> ping(
         [&](std::vector<BenchPayload>& batch) {
-            for (auto& s : batch) pong.write(s);
+            for (auto& s : batch) (void)pong.write(s);
         },
         participant, "ping", kReaderOptions);
     while (!g_stop) std::this_thread::sleep_for(50ms);
@@ -167,7 +167,7 @@ public:
     bool connected() override { return ping_.wait_for_matched(1, 10s) && pong_.wait_for_matched(1, 10s); }
 
 private:
-    void write(const BenchPayload& sample) override { ping_.write(sample); }
+    void write(const BenchPayload& sample) override { (void)ping_.write(sample); }
     bool wait_reply(uint64_t seq, bool& answered) override
     {
         if (!pong_.wait_for_data(kResendAfter)) return false;

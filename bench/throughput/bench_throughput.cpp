@@ -126,7 +126,7 @@ uint64_t publish(const std::string& impl, int domain, size_t size, int seconds)
     fdds::DataWriter* raw_writer = nullptr;
     if (impl == "cpm") {
         writer = std::make_unique<cpm::Writer<BenchPayload>>(participant, "throughput", kWriterOptions);
-        writer->wait_for_matched(1, 10s);
+        if (!writer->wait_for_matched(1, 10s)) std::fprintf(stderr, "bench_throughput: no reader matched within 10 s\n");
     } else {
         raw = std::make_unique<bench::RawEndpoints>(participant);
         raw_writer = raw->writer("throughput", true, 1);

@@ -25,7 +25,7 @@ std::vector<double> jitter_cpm(cpm::Participant& participant, uint64_t period_ns
     std::vector<double> jitter_us;
     const size_t ticks = static_cast<size_t>(uint64_t(seconds) * 1'000'000'000ull / period_ns);
     jitter_us.reserve(ticks);
-    auto timer = cpm::Timer::create(participant, "bench_timer", period_ns, 0, false, false);
+    auto timer = cpm::Timer::create(participant, "bench_timer", period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     timer->start([&](uint64_t nominal) {
         jitter_us.push_back(double(cpm::get_time_ns() - nominal) * 1e-3);
         if (jitter_us.size() >= ticks) timer->stop();
@@ -57,7 +57,7 @@ double simulated_run(cpm::Participant& participant, uint64_t simulated_s)
     const std::vector<std::pair<std::string, uint64_t>> nodes{
         {"vehicle", 20'000'000}, {"monitor", 50'000'000}, {"planner", 400'000'000}};
     for (const auto& [id, period] : nodes) {
-        timers.push_back(cpm::Timer::create(participant, id, period, 0, true, true));
+        timers.push_back(cpm::Timer::create(participant, id, period, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = true}));
         timers.back()->start_async([](uint64_t) {}, [&] { ++stopped; });
     }
     cpm::TimeMaster master(participant);

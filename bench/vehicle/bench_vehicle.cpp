@@ -141,8 +141,8 @@ void one_car(cpm::Participant& participant, const std::vector<std::string>& env,
                               "/tmp/bench_vehicle_bridge.err");
     cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState");
     cpm::Writer<VehicleCommandDirect> writer(participant, "vehicleCommandDirect");
-    states.wait_for_data(10s);
-    writer.wait_for_matched(1, 10s);
+    if (!states.wait_for_data(10s) || !writer.wait_for_matched(1, 10s))
+        std::fprintf(stderr, "bench_vehicle: the car did not answer within 10 s\n");
     std::this_thread::sleep_for(500ms);
 
     // A new throttle every 100-120 ms (random phase against the car's 20 ms cycle), never the
@@ -158,7 +158,7 @@ void one_car(cpm::Participant& participant, const std::vector<std::string>& env,
         command.motor_throttle(pwm / 1000.0);
         uint64_t now = cpm::get_time_ns();
         cpm::stamp_message(command, now, 0);
-        writer.write(command);
+        (void)writer.write(command);
         writes.emplace_back(now, pwm);
         std::this_thread::sleep_for(100ms + std::chrono::microseconds(rng() % 20'000));
     }
@@ -234,7 +234,7 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
             for (int id = 1; id <= cars; ++id) {
                 c.vehicle_id(uint8_t(id));
                 cpm::stamp_message(c, cpm::get_time_ns(), 0);
-                writer.write(c);
+                (void)writer.write(c);
             }
             std::this_thread::sleep_for(50ms);
         }

@@ -27,17 +27,16 @@ constexpr auto kReadyAnnouncePeriod = std::chrono::seconds(1);
 }  // namespace
 
 std::shared_ptr<Timer> Timer::create(const std::string& node_id, uint64_t period_ns, uint64_t offset_ns,
-                                     bool wait_for_start, bool simulated_time_allowed)
+                                     TimerOptions options)
 {
-    return create(Participant::default_participant(), node_id, period_ns, offset_ns, wait_for_start,
-                  simulated_time_allowed);
+    return create(Participant::default_participant(), node_id, period_ns, offset_ns, options);
 }
 
 std::shared_ptr<Timer> Timer::create(Participant& participant, const std::string& node_id, uint64_t period_ns,
-                                     uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed)
+                                     uint64_t offset_ns, TimerOptions options)
 {
-    const bool simulated = init_settings().simulated_time && simulated_time_allowed;
-    return std::make_shared<detail::LabTimer>(participant, node_id, period_ns, offset_ns, wait_for_start, simulated);
+    const bool simulated = init_settings().simulated_time && options.simulated_time_allowed;
+    return std::make_shared<detail::LabTimer>(participant, node_id, period_ns, offset_ns, options.wait_for_start, simulated);
 }
 
 namespace detail {
@@ -122,7 +121,7 @@ void LabTimer::announce(uint64_t next_tick_ns)
     ReadyStatus ready;
     ready.source_id(node_id_);
     ready.next_start_stamp().nanoseconds(next_tick_ns);
-    ready_writer_->write(ready);
+    (void)ready_writer_->write(ready);
 }
 
 uint64_t LabTimer::wait_for_trigger()

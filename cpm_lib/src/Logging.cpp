@@ -103,7 +103,7 @@ struct Logging::Impl
             waiting.swap(pending);
         }
         if (d != nullptr) {
-            for (const auto& w : waiting) d->log_writer.write(w);
+            for (const auto& w : waiting) (void)d->log_writer.write(w);
         }
     }
 
@@ -118,7 +118,7 @@ struct Logging::Impl
                 return;
             }
         }
-        d->log_writer.write(log);  // never under pending_mutex: a reader in this process may log from the write
+        (void)d->log_writer.write(log);  // never under pending_mutex: a reader in this process may log from the write
     }
 
     const std::string node_id;

@@ -47,7 +47,7 @@ struct ParameterServer::Impl
             std::lock_guard<std::mutex> lock(mutex);
             values[p.name()] = p;
         }
-        writer.write(p);
+        (void)writer.write(p);
     }
     void answer(const std::string& name)
     {
@@ -62,7 +62,7 @@ struct ParameterServer::Impl
                 reply.type(ParameterType_Invalid);
             }
         }
-        writer.write(reply);
+        (void)writer.write(reply);
     }
 
     mutable std::mutex mutex;

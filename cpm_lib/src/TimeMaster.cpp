@@ -49,7 +49,7 @@ struct TimeMaster::Impl
     {
         SystemTrigger t;
         t.next_start().nanoseconds(next_start);
-        trigger.write(t);
+        if (!trigger.write(t)) throw Error("TimeMaster: the SystemTrigger could not be written");
     }
 
     ReaderAbstract<ReadyStatus> ready;       ///< what was announced before it matched
@@ -113,7 +113,7 @@ uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uin
         }
         // Every announcement comes to the live reader, except those sent before it matched,
         // which only the transient-local one holds: wait on the live one, in short slices.
-        impl_->live_ready.wait_for_data(std::min(std::chrono::duration_cast<std::chrono::milliseconds>(remaining) +
+        (void)impl_->live_ready.wait_for_data(std::min(std::chrono::duration_cast<std::chrono::milliseconds>(remaining) +
                                                      std::chrono::milliseconds(1),
                                                  std::chrono::milliseconds(10)));
     }
@@ -128,7 +128,7 @@ uint64_t TimeMaster::start_real_time(const std::vector<std::string>& node_ids, s
             throw Error("TimeMaster: not ready within " + std::to_string(ready_timeout.count()) +
                         " ms: " + join(impl_->missing(node_ids)));
         }
-        impl_->live_ready.wait_for_data(std::chrono::milliseconds(20));
+        (void)impl_->live_ready.wait_for_data(std::chrono::milliseconds(20));
     }
     const uint64_t start = get_time_ns() + static_cast<uint64_t>(start_delay.count()) * 1'000'000ull;
     impl_->send(start);

@@ -61,7 +61,7 @@ private:
             lock.unlock();
             ParameterRequest request;
             request.name(name);
-            requests_.write(request);
+            (void)requests_.write(request);
             lock.lock();
             const auto wake = std::min(deadline, std::chrono::steady_clock::now() + std::chrono::milliseconds(500));
             changed_.wait_until(lock, wake, [&] { return values_.count(name) > 0; });

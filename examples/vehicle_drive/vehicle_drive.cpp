@@ -51,7 +51,7 @@ int run(int argc, char** argv)
         const auto start = std::chrono::steady_clock::now();
         for (int tick = 1; std::chrono::steady_clock::now() - start < std::chrono::duration<double>(seconds); ++tick) {
             cpm::stamp_message(command, cpm::get_time_ns(), 0);
-            command_writer.write(command);
+            if (!command_writer.write(command)) std::fprintf(stderr, "vehicle_drive: a command could not be written\n");
             std::this_thread::sleep_for(std::chrono::milliseconds(50));
             if (tick % 5 != 0) continue;
             uint64_t now = cpm::get_time_ns();

@@ -240,7 +240,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         cpm::stamp_message(reply, cpm::get_time_ns(), 0);
         ++requests;
         if (reply.status() == "error" || reply.status() == "unknown_object") ++bad_requests;
-        replies->write(reply);
+        (void)replies->write(reply);
     }
 
     void work_loop()
@@ -575,7 +575,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
                 s.topics().push_back(ts);
             }
         }
-        status->write(s);
+        (void)status->write(s);
     }
 };
 

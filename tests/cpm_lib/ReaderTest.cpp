@@ -170,7 +170,7 @@ TEST_F(ReaderTest, ConcurrentGetSampleWhileSamplesArriveNeverGoesBackwards)
     constexpr int kSamples = 2000;
 
     std::thread producer([&] {
-        for (int i = 1; i <= kSamples; ++i) writer.write(vehicle_state(1, kT0 + i, kT0 + i, i));
+        for (int i = 1; i <= kSamples; ++i) (void)writer.write(vehicle_state(1, kT0 + i, kT0 + i, i));
     });
     double last = 0;
     bool went_back = false;

@@ -85,7 +85,7 @@ protected:
 
 TEST_F(TimerTest, SynchronisedStartTicksAtAbsoluteMultiplesWithNominalTimes)
 {
-    auto sut = cpm::Timer::create(node, "planner", 20 * kMs, 5 * kMs, true, false);
+    auto sut = cpm::Timer::create(node, "planner", 20 * kMs, 5 * kMs, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = false});
     sut->start_async(recorder());
     ASSERT_TRUE(saw_ready_from("planner")) << "no ReadyStatus from the waiting timer";
     EXPECT_EQ(calls(), 0u) << "ticked before the trigger";
@@ -108,7 +108,7 @@ TEST_F(TimerTest, SynchronisedStartTicksAtAbsoluteMultiplesWithNominalTimes)
 TEST_F(TimerTest, OverrunningCallbackSkipsTheMissedTicksAndCountsThem)
 {
     const uint64_t period = 30 * kMs;
-    auto sut = cpm::Timer::create(node, "slow", period, 0, false, false);
+    auto sut = cpm::Timer::create(node, "slow", period, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     sut->start_async(recorder([](size_t n) {
         if (n == 3) std::this_thread::sleep_for(75ms);   // ~2.5 periods
         if (n == 6) std::this_thread::sleep_for(40ms);   // ~1.3 periods
@@ -135,7 +135,7 @@ TEST_F(TimerTest, ATimerThatOverrunsEveryTickWarnsOnceASecondWithACount)
 {
     const std::string log = "/tmp/cpm_timer_overrun_" + std::to_string(::getpid()) + ".csv";
     cpm::Logging::instance().set_file(log);
-    auto sut = cpm::Timer::create(node, "always_late", 10 * kMs, 0, false, false);
+    auto sut = cpm::Timer::create(node, "always_late", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     sut->start_async(recorder([](size_t) { std::this_thread::sleep_for(25ms); }));
     ASSERT_TRUE(cpm_test::wait_until([&] { return sut->missed_deadlines() >= 100; }, 20s));
     sut->stop();
@@ -158,7 +158,7 @@ TEST_F(TimerTest, ATimerThatOverrunsEveryTickWarnsOnceASecondWithACount)
 
 TEST_F(TimerTest, StopBeforeStartMeansNoCallbackEver)
 {
-    auto sut = cpm::Timer::create(node, "idle", 10 * kMs, 0, false, false);
+    auto sut = cpm::Timer::create(node, "idle", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     sut->stop();
     bool stopped = false;
 
@@ -170,7 +170,7 @@ TEST_F(TimerTest, StopBeforeStartMeansNoCallbackEver)
 
 TEST_F(TimerTest, StopDuringTheStartWaitReturnsAtOnce)
 {
-    auto sut = cpm::Timer::create(node, "waiting", 10 * kMs, 0, true, false);
+    auto sut = cpm::Timer::create(node, "waiting", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = false});
     std::atomic<bool> stopped{false};
     sut->start_async(recorder(), [&] { stopped = true; });
     ASSERT_TRUE(saw_ready_from("waiting"));
@@ -186,7 +186,7 @@ TEST_F(TimerTest, StopDuringTheStartWaitReturnsAtOnce)
 
 TEST_F(TimerTest, StopShortlyAfterStartAllowsOnlyAFewCallbacks)
 {
-    auto sut = cpm::Timer::create(node, "brief", 10 * kMs, 0, false, false);
+    auto sut = cpm::Timer::create(node, "brief", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     sut->start_async(recorder());
     ASSERT_TRUE(cpm_test::wait_until([&] { return calls() >= 1; }));
 
@@ -199,7 +199,7 @@ TEST_F(TimerTest, StopShortlyAfterStartAllowsOnlyAFewCallbacks)
 
 TEST_F(TimerTest, SecondStartIsAnError)
 {
-    auto sut = cpm::Timer::create(node, "twice", 10 * kMs, 0, false, false);
+    auto sut = cpm::Timer::create(node, "twice", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     sut->start_async(recorder());
 
     EXPECT_THROW(sut->start_async(recorder()), cpm::Error);
@@ -209,7 +209,7 @@ TEST_F(TimerTest, SecondStartIsAnError)
 
 TEST_F(TimerTest, StopFromInsideTheCallbackEndsAfterThatCallback)
 {
-    auto sut = cpm::Timer::create(node, "self", 10 * kMs, 0, false, false);
+    auto sut = cpm::Timer::create(node, "self", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     sut->start(recorder([&](size_t n) {
         if (n == 3) sut->stop();
     }));
@@ -219,7 +219,7 @@ TEST_F(TimerTest, StopFromInsideTheCallbackEndsAfterThatCallback)
 
 TEST_F(TimerTest, StopTriggerEndsARunningTimer)
 {
-    auto sut = cpm::Timer::create(node, "running", 10 * kMs, 0, false, false);
+    auto sut = cpm::Timer::create(node, "running", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     std::atomic<bool> stopped{false};
     sut->start_async(recorder(), [&] { stopped = true; });
     ASSERT_TRUE(cpm_test::wait_until([&] { return calls() >= 2; }));
@@ -233,7 +233,7 @@ TEST_F(TimerTest, APlainReliableTriggerWriterAsCpmLabsStartsTheTimers)
 {
     // cpm_lab's LCC writes SystemTrigger with a reliable, volatile writer: no transient-local.
     cpm::Writer<SystemTrigger> lcc(lab, "systemTrigger", {.reliable = true, .history_depth = 1});
-    auto sut = cpm::Timer::create(node, "cpm_lab_node", 10 * kMs, 0, true, false);
+    auto sut = cpm::Timer::create(node, "cpm_lab_node", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = false});
     sut->start_async(recorder());
     ASSERT_TRUE(saw_ready_from("cpm_lab_node"));
     ASSERT_TRUE(lcc.wait_for_matched(1, 5000ms)) << "no timer reader matches a volatile writer";
@@ -247,13 +247,13 @@ TEST_F(TimerTest, APlainReliableTriggerWriterAsCpmLabsStartsTheTimers)
 TEST_F(TimerTest, OffsetNotSmallerThanPeriodIsAnErrorNamingBoth)
 {
     try {
-        cpm::Timer::create(node, "bad", 20 * kMs, 20 * kMs, false, false);
+        cpm::Timer::create(node, "bad", 20 * kMs, 20 * kMs, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
         FAIL() << "no error";
     } catch (const cpm::Error& e) {
         EXPECT_THAT(e.what(), HasSubstr("offset_ns = 20000000"));
         EXPECT_THAT(e.what(), HasSubstr("period_ns = 20000000"));
     }
-    EXPECT_THROW(cpm::Timer::create(node, "zero", 0, 0, false, false), cpm::Error);
+    EXPECT_THROW(cpm::Timer::create(node, "zero", 0, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false}), cpm::Error);
 }
 
 namespace {
@@ -283,7 +283,7 @@ std::vector<Tick> run_three_node_scenario(cpm::Participant& lab, cpm::Participan
     std::vector<std::shared_ptr<cpm::Timer>> timers;
     std::atomic<int> stopped{0};
     for (const auto& n : nodes) {
-        auto timer = cpm::Timer::create(node, n.id, n.period, 0, true, true);
+        auto timer = cpm::Timer::create(node, n.id, n.period, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = true});
         timer->start_async(
             [&, id = n.id](uint64_t t) {
                 std::lock_guard<std::mutex> lock(mutex);
@@ -345,4 +345,15 @@ TEST_F(TimerTest, TimeMasterNamesTheNodesThatNeverAnnounce)
     } catch (const cpm::Error& e) {
         EXPECT_THAT(e.what(), HasSubstr("'ghost'"));
     }
+}
+
+TEST_F(TimerTest, CpmLabsTwoBooleanFormStillWorks)
+{
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations"
+    auto sut = cpm::Timer::create(node, "old_form", 10 * kMs, 0, false, false);
+#pragma GCC diagnostic pop
+    sut->start_async(recorder());
+    EXPECT_TRUE(cpm_test::wait_until([&] { return calls() >= 2; }, 5000ms));  // ticked without waiting for a start
+    sut->stop();
 }

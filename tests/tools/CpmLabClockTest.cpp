@@ -29,8 +29,8 @@ TEST(CpmLabClock, SimulatedModeDrivesTheNamedTimersToTheEndAndStopsThem)
     cpm::init(2, const_cast<char**>(argv));
     cpm::Participant node(cpm_test::isolated_options());
     std::atomic<int> vehicle_ticks{0}, planner_ticks{0}, stopped{0};
-    auto vehicle = cpm::Timer::create(node, "vehicle", 20 * kMs, 0, true, true);
-    auto planner = cpm::Timer::create(node, "planner", 400 * kMs, 0, true, true);
+    auto vehicle = cpm::Timer::create(node, "vehicle", 20 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = true});
+    auto planner = cpm::Timer::create(node, "planner", 400 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = true});
     vehicle->start_async([&](uint64_t) { ++vehicle_ticks; }, [&] { ++stopped; });
     planner->start_async([&](uint64_t) { ++planner_ticks; }, [&] { ++stopped; });
 
@@ -49,8 +49,8 @@ TEST(CpmLabClock, RealTimeModeStartsWaitingTimersTogetherAndStopsThem)
     cpm::Participant node(cpm_test::isolated_options());
     std::atomic<uint64_t> first_a{0}, first_b{0};
     std::atomic<int> stopped{0};
-    auto a = cpm::Timer::create(node, "a", 20 * kMs, 0, true, false);
-    auto b = cpm::Timer::create(node, "b", 50 * kMs, 10 * kMs, true, false);
+    auto a = cpm::Timer::create(node, "a", 20 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = false});
+    auto b = cpm::Timer::create(node, "b", 50 * kMs, 10 * kMs, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = false});
     a->start_async([&](uint64_t t) { if (!first_a) first_a = t; }, [&] { ++stopped; });
     b->start_async([&](uint64_t t) { if (!first_b) first_b = t; }, [&] { ++stopped; });
 

@@ -187,7 +187,7 @@ private:
         command_.vehicle_id(kId);
         while (!stop_) {
             cpm::stamp_message(command_, cpm::get_time_ns(), 0);
-            writer_.write(command_);
+            (void)writer_.write(command_);
             std::this_thread::sleep_for(50ms);
         }
     }

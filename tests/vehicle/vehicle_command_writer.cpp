@@ -30,7 +30,7 @@ int main(int argc, char** argv)
     std::signal(SIGTERM, [](int) { stop = true; });  // a clean exit frees its shared memory
     while (!stop) {
         cpm::stamp_message(command, cpm::get_time_ns(), 0);
-        writer.write(command);
+        (void)writer.write(command);
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     return 0;

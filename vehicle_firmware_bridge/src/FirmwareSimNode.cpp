@@ -172,7 +172,7 @@ void FirmwareSimNode::run(const std::function<bool()>& stop_requested)
     d.steps_per_state = std::max<uint64_t>(1, std::llround(p.physics_rate / p.state_rate));
     d.max_catch_up = std::max<uint64_t>(1, uint64_t(p.physics_rate));  // 1 s of model time
     d.timer = Timer::create(d.participant, "firmware_sim_" + std::to_string(d.options.vehicle_id), d.physics_period_ns,
-                            0, false, false);
+                            0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
     d.timer->start([&](uint64_t t_nominal) {
         if (stop_requested()) {
             d.timer->stop();

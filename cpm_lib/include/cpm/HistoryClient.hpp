@@ -23,7 +23,7 @@
 namespace cpm {
 
 template <class T>
-struct HistoryResult
+struct [[nodiscard]] HistoryResult
 {
     std::string status;  ///< ok, not_found, evicted, not_yet, timeout, gap, unknown_object, error (as DESIGN §6 and the JSON spell them)
     std::string error;   ///< why, when the request was refused

@@ -62,7 +62,7 @@ public:
     }
 
     size_t matched_publications() const { return core_.matched_publications(); }
-    bool wait_for_matched(size_t n, std::chrono::milliseconds timeout) const
+    [[nodiscard]] bool wait_for_matched(size_t n, std::chrono::milliseconds timeout) const
     {
         return core_.wait_for_matched(n, timeout);
     }

@@ -34,10 +34,10 @@ public:
     }
 
     /// Waits until a sample can be taken; false on timeout.
-    bool wait_for_data(std::chrono::milliseconds timeout) { return core_.wait_for_data(timeout); }
+    [[nodiscard]] bool wait_for_data(std::chrono::milliseconds timeout) { return core_.wait_for_data(timeout); }
 
     size_t matched_publications() const { return core_.matched_publications(); }
-    bool wait_for_matched(size_t n, std::chrono::milliseconds timeout) const
+    [[nodiscard]] bool wait_for_matched(size_t n, std::chrono::milliseconds timeout) const
     {
         return core_.wait_for_matched(n, timeout);
     }

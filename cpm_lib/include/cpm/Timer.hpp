@@ -8,6 +8,16 @@
 
 namespace cpm {
 
+/// How a Timer starts and which clock it follows (defaults as cpm_lab's).
+struct TimerOptions
+{
+    /// Announce ReadyStatus and wait for the lab's SystemTrigger before the first tick; else
+    /// tick from now on.
+    bool wait_for_start = true;
+    /// Under --simulated_time, follow the lab's simulated clock; else always the real clock.
+    bool simulated_time_allowed = true;
+};
+
 /// Calls back at absolute lab times k * period + offset (cpm_lab's Timer).
 ///
 /// With wait_for_start, the timer announces `ReadyStatus{source_id = node_id}` on
@@ -30,9 +40,22 @@ public:
     /// offset_ns must be < period_ns. The participant (default: the process's) carries the
     /// ready announcements and the start/stop triggers.
     static std::shared_ptr<Timer> create(const std::string& node_id, uint64_t period_ns, uint64_t offset_ns,
-                                         bool wait_for_start, bool simulated_time_allowed);
+                                         TimerOptions options = {});
     static std::shared_ptr<Timer> create(Participant& participant, const std::string& node_id, uint64_t period_ns,
-                                         uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed);
+                                         uint64_t offset_ns, TimerOptions options = {});
+    /// cpm_lab's form, two booleans in a row; say which is which with TimerOptions instead.
+    [[deprecated("use Timer::create(..., TimerOptions{.wait_for_start = ..., .simulated_time_allowed = ...})")]]
+    static std::shared_ptr<Timer> create(const std::string& node_id, uint64_t period_ns, uint64_t offset_ns,
+                                         bool wait_for_start, bool simulated_time_allowed)
+    {
+        return create(node_id, period_ns, offset_ns, TimerOptions{wait_for_start, simulated_time_allowed});
+    }
+    [[deprecated("use Timer::create(..., TimerOptions{.wait_for_start = ..., .simulated_time_allowed = ...})")]]
+    static std::shared_ptr<Timer> create(Participant& participant, const std::string& node_id, uint64_t period_ns,
+                                         uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed)
+    {
+        return create(participant, node_id, period_ns, offset_ns, TimerOptions{wait_for_start, simulated_time_allowed});
+    }
 
     virtual ~Timer() = default;
 

@@ -26,12 +26,12 @@ public:
 
     /// Publishes one sample. False when DDS refused it (a keep-all history stayed full
     /// for 100 ms, or the writer is broken). Thread-safe.
-    bool write(const T& sample) { return core_.write(&sample); }
+    [[nodiscard]] bool write(const T& sample) { return core_.write(&sample); }
 
     /// Readers matched right now (goes down again when a reader goes away).
     size_t matched_subscriptions() const { return core_.matched_subscriptions(); }
     /// Waits until at least n readers are matched; false on timeout.
-    bool wait_for_matched(size_t n, std::chrono::milliseconds timeout) const
+    [[nodiscard]] bool wait_for_matched(size_t n, std::chrono::milliseconds timeout) const
     {
         return core_.wait_for_matched(n, timeout);
     }
