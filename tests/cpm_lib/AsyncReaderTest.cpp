@@ -129,7 +129,8 @@ TEST_F(AsyncReaderTest, StopBeforeAnyDataReturnsPromptlyAndNoCallbackFollows)
     ASSERT_TRUE(writer.wait_for_acknowledgments(5000ms));
 
     EXPECT_LT(took, 500ms) << "stop() waited for the worker's poll period";
-    EXPECT_EQ(calls, 0);
+    // The sample was delivered to the reader; a worker that still ran would call back soon after.
+    EXPECT_TRUE(cpm_test::holds_for([&] { return calls == 0; }, 300ms)) << calls << " callbacks after stop()";
 }
 
 TEST_F(AsyncReaderTest, StopFromInsideTheCallbackEndsReading)
@@ -151,6 +152,6 @@ TEST_F(AsyncReaderTest, StopFromInsideTheCallbackEndsReading)
     ASSERT_TRUE(writer.write(vehicle_state(1, 2, 2)));
     ASSERT_TRUE(writer.wait_for_acknowledgments(5000ms));
 
-    EXPECT_EQ(calls, 1);
+    EXPECT_TRUE(cpm_test::holds_for([&] { return calls == 1; }, 300ms)) << calls << " callbacks";
     sut.reset();  // the destructor after a stop from inside must not hang or crash
 }

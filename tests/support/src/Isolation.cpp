@@ -101,4 +101,14 @@ bool wait_until(const std::function<bool()>& condition, std::chrono::millisecond
     return true;
 }
 
+bool holds_for(const std::function<bool()>& condition, std::chrono::milliseconds window, std::chrono::milliseconds poll)
+{
+    const auto deadline = std::chrono::steady_clock::now() + window;
+    while (std::chrono::steady_clock::now() < deadline) {
+        if (!condition()) return false;
+        std::this_thread::sleep_for(poll);
+    }
+    return condition();
+}
+
 }  // namespace cpm_test

@@ -19,4 +19,9 @@ bool wait_until(const std::function<bool()>& condition,
                 std::chrono::milliseconds timeout = std::chrono::seconds(5),
                 std::chrono::milliseconds poll = std::chrono::milliseconds(2));
 
+/// For a negative check: true when `condition` holds for the whole `window` (polled), false as
+/// soon as it does not. A broken implementation acts late; a single look would miss it.
+bool holds_for(const std::function<bool()>& condition, std::chrono::milliseconds window,
+               std::chrono::milliseconds poll = std::chrono::milliseconds(5));
+
 }  // namespace cpm_test
