@@ -14,6 +14,10 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <condition_variable>
+#include <mutex>
+#include <optional>
+#include <thread>
 #include <cstdio>
 #include <map>
 #include <random>
@@ -34,6 +38,7 @@ struct FirmwareSimNode::Impl
             pty = std::make_unique<PseudoTerminal>(options.link);
             device = pty->device_path();
         }
+        publisher = std::thread([this] { publish_loop(); });
     }
     static ReaderOptions depth_one()
     {
@@ -55,6 +60,7 @@ struct FirmwareSimNode::Impl
     void tick(uint64_t t_nominal);
     void publish_and_see_others();
     void report_collisions();
+    void publish_loop();
 
     FirmwareSimNodeOptions options;
     FirmwareSim sim;
@@ -70,7 +76,30 @@ struct FirmwareSimNode::Impl
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
     uint64_t last_tick_ns = 0, steps = 0, skipped_steps = 0;
     std::pair<MotorMode, uint16_t> traced{MotorMode::Brake, 0};
+    // The true pose goes out from a thread of its own: a DDS write can stall (a reader's process
+    // killed while holding its shared-memory port), and the microcontroller's clock, commands
+    // and watchdog must not wait for it. Only the newest observation is kept.
+    std::mutex publish_mutex;
+    std::condition_variable publish_ready;
+    std::optional<VehicleObservation> to_publish;
+    bool publishing = true;
+    std::thread publisher;  // started once the line is open (the constructor may throw before)
 };
+
+void FirmwareSimNode::Impl::publish_loop()
+{
+    for (;;) {
+        VehicleObservation o;
+        {
+            std::unique_lock<std::mutex> lock(publish_mutex);
+            publish_ready.wait(lock, [&] { return to_publish || !publishing; });
+            if (!to_publish) return;
+            o = *to_publish;
+            to_publish.reset();
+        }
+        (void)observations.write(o);
+    }
+}
 
 void FirmwareSimNode::Impl::trace(uint64_t now)
 {
@@ -102,7 +131,9 @@ void FirmwareSimNode::Impl::publish_and_see_others()
         o.pose().x(pose.x);
         o.pose().y(pose.y);
         o.pose().yaw(pose.yaw);
-        (void)observations.write(o);
+        std::lock_guard<std::mutex> lock(publish_mutex);
+        to_publish = o;
+        publish_ready.notify_one();
     }
     for (auto& o : others.take()) {
         if (o.vehicle_id() == options.vehicle_id) continue;
@@ -160,7 +191,15 @@ FirmwareSimNode::FirmwareSimNode(FirmwareSimNodeOptions options) : impl_(std::ma
     std::fflush(stdout);
 }
 
-FirmwareSimNode::~FirmwareSimNode() = default;
+FirmwareSimNode::~FirmwareSimNode()
+{
+    {
+        std::lock_guard<std::mutex> lock(impl_->publish_mutex);
+        impl_->publishing = false;
+        impl_->publish_ready.notify_one();
+    }
+    impl_->publisher.join();
+}
 
 const std::string& FirmwareSimNode::device_path() const { return impl_->device; }
 
