@@ -106,18 +106,10 @@ struct ReaderCore::Impl : public dds::DataReaderListener
 
     void on_requested_incompatible_qos(dds::DataReader*, const dds::RequestedIncompatibleQosStatus& status) override
     {
-        const int policy = static_cast<int>(status.last_policy_id);
-        {
-            std::lock_guard<std::mutex> lock(incompatible_mutex);
-            if (!incompatible_reported.insert(policy).second) return;  // once per policy
-        }
-        log_warning_later(incompatible_qos_message(true, topic_name, policy, reliable, transient_local));
+        if (incompatible) incompatible->report(static_cast<int>(status.last_policy_id));
     }
 
-    std::string topic_name;
-    bool reliable = false, transient_local = false;
-    std::mutex incompatible_mutex;
-    std::set<int> incompatible_reported;
+    std::unique_ptr<IncompatibleQos> incompatible;
 };
 
 ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
@@ -126,9 +118,7 @@ ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::
     if (topic.empty()) throw Error(std::string(role) + ": the topic name is empty");
     const dds::DataReaderQos qos = reader_qos(options, topic);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type, role, std::move(on_arrival));
-    impl_->topic_name = topic;
-    impl_->reliable = options.reliable;
-    impl_->transient_local = options.transient_local;
+    impl_->incompatible = std::make_unique<IncompatibleQos>(true, topic, options.reliable, options.transient_local);
     impl_->reader = impl_->topic.participant().subscriber()->create_datareader(
         impl_->topic.topic(), qos, impl_.get(),
         dds::StatusMask::data_available() << dds::StatusMask::subscription_matched()

@@ -13,8 +13,6 @@
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TopicDataType.hpp>
 
-#include <mutex>
-#include <set>
 
 namespace cpm::detail {
 
@@ -37,18 +35,10 @@ struct WriterCore::Impl : public dds::DataWriterListener
 
     void on_offered_incompatible_qos(dds::DataWriter*, const dds::OfferedIncompatibleQosStatus& status) override
     {
-        const int policy = static_cast<int>(status.last_policy_id);
-        {
-            std::lock_guard<std::mutex> lock(incompatible_mutex);
-            if (!incompatible_reported.insert(policy).second) return;  // once per policy
-        }
-        log_warning_later(incompatible_qos_message(false, topic_name, policy, reliable, transient_local));
+        if (incompatible) incompatible->report(static_cast<int>(status.last_policy_id));
     }
 
-    std::string topic_name;
-    bool reliable = false, transient_local = false;
-    std::mutex incompatible_mutex;
-    std::set<int> incompatible_reported;
+    std::unique_ptr<IncompatibleQos> incompatible;
 };
 
 WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
@@ -58,9 +48,7 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
     const std::unique_ptr<dds::TopicDataType> type(make_type());
     const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type);
-    impl_->topic_name = topic;
-    impl_->reliable = options.reliable;
-    impl_->transient_local = options.transient_local;
+    impl_->incompatible = std::make_unique<IncompatibleQos>(false, topic, options.reliable, options.transient_local);
     impl_->writer = impl_->topic.participant().publisher()->create_datawriter(
         impl_->topic.topic(), qos, impl_.get(),
         dds::StatusMask::publication_matched() << dds::StatusMask::offered_incompatible_qos());

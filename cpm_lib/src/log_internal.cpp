@@ -90,4 +90,13 @@ std::string incompatible_qos_message(bool reader, const std::string& topic, int 
     return text;
 }
 
+void IncompatibleQos::report(int policy_id)
+{
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (!reported_.insert(policy_id).second) return;
+    }
+    log_warning_later(incompatible_qos_message(reader_, topic_, policy_id, reliable_, transient_local_));
+}
+
 }  // namespace cpm::detail

@@ -1,4 +1,6 @@
 #pragma once
+#include <mutex>
+#include <set>
 #include <string>
 
 namespace cpm::detail {
@@ -16,5 +18,24 @@ void log_warning_later(std::string message);
 /// values where they follow from ours (reliability, durability). `reader`: this side reads.
 std::string incompatible_qos_message(bool reader, const std::string& topic, int policy_id, bool our_reliable,
                                      bool our_transient_local);
+
+/// One reader's or writer's incompatible-QoS matches, each policy logged once (later).
+class IncompatibleQos
+{
+public:
+    IncompatibleQos(bool reader, std::string topic, bool reliable, bool transient_local)
+        : reader_(reader), topic_(std::move(topic)), reliable_(reliable), transient_local_(transient_local)
+    {
+    }
+    /// From the DDS listener: logs the policy's first mismatch through log_warning_later.
+    void report(int policy_id);
+
+private:
+    bool reader_;
+    std::string topic_;
+    bool reliable_, transient_local_;
+    std::mutex mutex_;
+    std::set<int> reported_;
+};
 
 }  // namespace cpm::detail

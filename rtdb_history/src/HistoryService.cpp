@@ -383,15 +383,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
             return;
         }
         // Compatible with the first writer seen: as reliable and as durable as it offers.
-        dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
-        qos.reliability().kind = e.reliable ? dds::RELIABLE_RELIABILITY_QOS : dds::BEST_EFFORT_RELIABILITY_QOS;
-        qos.durability().kind = e.transient_local ? dds::TRANSIENT_LOCAL_DURABILITY_QOS : dds::VOLATILE_DURABILITY_QOS;
-        qos.history().kind = dds::KEEP_ALL_HISTORY_QOS;
-        qos.resource_limits().max_samples = 0;
-        qos.resource_limits().max_instances = 0;
-        qos.resource_limits().max_samples_per_instance = 0;
-        qos.endpoint().history_memory_policy = rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
-        qos.data_sharing().off();
+        const dds::DataReaderQos qos = raw_reader_qos(e.reliable, e.transient_local);
         rec->reader = raw_subscriber->create_datareader(rec->topic, qos, rec.get(), dds::StatusMask::data_available());
         if (!rec->reader) {
             CPM_LOG_ERROR("cpm_history: cannot create a reader for topic '%s'; not recorded", e.topic.c_str());

@@ -7,6 +7,7 @@
 // it is the octet right after a 16-byte Header (a lab type's vehicle_id).
 #include <cpm/rtdb/IdlDecoder.hpp>
 
+#include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
 #include <fastdds/dds/topic/TopicDataType.hpp>
 #include <fastrtps/utils/md5.h>
 
@@ -19,6 +20,23 @@ struct RawSample
 {
     std::vector<uint8_t> bytes;  ///< encapsulation header included
 };
+
+/// A raw reader's QoS, compatible with a writer that offers this reliability and durability
+/// (as reliable and as durable as it), keeping everything until taken.
+inline eprosima::fastdds::dds::DataReaderQos raw_reader_qos(bool reliable, bool transient_local)
+{
+    namespace dds = eprosima::fastdds::dds;
+    dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
+    qos.reliability().kind = reliable ? dds::RELIABLE_RELIABILITY_QOS : dds::BEST_EFFORT_RELIABILITY_QOS;
+    qos.durability().kind = transient_local ? dds::TRANSIENT_LOCAL_DURABILITY_QOS : dds::VOLATILE_DURABILITY_QOS;
+    qos.history().kind = dds::KEEP_ALL_HISTORY_QOS;
+    qos.resource_limits().max_samples = 0;
+    qos.resource_limits().max_instances = 0;
+    qos.resource_limits().max_samples_per_instance = 0;
+    qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
+    qos.data_sharing().off();
+    return qos;
+}
 
 class RawType : public eprosima::fastdds::dds::TopicDataType
 {

@@ -182,15 +182,7 @@ bool TopicProbe::subscribe(const std::string& topic_name, std::chrono::milliseco
     impl_->topic = p->create_topic(topic_name, writer.type_name, dds::TOPIC_QOS_DEFAULT);
     if (!impl_->topic) throw Error("topic '" + topic_name + "': cannot create it with type '" + writer.type_name + "'");
     impl_->subscriber = p->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
-    dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
-    qos.reliability().kind = writer.reliable ? dds::RELIABLE_RELIABILITY_QOS : dds::BEST_EFFORT_RELIABILITY_QOS;
-    qos.durability().kind = writer.transient_local ? dds::TRANSIENT_LOCAL_DURABILITY_QOS : dds::VOLATILE_DURABILITY_QOS;
-    qos.history().kind = dds::KEEP_ALL_HISTORY_QOS;
-    qos.resource_limits().max_samples = 0;
-    qos.resource_limits().max_instances = 0;
-    qos.resource_limits().max_samples_per_instance = 0;
-    qos.endpoint().history_memory_policy = rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
-    qos.data_sharing().off();
+    const dds::DataReaderQos qos = raw_reader_qos(writer.reliable, writer.transient_local);
     impl_->reader = impl_->subscriber ? impl_->subscriber->create_datareader(impl_->topic, qos, impl_.get(),
                                                                              dds::StatusMask::data_available())
                                       : nullptr;

@@ -8,6 +8,14 @@
 
 namespace cpm::tools {
 
+// The command-line vocabulary every verb file uses.
+using cpm::cli::FlagSpec;
+using cpm::cli::ParsedArgs;
+using cpm::cli::UsageError;
+using cpm::cli::parse_args;
+using cpm::cli::parse_duration;
+using cpm::cli::split_list;
+
 /// One verb of one group: `cpm GROUP VERB [args]` (`verb` empty: the group takes no verb).
 struct Command
 {

@@ -12,13 +12,6 @@
 namespace cpm::tools {
 namespace {
 
-using cpm::cli::FlagSpec;
-using cpm::cli::ParsedArgs;
-using cpm::cli::UsageError;
-using cpm::cli::parse_args;
-using cpm::cli::parse_duration;
-using cpm::cli::split_list;
-
 const char* kClockHelp =
     "usage: cpm lab clock --nodes ID[,ID...] [--simulated --until DURATION]\n"
     "                     [--start-delay DURATION] [--duration DURATION] [--dds_domain N]\n"

@@ -18,13 +18,6 @@
 namespace cpm::tools {
 namespace {
 
-using cpm::cli::FlagSpec;
-using cpm::cli::ParsedArgs;
-using cpm::cli::UsageError;
-using cpm::cli::parse_args;
-using cpm::cli::parse_duration;
-using cpm::cli::split_list;
-
 const char* kListHelp =
     "usage: cpm topic list [--json] [--wait DURATION] [--dds_domain N]\n"
     "\n"

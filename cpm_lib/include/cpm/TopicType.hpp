@@ -34,35 +34,25 @@ struct TopicType;
 
 /// The definitions for a declared type T whose type support class is PubSub (needs PubSub's
 /// header, and with it Fast DDS's).
-#define CPM_DEFINE_TYPE_AS(T, PubSub)                                                              \
-    ::eprosima::fastdds::dds::TopicDataType* cpm::TopicType<T>::make_type_support() { return new PubSub(); } \
-    bool cpm::TopicType<T>::decode(const std::vector<uint8_t>& cdr, T& out)                       \
-    {                                                                                              \
-        PubSub type;                                                                               \
-        ::eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(cdr.size())); \
-        for (size_t i = 0; i < cdr.size(); ++i) payload.data[i] = cdr[i];                         \
-        payload.length = static_cast<uint32_t>(cdr.size());                                        \
-        return type.deserialize(&payload, &out);                                                   \
-    }
+#define CPM_DEFINE_TYPE_AS(T, PubSub) CPM_TYPE_DEFINITIONS_(, T, PubSub)
 
 /// Registers a global-namespace type T whose type support class is T##PubSubType.
 #define CPM_REGISTER_TYPE(T) CPM_REGISTER_TYPE_AS(T, T##PubSubType)
 
 /// Registers type T (fully qualified) with the type support class PubSub, declared and defined
 /// at once (inline): for a file that includes PubSub's header.
-#define CPM_REGISTER_TYPE_AS(T, PubSub)                                                            \
-    namespace cpm {                                                                                \
-    template <>                                                                                    \
-    struct TopicType<T>                                                                            \
+#define CPM_REGISTER_TYPE_AS(T, PubSub) CPM_DECLARE_TYPE(T) CPM_TYPE_DEFINITIONS_(inline, T, PubSub)
+
+#define CPM_TYPE_DEFINITIONS_(SPECIFIER, T, PubSub)                                                \
+    SPECIFIER ::eprosima::fastdds::dds::TopicDataType* cpm::TopicType<T>::make_type_support()     \
     {                                                                                              \
-        static ::eprosima::fastdds::dds::TopicDataType* make_type_support() { return new PubSub(); } \
-        static bool decode(const std::vector<uint8_t>& cdr, T& out)                                \
-        {                                                                                          \
-            PubSub type;                                                                           \
-            ::eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(cdr.size())); \
-            for (size_t i = 0; i < cdr.size(); ++i) payload.data[i] = cdr[i];                     \
-            payload.length = static_cast<uint32_t>(cdr.size());                                    \
-            return type.deserialize(&payload, &out);                                               \
-        }                                                                                          \
-    };                                                                                             \
+        return new PubSub();                                                                       \
+    }                                                                                              \
+    SPECIFIER bool cpm::TopicType<T>::decode(const std::vector<uint8_t>& cdr, T& out)             \
+    {                                                                                              \
+        PubSub type;                                                                               \
+        ::eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(cdr.size())); \
+        for (size_t i = 0; i < cdr.size(); ++i) payload.data[i] = cdr[i];                         \
+        payload.length = static_cast<uint32_t>(cdr.size());                                        \
+        return type.deserialize(&payload, &out);                                                   \
     }
