@@ -4,6 +4,8 @@
 #include <cpm/init.hpp>
 #include <cpm/rtdb/HistoryService.hpp>
 
+#include <regex>
+
 #include <chrono>
 #include <cstdio>
 #include <thread>
@@ -40,6 +42,15 @@ int run(int argc, char** argv)
     cpm::rtdb::ServiceOptions options;
     options.include = parsed.all("--include");
     options.exclude = parsed.all("--exclude");
+    for (const auto& [flag, patterns] : {std::pair{"--include", options.include}, std::pair{"--exclude", options.exclude}}) {
+        for (const auto& p : patterns) {
+            try {
+                std::regex check(p);
+            } catch (const std::regex_error& e) {
+                throw cpm::cli::UsageError(std::string(flag) + " '" + p + "' is not a regular expression: " + e.what());
+            }
+        }
+    }
     options.window_ns = cpm::cli::parse_duration("--window", parsed.get("--window", "10s"));
     if (options.window_ns == 0) throw cpm::cli::UsageError("--window must be longer than 0");
     for (const auto& item : parsed.all("--topic-window")) {

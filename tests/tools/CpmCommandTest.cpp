@@ -14,6 +14,9 @@
 #include <nlohmann/json.hpp>
 
 #include <atomic>
+#include <cstdio>
+#include <fstream>
+#include <unistd.h>
 #include <sstream>
 #include <thread>
 
@@ -176,4 +179,43 @@ TEST(CpmTopic, ListInfoEchoAndHzSeeATopicFromDiscoveryAlone)
     auto nobody = run_cpm({"topic", "echo", cpm_test::unique_topic("nobody"), "--wait", "300ms"});
     EXPECT_EQ(nobody.wait(20s), 1);
     EXPECT_THAT(nobody.errors(), HasSubstr("no writer of topic"));
+}
+
+TEST(CpmPrograms, BadFlagsAndFilesOfEveryProgramAreNamedWithTheRightExitCode)
+{
+    cpm_test::test_domain_id();
+    struct Case
+    {
+        std::vector<std::string> argv;
+        std::string file_text;  // written to the file the arguments name as FILE, if any
+        int code;
+        std::string message;
+    };
+    const std::string file = "/tmp/cpm_program_errors_" + std::to_string(::getpid()) + ".json";
+    const std::vector<Case> cases{
+        {{"cpm_history", "--include", "("}, "", 2, "--include '(' is not a regular expression"},
+        {{"cpm_history", "--exclude", "a[", "--window", "1s"}, "", 2, "--exclude 'a[' is not a regular expression"},
+        {{"cpm_history", "--max-bytes", "abc"}, "", 2, "--max-bytes: 'abc' is not a whole number"},
+        {{"fsm_node", "--vehicle_id", "1", "--fsm", CPM_SOURCE_DIR "/scenarios/fsm/corridor.json", "--max-age", "abc"},
+         "", 2, "--max-age: 'abc' is not a duration"},
+        {{"vehicle_bridge", "--vehicle_id", "1", "--device", "/dev/null", "--calibration", "FILE"}, R"({"servo_range_us": 0})",
+         1, "servo_range_us must not be 0"},
+        {{"vehicle_bridge", "--vehicle_id", "1", "--device", "/dev/null", "--calibration", "FILE"}, R"({"max_speed": 500})",
+         1, "max_speed = 500 is out of range"},
+        {{"vehicle_bridge", "--vehicle_id", "1", "--device", "/dev/null", "--calibration", "FILE"},
+         R"({"battery_min_voltage": 9, "battery_max_voltage": 8})", 1, "battery_min_voltage must be below battery_max_voltage"},
+        {{"firmware_sim", "--vehicle_id", "1", "--params", "FILE"}, R"({"wheelbase": -1})", 1, "wheelbase = -1 is out of range"},
+    };
+    for (const auto& c : cases) {
+        std::vector<std::string> argv{cpm_test::built_program(c.argv[0])};
+        for (size_t i = 1; i < c.argv.size(); ++i) argv.push_back(c.argv[i] == "FILE" ? file : c.argv[i]);
+        if (!c.file_text.empty()) std::ofstream(file) << c.file_text;
+        Process p(argv);
+        EXPECT_EQ(p.wait(10s), c.code) << c.argv[0] << " " << c.message << "\n" << p.errors();
+        EXPECT_THAT(p.errors(), HasSubstr(c.message)) << c.argv[0];
+        if (!c.file_text.empty()) {
+            EXPECT_THAT(p.errors(), HasSubstr(file)) << "the file is not named";
+        }
+    }
+    std::remove(file.c_str());
 }
