@@ -291,6 +291,7 @@ TEST(StoreRegistry, ReadersNeverSeeAnotherObjectsSamplesWhileObjectsArePurgedAnd
     std::vector<Oid> oids(1);  // oids[g]: the object of generation g; filled before it is published
     oids.reserve(kObjects + 1);  // never moves while readers look
     std::atomic<size_t> published{0};
+    std::atomic<uint64_t> live_reads{0};  // answers with a sample
     std::thread ingest([&] {
         uint64_t t = 1'000;
         for (uint8_t g = 1; !stop; ++g) {
@@ -301,6 +302,12 @@ TEST(StoreRegistry, ReadersNeverSeeAnotherObjectsSamplesWhileObjectsArePurgedAnd
             }
             const uint8_t own = uint8_t(oid >> 32) ^ uint8_t(oid);  // the byte of this oid
             for (int i = 0; i < 20; ++i, ++t) put(store, oid, t, std::vector<uint8_t>(64, own), t);
+            // While it hands out the objects the readers ask about, it gives them a moment to
+            // read a live one (up to 1 ms), so that the race is really run, not only the purge.
+            const uint64_t reads_before = live_reads;
+            const auto until = std::chrono::steady_clock::now() + 1ms;
+            while (published < kObjects && live_reads == reads_before && std::chrono::steady_clock::now() < until)
+                std::this_thread::yield();
             store.mark_deleted(oid, t);
             store.expire(t += 20);  // purged: its slot is free for the next
         }
@@ -318,6 +325,7 @@ TEST(StoreRegistry, ReadersNeverSeeAnotherObjectsSamplesWhileObjectsArePurgedAnd
             for (size_t i = 0; i < v.size; ++i) ASSERT_EQ(v.data[i], own) << "oid " << oid << " answered with another object's bytes";
         });
         (st == Status::ok ? seen : st == Status::unknown_object ? unknown : empty)++;
+        if (st == Status::ok) ++live_reads;
     }
     stop = true;
     ingest.join();
