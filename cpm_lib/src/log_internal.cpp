@@ -58,6 +58,8 @@ void log_warning_later(std::string message)
     }).detach();
 }
 
+namespace {
+
 std::string incompatible_qos_message(bool reader, const std::string& topic, int policy_id, bool our_reliable,
                                      bool our_transient_local)
 {
@@ -89,6 +91,8 @@ std::string incompatible_qos_message(bool reader, const std::string& topic, int 
     }
     return text;
 }
+
+}  // namespace
 
 void IncompatibleQos::report(int policy_id)
 {

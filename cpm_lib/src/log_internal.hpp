@@ -14,12 +14,9 @@ void log_error(const std::string& message);
 /// reader of this process while Fast DDS holds its locks. Never blocks.
 void log_warning_later(std::string message);
 
-/// The message for an incompatible-QoS match: names the topic, the policy and both sides'
-/// values where they follow from ours (reliability, durability). `reader`: this side reads.
-std::string incompatible_qos_message(bool reader, const std::string& topic, int policy_id, bool our_reliable,
-                                     bool our_transient_local);
-
-/// One reader's or writer's incompatible-QoS matches, each policy logged once (later).
+/// One reader's or writer's incompatible-QoS matches, each policy logged once (later), naming
+/// the topic, the policy and both sides' values where they follow from ours (reliability,
+/// durability).
 class IncompatibleQos
 {
 public:

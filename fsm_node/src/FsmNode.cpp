@@ -88,27 +88,14 @@ std::map<int, std::pair<std::string, double>> walls_of(const std::string& machin
     return walls;
 }
 
-ReaderOptions for_vehicle(uint8_t id)
-{
-    ReaderOptions o;
-    o.vehicle_id = id;
-    return o;
-}
-
 }  // namespace
 
 struct FsmNode::Impl
 {
     Impl(FsmNodeOptions o, std::unique_ptr<Machine> m, const std::string& json)
-        : options(o), machine(std::move(m)), report(walls_of(json)), states("vehicleState", for_vehicle(o.vehicle_id)),
-          ranges("rangeSensors", for_vehicle(o.vehicle_id)), markers("arucoMarkers", for_vehicle(o.vehicle_id)),
-          commands("vehicleCommandDirect"), stops("stopRequest"), status("fsmStatus", [] {
-              WriterOptions w;
-              w.reliable = true;
-              w.history_depth = 1;
-              w.transient_local = true;
-              return w;
-          }())
+        : options(o), machine(std::move(m)), report(walls_of(json)), states("vehicleState", {.vehicle_id = o.vehicle_id}),
+          ranges("rangeSensors", {.vehicle_id = o.vehicle_id}), markers("arucoMarkers", {.vehicle_id = o.vehicle_id}),
+          commands("vehicleCommandDirect"), stops("stopRequest"), status("fsmStatus", {.reliable = true, .history_depth = 1, .transient_local = true})
     {
     }
 

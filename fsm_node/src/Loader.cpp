@@ -14,11 +14,9 @@
 #include <climits>
 #include <sstream>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <optional>
 #include <set>
-#include <sstream>
 
 namespace cpm::fsm {
 namespace {
@@ -125,15 +123,6 @@ std::optional<int> integer_member(Context& ctx, const json& e, const std::string
 
 std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::string& at);
 
-std::optional<std::string> read_file(const fs::path& path)
-{
-    std::ifstream in(path);
-    if (!in) return std::nullopt;
-    std::stringstream text;
-    text << in.rdbuf();
-    return text.str();
-}
-
 /// The factory for the element's "type"; null (and an error naming the known types) if none.
 template <class Factory>
 const Factory* find_factory(Context& ctx, const std::vector<Factory>& factories, const json& e, const std::string& path,
@@ -175,9 +164,12 @@ std::unique_ptr<Machine> load_nested(Context& ctx, const json& e, const std::str
     }
     json nested;
     try {
-        nested = json::parse(read_file(file).value_or(""));
+        nested = json::parse(cpm::read_text_file(file.string(), "nested machine file"));
     } catch (const json::parse_error& err) {
         ctx.error(path + ".file", file.string() + " is not valid JSON (" + err.what() + ")");
+        return nullptr;
+    } catch (const cpm::Error& err) {
+        ctx.error(path + ".file", err.what());
         return nullptr;
     }
     Context inner{file.string(), file.parent_path(), ctx.stack, ctx.out};
@@ -378,7 +370,7 @@ LoadResult load_json(const std::string& json_text, const std::string& source, co
 
 LoadResult load_file(const std::string& path)
 {
-    std::optional<std::string> text;
+    std::string text;
     try {
         text = cpm::read_text_file(path, "state machine file");
     } catch (const cpm::Error& e) {
@@ -390,8 +382,8 @@ LoadResult load_file(const std::string& path)
     std::error_code ec;
     const fs::path dir = fs::path(path).parent_path().empty() ? fs::path(".") : fs::path(path).parent_path();
     const std::string canonical = fs::weakly_canonical(path, ec).string();
-    if (fs::path(path).extension() == ".uxf") return load_uxf(path, *text, dir, canonical);
-    return check_text(*text, path, dir, {canonical});
+    if (fs::path(path).extension() == ".uxf") return load_uxf(path, text, dir, canonical);
+    return check_text(text, path, dir, {canonical});
 }
 
 const std::vector<TypeInfo>& known_types()

@@ -94,7 +94,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         Impl* service = nullptr;
         std::string name, type_name;
         bool keyed = false;
-        bool known = false;  ///< the lab's IDL describes the type: keys and stamps decoded exactly
+        const IdlDecoder* types = nullptr;  ///< the lab's IDL when it describes the type: keys and stamps exact
         std::optional<bool> has_header;  ///< decided from the IDL, else from the first sample
         dds::Topic* topic = nullptr;
         dds::DataReader* reader = nullptr;
@@ -365,8 +365,10 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
         rec->type_name = e.type_name;
         rec->keyed = e.keyed;
         const IdlDecoder* types = IdlDecoder::lab_types();
-        rec->known = types && types->knows(e.type_name);
-        if (rec->known) rec->has_header = types->has_header(e.type_name);
+        if (types && types->knows(e.type_name)) {
+            rec->types = types;
+            rec->has_header = types->has_header(e.type_name);
+        }
         auto* participant = recorder->native();
         if (participant->find_type(e.type_name).empty()) {
             dds::TypeSupport type(new RawType(e.type_name, e.keyed, types));
@@ -479,7 +481,7 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
                 const ProcessRec creator = proc == processes.end() ? ProcessRec{} : proc->second;
                 inst = InstanceRec{};
                 std::string key = key_text(info.instance_handle, t.keyed);
-                if (t.keyed && t.known) key = IdlDecoder::lab_types()->key_text(t.type_name, b.data(), b.size()).value_or(key);
+                if (t.keyed && t.types) key = t.types->key_text(t.type_name, b.data(), b.size()).value_or(key);
                 try {
                     inst.oid = store_.add_object({.topic = t.name, .key = key, .type_name = t.type_name,
                                                   .parent = creator.oid, .creator = creator.name,
@@ -491,11 +493,9 @@ struct HistoryService::Impl : public dds::DomainParticipantListener
                 }
             }
             inst.writers.insert(writer);
-            if (*t.has_header) {
-                store_.commit(inst.oid, {u64(4), u64(12), source, b.data(), b.size(), lost_before}, now);
-            } else {
-                store_.commit(inst.oid, {source, source, source, b.data(), b.size(), lost_before}, now);
-            }
+            const bool stamped = *t.has_header;
+            store_.commit(inst.oid, {stamped ? u64(4) : source, stamped ? u64(12) : source, source, b.data(), b.size(), lost_before},
+                          now);
         }
     }
 

@@ -1,5 +1,7 @@
 #include <cpm/rtdb/IdlDecoder.hpp>
 
+#include <cpm/read_text_file.hpp>
+
 #include <algorithm>
 #include <cstdint>
 #include <cstdlib>
@@ -7,7 +9,6 @@
 #include <memory>
 #include <sys/stat.h>
 #include <dirent.h>
-#include <fstream>
 #include <regex>
 #include <sstream>
 #include <stdexcept>
@@ -64,12 +65,7 @@ IdlDecoder::IdlDecoder(const std::string& dir)
         if (name.size() > 4 && name.substr(name.size() - 4) == ".idl") files.push_back(dir + "/" + name);
     }
     ::closedir(d);
-    for (const auto& f : files) {
-        std::ifstream in(f);
-        std::stringstream text;
-        text << in.rdbuf();
-        parse(text.str(), f);
-    }
+    for (const auto& f : files) parse(read_text_file(f, "IDL file"), f);
 }
 
 void IdlDecoder::parse(const std::string& text, const std::string& file)

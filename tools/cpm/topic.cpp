@@ -59,17 +59,12 @@ std::chrono::milliseconds milliseconds_of(const ParsedArgs& parsed, const char* 
     return std::chrono::milliseconds(parse_duration(flag, parsed.get(flag, fallback)) / 1'000'000);
 }
 
-/// Listens to discovery for `wait`; the topic's entry, if anybody writes or reads it.
-std::optional<cpm::rtdb::TopicInfo> find_topic(cpm::rtdb::TopicProbe& probe, const std::string& topic,
-                                               std::chrono::milliseconds wait)
+/// The topic's entry, if anybody writes or reads it.
+std::optional<cpm::rtdb::TopicInfo> find_topic(const cpm::rtdb::TopicProbe& probe, const std::string& topic)
 {
-    const auto deadline = std::chrono::steady_clock::now() + wait;
-    do {
-        for (auto& t : probe.topics()) {
-            if (t.name == topic) return t;
-        }
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    } while (std::chrono::steady_clock::now() < deadline);
+    for (auto& t : probe.topics()) {
+        if (t.name == topic) return t;
+    }
     return std::nullopt;
 }
 
@@ -113,7 +108,7 @@ int topic_info(const std::vector<std::string>& args)
     const auto wait = milliseconds_of(parsed, "--wait", "1500ms");
     cpm::rtdb::TopicProbe probe;
     std::this_thread::sleep_for(wait);  // all of its writers and readers, not only the first
-    auto t = find_topic(probe, topic, std::chrono::milliseconds(0));
+    auto t = find_topic(probe, topic);
     if (!t) {
         std::fprintf(stderr, "cpm topic info: nobody writes or reads topic '%s' on domain %d\n", topic.c_str(),
                      cpm::init_settings().domain_id);
@@ -154,14 +149,6 @@ bool subscribed(cpm::rtdb::TopicProbe& probe, const std::string& command, const 
     return false;
 }
 
-std::string type_of(cpm::rtdb::TopicProbe& probe, const std::string& topic)
-{
-    for (const auto& t : probe.topics()) {
-        if (t.name == topic) return t.type_name;
-    }
-    return "";
-}
-
 int topic_echo(const std::vector<std::string>& args)
 {
     const auto parsed =
@@ -175,7 +162,7 @@ int topic_echo(const std::vector<std::string>& args)
 
     cpm::rtdb::TopicProbe probe;
     if (!subscribed(probe, "cpm topic echo", topic, wait)) return 1;
-    const std::string type = type_of(probe, topic);
+    const std::string type = find_topic(probe, topic).value_or(cpm::rtdb::TopicInfo{}).type_name;
     const auto* types = cpm::rtdb::IdlDecoder::lab_types();
     cpm::cli::stop_on_signals();
     static const char* levels[] = {"?", "error", "warn", "info", "debug"};

@@ -31,27 +31,16 @@ uint64_t thread_cpu_ns()
     return uint64_t(ts.tv_sec) * 1'000'000'000ull + uint64_t(ts.tv_nsec);
 }
 
-ReaderOptions for_vehicle(uint8_t id)
-{
-    ReaderOptions options;
-    options.vehicle_id = id;
-    return options;
-}
-
 /// Everything the bridge reads from and writes to the lab.
 struct LabTopics
 {
     explicit LabTopics(uint8_t id)
-        : direct("vehicleCommandDirect", for_vehicle(id)),
-          speed_curvature("vehicleCommandSpeedCurvature", for_vehicle(id)),
-          trajectory("vehicleCommandTrajectory", for_vehicle(id)),
-          path_tracking("vehicleCommandPathTracking", for_vehicle(id)),
-          observation("vehicleObservation", for_vehicle(id)),
-          stop("stopRequest", [] {
-              ReaderOptions options;
-              options.history_depth = 4;
-              return options;
-          }())
+        : direct("vehicleCommandDirect", {.vehicle_id = id}),
+          speed_curvature("vehicleCommandSpeedCurvature", {.vehicle_id = id}),
+          trajectory("vehicleCommandTrajectory", {.vehicle_id = id}),
+          path_tracking("vehicleCommandPathTracking", {.vehicle_id = id}),
+          observation("vehicleObservation", {.vehicle_id = id}),
+          stop("stopRequest", {.history_depth = 4})
     {
     }
     Reader<VehicleCommandDirect> direct;

@@ -29,7 +29,7 @@ struct FirmwareSimNode::Impl
     explicit Impl(FirmwareSimNodeOptions o)
         : options(std::move(o)), sim(options.parameters, options.world, options.start, options.vehicle_id, options.seed),
           corruption(options.seed), participant(Participant::default_participant()),
-          observations(participant, "vehicleObservation"), others(participant, "vehicleObservation", depth_one())
+          observations(participant, "vehicleObservation"), others(participant, "vehicleObservation", {.history_depth = 1})
     {
         if (!options.device.empty()) {
             port = std::make_unique<SerialPort>(options.device, options.baud);
@@ -39,12 +39,6 @@ struct FirmwareSimNode::Impl
             device = pty->device_path();
         }
         publisher = std::thread([this] { publish_loop(); });
-    }
-    static ReaderOptions depth_one()
-    {
-        ReaderOptions r;
-        r.history_depth = 1;
-        return r;
     }
 
     long read_line(uint8_t* data, size_t size) { return pty ? pty->read_available(data, size) : port->read_some(data, size, 0); }
