@@ -113,7 +113,7 @@ uint64_t write_at(cpm::Writer<VehicleState>& w, double rate, double seconds, dou
 /// What the service committed on vehicleState so far (all vehicles).
 uint64_t committed(cpm::HistoryClient& client)
 {
-    HistoryRequest rq = cpm::HistoryClient::make("search", "", "");
+    HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
     rq.name_regex("^vehicleState/");
     uint64_t total = 0;
     for (const auto& o : client.request(rq).objects()) total += o.samples_total();
@@ -174,7 +174,7 @@ int main(int argc, char** argv)
         long rss_kb = 0;
     };
     auto held_now = [&] {
-        HistoryRequest rq = cpm::HistoryClient::make("search", "", "");
+        HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
         rq.name_regex("^vehicleState/");
         Held h;
         for (const auto& o : client.request(rq).objects()) {

@@ -36,7 +36,9 @@ ReaderOptions reply_options()
 
 }  // namespace
 
-struct HistoryClient::Impl
+/// The history service over DDS: requests on historyRequest, replies matched by client and
+/// request id on historyReply.
+class ServiceBackend final : public HistoryBackend
 {
     std::string client_id;
     std::chrono::milliseconds reply_timeout;
@@ -48,7 +50,8 @@ struct HistoryClient::Impl
     Writer<HistoryRequest> requests;
     AsyncReader<HistoryReply> reader;
 
-    Impl(Participant& p, std::chrono::milliseconds timeout)
+public:
+    ServiceBackend(Participant& p, std::chrono::milliseconds timeout)
         : client_id(std::to_string(::getpid()) + "-" + std::to_string(std::random_device{}())), reply_timeout(timeout),
           requests(p, "historyRequest", request_options()),
           reader(
@@ -62,6 +65,47 @@ struct HistoryClient::Impl
               p, "historyReply", reply_options())
     {
     }
+
+    HistoryReply request(const HistoryRequest& asked) override
+    {
+        HistoryRequest rq = asked;
+        const auto deadline = std::chrono::steady_clock::now() + reply_timeout + std::chrono::nanoseconds(rq.timeout_ns());
+        // A volatile request sent before the service's reader matched would be lost: wait for it.
+        auto left = [&] { return std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now()); };
+        if (!requests.wait_for_matched(1, left()) || !reader.wait_for_matched(1, left())) {
+            throw Error("history: no history service answers on this domain (is cpm_history running?)");
+        }
+        const uint64_t id = next_id++;
+        rq.client_id(client_id);
+        rq.request_id(id);
+        stamp_message(rq, get_time_ns(), 0);
+        // Sent again each second without an answer (queries do not change what is stored; the
+        // first reply to arrive is taken).
+        std::unique_lock lock(mutex);
+        pending.insert(id);
+        struct Done
+        {
+            ServiceBackend& d;
+            uint64_t id;
+            ~Done()
+            {
+                d.pending.erase(id);
+                d.replies.erase(id);
+            }
+        } done{*this, id};
+        for (;;) {
+            lock.unlock();
+            if (!requests.write(rq)) throw Error("history: the request could not be sent");
+            lock.lock();
+            const auto resend = std::min(deadline, std::chrono::steady_clock::now() + std::chrono::nanoseconds(rq.timeout_ns()) +
+                                                       std::chrono::seconds(1));
+            if (cv.wait_until(lock, resend, [&] { return replies.count(id) != 0; })) break;
+            if (std::chrono::steady_clock::now() >= deadline) {
+                throw Error("history: no reply to request " + std::to_string(id) + " (" + rq.kind() + ") in time");
+            }
+        }
+        return std::move(replies[id]);
+    }
 };
 
 double update_rate_hz(const HistoryObject& o, uint64_t now_ns)
@@ -73,70 +117,50 @@ double update_rate_hz(const HistoryObject& o, uint64_t now_ns)
     return double(o.samples_held()) * 1e9 / double(end - start);
 }
 
-HistoryClient::HistoryClient(Participant& participant, std::chrono::milliseconds reply_timeout)
-    : impl_(std::make_unique<Impl>(participant, reply_timeout))
+std::unique_ptr<HistoryBackend> history_service_backend(Participant& participant, std::chrono::milliseconds reply_timeout)
 {
+    return std::make_unique<ServiceBackend>(participant, reply_timeout);
+}
+
+HistoryClient::HistoryClient(Participant& participant, std::chrono::milliseconds reply_timeout)
+    : backend_(history_service_backend(participant, reply_timeout))
+{
+}
+
+HistoryClient::HistoryClient(std::unique_ptr<HistoryBackend> backend) : backend_(std::move(backend))
+{
+    if (!backend_) throw Error("HistoryClient: no backend given");
 }
 
 HistoryClient::~HistoryClient() = default;
+HistoryClient::HistoryClient(HistoryClient&&) noexcept = default;
+HistoryClient& HistoryClient::operator=(HistoryClient&&) noexcept = default;
 
-HistoryRequest HistoryClient::make(const std::string& kind, const std::string& topic, const std::string& key, uint64_t t0, HistoryBy by)
+HistoryReply HistoryClient::request(const HistoryRequest& rq) { return backend_->request(rq); }
+
+history::Status HistoryClient::status_of(const std::string& wire, std::string& error)
+{
+    if (auto s = history::status_from(wire)) return *s;
+    error = "the answer's status '" + wire + "' is not one this program knows";
+    return history::Status::error;
+}
+
+HistoryRequest HistoryClient::make(history::Kind kind, const std::string& topic, const std::string& key, uint64_t t0, HistoryBy by)
 {
     HistoryRequest rq;
-    rq.kind(kind);
+    rq.kind(std::string(history::to_string(kind)));
     rq.topic(topic);
     rq.key(key);
     rq.t0(t0);
-    rq.by(by == HistoryBy::data ? "data" : "commit");
+    rq.by(std::string(history::to_string(by)));
     return rq;
 }
 
-HistoryReply HistoryClient::request(HistoryRequest rq)
-{
-    auto& d = *impl_;
-    const auto deadline = std::chrono::steady_clock::now() + d.reply_timeout + std::chrono::nanoseconds(rq.timeout_ns());
-    // A volatile request sent before the service's reader matched would be lost: wait for it.
-    auto left = [&] { return std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now()); };
-    if (!d.requests.wait_for_matched(1, left()) || !d.reader.wait_for_matched(1, left())) {
-        throw Error("history: no history service answers on this domain (is cpm_history running?)");
-    }
-    const uint64_t id = d.next_id++;
-    rq.client_id(d.client_id);
-    rq.request_id(id);
-    stamp_message(rq, get_time_ns(), 0);
-    // Sent again each second without an answer (queries do not change what is stored; the
-    // first reply to arrive is taken).
-    std::unique_lock lock(d.mutex);
-    d.pending.insert(id);
-    struct Done
-    {
-        Impl& d;
-        uint64_t id;
-        ~Done()
-        {
-            d.pending.erase(id);
-            d.replies.erase(id);
-        }
-    } done{d, id};
-    for (;;) {
-        lock.unlock();
-        if (!d.requests.write(rq)) throw Error("history: the request could not be sent");
-        lock.lock();
-        const auto resend = std::min(deadline, std::chrono::steady_clock::now() + std::chrono::nanoseconds(rq.timeout_ns()) +
-                                                   std::chrono::seconds(1));
-        if (d.cv.wait_until(lock, resend, [&] { return d.replies.count(id) != 0; })) break;
-        if (std::chrono::steady_clock::now() >= deadline) {
-            throw Error("history: no reply to request " + std::to_string(id) + " (" + rq.kind() + ") in time");
-        }
-    }
-    return std::move(d.replies[id]);
-}
-
-HistoryReply HistoryClient::latest(const std::string& topic, const std::string& key) { return request(make("latest", topic, key)); }
+HistoryReply HistoryClient::latest(const std::string& topic, const std::string& key) { return request(make(history::Kind::latest, topic, key)); }
 
 HistoryReply HistoryClient::at(const std::string& topic, const std::string& key, uint64_t t, HistoryBy by)
 {
-    return request(make("at", topic, key, t, by));
+    return request(make(history::Kind::at, topic, key, t, by));
 }
 
 }  // namespace cpm

@@ -1,15 +1,13 @@
 #include <cpm/rtdb/Requests.hpp>
 
 #include <regex>
-#include <set>
 #include <stdexcept>
 
 namespace cpm::rtdb {
 
 namespace {
 
-const std::set<std::string> kKinds{"latest", "at",   "older",  "younger", "range",       "wait_next", "successor",
-                                   "snapshot", "info", "search", "list",   "wait_object", "changes"};
+using history::Kind;
 
 /// A malformed request: the reply's status is "error" and this is its message.
 struct BadRequest : std::runtime_error
@@ -29,7 +27,7 @@ HistorySample to_wire(const SampleView& s, Status status)
     w.data_ns(s.data_ns);
     w.valid_after_ns(s.valid_after_ns);
     w.source_ns(s.source_ns);
-    w.status(to_string(status));
+    w.status(std::string(to_string(status)));
     w.payload().assign(s.data, s.data + s.size);
     return w;
 }
@@ -58,6 +56,13 @@ Oid object_of(const Store& store, const HistoryRequest& rq)
     return object_named(store, rq.topic(), rq.key());
 }
 
+Kind kind_of(const HistoryRequest& rq)
+{
+    const auto kind = history::kind_from(rq.kind());
+    if (!kind) throw BadRequest("unknown kind '" + rq.kind() + "' (known: " + history::known_kinds() + ")");
+    return *kind;
+}
+
 Criteria criteria_of(const HistoryRequest& rq)
 {
     Criteria c;
@@ -76,17 +81,13 @@ Criteria criteria_of(const HistoryRequest& rq)
     return c;
 }
 
-void check(const HistoryRequest& rq)
+/// The request's kind and time, or BadRequest naming what is wrong.
+std::pair<Kind, By> check(const HistoryRequest& rq)
 {
-    if (!kKinds.count(rq.kind())) {
-        std::string known;
-        for (const auto& k : kKinds) known += (known.empty() ? "" : ", ") + k;
-        throw BadRequest("unknown kind '" + rq.kind() + "' (known: " + known + ")");
-    }
-    if (!rq.by().empty() && rq.by() != "commit" && rq.by() != "data") {
-        throw BadRequest("by is '" + rq.by() + "'; expected commit or data");
-    }
-    if (rq.kind() == "range" && rq.t1() < rq.t0()) {
+    const auto kind = kind_of(rq);
+    const auto by = history::by_from(rq.by());
+    if (!by) throw BadRequest("by is '" + rq.by() + "'; expected commit or data");
+    if (kind == Kind::range && rq.t1() < rq.t0()) {
         throw BadRequest("range: t1 (" + std::to_string(rq.t1()) + ") is before t0 (" + std::to_string(rq.t0()) + ")");
     }
     if (rq.limit() > kMaxLimit) {
@@ -95,12 +96,15 @@ void check(const HistoryRequest& rq)
     if (rq.timeout_ns() > kMaxTimeoutNs) {
         throw BadRequest("timeout_ns " + std::to_string(rq.timeout_ns()) + " is above 60 s");
     }
-    if (rq.kind() == "snapshot" && rq.objects().empty()) throw BadRequest("snapshot: objects is empty");
+    if (kind == Kind::snapshot && rq.objects().empty()) throw BadRequest("snapshot: objects is empty");
+    return {kind, *by};
 }
+
+void set_status(HistoryReply& reply, Status s) { reply.status(std::string(to_string(s))); }
 
 void reply_found(HistoryReply& reply, const Found& f)
 {
-    reply.status(to_string(f.status));
+    set_status(reply, f.status);
     if (f.ok()) reply.samples().push_back(to_wire(f.sample, f.status));
 }
 
@@ -108,34 +112,30 @@ void reply_found(HistoryReply& reply, const Found& f)
 void reply_viewed(HistoryReply& reply, const Store& store, Oid oid, Which which, uint64_t t, By by)
 {
     const Status st = store.view(oid, which, t, by, [&](const SampleView& v) { reply.samples().push_back(to_wire(v, Status::ok)); });
-    reply.status(to_string(st));
+    set_status(reply, st);
 }
 
 void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
 {
-    check(rq);
-    const By by = rq.by() == "data" ? By::data : By::commit;
-    const std::string& kind = rq.kind();
+    const auto [kind, by] = check(rq);
     const auto timeout = std::chrono::nanoseconds(rq.timeout_ns());
-    if (kind == "search" || kind == "list") {
-        for (const auto& i : store.search(kind == "list" ? Criteria{} : criteria_of(rq))) reply.objects().push_back(to_wire(i));
-        reply.status("ok");
-        return;
-    }
-    if (kind == "wait_object") {
+    switch (kind) {
+    case Kind::search:
+    case Kind::list:
+        for (const auto& i : store.search(kind == Kind::list ? Criteria{} : criteria_of(rq))) reply.objects().push_back(to_wire(i));
+        return set_status(reply, Status::ok);
+    case Kind::wait_object: {
         auto found = store.wait_for_object(criteria_of(rq), timeout);
-        reply.status(found ? "ok" : "timeout");
         if (found) reply.objects().push_back(to_wire(*found));
-        return;
+        return set_status(reply, found ? Status::ok : Status::timeout);
     }
-    if (kind == "changes") {
+    case Kind::changes: {
         auto ch = store.changes_since(rq.t0());
         for (const auto& i : ch.created) reply.objects().push_back(to_wire(i));
         for (const auto& i : ch.deleted) reply.objects().push_back(to_wire(i));
-        reply.status("ok");
-        return;
+        return set_status(reply, Status::ok);
     }
-    if (kind == "snapshot") {
+    case Kind::snapshot: {
         std::vector<Oid> oids;
         for (const auto& name : rq.objects()) {
             const auto slash = name.find('/');
@@ -148,24 +148,29 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
             reply.samples().push_back(to_wire(cut[i].sample, cut[i].status));
             all_ok = all_ok && cut[i].ok();
         }
-        reply.status(all_ok ? "ok" : "partial");
-        return;
+        return set_status(reply, all_ok ? Status::ok : Status::partial);
     }
+    default: break;
+    }
+    // The kinds about one object.
     const Oid oid = object_of(store, rq);
     if (auto info = store.info(oid)) reply.objects().push_back(to_wire(*info));
-    if (kind == "info") reply.status("ok");
-    else if (kind == "latest") reply_viewed(reply, store, oid, Which::latest, 0, by);
-    else if (kind == "at") reply_viewed(reply, store, oid, Which::at, rq.t0(), by);
-    else if (kind == "older") reply_viewed(reply, store, oid, Which::older, rq.t0(), by);
-    else if (kind == "younger") reply_viewed(reply, store, oid, Which::younger, rq.t0(), by);
-    else if (kind == "wait_next") reply_found(reply, store.wait_next(oid, rq.t0(), timeout));
-    else if (kind == "successor") reply_found(reply, store.successor(oid, rq.t0(), timeout));
-    else if (kind == "range") {
+    switch (kind) {
+    case Kind::info: return set_status(reply, Status::ok);
+    case Kind::latest: return reply_viewed(reply, store, oid, Which::latest, 0, by);
+    case Kind::at: return reply_viewed(reply, store, oid, Which::at, rq.t0(), by);
+    case Kind::older: return reply_viewed(reply, store, oid, Which::older, rq.t0(), by);
+    case Kind::younger: return reply_viewed(reply, store, oid, Which::younger, rq.t0(), by);
+    case Kind::wait_next: return reply_found(reply, store.wait_next(oid, rq.t0(), timeout));
+    case Kind::successor: return reply_found(reply, store.successor(oid, rq.t0(), timeout));
+    case Kind::range: {
         auto r = store.range(oid, rq.t0(), rq.t1(), by, rq.limit() ? rq.limit() : kDefaultLimit);
-        reply.status(to_string(r.status));
         reply.truncated(r.truncated);
         reply.lost(r.lost);
         for (const auto& s : r.samples) reply.samples().push_back(to_wire(s, Status::ok));
+        return set_status(reply, r.status);
+    }
+    default: return;  // answered above
     }
 }
 
@@ -173,7 +178,8 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
 
 bool may_wait(const HistoryRequest& rq)
 {
-    return rq.timeout_ns() > 0 && (rq.kind() == "wait_next" || rq.kind() == "successor" || rq.kind() == "wait_object");
+    const auto kind = history::kind_from(rq.kind());
+    return rq.timeout_ns() > 0 && kind && history::may_wait(*kind);
 }
 
 HistoryObject to_wire(const ObjectInfo& i)
@@ -210,12 +216,12 @@ HistoryReply answer(const Store& store, const HistoryRequest& rq)
     try {
         fill(store, rq, reply);
     } catch (const UnknownObject& e) {
-        reply.status("unknown_object");
+        set_status(reply, Status::unknown_object);
         reply.error(e.what());
     } catch (const std::exception& e) {
         reply.objects().clear();
         reply.samples().clear();
-        reply.status("error");
+        set_status(reply, Status::error);
         reply.error(e.what());
     }
     return reply;

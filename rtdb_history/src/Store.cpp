@@ -8,20 +8,6 @@
 
 namespace cpm::rtdb {
 
-const char* to_string(Status s)
-{
-    switch (s) {
-    case Status::ok: return "ok";
-    case Status::not_found: return "not_found";
-    case Status::evicted: return "evicted";
-    case Status::not_yet: return "not_yet";
-    case Status::timeout: return "timeout";
-    case Status::gap: return "gap";
-    case Status::unknown_object: return "unknown_object";
-    }
-    return "?";
-}
-
 namespace {
 
 constexpr uint64_t kNever = std::numeric_limits<uint64_t>::max();

@@ -103,8 +103,8 @@ TEST_F(HistoryService, RecordsAWriterProcessAndAnswersTheTypedClientByCommitAndD
     auto again = client.at<VehicleState>("vehicleState", 3, by_commit.commit_ns);
     EXPECT_EQ(again.sample.pose().x(), 30);
     EXPECT_EQ(client.older<VehicleState>("vehicleState", 3, by_commit.commit_ns).sample.pose().x(), 29);
-    EXPECT_EQ(client.at<VehicleState>("vehicleState", 3, 1000).status, "not_found");  // before the first
-    EXPECT_EQ(client.younger<VehicleState>("vehicleState", 3, latest.commit_ns).status, "not_yet");
+    EXPECT_EQ(client.at<VehicleState>("vehicleState", 3, 1000).status, cpm::history::Status::not_found);  // before the first
+    EXPECT_EQ(client.younger<VehicleState>("vehicleState", 3, latest.commit_ns).status, cpm::history::Status::not_yet);
 }
 
 TEST_F(HistoryService, TheCommandPrintsEveryFieldAsJsonAndDumpListsTheObjects)
@@ -238,14 +238,17 @@ TEST_F(HistoryService, TruncatedSamplesAreCountedAndSkippedAndBadRequestsAnswere
     EXPECT_NE(service.errors().find("topic 'tinyThing': a sample of 8 bytes is too short to hold a Header (4 + 16 bytes); skipped"), std::string::npos)
         << service.errors();
 
-    HistoryRequest bad = cpm::HistoryClient::make("range", "tinyThing", "");
+    HistoryRequest bad = cpm::HistoryClient::make(cpm::history::Kind::range, "tinyThing", "");
     bad.t0(10);
     bad.t1(5);
     auto reply = client.request(bad);
     EXPECT_EQ(reply.status(), "error");
     EXPECT_EQ(reply.error(), "range: t1 (5) is before t0 (10)");
-    auto bogus = client.request(cpm::HistoryClient::make("teleport", "x", ""));
+    HistoryRequest teleport = cpm::HistoryClient::make(cpm::history::Kind::latest, "x", "");
+    teleport.kind("teleport");
+    auto bogus = client.request(teleport);
     EXPECT_EQ(bogus.status(), "error");
+    EXPECT_NE(bogus.error().find("unknown kind 'teleport' (known: latest, at,"), std::string::npos) << bogus.error();
     // The service is still there and answers.
     Process w = writer({"--type", "vehicle", "--vehicle", "5", "--count", "3"});
     ASSERT_EQ(w.wait(30s), 0) << w.errors();
@@ -267,7 +270,7 @@ TEST_F(HistoryService, SeveralClientsAtOnceAndAWaitingOrStoppedClientStallsNeith
     std::thread waiter([&] {
         cpm::HistoryClient slow(participant);
         auto r = slow.wait_next<VehicleState>("vehicleState", 2, cpm::get_time_ns(), 3s);
-        EXPECT_EQ(r.status, "timeout");
+        EXPECT_EQ(r.status, cpm::history::Status::timeout);
         waited = true;
     });
     // Meanwhile another client is answered at once, and a writer's samples are all recorded.
@@ -329,7 +332,7 @@ TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReada
     // Its participant's lease (10 s) runs out, then its writer and its instances are gone.
     EXPECT_TRUE(cpm_test::wait_until([&] { return deleted("9"); }, 30s, 100ms));
     EXPECT_EQ(client.latest<VehicleState>("vehicleState", 9).sample.pose().x(), 3);
-    HistoryRequest alive = cpm::HistoryClient::make("search", "", "");
+    HistoryRequest alive = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
     alive.name_regex("^history_writer_vehicle$");
     alive.alive_at(cpm::get_time_ns());
     EXPECT_TRUE(client.request(alive).objects().empty());  // the dead process too

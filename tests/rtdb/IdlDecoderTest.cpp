@@ -5,6 +5,8 @@
 #include <ParameterPubSubTypes.h>
 #include <VehicleStatePubSubTypes.h>
 
+#include "serialized.hpp"
+
 #include <fastrtps/utils/md5.h>
 
 #include <gtest/gtest.h>
@@ -12,15 +14,6 @@
 namespace {
 
 using cpm::rtdb::IdlDecoder;
-
-template <class PubSub, class T>
-std::vector<uint8_t> serialized(T sample)
-{
-    PubSub type;
-    eprosima::fastrtps::rtps::SerializedPayload_t payload(type.m_typeSize);
-    EXPECT_TRUE(type.serialize(&sample, &payload));
-    return {payload.data, payload.data + payload.length};
-}
 
 template <class PubSub, class T>
 eprosima::fastrtps::rtps::InstanceHandle_t writers_key_hash(T sample)

@@ -2,7 +2,12 @@
 // answered with an error that names the field and value.
 #include <cpm/rtdb/Requests.hpp>
 
+#include <ParameterPubSubTypes.h>
+#include <VehicleStatePubSubTypes.h>
+
 #include <gtest/gtest.h>
+
+#include "serialized.hpp"
 
 using namespace cpm::rtdb;
 
@@ -107,3 +112,51 @@ TEST(HistoryRequests, SnapshotAnswersEachObjectWithItsOwnStatus)
 }
 
 }  // namespace
+
+// The client's calls over a backend other than the DDS service: the same typed answers and
+// statuses, from a store in this process.
+TEST(HistoryRequests, AClientAnswersFromAStoreThroughItsBackend)
+{
+    Store store;
+    const Oid oid = store.add_object({.topic = "vehicleState", .key = "3", .type_name = "VehicleState", .created_ts = 1});
+    for (uint64_t c : {100, 200, 300}) {
+        VehicleState s;
+        s.vehicle_id(3);
+        s.speed(double(c) / 100);
+        s.header().create_stamp().nanoseconds(c - 50);
+        const std::vector<uint8_t> bytes = serialized<VehicleStatePubSubType>(s);
+        store.commit(oid, {c - 50, c - 40, c, bytes.data(), bytes.size()}, c);
+    }
+    cpm::HistoryClient client(std::make_unique<StoreBackend>(store));
+
+    auto at = client.at<VehicleState>("vehicleState", 3, 250);
+    ASSERT_TRUE(at.ok()) << at.status << " " << at.error;
+    EXPECT_EQ(at.commit_ns, 200u);
+    EXPECT_EQ(at.data_ns, 150u);
+    EXPECT_DOUBLE_EQ(at.sample.speed(), 2.0);
+    auto by_data = client.at<VehicleState>("vehicleState", 3, 255, cpm::HistoryBy::data);
+    ASSERT_TRUE(by_data.ok());
+    EXPECT_DOUBLE_EQ(by_data.sample.speed(), 3.0);  // data time 250 <= 255
+
+    EXPECT_EQ(client.younger<VehicleState>("vehicleState", 3, 300).status, cpm::history::Status::not_yet);
+    EXPECT_EQ(client.older<VehicleState>("vehicleState", 3, 100).status, cpm::history::Status::not_found);
+    auto unknown = client.latest<VehicleState>("vehicleState", 9);
+    EXPECT_EQ(unknown.status, cpm::history::Status::unknown_object);
+    EXPECT_NE(unknown.error.find("vehicleState/9"), std::string::npos) << unknown.error;
+    auto range = client.range<VehicleState>("vehicleState", 3, 100, 300);
+    ASSERT_EQ(range.size(), 2u);
+    EXPECT_DOUBLE_EQ(range[1].sample.speed(), 2.0);
+    // A payload that is not the type asked for is an error, not a zeroed sample.
+    auto wrong = client.latest<Parameter>("vehicleState", 3);
+    EXPECT_EQ(wrong.status, cpm::history::Status::error);
+}
+
+TEST(HistoryVocabulary, EverySpellingReadsBackAsItself)
+{
+    for (auto s : cpm::history::kAllStatuses) EXPECT_EQ(cpm::history::status_from(cpm::history::to_string(s)), s);
+    for (auto k : cpm::history::kAllKinds) EXPECT_EQ(cpm::history::kind_from(cpm::history::to_string(k)), k);
+    EXPECT_EQ(cpm::history::status_from("not found"), std::nullopt);  // DESIGN's spelling only
+    EXPECT_EQ(cpm::history::by_from(""), cpm::history::By::commit);
+    EXPECT_EQ(cpm::history::by_from("Data"), std::nullopt);
+    EXPECT_EQ(cpm::history::to_string(cpm::history::Status::not_yet), "not_yet");
+}

@@ -41,7 +41,7 @@ enum class Q { latest, at, older, younger, range };
 /// "c200" for a found sample (its commit time), otherwise the status's name.
 std::string answer(const Found& f)
 {
-    if (!f.ok()) return to_string(f.status);
+    if (!f.ok()) return std::string(to_string(f.status));
     EXPECT_EQ(std::string(f.sample.payload.begin(), f.sample.payload.end()), "sample c" + std::to_string(f.sample.commit_ns));
     EXPECT_EQ(f.sample.valid_after_ns, f.sample.data_ns + 5);
     EXPECT_EQ(f.sample.source_ns, f.sample.commit_ns - 1);
@@ -50,7 +50,7 @@ std::string answer(const Found& f)
 
 std::string answer(const Range& r)
 {
-    if (r.status != Status::ok) return to_string(r.status);
+    if (r.status != Status::ok) return std::string(to_string(r.status));
     std::string s;
     for (auto& x : r.samples) s += (s.empty() ? "c" : " c") + std::to_string(x.commit_ns);
     return s;

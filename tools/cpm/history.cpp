@@ -320,21 +320,14 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
                                         {"--json", false}},
                                        command);
     if (!parsed.positional.empty()) throw UsageError(command + ": unexpected argument '" + parsed.positional[0] + "'");
-    static const std::map<std::string, std::string> kinds{{"list", "list"},     {"at", "at"},         {"older", "older"},
-                                                          {"younger", "younger"}, {"range", "range"}, {"latest", "latest"},
-                                                          {"wait", "wait_next"}, {"search", "search"}, {"snapshot", "snapshot"},
-                                                          {"successor", "successor"}, {"wait-object", "wait_object"},
-                                                          {"changes", "changes"}};
-    auto kind = kinds.find(verb);
-    if (kind == kinds.end()) throw UsageError("unknown command 'history " + verb + "' (see cpm history --help)");
-    HistoryRequest rq;
-    rq.kind(kind->second);
-    rq.topic(parsed.get("--topic"));
-    rq.key(parsed.get("--key"));
+    // The verbs are the request kinds, but for two spelled as a person types them.
+    const std::string kind_name = verb == "wait" ? "wait_next" : verb == "wait-object" ? "wait_object" : verb;
+    const auto kind = cpm::history::kind_from(kind_name);
+    if (!kind || *kind == cpm::history::Kind::info) throw UsageError("unknown command 'history " + verb + "' (see cpm history --help)");
+    const auto by = cpm::history::by_from(parsed.get("--by", "commit"));
+    if (!by) throw UsageError(command + ": --by '" + parsed.get("--by") + "': expected commit or data");
+    HistoryRequest rq = cpm::HistoryClient::make(*kind, parsed.get("--topic"), parsed.get("--key"), 0, *by);
     if (parsed.has("--oid")) rq.oid(parse_oid("--oid", parsed.get("--oid")));
-    const std::string by = parsed.get("--by", "commit");
-    if (by != "commit" && by != "data") throw UsageError(command + ": --by '" + by + "': expected commit or data");
-    rq.by(by);
     const bool about_objects = verb == "list" || verb == "search" || verb == "wait-object" || verb == "changes";
     const bool object_query = !about_objects && verb != "snapshot";
     if (object_query && rq.topic().empty() && !rq.oid()) throw UsageError(command + ": --topic NAME (and --key K) is required");
@@ -370,9 +363,10 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     cpm::HistoryClient client(client_participant());
     const HistoryReply reply = client.request(rq);
     const bool json = parsed.has("--json");
-    if (reply.status() == "error" || reply.status() == "unknown_object") {
+    const auto status = cpm::history::status_from(reply.status()).value_or(cpm::history::Status::error);
+    if (status == cpm::history::Status::error || status == cpm::history::Status::unknown_object) {
         std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(),
-                     reply.status() == "error" ? "the service refused the request: " : "", reply.error().c_str());
+                     status == cpm::history::Status::error ? "the service refused the request: " : "", reply.error().c_str());
         return 1;
     }
     if (verb == "changes") print_changes(reply, json, rq.t0());
@@ -382,10 +376,14 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     if (reply.lost() > 0)
         std::fprintf(stderr, "cpm history %s: %llu samples between the first and the last shown never reached the service\n",
                      verb.c_str(), (unsigned long long)reply.lost());
-    if (reply.status() != "ok") {
+    if (status != cpm::history::Status::ok) {
         const std::string what = rq.topic().empty() ? "" : rq.topic() + (rq.key().empty() ? "" : "/" + rq.key()) + ": ";
         std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(), what.c_str(), reply.status().c_str());
-        if (json && reply.samples().empty()) std::printf("%s\n", nlohmann::json{{"status", reply.status()}}.dump().c_str());
+        if (json && reply.samples().empty()) {
+            nlohmann::json miss{{"status", reply.status()}};
+            if (!rq.topic().empty()) miss.update({{"topic", rq.topic()}, {"key", rq.key()}});
+            std::printf("%s\n", miss.dump().c_str());
+        }
         return 1;
     }
     return 0;
@@ -396,12 +394,9 @@ int dump_command(const std::vector<std::string>& args)
     auto parsed = cpm::cli::parse_args(args, {{"--json", false}, {"--alive", false}, {"--all", false}}, "cpm dump");
     if (!parsed.positional.empty()) throw UsageError("cpm dump: unexpected argument '" + parsed.positional[0] + "'");
     cpm::HistoryClient client(client_participant());
-    HistoryRequest rq;
-    rq.kind("list");
-    if (parsed.has("--alive")) {
-        rq.kind("search");
-        rq.alive_at(cpm::get_time_ns());
-    }
+    const bool alive = parsed.has("--alive");
+    HistoryRequest rq = cpm::HistoryClient::make(alive ? cpm::history::Kind::search : cpm::history::Kind::list, "", "");
+    if (alive) rq.alive_at(cpm::get_time_ns());
     const HistoryReply reply = client.request(rq);
     if (reply.status() != "ok") {
         std::fprintf(stderr, "cpm dump: %s: %s\n", reply.status().c_str(), reply.error().c_str());

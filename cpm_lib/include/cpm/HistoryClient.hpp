@@ -6,7 +6,12 @@
 //
 //   cpm::HistoryClient history;
 //   auto r = history.at<VehicleState>("vehicleState", 3, t);   // r.ok(), r.status, r.sample
+//
+// The client asks a HistoryBackend: by default the lab's history service over DDS; any other
+// backend that answers the same HistoryRequests (a cpm::rtdb::Store in this process, a
+// recording) serves the same calls.
 #include <cpm/Error.hpp>
+#include <cpm/HistoryVocabulary.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/TopicType.hpp>
 
@@ -25,14 +30,30 @@ namespace cpm {
 template <class T>
 struct [[nodiscard]] HistoryResult
 {
-    std::string status;  ///< ok, not_found, evicted, not_yet, timeout, gap, unknown_object, error (as DESIGN §6 and the JSON spell them)
-    std::string error;   ///< why, when the request was refused
+    history::Status status = history::Status::error;
+    std::string error;  ///< why, when the request was refused
     uint64_t commit_ns = 0, data_ns = 0, valid_after_ns = 0, source_ns = 0;
     T sample{};
-    bool ok() const { return status == "ok"; }
+    bool ok() const { return status == history::Status::ok; }
 };
 
-enum class HistoryBy { commit, data };
+using HistoryBy = history::By;
+
+/// What answers a HistoryClient's requests.
+class HistoryBackend
+{
+public:
+    virtual ~HistoryBackend() = default;
+    /// Answers one request, waiting up to its timeout_ns for the kinds that wait. A malformed
+    /// request is answered (status error, with the reason); throws cpm::Error only when no
+    /// answer can be had (no service, no reply in time).
+    virtual HistoryReply request(const HistoryRequest& rq) = 0;
+};
+
+/// The lab's history service (cpm_history) over DDS. reply_timeout: how long to wait for the
+/// service beyond a request's own timeout.
+std::unique_ptr<HistoryBackend> history_service_backend(Participant& participant = Participant::default_participant(),
+                                                        std::chrono::milliseconds reply_timeout = std::chrono::milliseconds(3000));
 
 /// How often an object has been updated lately, as `cpm dump` shows it: the samples it holds
 /// over the time they can span — from the later of its creation and its history interval
@@ -44,16 +65,18 @@ double update_rate_hz(const HistoryObject& o, uint64_t now_ns);
 class HistoryClient
 {
 public:
-    /// reply_timeout: how long to wait for the service beyond a request's own timeout.
+    /// Asks the lab's history service. reply_timeout: how long to wait for the service beyond a
+    /// request's own timeout.
     explicit HistoryClient(Participant& participant = Participant::default_participant(),
                            std::chrono::milliseconds reply_timeout = std::chrono::milliseconds(3000));
+    /// Asks another backend.
+    explicit HistoryClient(std::unique_ptr<HistoryBackend> backend);
     ~HistoryClient();
-    HistoryClient(const HistoryClient&) = delete;
-    HistoryClient& operator=(const HistoryClient&) = delete;
+    HistoryClient(HistoryClient&&) noexcept;
+    HistoryClient& operator=(HistoryClient&&) noexcept;
 
-    /// Sends a request (client_id and request_id are filled in) and waits for its reply.
-    /// Throws cpm::Error when no service answers in time.
-    HistoryReply request(HistoryRequest rq);
+    /// Sends a request and waits for its reply. Throws cpm::Error when no answer can be had.
+    HistoryReply request(const HistoryRequest& rq);
 
     // Untyped: the reply, payloads as bytes.
     HistoryReply latest(const std::string& topic, const std::string& key = "");
@@ -63,28 +86,28 @@ public:
     template <class T, class Key>
     HistoryResult<T> latest(const std::string& topic, const Key& key)
     {
-        return decoded<T>(request(make("latest", topic, key_text(key))));
+        return decoded<T>(request(make(history::Kind::latest, topic, key_text(key))));
     }
     template <class T, class Key>
     HistoryResult<T> at(const std::string& topic, const Key& key, uint64_t t, HistoryBy by = HistoryBy::commit)
     {
-        return decoded<T>(request(make("at", topic, key_text(key), t, by)));
+        return decoded<T>(request(make(history::Kind::at, topic, key_text(key), t, by)));
     }
     template <class T, class Key>
     HistoryResult<T> older(const std::string& topic, const Key& key, uint64_t t, HistoryBy by = HistoryBy::commit)
     {
-        return decoded<T>(request(make("older", topic, key_text(key), t, by)));
+        return decoded<T>(request(make(history::Kind::older, topic, key_text(key), t, by)));
     }
     template <class T, class Key>
     HistoryResult<T> younger(const std::string& topic, const Key& key, uint64_t t, HistoryBy by = HistoryBy::commit)
     {
-        return decoded<T>(request(make("younger", topic, key_text(key), t, by)));
+        return decoded<T>(request(make(history::Kind::younger, topic, key_text(key), t, by)));
     }
     /// The newest sample committed after `after`, waiting up to `timeout`.
     template <class T, class Key>
     HistoryResult<T> wait_next(const std::string& topic, const Key& key, uint64_t after, std::chrono::nanoseconds timeout)
     {
-        auto rq = make("wait_next", topic, key_text(key), after);
+        auto rq = make(history::Kind::wait_next, topic, key_text(key), after);
         rq.timeout_ns(static_cast<uint64_t>(timeout.count()));
         return decoded<T>(request(rq));
     }
@@ -93,7 +116,7 @@ public:
     std::vector<HistoryResult<T>> range(const std::string& topic, const Key& key, uint64_t t0, uint64_t t1,
                                         HistoryBy by = HistoryBy::commit, uint32_t limit = 1000)
     {
-        auto rq = make("range", topic, key_text(key), t0, by);
+        auto rq = make(history::Kind::range, topic, key_text(key), t0, by);
         rq.t1(t1);
         rq.limit(limit);
         auto reply = request(rq);
@@ -109,7 +132,7 @@ public:
         return TopicType<T>::decode(bytes, out);
     }
 
-    static HistoryRequest make(const std::string& kind, const std::string& topic, const std::string& key, uint64_t t0 = 0,
+    static HistoryRequest make(history::Kind kind, const std::string& topic, const std::string& key, uint64_t t0 = 0,
                                HistoryBy by = HistoryBy::commit);
 
 private:
@@ -123,14 +146,14 @@ private:
     static HistoryResult<T> decode(const HistorySample& s, const HistoryReply& reply)
     {
         HistoryResult<T> r;
-        r.status = s.status().empty() ? reply.status() : s.status();
-        r.error = reply.error();
+        r.status = status_of(s.status().empty() ? reply.status() : s.status(), r.error);
+        if (r.error.empty()) r.error = reply.error();
         r.commit_ns = s.commit_ns();
         r.data_ns = s.data_ns();
         r.valid_after_ns = s.valid_after_ns();
         r.source_ns = s.source_ns();
         if (!decode_payload(s.payload(), r.sample)) {
-            r.status = "error";
+            r.status = history::Status::error;
             r.error = "the stored payload does not decode as the type asked for";
         }
         return r;
@@ -140,15 +163,17 @@ private:
     {
         if (reply.samples().empty()) {
             HistoryResult<T> r;
-            r.status = reply.status();
-            r.error = reply.error();
+            r.status = status_of(reply.status(), r.error);
+            if (r.error.empty()) r.error = reply.error();
             return r;
         }
         return decode<T>(reply.samples().front(), reply);
     }
 
-    struct Impl;
-    std::unique_ptr<Impl> impl_;
+    /// The wire's status as the enum; a spelling this build does not know is an error, named in `error`.
+    static history::Status status_of(const std::string& wire, std::string& error);
+
+    std::unique_ptr<HistoryBackend> backend_;
 };
 
 }  // namespace cpm

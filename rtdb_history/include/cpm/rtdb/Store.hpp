@@ -19,6 +19,8 @@
 // copy what they return under it (or see it in place, view()), so they never see a torn sample.
 // snapshot() holds every asked object's lock at once, so no commit can slip in between its
 // answers.
+#include <cpm/HistoryVocabulary.hpp>
+
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -40,11 +42,10 @@ namespace cpm::rtdb {
 using Oid = uint64_t;
 constexpr Oid kNoOid = 0;
 
-enum class Status { ok, not_found, evicted, not_yet, timeout, gap, unknown_object };
-const char* to_string(Status s);
-
-/// Which of a sample's two indexed times a query goes by.
-enum class By { commit, data };
+// The history's vocabulary (cpm/HistoryVocabulary.hpp), one spelling for C++, wire and JSON.
+using Status = cpm::history::Status;
+using By = cpm::history::By;
+using cpm::history::to_string;
 
 struct StoredSample
 {

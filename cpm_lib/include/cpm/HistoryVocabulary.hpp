@@ -1,0 +1,60 @@
+#pragma once
+// The history's words, spelled once: what a query found (Status), what a request asks (Kind)
+// and which time it goes by (By). The same spellings are used on the wire (HistoryRequest.kind,
+// HistoryReply.status), in `cpm history --json` and in C++:
+//
+//   status   ok | not_found | evicted | not_yet | timeout | gap | partial | unknown_object | error
+//   kind     latest | at | older | younger | range | wait_next | successor | snapshot | info |
+//            search | list | wait_object | changes
+//   by       commit | data
+#include <array>
+#include <iosfwd>
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace cpm::history {
+
+enum class Status {
+    ok,              ///< found (for a snapshot: every object's sample found)
+    not_found,       ///< nothing at that time: before the first sample held, and nothing was evicted there
+    evicted,         ///< it was held once and is older than the object's window now
+    not_yet,         ///< after the newest sample held
+    timeout,         ///< a waiting request's time ran out
+    gap,             ///< successor: the next sample was evicted (or never arrived) before it was asked for
+    partial,         ///< snapshot: some objects had a sample, some not (each sample carries its own status)
+    unknown_object,  ///< no object by that name or oid
+    error,           ///< the request was malformed; the reply's error says why
+};
+
+enum class Kind {
+    latest, at, older, younger, range, wait_next, successor, snapshot, info, search, list, wait_object, changes,
+};
+
+/// Which of a sample's two indexed times a query goes by.
+enum class By { commit, data };
+
+inline constexpr std::array kAllStatuses{Status::ok,      Status::not_found, Status::evicted,        Status::not_yet, Status::timeout,
+                                         Status::gap,     Status::partial,   Status::unknown_object, Status::error};
+inline constexpr std::array kAllKinds{Kind::latest,    Kind::at,       Kind::older,     Kind::younger, Kind::range,
+                                      Kind::wait_next, Kind::successor, Kind::snapshot, Kind::info,    Kind::search,
+                                      Kind::list,      Kind::wait_object, Kind::changes};
+
+std::string_view to_string(Status s);
+std::string_view to_string(Kind k);
+std::string_view to_string(By b);
+std::optional<Status> status_from(std::string_view text);
+std::optional<Kind> kind_from(std::string_view text);
+/// "" is commit (the default on the wire).
+std::optional<By> by_from(std::string_view text);
+/// "latest, at, …": for messages that list what is known.
+std::string known_kinds();
+
+/// Whether a request of this kind may block for its timeout (the service answers those on
+/// worker threads).
+constexpr bool may_wait(Kind k) { return k == Kind::wait_next || k == Kind::successor || k == Kind::wait_object; }
+
+std::ostream& operator<<(std::ostream& out, Status s);
+std::ostream& operator<<(std::ostream& out, Kind k);
+
+}  // namespace cpm::history
