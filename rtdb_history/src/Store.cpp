@@ -519,7 +519,7 @@ void Store::evict_for_budget(Object& obj, uint64_t needed)
     uint64_t topic_budget;
     {
         std::shared_lock lock(obj.mutex);
-        topic_budget = obj.retention.max_bytes;
+        topic_budget = obj.retention.max_bytes_per_topic;
     }
     auto used = [&](bool whole_store) { return whole_store ? total_bytes_ : *obj.topic_bytes; };
     for (bool whole_store : {false, true}) {

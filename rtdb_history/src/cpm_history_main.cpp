@@ -7,6 +7,8 @@
 #include <regex>
 
 #include <chrono>
+#include <nlohmann/json.hpp>
+
 #include <cstdio>
 #include <thread>
 
@@ -14,15 +16,16 @@ namespace {
 
 const char* kHelp =
     "usage: cpm_history [--include REGEX]... [--exclude REGEX]... [--window 10s] [--topic-window TOPIC=DURATION]...\n"
-    "                   [--max-bytes N] [--max-bytes-per-topic N] [--status-period 1s] [--dds_domain N]\n"
+    "                   [--max-bytes-total N] [--max-bytes-per-topic N] [--status-period 1s] [--dds_domain N]\n"
     "\n"
     "Finds topics by DDS discovery and records every one whose name matches an --include pattern\n"
     "(all when none is given) and no --exclude pattern (full-match ECMAScript regexes), types it\n"
     "was never compiled with included: it keeps the serialized payloads and reads the stamps from\n"
     "the Header every cpm type starts with. Each topic keeps --window of history (--topic-window\n"
     "sets one topic's, e.g. --topic-window vehicleState=60s; repeatable) and at most\n"
-    "--max-bytes-per-topic, default 128 MiB; --max-bytes in all, default 512 MiB). Deleted\n"
-    "objects (disposed, or their writers gone) stay readable for the window.\n"
+    "--max-bytes-per-topic payload bytes (default 128 MiB), all topics together at most\n"
+    "--max-bytes-total (default 512 MiB; --max-bytes is its older name). Deleted objects\n"
+    "(disposed, or their writers gone) stay readable for the window.\n"
     "Answers historyRequest on historyReply (cpm history ..., cpm dump, cpm::HistoryClient) and\n"
     "publishes historyStatus every --status-period. Ends on SIGINT/SIGTERM.\n";
 
@@ -34,6 +37,7 @@ int run(int argc, char** argv)
                                         {"--exclude", true, true},
                                         {"--window", true},
                                         {"--topic-window", true, true},
+                                        {"--max-bytes-total", true},
                                         {"--max-bytes", true},
                                         {"--max-bytes-per-topic", true},
                                         {"--status-period", true}},
@@ -62,7 +66,11 @@ int run(int argc, char** argv)
         if (w == 0) throw cpm::cli::UsageError("cpm_history: --topic-window '" + item + "': the window must be longer than 0");
         options.topic_windows_ns[item.substr(0, eq)] = w;
     }
-    options.max_bytes = static_cast<uint64_t>(cpm::cli::parse_integer("--max-bytes", parsed.get("--max-bytes", "536870912"), 1024, 1LL << 40));
+    if (parsed.has("--max-bytes") && parsed.has("--max-bytes-total"))
+        throw cpm::cli::UsageError("cpm_history: --max-bytes is the older name of --max-bytes-total; give one");
+    const char* total_flag = parsed.has("--max-bytes") ? "--max-bytes" : "--max-bytes-total";
+    options.max_bytes_total =
+        static_cast<uint64_t>(cpm::cli::parse_integer(total_flag, parsed.get(total_flag, "536870912"), 1024, 1LL << 40));
     options.max_bytes_per_topic = static_cast<uint64_t>(
         cpm::cli::parse_integer("--max-bytes-per-topic", parsed.get("--max-bytes-per-topic", "134217728"), 1024, 1LL << 40));
     options.status_period_ns = cpm::cli::parse_duration("--status-period", parsed.get("--status-period", "1s"));
@@ -73,9 +81,9 @@ int run(int argc, char** argv)
     std::fprintf(stderr, "cpm_history: recording (window %.1f s); Ctrl-C ends\n", double(options.window_ns) * 1e-9);
     while (!cpm::cli::stop_requested()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
     auto c = service.counters();
-    std::printf("{\"topics\": %llu, \"received\": %llu, \"dropped\": %llu, \"requests\": %llu, \"bad_requests\": %llu}\n",
-                (unsigned long long)c.topics, (unsigned long long)c.received, (unsigned long long)c.dropped,
-                (unsigned long long)c.requests, (unsigned long long)c.bad_requests);
+    const nlohmann::json counts{{"topics", c.topics},     {"received", c.received},         {"dropped", c.dropped},
+                                {"lost", c.lost},         {"requests", c.requests},         {"bad_requests", c.bad_requests}};
+    std::printf("%s\n", counts.dump().c_str());
     return 0;
 }
 

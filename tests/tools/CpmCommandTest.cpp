@@ -196,6 +196,8 @@ TEST(CpmPrograms, BadFlagsAndFilesOfEveryProgramAreNamedWithTheRightExitCode)
         {{"cpm_history", "--include", "("}, "", 2, "--include '(' is not a regular expression"},
         {{"cpm_history", "--exclude", "a[", "--window", "1s"}, "", 2, "--exclude 'a[' is not a regular expression"},
         {{"cpm_history", "--max-bytes", "abc"}, "", 2, "--max-bytes: 'abc' is not a whole number"},
+        {{"cpm_history", "--max-bytes-total", "12"}, "", 2, "--max-bytes-total: '12' is not a whole number in 1024..1099511627776"},
+        {{"cpm_history", "--max-bytes", "2048", "--max-bytes-total", "4096"}, "", 2, "--max-bytes is the older name of --max-bytes-total"},
         {{"fsm_node", "--vehicle_id", "1", "--fsm", CPM_SOURCE_DIR "/scenarios/fsm/corridor.json", "--max-age", "abc"},
          "", 2, "--max-age: 'abc' is not a duration"},
         {{"vehicle_bridge", "--vehicle_id", "1", "--device", "/dev/null", "--calibration", "FILE"}, R"({"servo_range_us": 0})",

@@ -3,6 +3,7 @@
 // Store as raw serialized payloads (types it was never compiled with included), answers
 // historyRequest with historyReply and publishes historyStatus.
 #include <cpm/Participant.hpp>
+#include <cpm/rtdb/IngestSink.hpp>
 #include <cpm/rtdb/Store.hpp>
 
 #include <map>
@@ -18,8 +19,8 @@ struct ServiceOptions
     std::vector<std::string> include;  ///< topic name regexes (full match); empty: every topic
     std::vector<std::string> exclude;  ///< topic name regexes never recorded (historyRequest/Reply always are)
     uint64_t window_ns = 10'000'000'000ull;
-    uint64_t max_bytes = 512ull << 20;  ///< payload bytes across all topics
-    uint64_t max_bytes_per_topic = 128ull << 20;
+    uint64_t max_bytes_total = 512ull << 20;      ///< payload bytes across all topics
+    uint64_t max_bytes_per_topic = 128ull << 20;  ///< payload bytes of one topic
     std::map<std::string, uint64_t> topic_windows_ns;  ///< topics keeping another window than window_ns
     uint64_t status_period_ns = 1'000'000'000ull;
     size_t workers = 4;  ///< threads answering requests that may wait
@@ -27,6 +28,8 @@ struct ServiceOptions
     /// cpm::init's settings make, which cpm::Logging uses too), so the process shows as one
     /// participant of its name besides its recorder. Set: a participant of these options.
     std::optional<ParticipantOptions> participant;
+    /// Beside the store, these get every object, sample and deletion the service records.
+    std::vector<std::shared_ptr<IngestSink>> sinks;
 };
 
 struct ServiceCounters

@@ -144,7 +144,7 @@ struct Criteria
 struct Retention
 {
     uint64_t window_ns = 10'000'000'000ull;  ///< history_interval
-    uint64_t max_bytes = 64ull << 20;        ///< payload bytes per topic
+    uint64_t max_bytes_per_topic = 64ull << 20;  ///< payload bytes of one topic
 };
 
 struct StoreOptions

@@ -1,0 +1,373 @@
+#include "Ingest.hpp"
+
+#include <cpm/Error.hpp>
+#include <cpm/Logging.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/rtdb/IdlDecoder.hpp>
+
+#include "RawType.hpp"
+
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+
+#include <map>
+#include <optional>
+
+namespace cpm::rtdb {
+
+namespace dds = eprosima::fastdds::dds;
+
+namespace {
+
+/// The instance key as cpm prints it when the IDL does not describe the type: a lab type's
+/// vehicle id (the one-byte key the handle starts with), otherwise the handle in hex; "" for an
+/// unkeyed topic.
+std::string key_text(const rtps::InstanceHandle_t& h, bool keyed)
+{
+    if (!keyed) return "";
+    bool small = true;
+    for (size_t i = 1; i < 16; ++i) small = small && h.value[i] == 0;
+    if (small) return std::to_string(unsigned(h.value[0]));
+    static const char* hex = "0123456789abcdef";
+    std::string out;
+    for (size_t i = 0; i < 16; ++i) {
+        out += hex[h.value[i] >> 4];
+        out += hex[h.value[i] & 15];
+    }
+    return out;
+}
+
+/// Something discovery told us, handled on the service's own thread (creating readers inside
+/// a discovery callback can deadlock Fast DDS).
+struct Event
+{
+    enum Kind { writer_found, writer_gone, process_found, process_gone } kind;
+    std::string topic, type_name, name;
+    bool keyed = false, reliable = false, transient_local = false;
+    rtps::GUID_t guid;
+};
+
+std::vector<std::regex> compile(const std::vector<std::string>& patterns, const char* flag)
+{
+    std::vector<std::regex> out;
+    for (const auto& p : patterns) {
+        try {
+            out.emplace_back(p);
+        } catch (const std::regex_error& e) {
+            throw Error(std::string(flag) + " '" + p + "' is not a regular expression: " + e.what());
+        }
+    }
+    return out;
+}
+
+/// Samples too short to hold a header: the first ten are logged, outside the lock.
+struct Skipped
+{
+    size_t count = 0, size = 0;
+};
+
+}  // namespace
+
+struct Ingest::Impl : public dds::DomainParticipantListener
+{
+    /// One recorded topic: a raw reader on the recording participant.
+    struct TopicRec : public dds::DataReaderListener
+    {
+        Impl* ingest = nullptr;
+        std::string name, type_name;
+        bool keyed = false;
+        const IdlDecoder* types = nullptr;  ///< the lab's IDL when it describes the type: keys and stamps exact
+        std::optional<bool> has_header;     ///< decided from the IDL, else from the first sample
+        dds::Topic* topic = nullptr;
+        dds::DataReader* reader = nullptr;
+        uint64_t received = 0, lost = 0;
+        std::map<rtps::GUID_t, uint64_t> last_sequence;  ///< per writer: the newest sequence number taken
+        void on_data_available(dds::DataReader* r) override { ingest->ingest(*this, r); }
+    };
+
+    Ingest& self;
+    Outlet& out;
+    Registry registry;
+    std::vector<std::regex> include, exclude;
+    std::unique_ptr<Participant> recorder;
+    dds::Subscriber* raw_subscriber = nullptr;
+    std::map<std::string, std::unique_ptr<TopicRec>> topics;  // under self.mutex_
+
+    std::mutex events_mutex;
+    std::condition_variable events_cv;
+    std::deque<Event> events;
+    bool stopping = false;
+
+    Impl(Ingest& i, const ServiceOptions& options, Outlet& o)
+        : self(i), out(o), registry(o), include(compile(options.include, "--include")), exclude(compile(options.exclude, "--exclude"))
+    {
+        ParticipantOptions rec = options.participant.value_or(ParticipantOptions::from_init());
+        rec.name = (rec.name.empty() ? std::string("cpm_history") : rec.name) + "_recorder";
+        rec.discovery_listener = this;
+        recorder = std::make_unique<Participant>(rec);
+        raw_subscriber = recorder->native()->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
+        if (!raw_subscriber) throw Error("cpm_history: cannot create the recording subscriber");
+    }
+
+    ~Impl() override
+    {
+        // Readers first, while their listeners (TopicRec) still exist.
+        for (auto& [name, t] : topics) {
+            if (t->reader) {
+                t->reader->set_listener(nullptr);
+                raw_subscriber->delete_datareader(t->reader);
+            }
+            if (t->topic) recorder->native()->delete_topic(t->topic);
+        }
+        recorder->native()->delete_subscriber(raw_subscriber);
+        recorder->native()->set_listener(nullptr);
+    }
+
+    // ---- discovery -------------------------------------------------------------------------
+    void push(Event e)
+    {
+        std::lock_guard lock(events_mutex);
+        events.push_back(std::move(e));
+        events_cv.notify_one();
+    }
+
+    void on_participant_discovery(dds::DomainParticipant*, rtps::ParticipantDiscoveryInfo&& info) override
+    {
+        Event e{};
+        e.guid = info.info.m_guid;
+        e.name = info.info.m_participantName.to_string();
+        switch (info.status) {
+        case rtps::ParticipantDiscoveryInfo::DISCOVERED_PARTICIPANT: e.kind = Event::process_found; break;
+        case rtps::ParticipantDiscoveryInfo::REMOVED_PARTICIPANT:
+        case rtps::ParticipantDiscoveryInfo::DROPPED_PARTICIPANT: e.kind = Event::process_gone; break;
+        default: return;
+        }
+        push(std::move(e));
+    }
+
+    void on_publisher_discovery(dds::DomainParticipant*, rtps::WriterDiscoveryInfo&& info) override
+    {
+        Event e{};
+        e.guid = info.info.guid();
+        e.topic = info.info.topicName().to_string();
+        e.type_name = info.info.typeName().to_string();
+        e.keyed = info.info.topicKind() == rtps::WITH_KEY;
+        e.reliable = info.info.m_qos.m_reliability.kind == dds::RELIABLE_RELIABILITY_QOS;
+        e.transient_local = info.info.m_qos.m_durability.kind != dds::VOLATILE_DURABILITY_QOS;
+        switch (info.status) {
+        case rtps::WriterDiscoveryInfo::DISCOVERED_WRITER: e.kind = Event::writer_found; break;
+        case rtps::WriterDiscoveryInfo::REMOVED_WRITER: e.kind = Event::writer_gone; break;
+        default: return;
+        }
+        push(std::move(e));
+    }
+
+    bool wanted(const std::string& topic) const
+    {
+        if (topic == "historyRequest" || topic == "historyReply") return false;
+        for (const auto& re : exclude) {
+            if (std::regex_match(topic, re)) return false;
+        }
+        if (include.empty()) return true;
+        for (const auto& re : include) {
+            if (std::regex_match(topic, re)) return true;
+        }
+        return false;
+    }
+
+    void handle(const Event& e, uint64_t now)
+    {
+        switch (e.kind) {
+        case Event::process_found: return registry.process_found(e.guid.guidPrefix, e.name, now);
+        case Event::process_gone: return registry.process_gone(e.guid.guidPrefix, now);
+        case Event::writer_gone: return registry.writer_gone(e.topic, e.guid, now);
+        case Event::writer_found: return;  // subscribe(), outside the lock
+        }
+    }
+
+    void subscribe(const Event& e)
+    {
+        auto rec = std::make_unique<TopicRec>();
+        rec->ingest = this;
+        rec->name = e.topic;
+        rec->type_name = e.type_name;
+        rec->keyed = e.keyed;
+        const IdlDecoder* types = IdlDecoder::lab_types();
+        if (types && types->knows(e.type_name)) {
+            rec->types = types;
+            rec->has_header = types->has_header(e.type_name);
+        }
+        auto* participant = recorder->native();
+        if (participant->find_type(e.type_name).empty()) {
+            dds::TypeSupport type(new RawType(e.type_name, e.keyed, types));
+            type->auto_fill_type_information(false);
+            type->auto_fill_type_object(false);
+            if (type.register_type(participant) != ReturnCode_t::RETCODE_OK) {
+                CPM_LOG_ERROR("cpm_history: cannot register type '%s' of topic '%s'; not recorded", e.type_name.c_str(), e.topic.c_str());
+                return;
+            }
+        }
+        rec->topic = participant->create_topic(e.topic, e.type_name, dds::TOPIC_QOS_DEFAULT);
+        if (!rec->topic) {
+            CPM_LOG_ERROR("cpm_history: cannot create topic '%s' (type '%s'); not recorded", e.topic.c_str(), e.type_name.c_str());
+            return;
+        }
+        // Compatible with the first writer seen: as reliable and as durable as it offers.
+        const dds::DataReaderQos qos = raw_reader_qos(e.reliable, e.transient_local);
+        rec->reader = raw_subscriber->create_datareader(rec->topic, qos, rec.get(), dds::StatusMask::data_available());
+        if (!rec->reader) {
+            CPM_LOG_ERROR("cpm_history: cannot create a reader for topic '%s'; not recorded", e.topic.c_str());
+            participant->delete_topic(rec->topic);
+            return;
+        }
+        CPM_LOG_INFO("cpm_history: recording topic '%s' (type '%s'%s)", e.topic.c_str(), e.type_name.c_str(), e.keyed ? ", keyed" : "");
+        std::lock_guard lock(self.mutex_);
+        topics[e.topic] = std::move(rec);
+    }
+
+    // ---- samples ---------------------------------------------------------------------------
+    void ingest(TopicRec& t, dds::DataReader* reader)
+    {
+        Skipped skipped;
+        {
+            std::lock_guard lock(self.mutex_);
+            take_all(t, reader, skipped);
+        }
+        // Logged outside the lock: the log topic is recorded too, and Fast DDS may deliver a
+        // write to a reader in this process on the writing thread, which would take the lock again.
+        for (size_t i = 0; i < skipped.count; ++i) {
+            CPM_LOG_WARN("cpm_history: topic '%s': a sample of %zu bytes is too short to hold a Header (4 + 16 bytes); skipped",
+                         t.name.c_str(), skipped.size);
+        }
+    }
+
+    /// The samples its writer sent before this one that never arrived: a writer numbers
+    /// everything it sends, so a jump means a best-effort sample dropped or a reliable writer's
+    /// history overwritten while the service could not keep up.
+    uint64_t lost_before(TopicRec& t, const rtps::GUID_t& writer, uint64_t seq)
+    {
+        auto [last, first] = t.last_sequence.try_emplace(writer, seq);
+        if (first) return 0;
+        const uint64_t lost = seq > last->second + 1 ? seq - last->second - 1 : 0;
+        last->second = std::max(last->second, seq);
+        return lost;
+    }
+
+    /// Takes every sample the reader holds to the outlet; under the lock.
+    void take_all(TopicRec& t, dds::DataReader* reader, Skipped& skipped)
+    {
+        RawSample raw;
+        dds::SampleInfo info;
+        while (reader->take_next_sample(&raw, &info) == ReturnCode_t::RETCODE_OK) {
+            const uint64_t now = cpm::get_time_ns();
+            rtps::GUID_t writer;
+            rtps::iHandle2GUID(writer, info.publication_handle);
+            const uint64_t lost = lost_before(t, writer, info.sample_identity.sequence_number().to64long());
+            t.lost += lost;
+            self.lost_ += lost;
+            if (!info.valid_data) {
+                if (info.instance_state != dds::ALIVE_INSTANCE_STATE) registry.instance_ended(t.name, info.instance_handle, now);
+                continue;
+            }
+            ++t.received;
+            ++self.received_;
+            const auto& b = raw.bytes;
+            if (b.size() < 4 + 16) {  // encapsulation + Header
+                if (++self.dropped_ <= 10) {
+                    ++skipped.count;
+                    skipped.size = b.size();
+                }
+                continue;
+            }
+            const bool little = b[1] & 1;  // CDR_LE / PL_CDR_LE
+            auto u64 = [&](size_t at) {
+                uint64_t v = 0;
+                for (size_t i = 0; i < 8; ++i) v |= uint64_t(b[at + (little ? i : 7 - i)]) << (8 * i);
+                return v;
+            };
+            const uint64_t source = uint64_t(info.source_timestamp.seconds()) * 1'000'000'000ull + info.source_timestamp.nanosec();
+            // A type the IDL does not describe is taken to begin with a Header when its first
+            // sample's stamps look like one (valid after created, by less than an hour, and not
+            // from the future); a Log's string or a Parameter's name do not.
+            if (!t.has_header) {
+                const uint64_t create = u64(4), valid_after = u64(12);
+                t.has_header = create <= now + 3'600'000'000'000ull && valid_after >= create &&
+                               valid_after - create <= 3'600'000'000'000ull;
+                if (!*t.has_header)
+                    CPM_LOG_INFO("cpm_history: topic '%s' (type '%s') has no Header: its data time is the writer's "
+                                 "source timestamp", t.name.c_str(), t.type_name.c_str());
+            }
+            const bool stamped = *t.has_header;
+            const Oid oid = registry.instance(t.name, info.instance_handle, writer, [&] {
+                std::string key = key_text(info.instance_handle, t.keyed);
+                if (t.keyed && t.types) key = t.types->key_text(t.type_name, b.data(), b.size()).value_or(key);
+                return Registry::Naming{key, t.type_name, stamped ? "create_stamp" : "source_timestamp"};
+            }, now);
+            if (oid == kNoOid) {  // millions of instances held at once: counted, not stored
+                ++self.dropped_;
+                continue;
+            }
+            out.commit(oid, {stamped ? u64(4) : source, stamped ? u64(12) : source, source, b.data(), b.size(), lost}, now);
+        }
+    }
+};
+
+Ingest::Ingest(const ServiceOptions& options, Outlet& out) : impl_(std::make_unique<Impl>(*this, options, out)) {}
+
+Ingest::~Ingest()
+{
+    stop();
+    impl_.reset();
+}
+
+void Ingest::stop()
+{
+    std::lock_guard lock(impl_->events_mutex);
+    impl_->stopping = true;
+    impl_->events_cv.notify_all();
+}
+
+bool Ingest::process_events(std::chrono::milliseconds wait)
+{
+    auto& d = *impl_;
+    std::deque<Event> batch;
+    {
+        std::unique_lock lock(d.events_mutex);
+        d.events_cv.wait_for(lock, wait, [&] { return d.stopping || !d.events.empty(); });
+        if (d.stopping) return false;
+        batch.swap(d.events);
+    }
+    const uint64_t now = cpm::get_time_ns();
+    for (const auto& e : batch) {
+        // Creating a reader takes Fast DDS locks that its receive threads hold while they
+        // call ingest(): never under the lock.
+        if (e.kind == Event::writer_found) {
+            const bool known = locked([&] { return d.topics.count(e.topic) != 0; });
+            if (!known && d.wanted(e.topic)) d.subscribe(e);
+        } else {
+            locked([&] { d.handle(e, now); });
+        }
+    }
+    return true;
+}
+
+size_t Ingest::topic_count() const
+{
+    std::lock_guard lock(mutex_);
+    return impl_->topics.size();
+}
+
+std::vector<TopicCount> Ingest::topic_counts() const
+{
+    std::lock_guard lock(mutex_);
+    std::vector<TopicCount> out;
+    for (const auto& [name, t] : impl_->topics) out.push_back({name, t->type_name, t->received, t->lost});
+    return out;
+}
+
+}  // namespace cpm::rtdb

@@ -1,0 +1,66 @@
+#pragma once
+// The history service's ingest: a recording participant that finds writers by discovery,
+// opens a raw reader per wanted topic, and hands every sample — with its object from the
+// registry, its data time and the writer's sequence gaps — to the outlet. Discovery is
+// handled on the caller's thread (process_events), never in a Fast DDS callback.
+#include <cpm/Participant.hpp>
+#include <cpm/rtdb/HistoryService.hpp>
+
+#include "Outlet.hpp"
+#include "Registry.hpp"
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <regex>
+#include <string>
+#include <vector>
+
+namespace cpm::rtdb {
+
+/// A recorded topic as the status reports it.
+struct TopicCount
+{
+    std::string topic, type_name;
+    uint64_t received = 0, lost = 0;
+};
+
+class Ingest
+{
+public:
+    /// Starts the recording participant (named after `participant`'s name + "_recorder").
+    /// Throws cpm::Error for a bad include/exclude pattern or when DDS refuses.
+    Ingest(const ServiceOptions& options, Outlet& out);
+    ~Ingest();
+    Ingest(const Ingest&) = delete;
+    Ingest& operator=(const Ingest&) = delete;
+
+    /// Handles what discovery reported, waiting up to `wait` for something; false once stop()
+    /// was called.
+    bool process_events(std::chrono::milliseconds wait);
+    void stop();
+    /// Runs f under the ingest's lock (nothing is committed meanwhile).
+    template <class F>
+    auto locked(F&& f)
+    {
+        std::lock_guard lock(mutex_);
+        return f();
+    }
+
+    uint64_t received() const { return received_; }
+    uint64_t dropped() const { return dropped_; }
+    uint64_t lost() const { return lost_; }
+    size_t topic_count() const;
+    std::vector<TopicCount> topic_counts() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+    mutable std::mutex mutex_;  ///< the ingest path: reader callbacks, registry, expiry
+    std::atomic<uint64_t> received_{0}, dropped_{0}, lost_{0};
+};
+
+}  // namespace cpm::rtdb

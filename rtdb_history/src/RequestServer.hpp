@@ -1,0 +1,49 @@
+#pragma once
+// The history service's request side: answers historyRequest from the store on historyReply.
+// Requests that may wait (wait_next, successor, wait_object) go to worker threads so that they
+// never hold up the others.
+#include <cpm/AsyncReader.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/rtdb/Store.hpp>
+
+#include <HistoryReply.h>
+#include <HistoryRequest.h>
+
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace cpm::rtdb {
+
+class RequestServer
+{
+public:
+    RequestServer(const Store& store, Participant& participant, size_t workers);
+    ~RequestServer();
+    RequestServer(const RequestServer&) = delete;
+    RequestServer& operator=(const RequestServer&) = delete;
+
+    uint64_t requests() const { return requests_; }
+    uint64_t bad_requests() const { return bad_requests_; }
+
+private:
+    void serve(const HistoryRequest& rq);
+    void work_loop();
+
+    const Store& store_;
+    std::atomic<uint64_t> requests_{0}, bad_requests_{0};
+    Writer<HistoryReply> replies_;
+    std::mutex work_mutex_;
+    std::condition_variable work_cv_;
+    std::deque<HistoryRequest> work_;
+    bool stopping_ = false;
+    std::vector<std::thread> workers_;
+    std::unique_ptr<AsyncReader<HistoryRequest>> reader_;
+};
+
+}  // namespace cpm::rtdb
