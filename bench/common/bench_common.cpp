@@ -66,57 +66,24 @@ void print_machine(const std::string& settings)
                 u.sysname, u.release, settings.c_str());
 }
 
-int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path,
-          const std::string& err_path)
+cpm::ChildProcess spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path,
+                        const std::string& err_path)
 {
-    std::vector<std::string> args = argv, envs;
-    for (char** e = environ; *e; ++e) envs.emplace_back(*e);
-    envs.insert(envs.end(), env.begin(), env.end());
-    const int pid = fork();
-    if (pid == 0) {
-        if (!out_path.empty()) {
-            const int fd = open(out_path.c_str(), O_CREAT | O_TRUNC | O_WRONLY, 0644);
-            dup2(fd, STDOUT_FILENO);
-        }
-        if (!err_path.empty()) {
-            const int fd = open(err_path.c_str(), O_CREAT | O_TRUNC | O_WRONLY, 0644);
-            dup2(fd, STDERR_FILENO);
-        }
-        close_range(3, ~0u, 0);  // keep our DDS shared-memory lock files out of the child
-        std::vector<char*> a, e;
-        for (auto& s : args) a.push_back(s.data());
-        a.push_back(nullptr);
-        for (auto& s : envs) e.push_back(s.data());
-        e.push_back(nullptr);
-        execve(a[0], a.data(), e.data());
-        _exit(127);
-    }
-    return pid;
+    return cpm::ChildProcess({.argv = argv, .env = env, .stdout_path = out_path, .stderr_path = err_path});
 }
 
-int spawn_self(const std::vector<std::string>& args)
+cpm::ChildProcess spawn_self(const std::vector<std::string>& args)
 {
-    char self[4096];
-    const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-    self[n > 0 ? n : 0] = '\0';
-    std::vector<std::string> argv{self};
+    std::vector<std::string> argv{cpm::sibling_executable(program_invocation_short_name)};
     argv.insert(argv.end(), args.begin(), args.end());
     return spawn(argv, {}, "");
 }
 
-int wait_child(int pid, double timeout_s)
+int wait_child(cpm::ChildProcess& child, double timeout_s)
 {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-    int status = 0;
-    while (waitpid(pid, &status, WNOHANG) == 0) {
-        if (std::chrono::steady_clock::now() > deadline) {
-            kill(pid, SIGKILL);
-            waitpid(pid, &status, 0);
-            return -1;
-        }
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    auto end = child.wait(std::chrono::milliseconds(int64_t(timeout_s * 1000)));
+    if (!end) end = child.stop(std::chrono::milliseconds(0));
+    return end->signal == 0 ? end->code : -1;
 }
 
 std::string cyclone_loopback_env() { return "CYCLONEDDS_URI=file://" CPM_CYCLONE_LOOPBACK_XML; }

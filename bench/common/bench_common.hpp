@@ -1,4 +1,6 @@
 #pragma once
+#include <cpm/ChildProcess.hpp>
+
 // What every benchmark here shares: statistics printed the same way, child processes, the
 // Cyclone configuration that pins ddsperf to loopback, and the machine description.
 #include <cstdint>
@@ -24,14 +26,14 @@ void print_ratio(const std::string& label, const Stats& ours, const Stats& refer
 /// Machine and settings, printed once at the top.
 void print_machine(const std::string& settings);
 
-/// Starts this program again (via /proc/self/exe) with `args`; returns the pid.
-int spawn_self(const std::vector<std::string>& args);
+/// Starts this program again with `args`.
+cpm::ChildProcess spawn_self(const std::vector<std::string>& args);
 /// Starts a program with args and extra environment, stdout to `out_path` (and stderr to
-/// `err_path` when given); returns the pid.
-int spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path,
-          const std::string& err_path = "");
-/// Waits for a child; returns its exit code (-1 if killed). Kills it after timeout_s.
-int wait_child(int pid, double timeout_s);
+/// `err_path` when given).
+cpm::ChildProcess spawn(const std::vector<std::string>& argv, const std::vector<std::string>& env, const std::string& out_path,
+                        const std::string& err_path = "");
+/// Waits for a child's end; returns its exit code (-1 if a signal ended it). Stops it after timeout_s.
+int wait_child(cpm::ChildProcess& child, double timeout_s);
 
 /// CYCLONEDDS_URI=... for loopback only, unicast discovery, no multicast.
 std::string cyclone_loopback_env();

@@ -147,22 +147,18 @@ int main(int argc, char** argv)
     cpm::Participant participant(o);
     const std::string machine = "/tmp/bench_fsm_" + std::to_string(::getpid()) + ".json";
     std::ofstream(machine) << R"({"root": 0, "tick_period": 0.02, "states": [{"id": 0, "type": "FollowWall", "final": true}], "transitions": []})";
-    char self[4096];
-    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-    std::string dir(self, size_t(n > 0 ? n : 0));
-    dir = dir.substr(0, dir.rfind('/'));
     const std::vector<std::string> env{"CPM_DOMAIN_ID=" + std::to_string(domain)};
 
-    int node = bench::spawn({dir + "/fsm_node", "--vehicle_id", "1", "--fsm", machine, "--max-age", "1s"}, env,
+    auto node = bench::spawn({cpm::sibling_executable("fsm_node"), "--vehicle_id", "1", "--fsm", machine, "--max-age", "1s"}, env,
                             "/tmp/bench_fsm_node.out", "/tmp/bench_fsm_node.err");
     auto ours = command_latency(participant, count);
-    kill(node, SIGTERM);
+    node.signal(SIGTERM);
     bench::wait_child(node, 10);
     std::this_thread::sleep_for(500ms);
 
-    int relay_pid = bench::spawn_self({"--relay", "1", "--domain", std::to_string(domain)});
+    auto relay_pid = bench::spawn_self({"--relay", "1", "--domain", std::to_string(domain)});
     auto reference = command_latency(participant, count);
-    kill(relay_pid, SIGKILL);
+    relay_pid.signal(SIGKILL);
     bench::wait_child(relay_pid, 10);
     std::remove(machine.c_str());
 

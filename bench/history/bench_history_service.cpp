@@ -147,7 +147,7 @@ int main(int argc, char** argv)
     bench::print_machine("bench_history_service: cpm_history on domain " + std::to_string(domain) + ", " +
                          bench::arg(argc, argv, "--seconds", "3") + " s per rate");
     const std::vector<std::string> env{"CPM_DOMAIN_ID=" + std::to_string(domain)};
-    const int service = bench::spawn({std::string(CPM_BIN_DIR) + "/cpm_history", "--window", "120s", "--max-bytes",
+    auto service = bench::spawn({cpm::sibling_executable("cpm_history"), "--window", "120s", "--max-bytes-total",
                                       "4294967296", "--max-bytes-per-topic", "4294967296"},
                                      env, "/tmp/bench_history_service.out", "/tmp/bench_history_service.err");
     // The client talks UDP loopback (a restarted service may reuse a shared-memory port);
@@ -165,7 +165,7 @@ int main(int argc, char** argv)
     }
     double tag = 0;
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    const long rss_before = rss_kb(service);
+    const long rss_before = rss_kb(service.pid());
     const uint64_t before = 0;
     // What the service holds (samples, payload bytes) and its resident size, after each rate.
     struct Held
@@ -181,7 +181,7 @@ int main(int argc, char** argv)
             h.samples += o.samples_held();
             h.bytes += o.bytes_held();
         }
-        h.rss_kb = rss_kb(service);
+        h.rss_kb = rss_kb(service.pid());
         return h;
     };
     std::vector<Held> steps;
@@ -223,14 +223,14 @@ int main(int argc, char** argv)
     bench::print_header("round trip");
     const auto service_stats = bench::stats_of(round_trips(client, 2050));
     bench::print_row("cpm_history at", service_stats);
-    ::kill(service, SIGTERM);
+    service.signal(SIGTERM);
     bench::wait_child(service, 10);
-    const int echo_pid = bench::spawn_self({"--echo", "1", "--domain", std::to_string(domain)});
+    auto echo_pid = bench::spawn_self({"--echo", "1", "--domain", std::to_string(domain)});
     cpm::HistoryClient echo_client(client_participant, std::chrono::milliseconds(10000));
     const auto echo_stats = bench::stats_of(round_trips(echo_client, 2050));
     bench::print_row("plain ping-pong", echo_stats);
     bench::print_ratio("cpm_history / ping-pong (target <= 1.5)", service_stats, echo_stats);
-    ::kill(echo_pid, SIGTERM);
+    echo_pid.signal(SIGTERM);
     bench::wait_child(echo_pid, 10);
     return 0;
 }

@@ -235,12 +235,12 @@ bench::Stats ddsperf_latency(int domain, size_t size, int seconds)
     const std::string ping_out = "/tmp/bench_ddsperf_ping_" + std::to_string(getpid());
     const std::vector<std::string> env{bench::cyclone_loopback_env()};
     const std::string dur = std::to_string(seconds + 2);
-    const int pong = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", dur, "pong"}, env, pong_out);
-    const int ping = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds),
+    auto pong = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", dur, "pong"}, env, pong_out);
+    auto ping = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds),
                                    "ping", "size", std::to_string(size)},
                                   env, ping_out);
     bench::wait_child(ping, seconds + 20);
-    kill(pong, SIGTERM);
+    pong.signal(SIGTERM);
     bench::wait_child(pong, 5);
 
     std::vector<double> p50s, p90s, p99s;
@@ -314,7 +314,7 @@ int main(int argc, char** argv)
     for (size_t size : sizes) {
         bench::print_header("one-way latency, payload " + std::to_string(size) + " B");
         // Every case gets its own domain and pong process for the whole run.
-        std::vector<int> pongs;
+        std::vector<cpm::ChildProcess> pongs;
         std::vector<std::unique_ptr<Pinger>> pingers;
         for (size_t k = 0; k < cases.size(); ++k) {
             const int d = domain + int(k);
@@ -333,8 +333,8 @@ int main(int argc, char** argv)
             }
         }
         pingers.clear();
-        for (int pid : pongs) kill(pid, SIGTERM);
-        for (int pid : pongs) bench::wait_child(pid, 10);
+        for (auto& pong : pongs) pong.signal(SIGTERM);
+        for (auto& pong : pongs) bench::wait_child(pong, 10);
 
         std::map<std::string, bench::Stats> results;
         for (size_t k = 0; k < cases.size(); ++k) {

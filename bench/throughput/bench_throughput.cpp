@@ -163,10 +163,7 @@ struct Result
 Result run_fastdds(const std::string& impl, int domain, size_t size, int seconds)
 {
     const std::string out = "/tmp/bench_throughput_sub_" + std::to_string(getpid());
-    char self[4096];
-    const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-    self[n > 0 ? n : 0] = '\0';
-    const int sub = bench::spawn({self, "--role", "sub", "--impl", impl, "--domain", std::to_string(domain), "--seconds",
+    auto sub = bench::spawn({cpm::sibling_executable("bench_throughput"), "--role", "sub", "--impl", impl, "--domain", std::to_string(domain), "--seconds",
                                   std::to_string(seconds + 60)},
                                  {}, out);
     Result r;
@@ -187,9 +184,9 @@ Result run_ddsperf(int domain, size_t size, int seconds)
 {
     const std::string sub_out = "/tmp/bench_ddsperf_sub_" + std::to_string(getpid());
     const std::vector<std::string> env{bench::cyclone_loopback_env()};
-    const int sub = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds + 2), "sub"},
+    auto sub = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds + 2), "sub"},
                                  env, sub_out);
-    const int pub = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds), "pub",
+    auto pub = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds), "pub",
                                   "size", std::to_string(size)},
                                  env, "/dev/null");
     bench::wait_child(pub, seconds + 20);

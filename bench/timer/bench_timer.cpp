@@ -92,7 +92,8 @@ int main(int argc, char** argv)
                          " s per case; 'busy' = a spinning process competing for the cores; reference: "
                          "clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME) loop");
     for (const bool busy : {false, true}) {
-        const int spinner = busy ? bench::spawn_self({"--role", "busy"}) : -1;
+        std::optional<cpm::ChildProcess> spinner;
+        if (busy) spinner.emplace(bench::spawn_self({"--role", "busy"}));
         for (const uint64_t period : {20'000'000ull, 1'000'000ull}) {
             const std::string rate = period == 20'000'000ull ? "50 Hz" : "1 kHz";
             bench::print_header("tick jitter, " + rate + (busy ? ", other core busy" : ", idle"));
@@ -110,9 +111,9 @@ int main(int argc, char** argv)
                         "reference %ld run late\n",
                         (unsigned long long)skipped, long(late(cpm_jitter)), long(late(ref_jitter)));
         }
-        if (spinner > 0) {
-            kill(spinner, SIGKILL);
-            bench::wait_child(spinner, 5);
+        if (spinner) {
+            spinner->signal(SIGKILL);
+            bench::wait_child(*spinner, 5);
         }
     }
     // Last: --simulated_time switches this process's clock to the lab's simulated one.

@@ -38,14 +38,6 @@ namespace {
 
 using namespace std::chrono_literals;
 
-std::string bin_dir()
-{
-    char self[4096];
-    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-    std::string path(self, size_t(n > 0 ? n : 0));
-    return path.substr(0, path.rfind('/'));
-}
-
 std::string file_text(const std::string& path)
 {
     std::ifstream in(path);
@@ -127,17 +119,16 @@ bool wait_for_line(const std::string& path, const std::string& prefix, std::stri
 
 void one_car(cpm::Participant& participant, const std::vector<std::string>& env, int seconds)
 {
-    const std::string dir = bin_dir();
     const std::string sim_out = "/tmp/bench_vehicle_sim.out", bridge_out = "/tmp/bench_vehicle_bridge.out";
     std::remove(sim_out.c_str());  // never read the device line of an earlier run
     std::remove(bridge_out.c_str());
-    int sim = bench::spawn({dir + "/firmware_sim", "--vehicle_id", "1", "--trace-pwm"}, env, sim_out, "/tmp/bench_vehicle_sim.err");
+    auto sim = bench::spawn({cpm::sibling_executable("firmware_sim"), "--vehicle_id", "1", "--trace-pwm"}, env, sim_out, "/tmp/bench_vehicle_sim.err");
     std::string device;
     if (!wait_for_line(sim_out, "device: ", device, 10s)) {
         std::fprintf(stderr, "bench_vehicle: firmware_sim did not start\n");
         std::exit(1);
     }
-    int bridge = bench::spawn({dir + "/vehicle_bridge", "--vehicle_id", "1", "--device", device.substr(8)}, env, bridge_out,
+    auto bridge = bench::spawn({cpm::sibling_executable("vehicle_bridge"), "--vehicle_id", "1", "--device", device.substr(8)}, env, bridge_out,
                               "/tmp/bench_vehicle_bridge.err");
     cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState");
     cpm::Writer<VehicleCommandDirect> writer(participant, "vehicleCommandDirect");
@@ -151,7 +142,7 @@ void one_car(cpm::Participant& participant, const std::vector<std::string>& env,
     std::vector<std::pair<uint64_t, int>> writes;  // (time, pwm)
     VehicleCommandDirect command;
     command.vehicle_id(1);
-    double cpu_sim0 = process_cpu_us(sim), cpu_bridge0 = process_cpu_us(bridge);
+    double cpu_sim0 = process_cpu_us(sim.pid()), cpu_bridge0 = process_cpu_us(bridge.pid());
     auto t_end = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
     for (int k = 0; std::chrono::steady_clock::now() < t_end; ++k) {
         int pwm = 100 + (k % 2) * 100 + (k % 50) * 4;
@@ -162,9 +153,9 @@ void one_car(cpm::Participant& participant, const std::vector<std::string>& env,
         writes.emplace_back(now, pwm);
         std::this_thread::sleep_for(100ms + std::chrono::microseconds(rng() % 20'000));
     }
-    double cpu_sim = process_cpu_us(sim) - cpu_sim0, cpu_bridge = process_cpu_us(bridge) - cpu_bridge0;
-    kill(bridge, SIGTERM);
-    kill(sim, SIGTERM);
+    double cpu_sim = process_cpu_us(sim.pid()) - cpu_sim0, cpu_bridge = process_cpu_us(bridge.pid()) - cpu_bridge0;
+    bridge.signal(SIGTERM);
+    sim.signal(SIGTERM);
     bench::wait_child(bridge, 10);
     bench::wait_child(sim, 10);
 
@@ -219,7 +210,7 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
 {
     const std::string out = "/tmp/bench_vehicle_fleet.out";
     std::remove(out.c_str());
-    int fleet = bench::spawn({bin_dir() + "/cpm", "vehicle", "sim", "--id", "1", "--count", std::to_string(cars)}, env, out,
+    auto fleet = bench::spawn({cpm::sibling_executable("cpm"), "vehicle", "sim", "--id", "1", "--count", std::to_string(cars)}, env, out,
                              "/tmp/bench_vehicle_fleet.err");
     cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});
     cpm::Writer<VehicleCommandSpeedCurvature> writer(participant, "vehicleCommandSpeedCurvature");
@@ -263,7 +254,7 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
     r.cpu_busy = cpu.stop();
     stop = true;
     commander.join();
-    kill(fleet, SIGINT);
+    fleet.signal(SIGINT);
     bench::wait_child(fleet, 20);
 
     const uint64_t period = 20'000'000, expected_delivery = 1'000'000;

@@ -2,88 +2,31 @@
 
 #include <cpm_test/Isolation.hpp>
 
-#include <cerrno>
-#include <csignal>
-#include <cstdlib>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
-#include <thread>
 
-#include <fcntl.h>
-#include <sys/wait.h>
 #include <unistd.h>
-
-extern char** environ;
 
 namespace cpm_test {
 
-Process::Process(std::vector<std::string> argv, std::vector<std::string> env)
+namespace {
+
+std::string temp_file(const char* prefix)
+{
+    std::string path = std::string("/tmp/") + prefix + "XXXXXX";
+    const int fd = ::mkstemp(path.data());
+    if (fd < 0) throw std::runtime_error("mkstemp failed");
+    ::close(fd);
+    return path;
+}
+
+cpm::ChildProcess start(std::vector<std::string> argv, std::vector<std::string> env, const std::string& out, const std::string& err)
 {
     test_domain_id();  // children inherit CPM_DOMAIN_ID
-    char tmpl[] = "/tmp/cpm_test_out_XXXXXX";
-    const int out_fd = ::mkstemp(tmpl);
-    if (out_fd < 0) throw std::runtime_error("mkstemp failed");
-    out_path_ = tmpl;
-    char err_tmpl[] = "/tmp/cpm_test_err_XXXXXX";
-    const int err_fd = ::mkstemp(err_tmpl);
-    if (err_fd < 0) throw std::runtime_error("mkstemp failed");
-    err_path_ = err_tmpl;
-
-    std::vector<char*> args;
-    for (auto& a : argv) args.push_back(a.data());
-    args.push_back(nullptr);
-    std::vector<std::string> env_strings;
-    for (char** e = environ; *e != nullptr; ++e) env_strings.emplace_back(*e);
-    for (auto& e : env) env_strings.push_back(e);
-    std::vector<char*> envp;
-    for (auto& e : env_strings) envp.push_back(e.data());
-    envp.push_back(nullptr);
-
-    pid_ = ::fork();
-    if (pid_ < 0) throw std::runtime_error("fork failed");
-    if (pid_ == 0) {
-        ::dup2(out_fd, STDOUT_FILENO);
-        ::dup2(err_fd, STDERR_FILENO);
-        ::setpgid(0, 0);
-        ::close_range(3, ~0u, 0);  // keep the test's DDS shared-memory lock files out of the child
-        ::execve(args[0], args.data(), envp.data());
-        std::fprintf(stderr, "cannot start %s: errno %d\n", args[0], errno);
-        ::_exit(127);
-    }
-    ::close(out_fd);
-    ::close(err_fd);
+    return cpm::ChildProcess(
+        {.argv = std::move(argv), .env = std::move(env), .stdout_path = out, .stderr_path = err, .own_process_group = true});
 }
-
-Process::~Process()
-{
-    if (!reaped_) {
-        kill(SIGTERM);
-        if (wait(std::chrono::seconds(3)) == -1 && !reaped_) {
-            kill(SIGKILL);
-            wait(std::chrono::seconds(3));
-        }
-    }
-    ::unlink(out_path_.c_str());
-    ::unlink(err_path_.c_str());
-}
-
-int Process::wait(std::chrono::milliseconds timeout)
-{
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (!reaped_) {
-        const int r = ::waitpid(pid_, &status_, WNOHANG);
-        if (r == pid_) {
-            reaped_ = true;
-            break;
-        }
-        if (std::chrono::steady_clock::now() >= deadline) return -1;
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    return WIFEXITED(status_) ? WEXITSTATUS(status_) : -1;
-}
-
-namespace {
 
 std::string file_text(const std::string& path)
 {
@@ -95,14 +38,30 @@ std::string file_text(const std::string& path)
 
 }  // namespace
 
+Process::Process(std::vector<std::string> argv, std::vector<std::string> env)
+    : out_path_(temp_file("cpm_test_out_")), err_path_(temp_file("cpm_test_err_")),
+      child_(start(std::move(argv), std::move(env), out_path_, err_path_))
+{
+}
+
+Process::~Process()
+{
+    child_.stop();
+    ::unlink(out_path_.c_str());
+    ::unlink(err_path_.c_str());
+}
+
+int Process::wait(std::chrono::milliseconds timeout)
+{
+    const auto end = child_.wait(timeout);
+    return end && end->signal == 0 ? end->code : -1;
+}
+
 std::string Process::output() const { return file_text(out_path_); }
 
 std::string Process::errors() const { return file_text(err_path_); }
 
-void Process::kill(int signal)
-{
-    if (!reaped_ && pid_ > 0) ::kill(-pid_, signal);  // its whole process group: wrappers spawn children
-}
+void Process::kill(int signal) { child_.signal(signal); }  // its whole process group: wrappers spawn children
 
 std::string built_program(const std::string& name) { return std::string(CPM_BIN_DIR) + "/" + name; }
 

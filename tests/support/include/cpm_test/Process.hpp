@@ -1,12 +1,15 @@
 #pragma once
+#include <cpm/ChildProcess.hpp>
+
 #include <chrono>
 #include <string>
 #include <vector>
 
 namespace cpm_test {
 
-/// A child process started by a test, with its stdout and stderr captured to files. The destructor
-/// kills it (SIGTERM, then SIGKILL) and reaps it, so a failing test never leaves it behind.
+/// A child process started by a test (a cpm::ChildProcess in its own process group), with its
+/// stdout and stderr captured to files. The destructor kills it (SIGTERM, then SIGKILL) and
+/// reaps it, so a failing test never leaves it behind.
 class Process
 {
 public:
@@ -23,14 +26,12 @@ public:
     /// Everything it has written to stderr so far.
     std::string errors() const;
     void kill(int signal);
-    int pid() const { return pid_; }
+    int pid() const { return child_.pid(); }
 
 private:
-    int pid_ = -1;
-    bool reaped_ = false;
-    int status_ = 0;
     std::string out_path_;
     std::string err_path_;
+    cpm::ChildProcess child_;
 };
 
 /// The path of a program built next to the tests (set by CMake as CPM_BIN_DIR).
