@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/AsyncReader.hpp>
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Writer.hpp>
@@ -16,23 +17,6 @@
 namespace cpm {
 
 namespace {
-
-WriterOptions request_options()
-{
-    WriterOptions o;
-    o.reliable = true;
-    o.history_depth = 64;
-    return o;
-}
-
-ReaderOptions reply_options()
-{
-    ReaderOptions o;
-    o.reliable = true;
-    o.keep_all = true;
-    o.transient_local = true;  // the service's replies written before this reader matched
-    return o;
-}
 
 }  // namespace
 
@@ -53,7 +37,7 @@ class ServiceBackend final : public HistoryBackend
 public:
     ServiceBackend(Participant& p, std::chrono::milliseconds timeout)
         : client_id(std::to_string(::getpid()) + "-" + std::to_string(std::random_device{}())), reply_timeout(timeout),
-          requests(p, "historyRequest", request_options()),
+          requests(p, topics::history_request.name, topics::history_request.writer),
           reader(
               [this](std::vector<HistoryReply>& batch) {
                   std::lock_guard lock(mutex);
@@ -62,7 +46,7 @@ public:
                   }
                   cv.notify_all();
               },
-              p, "historyReply", reply_options())
+              p, topics::history_reply.name, topics::history_reply.reader)
     {
     }
 

@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/Logging.hpp>
 
 #include <cpm/AsyncReader.hpp>
@@ -51,8 +52,6 @@ struct Logging::Impl
 
     // The last 100 messages stay available to monitors that start late; a node that starts
     // late gets the lab's current level.
-    static WriterOptions log_options() { return detail::reliable_writer_options(100, true); }
-    static ReaderOptions level_options() { return detail::reliable_reader_options(1, true); }
 
     void open_file(const std::string& path)
     {
@@ -67,14 +66,14 @@ struct Logging::Impl
     struct Dds
     {
         explicit Dds(std::atomic<uint16_t>& level)
-            : log_writer(Participant::default_participant(), "log", log_options()),
+            : log_writer(Participant::default_participant(), topics::log.name, topics::log.writer),
               level_reader(
                   [&level](std::vector<LogLevel>& levels) {
                       for (const auto& l : levels) {
                           if (l.log_level() >= 1 && l.log_level() <= 4) level = l.log_level();
                       }
                   },
-                  Participant::default_participant(), "logLevel", level_options())
+                  Participant::default_participant(), topics::log_level.name, topics::log_level.reader)
         {
         }
         Writer<Log> log_writer;

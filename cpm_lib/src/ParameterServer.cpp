@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/ParameterServer.hpp>
 #include <cpm/read_text_file.hpp>
 
@@ -29,17 +30,15 @@ using detail::parameter_type_named;
 struct ParameterServer::Impl
 {
     explicit Impl(Participant& participant)
-        : writer(participant, "parameter", writer_options()),
+        : writer(participant, topics::parameter.name, topics::parameter.writer),
           requests(
               [this](std::vector<ParameterRequest>& batch) {
                   for (const auto& r : batch) answer(r.name());
               },
-              participant, "parameterRequest", request_options())
+              participant, topics::parameter_request.name, topics::parameter_request.reader)
     {
     }
-    // Keyed by name and transient-local: a client that starts late gets every current value.
-    static WriterOptions writer_options() { return detail::reliable_writer_options(1, true); }
-    static ReaderOptions request_options() { return detail::reliable_reader_options(100, false); }
+    // Keyed by name and transient-local (topics::parameter): a client that starts late gets every current value.
 
     void publish(Parameter p)
     {

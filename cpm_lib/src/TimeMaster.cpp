@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/TimeMaster.hpp>
 
 #include "lab_topics.hpp"
@@ -20,9 +21,9 @@ using namespace detail;
 struct TimeMaster::Impl
 {
     explicit Impl(Participant& participant)
-        : ready(participant, kReadyStatusTopic, lab_control_reader_options()),
-          live_ready(participant, kReadyStatusTopic, lab_control_live_reader_options()),
-          trigger(participant, kSystemTriggerTopic, lab_control_writer_options())
+        : ready(participant, topics::ready_status.name, lab_control_reader_options()),
+          live_ready(participant, topics::ready_status.name, lab_control_live_reader_options()),
+          trigger(participant, topics::system_trigger.name, lab_control_writer_options())
     {
     }
 

@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/get_parameter.hpp>
 
 #include <cpm/AsyncReader.hpp>
@@ -73,7 +74,7 @@ private:
     }
 
     ParameterCache()
-        : requests_("parameterRequest", request_options()),
+        : requests_(topics::parameter_request.name, topics::parameter_request.writer),
           values_reader_(
               [this](std::vector<Parameter>& batch) {
                   {
@@ -82,11 +83,9 @@ private:
                   }
                   changed_.notify_all();
               },
-              "parameter", values_options())
+              topics::parameter.name, topics::parameter.reader)
     {
     }
-    static WriterOptions request_options() { return detail::reliable_writer_options(10, false); }
-    static ReaderOptions values_options() { return detail::reliable_reader_options(1, true); }
 
     std::mutex mutex_;
     std::condition_variable changed_;

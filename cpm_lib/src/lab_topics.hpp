@@ -1,36 +1,14 @@
 #pragma once
-// The lab's control topics, shared by Timer and TimeMaster.
-#include <cpm/ReaderOptions.hpp>
-#include <cpm/WriterOptions.hpp>
+// The lab's control topics (readyStatus, systemTrigger; cpm/topics.hpp), shared by Timer and
+// TimeMaster.
+#include <cpm/topics.hpp>
 
 #include <cstdint>
 
 namespace cpm::detail {
 
-constexpr const char* kReadyStatusTopic = "readyStatus";
-constexpr const char* kSystemTriggerTopic = "systemTrigger";
 /// A SystemTrigger with this next_start stops every timer.
 constexpr uint64_t kStopTrigger = UINT64_MAX;
-
-/// Reliable options (WriterOptions or ReaderOptions) with a history depth, optionally
-/// transient-local (cpm's own services).
-template <class Options>
-Options reliable_options(int depth, bool transient_local)
-{
-    Options o;
-    o.reliable = true;
-    o.transient_local = transient_local;
-    o.history_depth = depth;
-    return o;
-}
-inline WriterOptions reliable_writer_options(int depth, bool transient_local)
-{
-    return reliable_options<WriterOptions>(depth, transient_local);
-}
-inline ReaderOptions reliable_reader_options(int depth, bool transient_local)
-{
-    return reliable_options<ReaderOptions>(depth, transient_local);
-}
 
 /// Timer/TimeMaster control: transient-local (writers keep the latest sample per key), so
 /// whoever matches late (a master started after its nodes, a node after the start) still sees
@@ -40,8 +18,15 @@ inline ReaderOptions reliable_reader_options(int depth, bool transient_local)
 /// SystemTrigger with a plain reliable writer): the control topics are read twice, by a
 /// transient-local reader for what was sent before it matched and by a volatile one that
 /// matches every writer and so gets every sample sent after.
-inline WriterOptions lab_control_writer_options() { return reliable_writer_options(1, true); }
-inline ReaderOptions lab_control_reader_options() { return reliable_reader_options(64, true); }
-inline ReaderOptions lab_control_live_reader_options() { return reliable_reader_options(64, false); }
+/// Both topics have the same QoS (topics::ready_status, topics::system_trigger).
+static_assert(topics::ready_status.reader.history_depth == topics::system_trigger.reader.history_depth);
+inline WriterOptions lab_control_writer_options() { return topics::system_trigger.writer; }
+inline ReaderOptions lab_control_reader_options() { return topics::system_trigger.reader; }
+inline ReaderOptions lab_control_live_reader_options()
+{
+    ReaderOptions o = topics::system_trigger.reader;
+    o.transient_local = false;
+    return o;
+}
 
 }  // namespace cpm::detail

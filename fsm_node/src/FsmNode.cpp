@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/fsm/FsmNode.hpp>
 
 #include <cpm/Logging.hpp>
@@ -93,9 +94,11 @@ std::map<int, std::pair<std::string, double>> walls_of(const std::string& machin
 struct FsmNode::Impl
 {
     Impl(FsmNodeOptions o, std::unique_ptr<Machine> m, const std::string& json)
-        : options(o), machine(std::move(m)), report(walls_of(json)), states("vehicleState", {.vehicle_id = o.vehicle_id}),
-          ranges("rangeSensors", {.vehicle_id = o.vehicle_id}), markers("arucoMarkers", {.vehicle_id = o.vehicle_id}),
-          commands("vehicleCommandDirect"), stops("stopRequest"), status("fsmStatus", {.reliable = true, .history_depth = 1, .transient_local = true})
+        : options(o), machine(std::move(m)), report(walls_of(json)), states(topics::vehicle_state.name, topics::vehicle_state.reader_for(o.vehicle_id)),
+          ranges(topics::range_sensors.name, topics::range_sensors.reader_for(o.vehicle_id)),
+          markers(topics::aruco_markers.name, topics::aruco_markers.reader_for(o.vehicle_id)),
+          commands(topics::vehicle_command_direct.name, topics::vehicle_command_direct.writer),
+          stops(topics::stop_request.name, topics::stop_request.writer), status(topics::fsm_status.name, topics::fsm_status.writer)
     {
     }
 

@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/rtdb/HistoryService.hpp>
 
 #include <cpm/Writer.hpp>
@@ -68,7 +69,7 @@ struct HistoryService::Impl
         : options(std::move(o)), store(StoreOptions{{options.window_ns, options.max_bytes_per_topic}, options.max_bytes_total}),
           outlet(store, options.sinks), ingest(options, outlet), serving(serving_participant(options, own_serving)),
           requests(store, *serving, options.workers),
-          status(*serving, "historyStatus", WriterOptions{.reliable = true, .history_depth = 1, .transient_local = true})
+          status(*serving, topics::history_status.name, topics::history_status.writer)
     {
         for (const auto& [topic, window] : options.topic_windows_ns) store.set_retention(topic, {window, options.max_bytes_per_topic});
         control = std::thread([this] { control_loop(); });

@@ -1,5 +1,6 @@
 #include "Ingest.hpp"
 
+#include <cpm/topics.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/get_time_ns.hpp>
@@ -169,7 +170,7 @@ struct Ingest::Impl : public dds::DomainParticipantListener
 
     bool wanted(const std::string& topic) const
     {
-        if (topic == "historyRequest" || topic == "historyReply") return false;
+        if (topic == topics::history_request.name || topic == topics::history_reply.name) return false;
         for (const auto& re : exclude) {
             if (std::regex_match(topic, re)) return false;
         }

@@ -1,5 +1,6 @@
 #include "RequestServer.hpp"
 
+#include <cpm/topics.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/rtdb/Requests.hpp>
 #include <cpm/stamp_message.hpp>
@@ -8,9 +9,7 @@ namespace cpm::rtdb {
 
 RequestServer::RequestServer(const Store& store, Participant& participant, size_t workers)
     : store_(store),
-      // Transient-local: a client whose reader the writer has not matched yet when the reply
-      // goes out still gets it on matching.
-      replies_(participant, "historyReply", WriterOptions{.reliable = true, .history_depth = 64, .transient_local = true})
+      replies_(participant, topics::history_reply.name, topics::history_reply.writer)
 {
     for (size_t i = 0; i < std::max<size_t>(1, workers); ++i) workers_.emplace_back([this] { work_loop(); });
     reader_ = std::make_unique<AsyncReader<HistoryRequest>>(
@@ -25,7 +24,7 @@ RequestServer::RequestServer(const Store& store, Participant& participant, size_
                 }
             }
         },
-        participant, "historyRequest", ReaderOptions{.reliable = true, .keep_all = true});
+        participant, topics::history_request.name, topics::history_request.reader);
 }
 
 RequestServer::~RequestServer()

@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/vehicle/BridgeNode.hpp>
 
 #include <cpm/LogThrottle.hpp>
@@ -35,12 +36,12 @@ uint64_t thread_cpu_ns()
 struct LabTopics
 {
     explicit LabTopics(uint8_t id)
-        : direct("vehicleCommandDirect", {.vehicle_id = id}),
-          speed_curvature("vehicleCommandSpeedCurvature", {.vehicle_id = id}),
-          trajectory("vehicleCommandTrajectory", {.vehicle_id = id}),
-          path_tracking("vehicleCommandPathTracking", {.vehicle_id = id}),
-          observation("vehicleObservation", {.vehicle_id = id}),
-          stop("stopRequest", {.history_depth = 4})
+        : direct(topics::vehicle_command_direct.name, topics::vehicle_command_direct.reader_for(id)),
+          speed_curvature(topics::vehicle_command_speed_curvature.name, topics::vehicle_command_speed_curvature.reader_for(id)),
+          trajectory(topics::vehicle_command_trajectory.name, topics::vehicle_command_trajectory.reader_for(id)),
+          path_tracking(topics::vehicle_command_path_tracking.name, topics::vehicle_command_path_tracking.reader_for(id)),
+          observation(topics::vehicle_observation.name, topics::vehicle_observation.reader_for(id)),
+          stop(topics::stop_request.name, topics::stop_request.reader)
     {
     }
     Reader<VehicleCommandDirect> direct;
@@ -49,8 +50,8 @@ struct LabTopics
     Reader<VehicleCommandPathTracking> path_tracking;
     Reader<VehicleObservation> observation;
     ReaderAbstract<StopRequest> stop;
-    Writer<VehicleState> state{"vehicleState"};
-    Writer<RangeSensors> ranges{"rangeSensors"};
+    Writer<VehicleState> state{topics::vehicle_state.name, topics::vehicle_state.writer};
+    Writer<RangeSensors> ranges{topics::range_sensors.name, topics::range_sensors.writer};
 };
 
 }  // namespace

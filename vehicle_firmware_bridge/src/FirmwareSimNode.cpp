@@ -1,3 +1,4 @@
+#include <cpm/topics.hpp>
 #include <cpm/vehicle/FirmwareSimNode.hpp>
 
 #include <cpm/Logging.hpp>
@@ -29,7 +30,8 @@ struct FirmwareSimNode::Impl
     explicit Impl(FirmwareSimNodeOptions o)
         : options(std::move(o)), sim(options.parameters, options.world, options.start, options.vehicle_id, options.seed),
           corruption(options.seed), participant(Participant::default_participant()),
-          observations(participant, "vehicleObservation"), others(participant, "vehicleObservation", {.history_depth = 1})
+          observations(participant, topics::vehicle_observation.name, topics::vehicle_observation.writer),
+          others(participant, topics::vehicle_observation.name, topics::vehicle_observation.reader)
     {
         if (!options.device.empty()) {
             port = std::make_unique<SerialPort>(options.device, options.baud);

@@ -1,0 +1,136 @@
+#pragma once
+// The lab's topics in one table: each topic's name on the wire, its type, and the QoS cpm's own
+// writers offer and readers ask for. Use an entry instead of spelling the name, so that every
+// program agrees on both:
+//
+//   namespace t = cpm::topics;
+//   cpm::Writer<VehicleState> state(t::vehicle_state.name, t::vehicle_state.writer);
+//   cpm::Reader<VehicleState> mine(t::vehicle_state.name, t::vehicle_state.reader_for(3));
+//
+// The names are cpm_lab's where cpm_lab has the topic. The QoS are chosen so that a writer as
+// the table says matches every reader as the table says:
+//   - sensor data and commands: best effort, the newest sample per vehicle (a late sample is
+//     worth less than the next one);
+//   - state that a late joiner needs (parameters, a node's status, the lab's start): reliable
+//     and transient-local, the newest per key;
+//   - requests and replies: reliable, nothing dropped while a service is busy.
+#include <cpm/ReaderOptions.hpp>
+#include <cpm/WriterOptions.hpp>
+
+#include <array>
+#include <cstdint>
+#include <string_view>
+
+namespace cpm {
+
+struct TopicSpec
+{
+    const char* name;       ///< on the wire
+    const char* type_name;  ///< the IDL type
+    WriterOptions writer;   ///< what cpm's writers offer
+    ReaderOptions reader;   ///< what cpm's readers ask for
+    const char* about;
+
+    /// The reader's options for one vehicle's samples only.
+    constexpr ReaderOptions reader_for(uint8_t vehicle_id) const
+    {
+        ReaderOptions o = reader;
+        o.vehicle_id = vehicle_id;
+        return o;
+    }
+};
+
+namespace topics {
+
+namespace qos {
+constexpr WriterOptions reliable_writer(int depth, bool transient_local)
+{
+    WriterOptions o;
+    o.reliable = true;
+    o.history_depth = depth;
+    o.transient_local = transient_local;
+    return o;
+}
+constexpr ReaderOptions reliable_reader(int depth, bool transient_local, bool keep_all = false)
+{
+    ReaderOptions o;
+    o.reliable = true;
+    o.history_depth = depth;
+    o.transient_local = transient_local;
+    o.keep_all = keep_all;
+    return o;
+}
+constexpr ReaderOptions newest_reader(int depth)
+{
+    ReaderOptions o;
+    o.history_depth = depth;
+    return o;
+}
+}  // namespace qos
+
+// ---- vehicles --------------------------------------------------------------------------------
+inline constexpr TopicSpec vehicle_state{"vehicleState", "VehicleState", {}, {},
+                                         "each car's state at 50 Hz: pose, speed, odometer, IMU, battery"};
+inline constexpr TopicSpec range_sensors{"rangeSensors", "RangeSensors", {}, {}, "each car's ultrasonic ranges (front, left, right)"};
+inline constexpr TopicSpec vehicle_observation{"vehicleObservation", "VehicleObservation", {}, {},
+                                               "each car's pose as seen from outside (the simulator's ground truth, the camera)"};
+inline constexpr TopicSpec aruco_markers{"arucoMarkers", "ArucoMarkers", {}, {}, "the markers a car's camera sees in one frame"};
+inline constexpr TopicSpec camera_frame{"cameraFrame", "CameraFrame", {}, {}, "a car camera's image, exposure time as create_stamp"};
+inline constexpr TopicSpec vehicle_command_direct{"vehicleCommandDirect", "VehicleCommandDirect", {}, {},
+                                                  "throttle and steering, -1..1"};
+inline constexpr TopicSpec vehicle_command_speed_curvature{"vehicleCommandSpeedCurvature", "VehicleCommandSpeedCurvature", {}, {},
+                                                           "speed and curvature for the car's controller"};
+inline constexpr TopicSpec vehicle_command_trajectory{"vehicleCommandTrajectory", "VehicleCommandTrajectory", {}, {},
+                                                      "timed trajectory points for the car to follow"};
+inline constexpr TopicSpec vehicle_command_path_tracking{"vehicleCommandPathTracking", "VehicleCommandPathTracking", {}, {},
+                                                         "a path and a speed for the car to follow"};
+inline constexpr TopicSpec stop_request{"stopRequest", "StopRequest", {}, qos::newest_reader(4), "stop one car, or every car"};
+inline constexpr TopicSpec fsm_status{"fsmStatus", "FsmStatus", qos::reliable_writer(1, true), qos::reliable_reader(1, true),
+                                      "a state machine's current state and since when"};
+
+// ---- every process ---------------------------------------------------------------------------
+inline constexpr TopicSpec log{"log", "Log", qos::reliable_writer(100, true), qos::reliable_reader(100, true, true),
+                               "log lines of every process"};
+inline constexpr TopicSpec log_level{"logLevel", "LogLevel", qos::reliable_writer(1, true), qos::reliable_reader(1, true),
+                                     "the lab's log level"};
+inline constexpr TopicSpec parameter{"parameter", "Parameter", qos::reliable_writer(1, true), qos::reliable_reader(1, true),
+                                     "the parameter server's values, one instance per name"};
+inline constexpr TopicSpec parameter_request{"parameterRequest", "ParameterRequest", qos::reliable_writer(10, false),
+                                             qos::reliable_reader(100, false), "a node asks for a parameter"};
+/// Lab start and stop. A transient-local reader does not match a volatile writer (cpm_lab's LCC
+/// writes its SystemTrigger with a plain reliable one), so cpm's timers read these topics twice:
+/// with `reader` for what was sent before they matched, and with `reader` made volatile for
+/// every sample sent after.
+inline constexpr TopicSpec ready_status{"readyStatus", "ReadyStatus", qos::reliable_writer(1, true), qos::reliable_reader(64, true),
+                                        "a node's timer is ready to start"};
+inline constexpr TopicSpec system_trigger{"systemTrigger", "SystemTrigger", qos::reliable_writer(1, true),
+                                          qos::reliable_reader(64, true), "the lab's start time, or stop"};
+
+// ---- the history -----------------------------------------------------------------------------
+inline constexpr TopicSpec history_request{"historyRequest", "HistoryRequest", qos::reliable_writer(64, false),
+                                           qos::reliable_reader(1, false, true), "a question to the history service"};
+/// Transient-local: a client whose reader matched after the reply went out still gets it.
+inline constexpr TopicSpec history_reply{"historyReply", "HistoryReply", qos::reliable_writer(64, true),
+                                         qos::reliable_reader(1, true, true), "the history service's answers"};
+inline constexpr TopicSpec history_status{"historyStatus", "HistoryStatus", qos::reliable_writer(1, true),
+                                          qos::reliable_reader(1, true), "the history service's counts, once a second"};
+
+inline constexpr std::array all{&vehicle_state,          &range_sensors,          &vehicle_observation,
+                                &aruco_markers,          &camera_frame,           &vehicle_command_direct,
+                                &vehicle_command_speed_curvature, &vehicle_command_trajectory, &vehicle_command_path_tracking,
+                                &stop_request,           &fsm_status,             &log,
+                                &log_level,              &parameter,              &parameter_request,
+                                &ready_status,           &system_trigger,         &history_request,
+                                &history_reply,          &history_status};
+
+/// The entry of a name, or nullptr.
+constexpr const TopicSpec* find(std::string_view name)
+{
+    for (const TopicSpec* t : all) {
+        if (name == t->name) return t;
+    }
+    return nullptr;
+}
+
+}  // namespace topics
+}  // namespace cpm
