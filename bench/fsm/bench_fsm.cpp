@@ -18,6 +18,8 @@
 #include <VehicleCommandDirect.h>
 #include <VehicleState.h>
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <chrono>
 #include <csignal>
@@ -33,17 +35,12 @@ using namespace std::chrono_literals;
 
 std::string chain_machine(int states)
 {
-    std::string s = "{\"root\": 0, \"tick_period\": 0.02, \"states\": [";
+    nlohmann::json m{{"root", 0}, {"tick_period", 0.02}, {"states", nlohmann::json::array()}, {"transitions", nlohmann::json::array()}};
     for (int i = 0; i < states; ++i) {
-        s += (i ? "," : "") + std::string("{\"id\": ") + std::to_string(i) +
-             ", \"type\": \"FollowWall\", \"side\": \"right\", \"clearance\": 0.4}";
+        m["states"].push_back({{"id", i}, {"type", "FollowWall"}, {"side", "right"}, {"clearance", 0.4}});
+        m["transitions"].push_back({{"id", i}, {"type", "Distance"}, {"from", i}, {"to", (i + 1) % states}, {"distance", 0.1}});
     }
-    s += "], \"transitions\": [";
-    for (int i = 0; i < states; ++i) {
-        s += (i ? "," : "") + std::string("{\"id\": ") + std::to_string(i) + ", \"type\": \"Distance\", \"from\": " +
-             std::to_string(i) + ", \"to\": " + std::to_string((i + 1) % states) + ", \"distance\": 0.1}";
-    }
-    return s + "]}";
+    return m.dump();
 }
 
 void tick_cost()

@@ -1,6 +1,7 @@
 #include <cpm/CommandLine.hpp>
 #include <cpm/init.hpp>
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -100,6 +101,20 @@ uint64_t parse_duration(const std::string& flag, const std::string& text)
                          "' is not a duration (a number of at most 2^64 ns with ns, us, ms, s, m or h, e.g. 10s)");
     }
     return static_cast<uint64_t>(value * double(unit->second));
+}
+
+std::string format_time(uint64_t ns, int decimals)
+{
+    if (!ns) return "-";
+    decimals = std::clamp(decimals, 0, 9);
+    const std::time_t secs = std::time_t(ns / 1'000'000'000ull);
+    std::tm tm{};
+    ::gmtime_r(&secs, &tm);
+    char buf[48];
+    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%S", &tm);
+    char frac[16];
+    std::snprintf(frac, sizeof frac, "%09llu", (unsigned long long)(ns % 1'000'000'000ull));
+    return std::string(buf) + (decimals ? "." + std::string(frac, size_t(decimals)) : "") + "Z";
 }
 
 uint64_t parse_time(const std::string& flag, const std::string& text, uint64_t now_ns)

@@ -129,8 +129,22 @@ ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::
     }
 }
 
-ReaderCore::~ReaderCore()
+ReaderCore::~ReaderCore() { close(); }
+
+ReaderCore::ReaderCore(ReaderCore&& other) noexcept = default;
+
+ReaderCore& ReaderCore::operator=(ReaderCore&& other) noexcept
 {
+    if (this != &other) {
+        close();
+        impl_ = std::move(other.impl_);
+    }
+    return *this;
+}
+
+void ReaderCore::close() noexcept
+{
+    if (!impl_) return;  // moved from
     {
         std::lock_guard<std::mutex> lock(impl_->listener_mutex);  // waits for a running callback
         impl_->closing = true;
@@ -138,6 +152,7 @@ ReaderCore::~ReaderCore()
     interrupt();
     impl_->reader->set_listener(nullptr);
     impl_->topic.participant().subscriber()->delete_datareader(impl_->reader);
+    impl_.reset();
 }
 
 size_t ReaderCore::drain(const Sink& sink) { return impl_->drain_from(impl_->reader, sink); }

@@ -57,10 +57,25 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
     }
 }
 
-WriterCore::~WriterCore()
+WriterCore::~WriterCore() { close(); }
+
+WriterCore::WriterCore(WriterCore&& other) noexcept = default;
+
+WriterCore& WriterCore::operator=(WriterCore&& other) noexcept
 {
+    if (this != &other) {
+        close();
+        impl_ = std::move(other.impl_);
+    }
+    return *this;
+}
+
+void WriterCore::close() noexcept
+{
+    if (!impl_) return;  // moved from
     impl_->writer->set_listener(nullptr);
     impl_->topic.participant().publisher()->delete_datawriter(impl_->writer);
+    impl_.reset();
 }
 
 bool WriterCore::write(const void* sample)

@@ -102,3 +102,14 @@ TEST(CommandLine, AFlagFollowedByAnotherFlagIsToldItNeedsAValue)
                 HasSubstr("cpm history at: --topic needs a value"));
     EXPECT_EQ(parse_args({"--key", "-2"}, known, "x").get("--key"), "-2");  // a negative value is a value
 }
+
+TEST(CommandLine, FormattedTimesReadBackAsTheSameInstant)
+{
+    using cpm::cli::format_time;
+    EXPECT_EQ(format_time(1'795'446'323'725'000'000ull), "2026-11-23T15:05:23.725Z");
+    EXPECT_EQ(format_time(1'795'446'323'725'000'001ull, 9), "2026-11-23T15:05:23.725000001Z");
+    EXPECT_EQ(format_time(1'795'446'323'725'000'000ull, 0), "2026-11-23T15:05:23Z");
+    EXPECT_EQ(format_time(0), "-");
+    for (uint64_t t : {1ull, 1'795'446'323'725'000'001ull, 4'102'444'800'000'000'000ull})
+        EXPECT_EQ(cpm::cli::parse_time("--time", format_time(t, 9), 0), t) << format_time(t, 9);
+}

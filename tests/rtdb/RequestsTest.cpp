@@ -1,5 +1,6 @@
 // The service's request handling against an in-process store: answers, and malformed requests
 // answered with an error that names the field and value.
+#include <cpm/rtdb/HistoryJson.hpp>
 #include <cpm/rtdb/Requests.hpp>
 
 #include <ParameterPubSubTypes.h>
@@ -159,4 +160,42 @@ TEST(HistoryVocabulary, EverySpellingReadsBackAsItself)
     EXPECT_EQ(cpm::history::by_from(""), cpm::history::By::commit);
     EXPECT_EQ(cpm::history::by_from("Data"), std::nullopt);
     EXPECT_EQ(cpm::history::to_string(cpm::history::Status::not_yet), "not_yet");
+}
+
+TEST(HistoryJson, ObjectsAndSamplesAreWrittenAsDesignSaysAndOidsReadBack)
+{
+    Store store;
+    const Oid oid = store.add_object({.topic = "vehicleState", .key = "3", .type_name = "VehicleState", .created_ts = 1000});
+    VehicleState s;
+    s.vehicle_id(3);
+    s.speed(1.25);
+    const auto bytes = serialized<VehicleStatePubSubType>(s);
+    store.commit(oid, {10, 20, 30, bytes.data(), bytes.size()}, 2000);
+    HistoryRequest rq;
+    rq.kind("latest");
+    rq.topic("vehicleState");
+    rq.key("3");
+    const auto reply = answer(store, rq);
+    ASSERT_EQ(reply.objects().size(), 1u);
+    const auto object = object_json(reply.objects()[0], 3000);
+    EXPECT_EQ(object["name"], "vehicleState/3");
+    EXPECT_EQ(object["created_ns"], 1000u);
+    EXPECT_EQ(object["deleted_ns"], 0u);
+    EXPECT_FALSE(object.contains("created_ts"));
+    const auto* types = IdlDecoder::lab_types();
+    ASSERT_NE(types, nullptr);
+    const auto sample = sample_json(reply.samples()[0], &reply.objects()[0], types);
+    EXPECT_EQ(sample["status"], "ok");
+    EXPECT_EQ(sample["commit_ns"], 2000u);
+    EXPECT_EQ(sample["data_ns"], 10u);
+    EXPECT_EQ(sample["data"]["speed"], 1.25);
+    EXPECT_EQ(sample["data"]["vehicle_id"], 3);
+    const auto unknown = sample_json(reply.samples()[0], nullptr, nullptr);
+    EXPECT_EQ(unknown["payload_base64"], base64(bytes));
+
+    EXPECT_EQ(oid_text(7), "7");
+    EXPECT_EQ(oid_text(2ull << 32 | 7), "7.2");
+    EXPECT_EQ(oid_from_text("7.2"), 2ull << 32 | 7);
+    EXPECT_EQ(oid_from_text(oid_text(oid)), oid);
+    for (const char* bad : {"", "0", "x", "7.", ".2", "7.2.1", "-3", "99999999999.1"}) EXPECT_EQ(oid_from_text(bad), std::nullopt) << bad;
 }

@@ -1,6 +1,7 @@
 // cpm history ... and cpm dump: the history service's answers on the command line.
 #include "Command.hpp"
 
+#include <cpm/rtdb/HistoryJson.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 
 #include <cpm/CommandLine.hpp>
@@ -69,48 +70,6 @@ const cpm::rtdb::IdlDecoder& decoder()
     return *types;
 }
 
-nlohmann::json object_json(const HistoryObject& o, uint64_t now)
-{
-    return {{"oid", o.oid()},
-            {"name", o.name()},
-            {"kind", o.is_process() ? "process" : "instance"},
-            {"topic", o.topic()},
-            {"key", o.key()},
-            {"type", o.type_name()},
-            {"parent", o.parent()},
-            {"creator", o.creator()},
-            {"creator_guid", o.creator_guid()},
-            {"created_ns", o.created_ts()},
-            {"deleted_ns", o.deleted_ts()},
-            {"data_time", o.data_time()},
-            {"history_interval_ns", o.history_interval_ns()},
-            {"samples_held", o.samples_held()},
-            {"bytes_held", o.bytes_held()},
-            {"samples_total", o.samples_total()},
-            {"samples_lost", o.samples_lost()},
-            {"rate_hz", cpm::update_rate_hz(o, now)},
-            {"avg_cycle_s", o.avg_cycle_s()},
-            {"max_cycle_s", o.max_cycle_s()},
-            {"newest_age_s", o.newest_commit_ns() ? double(now - std::min(now, o.newest_commit_ns())) * 1e-9 : -1.0}};
-}
-
-nlohmann::json sample_json(const HistorySample& s, const HistoryObject* o)
-{
-    nlohmann::json j{{"status", s.status()},         {"commit_ns", s.commit_ns()}, {"data_ns", s.data_ns()},
-                     {"valid_after_ns", s.valid_after_ns()}, {"source_ns", s.source_ns()}};
-    if (o) {
-        j["topic"] = o->topic();
-        j["key"] = o->key();
-        j["type"] = o->type_name();
-        // A type without a Header has no create_stamp: data_ns is the writer's source timestamp.
-        if (o->data_time() == "source_timestamp") j["data_time"] = "source_timestamp";
-        j.update(decoder().describe(o->type_name(), s.payload()));
-        return j;
-    }
-    j["payload_base64"] = cpm::rtdb::base64(s.payload());
-    return j;
-}
-
 std::string age_text(double s)
 {
     char buf[32];
@@ -119,35 +78,11 @@ std::string age_text(double s)
     return buf;
 }
 
-/// A time for people: ISO-8601 in UTC (what --time accepts back), to ms or ns; "-" for none.
-std::string time_text(uint64_t ns, int decimals = 3)
-{
-    if (!ns) return "-";
-    const std::time_t secs = std::time_t(ns / 1'000'000'000ull);
-    std::tm tm{};
-    ::gmtime_r(&secs, &tm);
-    char buf[48];
-    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%S", &tm);
-    char frac[16];
-    std::snprintf(frac, sizeof frac, "%09llu", (unsigned long long)(ns % 1'000'000'000ull));
-    return std::string(buf) + "." + std::string(frac, size_t(decimals)) + "Z";
-}
-
-/// An oid for people: its slot, and ".generation" once the slot was used before ("7", "7.2").
-std::string oid_text(uint64_t oid)
-{
-    const uint64_t slot = oid & 0xffffffffull, generation = oid >> 32;
-    return generation ? std::to_string(slot) + "." + std::to_string(generation) : std::to_string(slot);
-}
-
 /// --oid / --parent: the number as the table prints it ("7", "7.2") or as JSON gives it.
 uint64_t parse_oid(const std::string& flag, const std::string& text)
 {
-    const auto dot = text.find('.');
-    if (dot == std::string::npos) return uint64_t(cpm::cli::parse_integer(flag, text, 1, INT64_MAX));
-    const auto slot = uint64_t(cpm::cli::parse_integer(flag, text.substr(0, dot), 1, UINT32_MAX));
-    const auto generation = uint64_t(cpm::cli::parse_integer(flag, text.substr(dot + 1), 0, UINT32_MAX));
-    return generation << 32 | slot;
+    if (auto oid = cpm::rtdb::oid_from_text(text)) return *oid;
+    throw UsageError(flag + ": '" + text + "' is not an oid (as cpm dump prints it: 7, or 7.2 for slot 7's second object)");
 }
 
 /// The processes of cpm's own command and probes: the dump leaves them out unless --all.
@@ -165,19 +100,19 @@ void print_objects(const HistoryReply& reply, bool json, bool show_all = true)
     }
     std::stable_sort(rows.begin(), rows.end(), [](const HistoryObject& a, const HistoryObject& b) { return a.created_ts() < b.created_ts(); });
     if (json) {
-        for (const auto& o : rows) std::printf("%s\n", object_json(o, now).dump().c_str());
+        for (const auto& o : rows) std::printf("%s\n", cpm::rtdb::object_json(o, now).dump().c_str());
         return;
     }
     std::printf("%-6s %-28s %-22s %-18s %-24s %-24s %8s %6s %9s %10s\n", "oid", "name", "type", "creator", "created (UTC)",
                 "deleted (UTC)", "samples", "lost", "rate", "newest");
     for (const auto& o : rows) {
-        const auto j = object_json(o, now);
+        const auto j = cpm::rtdb::object_json(o, now);
         char rate[32];
         const double hz = j["rate_hz"].get<double>();
         if (hz > 0) std::snprintf(rate, sizeof rate, "%.1f Hz", hz);
         else std::snprintf(rate, sizeof rate, "-");
-        std::printf("%-6s %-28s %-22s %-18s %-24s %-24s %8llu %6llu %9s %10s\n", oid_text(o.oid()).c_str(), o.name().c_str(),
-                    o.type_name().c_str(), o.creator().c_str(), time_text(o.created_ts()).c_str(), time_text(o.deleted_ts()).c_str(),
+        std::printf("%-6s %-28s %-22s %-18s %-24s %-24s %8llu %6llu %9s %10s\n", cpm::rtdb::oid_text(o.oid()).c_str(), o.name().c_str(),
+                    o.type_name().c_str(), o.creator().c_str(), cpm::cli::format_time(o.created_ts()).c_str(), cpm::cli::format_time(o.deleted_ts()).c_str(),
                     (unsigned long long)o.samples_held(), (unsigned long long)o.samples_lost(), rate, age_text(j["newest_age_s"]).c_str());
     }
 }
@@ -203,12 +138,12 @@ void print_changes(const HistoryReply& reply, bool json, uint64_t since)
     if (!json) std::printf("%-24s %-8s %-6s %-28s %-22s %s\n", "time (UTC)", "event", "oid", "name", "type", "creator");
     for (const auto& e : events) {
         if (json) {
-            auto j = object_json(*e.o, now);
+            auto j = cpm::rtdb::object_json(*e.o, now);
             j["event"] = e.kind;
             j["t_ns"] = e.t;
             std::printf("%s\n", j.dump().c_str());
         } else {
-            std::printf("%-24s %-8s %-6s %-28s %-22s %s\n", time_text(e.t).c_str(), e.kind, oid_text(e.o->oid()).c_str(),
+            std::printf("%-24s %-8s %-6s %-28s %-22s %s\n", cpm::cli::format_time(e.t).c_str(), e.kind, cpm::rtdb::oid_text(e.o->oid()).c_str(),
                         e.o->name().c_str(), e.o->type_name().c_str(), e.o->creator().c_str());
         }
     }
@@ -247,7 +182,7 @@ void print_fields(const nlohmann::json& data, const std::string& prefix)
         const auto& v = it.value();
         if (v.is_object() && v.size() == 1 && v.contains("nanoseconds")) {  // a TimeStamp
             const uint64_t ns = v["nanoseconds"].get<uint64_t>();
-            std::printf("  %-32s %s (%llu ns)\n", name.c_str(), time_text(ns, 9).c_str(), (unsigned long long)ns);
+            std::printf("  %-32s %s (%llu ns)\n", name.c_str(), cpm::cli::format_time(ns, 9).c_str(), (unsigned long long)ns);
         } else if (v.is_object()) {
             print_fields(v, name + ".");
         } else {
@@ -264,7 +199,7 @@ void print_samples(const HistoryReply& reply, bool json)
         const HistoryObject* o = reply.objects().size() == reply.samples().size() ? &reply.objects()[i]
                                  : reply.objects().empty()                        ? nullptr
                                                                                   : &reply.objects()[0];
-        auto j = sample_json(s, o);
+        auto j = cpm::rtdb::sample_json(s, o, &decoder());
         if (json) {
             std::printf("%s\n", j.dump().c_str());
             continue;
@@ -274,10 +209,10 @@ void print_samples(const HistoryReply& reply, bool json)
                     o ? ("(" + o->type_name() + ")").c_str() : "");
         if (s.status() != "ok") std::printf("  %-32s %s\n", "status", s.status().c_str());
         const bool source_time = o && o->data_time() == "source_timestamp";
-        std::printf("  %-32s %s\n", "committed", time_text(s.commit_ns(), 9).c_str());
-        std::printf("  %-32s %s%s\n", "data time", time_text(s.data_ns(), 9).c_str(),
+        std::printf("  %-32s %s\n", "committed", cpm::cli::format_time(s.commit_ns(), 9).c_str());
+        std::printf("  %-32s %s%s\n", "data time", cpm::cli::format_time(s.data_ns(), 9).c_str(),
                     source_time ? "  (the writer's source timestamp: the type has no Header)" : "");
-        if (!source_time) std::printf("  %-32s %s\n", "valid after", time_text(s.valid_after_ns(), 9).c_str());
+        if (!source_time) std::printf("  %-32s %s\n", "valid after", cpm::cli::format_time(s.valid_after_ns(), 9).c_str());
         if (j.contains("data")) print_fields(j["data"], "");
         else std::printf("  %-32s %s\n", "payload_base64", j["payload_base64"].get<std::string>().c_str());
     }

@@ -15,10 +15,15 @@ namespace cpm {
 /// The callback runs on a thread this reader owns (never a DDS thread, no DDS lock held),
 /// one batch at a time. An exception from the callback is logged and reading goes on.
 /// stop() and the destructor wake the thread and join it once a running callback returns.
+/// Not movable: DDS's receive thread (and the reader's own thread) calls into this very object from the moment it is
+/// made. To move one, hold it in a std::unique_ptr.
 template <class T>
 class AsyncReader
 {
 public:
+    AsyncReader(AsyncReader&&) = delete;
+    AsyncReader& operator=(AsyncReader&&) = delete;
+
     using Callback = std::function<void(std::vector<T>&)>;
 
     AsyncReader(Callback callback, const std::string& topic, ReaderOptions options = {})

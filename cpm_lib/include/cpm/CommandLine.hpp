@@ -60,6 +60,10 @@ uint64_t parse_duration(const std::string& flag, const std::string& text);
 /// before 1970 (which nanoseconds since the epoch cannot hold).
 uint64_t parse_time(const std::string& flag, const std::string& text, uint64_t now_ns);
 
+/// A time for people, as parse_time reads it back: ISO-8601 in UTC with `decimals` (0..9)
+/// digits of the second, "2026-11-23T14:05:00.250Z"; "-" for 0 (none).
+std::string format_time(uint64_t ns, int decimals = 3);
+
 /// A number within [min, max]; throws UsageError naming the flag and the value.
 double parse_number(const std::string& flag, const std::string& text, double min, double max);
 

@@ -20,6 +20,8 @@ namespace cpm {
 /// (newest valid by create_stamp, age = t_now - valid_after_stamp) per configured vehicle.
 /// Samples of other vehicle ids are ignored. Each vehicle's buffer holds up to
 /// options.buffer_capacity samples. Thread-safe. Throws cpm::Error only at construction.
+/// Not movable: DDS's receive thread calls into this very object from the moment it is
+/// made. To move one, hold it in a std::unique_ptr.
 template <class T>
 class MultiVehicleReader
 {
@@ -27,6 +29,9 @@ class MultiVehicleReader
                   "MultiVehicleReader<T> needs `Header header` and `@key octet vehicle_id`");
 
 public:
+    MultiVehicleReader(MultiVehicleReader&&) = delete;
+    MultiVehicleReader& operator=(MultiVehicleReader&&) = delete;
+
     MultiVehicleReader(const std::string& topic, std::vector<uint8_t> vehicle_ids, ReaderOptions options = {})
         : MultiVehicleReader(Participant::default_participant(), topic, std::move(vehicle_ids), options)
     {

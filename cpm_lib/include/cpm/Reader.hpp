@@ -20,12 +20,17 @@ namespace cpm {
 /// arrival does not matter. Every sample that can no longer win is then dropped; with no
 /// valid sample nothing is dropped. With options.vehicle_id set, other vehicles' samples
 /// are ignored. Thread-safe. Throws cpm::Error only at construction.
+/// Not movable: DDS's receive thread calls into this very object from the moment it is
+/// made. To move one, hold it in a std::unique_ptr.
 template <class T>
 class Reader
 {
     static_assert(detail::HasHeader<T>::value, "Reader<T> needs a type whose first member is `Header header`");
 
 public:
+    Reader(Reader&&) = delete;
+    Reader& operator=(Reader&&) = delete;
+
     explicit Reader(const std::string& topic, ReaderOptions options = {})
         : Reader(Participant::default_participant(), topic, options)
     {

@@ -11,6 +11,8 @@ namespace cpm {
 
 /// A plain DDS reader: take() what arrived, wait for data, see the match count.
 /// Thread-safe. Throws cpm::Error only at construction.
+/// Movable (not copyable): the DDS entity moves along; a moved-from ReaderAbstract may only be destroyed
+/// or assigned to.
 template <class T>
 class ReaderAbstract
 {

@@ -11,6 +11,8 @@ namespace cpm {
 /// Publishes samples of T on one topic.
 /// Throws cpm::Error at construction when the topic name is empty, the topic exists in
 /// the participant with another type, or DDS refuses the options. write() never throws.
+/// Movable (not copyable): the DDS entity moves along; a moved-from Writer may only be destroyed
+/// or assigned to.
 template <class T>
 class Writer
 {

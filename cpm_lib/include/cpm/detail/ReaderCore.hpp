@@ -28,6 +28,10 @@ public:
     ~ReaderCore();
     ReaderCore(const ReaderCore&) = delete;
     ReaderCore& operator=(const ReaderCore&) = delete;
+    /// The DDS reader and the sink move along; the moved-from core may only be destroyed or
+    /// assigned to. (A sink that points into its owner makes the owner unmovable.)
+    ReaderCore(ReaderCore&& other) noexcept;
+    ReaderCore& operator=(ReaderCore&& other) noexcept;
 
     /// Takes every sample DDS holds and passes each valid one to `sink`, in arrival order.
     /// Returns how many were passed. Never throws.
@@ -43,6 +47,7 @@ public:
     const std::string& topic() const;
 
 private:
+    void close() noexcept;
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

@@ -20,6 +20,9 @@ public:
     ~WriterCore();
     WriterCore(const WriterCore&) = delete;
     WriterCore& operator=(const WriterCore&) = delete;
+    /// The DDS writer moves along; the moved-from core may only be destroyed or assigned to.
+    WriterCore(WriterCore&& other) noexcept;
+    WriterCore& operator=(WriterCore&& other) noexcept;
 
     /// Publishes one sample; false when DDS refused it (e.g. keep-all history full). Never throws.
     bool write(const void* sample);
@@ -30,6 +33,7 @@ public:
     const std::string& topic() const;
 
 private:
+    void close() noexcept;
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };
