@@ -280,7 +280,7 @@ TEST(StoreRegistry, ReadersNeverSeeAnotherObjectsSamplesWhileObjectsArePurgedAnd
 {
     // The ingest thread keeps creating an object, filling it with payloads of its own byte,
     // deleting and purging it; readers asking any oid handed out so far get that object's
-    // bytes, no sample yet, or "unknown object", never a later object's.
+    // bytes, no sample yet, or unknown_object, never a later object's.
     // How far each side gets depends on scheduling, so the readers go on until they have asked
     // kQueries times *and* once more for every one of the kObjects oids the ingest hands out.
     constexpr size_t kObjects = 2'000;

@@ -1,7 +1,7 @@
 #pragma once
 // The history service's request handling, without DDS: a HistoryRequest against a Store gives
 // the HistoryReply. A malformed request (unknown kind or object, t1 < t0, absurd limits) gets
-// status "error" (or "unknown object") and a message naming the field and value.
+// status "error" (or "unknown_object") and a message naming the field and value.
 #include <cpm/HistoryClient.hpp>
 #include <cpm/rtdb/Store.hpp>
 
