@@ -103,6 +103,18 @@ uint64_t parse_duration(const std::string& flag, const std::string& text)
     return static_cast<uint64_t>(value * double(unit->second));
 }
 
+ParsedArgs parse_flags(const std::vector<std::string>& args, const std::vector<FlagSpec>& known, const std::string& command)
+{
+    ParsedArgs parsed = parse_args(args, known, command);
+    if (!parsed.positional.empty()) throw UsageError(command + ": unexpected argument '" + parsed.positional[0] + "'");
+    return parsed;
+}
+
+ParsedArgs parse_flags(int argc, char** argv, const std::vector<FlagSpec>& known, const std::string& command)
+{
+    return parse_flags(std::vector<std::string>(argv + 1, argv + argc), known, command);
+}
+
 std::string format_time(uint64_t ns, int decimals)
 {
     if (!ns) return "-";

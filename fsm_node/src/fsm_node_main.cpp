@@ -27,10 +27,8 @@ const char* kHelp =
 
 int run(int argc, char** argv)
 {
-    std::vector<std::string> args(argv + 1, argv + argc);
-    auto parsed = cpm::cli::parse_args(
-        args, {{"--vehicle_id", true}, {"--fsm", true}, {"--rate", true}, {"--max-age", true}, {"--report", false}}, "fsm_node");
-    if (!parsed.positional.empty()) throw cpm::cli::UsageError("fsm_node: unexpected argument '" + parsed.positional[0] + "'");
+    auto parsed = cpm::cli::parse_flags(
+        argc, argv, {{"--vehicle_id", true}, {"--fsm", true}, {"--rate", true}, {"--max-age", true}, {"--report", false}}, "fsm_node");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("fsm_node: --vehicle_id is required");
     if (!parsed.has("--fsm")) throw cpm::cli::UsageError("fsm_node: --fsm is required (a machine's JSON file)");
     cpm::fsm::FsmNodeOptions options;

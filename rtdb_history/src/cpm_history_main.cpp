@@ -31,8 +31,7 @@ const char* kHelp =
 
 int run(int argc, char** argv)
 {
-    std::vector<std::string> args(argv + 1, argv + argc);
-    auto parsed = cpm::cli::parse_args(args,
+    auto parsed = cpm::cli::parse_flags(argc, argv,
                                        {{"--include", true, true},
                                         {"--exclude", true, true},
                                         {"--window", true},
@@ -42,7 +41,6 @@ int run(int argc, char** argv)
                                         {"--max-bytes-per-topic", true},
                                         {"--status-period", true}},
                                        "cpm_history");
-    if (!parsed.positional.empty()) throw cpm::cli::UsageError("cpm_history: unexpected argument '" + parsed.positional[0] + "'");
     cpm::rtdb::ServiceOptions options;
     options.include = parsed.all("--include");
     options.exclude = parsed.all("--exclude");

@@ -13,6 +13,7 @@ using cpm::cli::FlagSpec;
 using cpm::cli::ParsedArgs;
 using cpm::cli::UsageError;
 using cpm::cli::parse_args;
+using cpm::cli::parse_flags;
 using cpm::cli::parse_duration;
 using cpm::cli::split_list;
 

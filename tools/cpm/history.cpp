@@ -235,7 +235,7 @@ cpm::Participant& client_participant()
 int history_command(const std::string& verb, const std::vector<std::string>& args)
 {
     const std::string command = "cpm history " + verb;
-    auto parsed = cpm::cli::parse_args(args,
+    auto parsed = cpm::cli::parse_flags(args,
                                        {{"--topic", true},
                                         {"--key", true},
                                         {"--oid", true},
@@ -254,7 +254,6 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
                                         {"--since", true},
                                         {"--json", false}},
                                        command);
-    if (!parsed.positional.empty()) throw UsageError(command + ": unexpected argument '" + parsed.positional[0] + "'");
     // The verbs are the request kinds, but for two spelled as a person types them.
     const std::string kind_name = verb == "wait" ? "wait_next" : verb == "wait-object" ? "wait_object" : verb;
     const auto kind = cpm::history::kind_from(kind_name);
@@ -326,8 +325,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
 
 int dump_command(const std::vector<std::string>& args)
 {
-    auto parsed = cpm::cli::parse_args(args, {{"--json", false}, {"--alive", false}, {"--all", false}}, "cpm dump");
-    if (!parsed.positional.empty()) throw UsageError("cpm dump: unexpected argument '" + parsed.positional[0] + "'");
+    auto parsed = cpm::cli::parse_flags(args, {{"--json", false}, {"--alive", false}, {"--all", false}}, "cpm dump");
     cpm::HistoryClient client(client_participant());
     const bool alive = parsed.has("--alive");
     HistoryRequest rq = cpm::HistoryClient::make(alive ? cpm::history::Kind::search : cpm::history::Kind::list, "", "");

@@ -25,12 +25,9 @@ const char* kClockHelp =
 
 int lab_clock(const std::vector<std::string>& args)
 {
-    const auto parsed = parse_args(
+    const auto parsed = parse_flags(
         args, {{"--nodes", true}, {"--simulated", false}, {"--until", true}, {"--start-delay", true}, {"--duration", true}},
         "cpm lab clock");
-    if (!parsed.positional.empty()) {
-        throw UsageError("cpm lab clock: unexpected argument '" + parsed.positional[0] + "'");
-    }
     const auto& flags = parsed.flags;
     if (!flags.count("--nodes")) throw UsageError("cpm lab clock: --nodes is required (the timers' node ids)");
     const auto nodes = split_list("--nodes", flags.at("--nodes"));

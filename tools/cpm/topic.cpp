@@ -81,8 +81,7 @@ nlohmann::json endpoints_json(const std::vector<cpm::rtdb::Endpoint>& list)
 
 int topic_list(const std::vector<std::string>& args)
 {
-    const auto parsed = parse_args(args, {{"--json", false}, {"--wait", true}}, "cpm topic list");
-    if (!parsed.positional.empty()) throw UsageError("cpm topic list: unexpected argument '" + parsed.positional[0] + "'");
+    const auto parsed = parse_flags(args, {{"--json", false}, {"--wait", true}}, "cpm topic list");
     const auto wait = milliseconds_of(parsed, "--wait", "1500ms");
     cpm::rtdb::TopicProbe probe;
     std::this_thread::sleep_for(wait);

@@ -30,11 +30,10 @@ const char* const kVehicleSimHelp =
 
 int vehicle_sim(const std::vector<std::string>& args)
 {
-    auto parsed = cpm::cli::parse_args(args,
+    auto parsed = cpm::cli::parse_flags(args,
                                        {{"--id", true}, {"--count", true}, {"--map", true}, {"--start", true},
                                         {"--spacing", true}, {"--params", true}, {"--calibration", true}},
                                        "cpm vehicle sim");
-    if (!parsed.positional.empty()) throw cpm::cli::UsageError("cpm vehicle sim: unexpected argument '" + parsed.positional[0] + "'");
     if (!parsed.has("--id")) throw cpm::cli::UsageError("cpm vehicle sim: --id is required (the vehicle id, 1..255)");
     long long first = cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255);
     long long count = cpm::cli::parse_integer("--count", parsed.get("--count", "1"), 1, 256 - first);

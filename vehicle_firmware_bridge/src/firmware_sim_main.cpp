@@ -34,13 +34,11 @@ const char* kHelp =
 
 int run(int argc, char** argv)
 {
-    std::vector<std::string> args(argv + 1, argv + argc);
-    auto parsed = cpm::cli::parse_args(args,
+    auto parsed = cpm::cli::parse_flags(argc, argv,
                                        {{"--vehicle_id", true}, {"--map", true}, {"--params", true}, {"--start", true},
                                         {"--link", true}, {"--seed", true}, {"--trace-pwm", false},
                                         {"--corrupt-rate", true}, {"--device", true}, {"--baud", true}},
                                        "firmware_sim");
-    if (!parsed.positional.empty()) throw cpm::cli::UsageError("firmware_sim: unexpected argument '" + parsed.positional[0] + "'");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("firmware_sim: --vehicle_id is required");
     if (parsed.has("--device") && parsed.has("--link"))
         throw cpm::cli::UsageError("firmware_sim: --link names a new pty; it cannot go with --device");

@@ -32,11 +32,9 @@ const char* kHelp =
 
 int run(int argc, char** argv)
 {
-    std::vector<std::string> args(argv + 1, argv + argc);
-    auto parsed = cpm::cli::parse_args(
-        args, {{"--vehicle_id", true}, {"--device", true}, {"--baud", true}, {"--calibration", true}, {"--start", true}},
+    auto parsed = cpm::cli::parse_flags(
+        argc, argv, {{"--vehicle_id", true}, {"--device", true}, {"--baud", true}, {"--calibration", true}, {"--start", true}},
         "vehicle_bridge");
-    if (!parsed.positional.empty()) throw cpm::cli::UsageError("vehicle_bridge: unexpected argument '" + parsed.positional[0] + "'");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("vehicle_bridge: --vehicle_id is required");
     if (!parsed.has("--device")) throw cpm::cli::UsageError("vehicle_bridge: --device is required (e.g. /dev/ttyACM0)");
     cpm::vehicle::BridgeNodeOptions options;

@@ -43,6 +43,11 @@ struct ParsedArgs
 /// Parses `args` against the known flags; throws UsageError naming `command` and the flag.
 ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<FlagSpec>& known,
                       const std::string& command);
+/// As parse_args, for a command that takes flags only: an argument that is not a flag is a
+/// UsageError naming it.
+ParsedArgs parse_flags(const std::vector<std::string>& args, const std::vector<FlagSpec>& known, const std::string& command);
+/// A program's flags (argv[1..]), flags only.
+ParsedArgs parse_flags(int argc, char** argv, const std::vector<FlagSpec>& known, const std::string& command);
 
 /// True when --help or -h is among the arguments.
 bool wants_help(const std::vector<std::string>& args);
