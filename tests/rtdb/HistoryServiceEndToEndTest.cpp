@@ -533,6 +533,14 @@ TEST_F(HistoryService, AfterAFreezeLongerThanTheLeaseItRecordsEverythingAgainIts
         << service.errors();
     EXPECT_TRUE(cpm_test::wait_until([&] { return newest("historyStatus", "") > resumed + 1'000'000'000ull; }, 15s))
         << "its own status is no longer recorded\n" << service.errors();
+    if (::testing::Test::HasFailure()) {  // what a process that never saw the freeze sees
+        for (std::vector<std::string> args : {std::vector<std::string>{"dump"}, {"topic", "info", "historyStatus"}}) {
+            args.insert(args.begin(), built_program("cpm"));
+            Process fresh(args);
+            fresh.wait(20s);
+            ADD_FAILURE() << "a fresh `cpm " << args[1] << "`:\n" << fresh.output() << fresh.errors();
+        }
+    }
     // The service's own process is known again (a new object, the one before it lost).
     HistoryRequest processes;
     processes.kind("search");

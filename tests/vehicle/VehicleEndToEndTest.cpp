@@ -272,34 +272,43 @@ TEST_F(VehicleEndToEnd, DirectCommandOverridesATrajectoryUntilItIsStale)
     Watcher watch(participant);
     Car car;
     ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
-    // A trajectory that holds the car where it stands for 10 s (steering straight) ...
+    // A trajectory that turns left on a circle of radius 1 m at 0.4 m/s for 10 s ...
     uint64_t now = cpm::get_time_ns();
     VehicleCommandTrajectory trajectory;
     std::vector<TrajectoryPoint> points;
     for (int i = 0; i <= 100; ++i) {
+        const double t = 0.1 * i, v = 0.4, phi = v * t;
         TrajectoryPoint p;
         p.t().nanoseconds(now + uint64_t(i) * kSecond / 10);
+        p.px(std::sin(phi));
+        p.py(1 - std::cos(phi));
+        p.vx(v * std::cos(phi));
+        p.vy(v * std::sin(phi));
         points.push_back(p);
     }
     trajectory.trajectory_points(points);
     auto follow = std::make_unique<Repeater<VehicleCommandTrajectory>>(participant, "vehicleCommandTrajectory", trajectory);
-    // ... and a direct command hard right, which wins.
+    // ... and a direct command that holds the car with its wheels hard right, which wins.
     VehicleCommandDirect direct;
-    direct.motor_throttle(0.2);
+    direct.motor_throttle(0.0);
     direct.steering_servo(-1.0);
     auto override_ = std::make_unique<Repeater<VehicleCommandDirect>>(participant, "vehicleCommandDirect", direct);
     std::this_thread::sleep_for(2s);
     auto states = watch.states();
     ASSERT_FALSE(states.empty());
-    EXPECT_DOUBLE_EQ(states.back().motor_throttle(), 0.2);
+    EXPECT_DOUBLE_EQ(states.back().motor_throttle(), 0.0);
     EXPECT_DOUBLE_EQ(states.back().steering_servo(), -1.0);
     auto observed = watch.observations();
     ASSERT_FALSE(observed.empty());
-    EXPECT_LT(observed.back().pose().yaw(), -0.3);  // turned right
+    EXPECT_LT(std::hypot(observed.back().pose().x(), observed.back().pose().y()), 0.05);  // held where it stood
 
     override_.reset();
     std::this_thread::sleep_for(1500ms);  // the direct command is stale after 1 s
-    EXPECT_EQ(watch.states().back().steering_servo(), 0.0);  // the trajectory's again
+    // The trajectory's again: the car drives after the left-turning path, steering left (no
+    // command at all would be steering 0 and throttle 0; the direct one, -1 and 0).
+    const auto back = watch.states().back();
+    EXPECT_GT(back.steering_servo(), 0.05);  // measured 0.12-0.16
+    EXPECT_GT(back.motor_throttle(), 0.0);
 }
 
 TEST_F(VehicleEndToEnd, TrajectoryLineThenArcIsFollowedWithinFiveCentimetres)
