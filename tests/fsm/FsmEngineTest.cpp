@@ -137,6 +137,33 @@ TEST(FsmEngine, ArucoGateFoundHandsTheGateCentreToATargetableState)
     EXPECT_EQ(sut->active().id(), 2);
 }
 
+TEST(FsmEngine, ArucoGateCenterTurnsTowardsTheGateUntilItFacesItsCentre)
+{
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "ArucoGateCenter", "marker_a": 3, "marker_b": 4, "speed": 0.2, "tolerance": 0.1},
+                   {"id": 1, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "Finished", "from": 0, "to": 1}]})");
+    Inputs in = at(0, 0);
+    in.markers = {{3, 1.0, 1.2, 0, 1.56}, {4, 1.0, 0.6, 0, 1.17}};  // centre (1.0, 0.9): 42 degrees left
+    auto out = sut->tick(in, 0.0125);
+    EXPECT_EQ(out.steering, 1.0);  // full lock left
+    EXPECT_GT(out.throttle, 0.0);
+    EXPECT_EQ(sut->active().id(), 0);
+    in.markers = {{3, 1.0, -0.3, 0, 1.04}, {4, 1.0, -0.9, 0, 1.35}};  // centre (1.0, -0.6): right
+    out = sut->tick(in, 0.0125);
+    EXPECT_EQ(out.steering, -1.0);
+    EXPECT_EQ(sut->active().id(), 0);
+    in.markers = {{3, 1.0, 0.3, 0, 1.04}};  // one marker only: no gate, keeps turning as it was
+    out = sut->tick(in, 0.0125);
+    EXPECT_EQ(out.steering, -1.0);
+    EXPECT_EQ(sut->active().id(), 0);
+    in.markers = {{3, 1.0, 0.35, 0, 1.06}, {4, 1.0, -0.3, 0, 1.04}};  // centre (1.0, 0.025): within 0.1 rad
+    out = sut->tick(in, 0.0125);
+    EXPECT_EQ(out.steering, 0.0);  // aligned: straight on
+    sut->tick(in, 0.0125);
+    EXPECT_EQ(sut->active().id(), 1);  // finished, then Stop
+}
+
 TEST(FsmEngine, NestedMachineFinishesWhenItReachesAFinalState)
 {
     auto sut = machine(R"({"root": 0,

@@ -70,10 +70,66 @@ TEST(CpmCommand, CommandLineErrorsExitWithTwoAndNameWhatIsWrongOnce)
     EXPECT_EQ(missing.errors(), "cpm history at: --topic needs a value\n");  // one prefix, not "cpm: cpm history at:"
     auto unknown = run_cpm({"history", "nope"});
     EXPECT_EQ(unknown.wait(10s), 2);
-    EXPECT_THAT(unknown.errors(), HasSubstr("unknown command 'history nope'"));
+    EXPECT_THAT(unknown.errors(), HasSubstr("cpm: unknown command 'cpm history nope'"));
     auto group_only = run_cpm({"fsm"});
     EXPECT_EQ(group_only.wait(10s), 2);
     EXPECT_THAT(group_only.errors(), HasSubstr("fsm check"));
+}
+
+TEST(CpmCommand, EveryHistoryVerbNamesWhatIsMissingOrWrongBeforeAskingTheService)
+{
+    cpm_test::test_domain_id();
+    struct Case
+    {
+        std::vector<std::string> args;
+        std::string message;  // the whole first line of stderr
+    };
+    const std::vector<Case> cases{
+        {{"history", "list", "extra"}, "cpm history list: unexpected argument 'extra'"},
+        {{"history", "search", "--alive-at", "2026-02-30T00:00:00Z"}, "cpm history search: --alive-at: '2026-02-30T00:00:00Z' is not a date and time that exists"},
+        {{"history", "search", "--parent", "7.x"}, "cpm history search: --parent: '7.x' is not an oid (as cpm dump prints it: 7, or 7.2 for slot 7's second object)"},
+        {{"history", "latest"}, "cpm history latest: --topic NAME (and --key K) is required"},
+        {{"history", "latest", "--topic", "vehicleState", "--by", "arrival"}, "cpm history latest: --by 'arrival': expected commit or data"},
+        {{"history", "at", "--topic", "vehicleState"}, "cpm history at: --time T is required (ns, ISO-8601 or relative such as -2s)"},
+        {{"history", "older", "--topic", "vehicleState", "--time", "-2 s"}, "cpm history older: --time: '-2 s' is not a relative time (a sign and a duration with its unit: -2s, +500ms)"},
+        {{"history", "younger", "--topic", "vehicleState", "--time", "2026-11-23T14:05:00+25:00"}, "cpm history younger: --time: '2026-11-23T14:05:00+25:00' has a zone offset beyond 23:59"},
+        {{"history", "range", "--topic", "vehicleState", "--from", "-1s"}, "cpm history range: --from T and --to T are required"},
+        {{"history", "range", "--topic", "vehicleState", "--from", "now", "--to", "-5s"}, "cpm history range: --to is before --from"},
+        {{"history", "range", "--topic", "vehicleState", "--from", "-5s", "--to", "now", "--limit", "0"}, "cpm history range: --limit: '0' is not a whole number in 1..100000"},
+        {{"history", "successor", "--topic", "vehicleState", "--timeout", "1parsec"}, "cpm history successor: --timeout: '1parsec' is not a duration"},
+        {{"history", "snapshot", "--time", "now"}, "cpm history snapshot: --objects TOPIC[/KEY],... is required"},
+        {{"history", "snapshot", "--time", "now", "--objects", "a,,b"}, "cpm history snapshot: --objects: empty item in 'a,,b'"},
+        {{"history", "changes"}, "cpm history changes: --since T is required"},
+        {{"history", "teleport"}, "cpm: unknown command 'cpm history teleport' (see cpm history --help)"},
+        {{"dump", "--alive", "now"}, "cpm dump: unexpected argument 'now'"},
+    };
+    for (const auto& c : cases) {
+        auto p = run_cpm(c.args);
+        EXPECT_EQ(p.wait(10s), 2) << c.message << "\n" << p.errors();
+        const std::string first_line = p.errors().substr(0, p.errors().find('\n'));
+        EXPECT_THAT(first_line, HasSubstr(c.message));
+        EXPECT_EQ(p.output(), "") << c.message;
+    }
+    for (const char* verb : {"list", "latest", "snapshot", "changes"}) {
+        auto help = run_cpm({"history", verb, "--help"});
+        EXPECT_EQ(help.wait(10s), 0) << verb;
+        EXPECT_THAT(help.output(), HasSubstr("usage: cpm history")) << verb;
+    }
+    auto dump_help = run_cpm({"dump", "--help"});
+    EXPECT_EQ(dump_help.wait(10s), 0);
+    EXPECT_THAT(dump_help.output(), HasSubstr("usage: cpm dump"));
+}
+
+TEST(CpmCommand, WithNoHistoryServiceOnTheDomainTheCommandSaysSoAndExitsOne)
+{
+    cpm_test::test_domain_id();  // this test's own domain: nothing answers there
+    for (std::vector<std::string> args : {std::vector<std::string>{"dump", "--alive"},
+                                          {"history", "at", "--topic", "vehicleState", "--key", "3", "--time", "2026-11-23T14:05:00.25Z"},
+                                          {"history", "snapshot", "--objects", "vehicleState/3", "--time", "-2s"}}) {
+        auto p = run_cpm(args);
+        EXPECT_EQ(p.wait(30s), 1) << args[1];
+        EXPECT_THAT(p.errors(), HasSubstr("no history service answers on this domain (is cpm_history running?)")) << args[1];
+    }
 }
 
 TEST(CpmCommand, OutputThatCannotBeWrittenIsAnError)

@@ -257,7 +257,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     // The verbs are the request kinds, but for two spelled as a person types them.
     const std::string kind_name = verb == "wait" ? "wait_next" : verb == "wait-object" ? "wait_object" : verb;
     const auto kind = cpm::history::kind_from(kind_name);
-    if (!kind || *kind == cpm::history::Kind::info) throw UsageError("unknown command 'history " + verb + "' (see cpm history --help)");
+    if (!kind || *kind == cpm::history::Kind::info) throw UsageError("cpm: unknown command 'cpm history " + verb + "' (see cpm history --help)");
     const auto by = cpm::history::by_from(parsed.get("--by", "commit"));
     if (!by) throw UsageError(command + ": --by '" + parsed.get("--by") + "': expected commit or data");
     HistoryRequest rq = cpm::HistoryClient::make(*kind, parsed.get("--topic"), parsed.get("--key"), 0, *by);

@@ -63,6 +63,9 @@ std::vector<std::string> command_words(int argc, char** argv)
     return words;
 }
 
+/// Whether an error message begins with the command it belongs to ("cpm history at: …", "cpm: …").
+bool names_a_command(const char* message) { return std::strncmp(message, "cpm ", 4) == 0 || std::strncmp(message, "cpm:", 4) == 0; }
+
 int dispatch(int argc, char** argv)
 {
     const std::vector<std::string> args = command_words(argc, argv);
@@ -91,7 +94,18 @@ int dispatch(int argc, char** argv)
             return 0;
         }
         cpm::init(argc, argv);  // cpm's own flags, checked before any waiting
-        return c.run(std::vector<std::string>(args.begin() + (verbless ? 1 : 2), args.end()));
+        const std::vector<std::string> rest(args.begin() + (verbless ? 1 : 2), args.end());
+        try {
+            return c.run(rest);
+        } catch (const UsageError& e) {
+            // A value's error from the shared parsers ("--time: 'x' is not a time") names the
+            // command it was given to, as the commands' own messages do.
+            if (names_a_command(e.what())) throw;
+            const std::string command = verbless && !rest.empty() && rest[0].rfind("--", 0) != 0
+                                            ? std::string("cpm ") + c.group + " " + rest[0]
+                                            : std::string("cpm ") + c.group + (verbless ? "" : std::string(" ") + c.verb);
+            throw UsageError(command + ": " + e.what());
+        }
     }
     if (group_known) {
         if (help || args.size() < 2) {
@@ -106,7 +120,7 @@ int dispatch(int argc, char** argv)
 void print_error(const char* message)
 {
     // Messages that already name their command ("cpm history at: …") keep their own prefix.
-    std::fprintf(stderr, std::strncmp(message, "cpm ", 4) == 0 ? "%s\n" : "cpm: %s\n", message);
+    std::fprintf(stderr, names_a_command(message) ? "%s\n" : "cpm: %s\n", message);
 }
 
 }  // namespace
