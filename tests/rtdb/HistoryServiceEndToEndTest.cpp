@@ -28,6 +28,7 @@
 #include <thread>
 #include <set>
 #include <sstream>
+#include <utility>
 
 CPM_REGISTER_TYPE(LabOnlyThing)
 
@@ -457,7 +458,13 @@ TEST_F(HistoryService, SamplesLostWhileTheServiceWasFrozenAreCountedAndMarkedAsA
         auto r = client.latest("vehicleState", "5");
         return !r.objects().empty() && r.objects()[0].samples_lost() > 0;
     }, 10s)) << service.errors();
-    std::this_thread::sleep_for(500ms);  // the last samples in flight
+    // The writer is gone: wait until the last samples in flight have arrived (the count holds
+    // still for 300 ms).
+    uint64_t total = UINT64_MAX;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        const uint64_t now_total = client.latest("vehicleState", "5").objects().at(0).samples_total();
+        return std::exchange(total, now_total) == now_total;
+    }, 10s, 300ms));
     auto latest = client.latest<VehicleState>("vehicleState", 5);
     ASSERT_TRUE(latest.ok());
     auto info = client.latest("vehicleState", "5").objects().at(0);
