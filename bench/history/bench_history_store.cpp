@@ -1,14 +1,20 @@
 // bench_history_store: the in-process store (cpm::rtdb) against SQLite doing the same work in
-// the same run — an in-memory table with indexes on (object, commit) and (object, data) and
-// prepared statements, the storage rosbag2 used. 10 objects, 10,000 samples of 150 bytes each
+// the same run — an in-memory table with indexes on (object, commit) and (object, data, commit)
+// (each query's ORDER BY served by its index: EXPLAIN QUERY PLAN is printed) and prepared
+// statements, the storage rosbag2 used. 10 objects, 10,000 samples of 150 bytes each
 // held per object; data times arrive slightly out of order (every 10th is 3 cycles late).
 //
 // `at` is measured two ways, each side doing the same work: "copied" returns the payload in a
 // vector of its own (Store::at; SQLite's blob copied out), "in place" hands out the times and a
 // pointer to the payload without touching its bytes (Store::view; sqlite3_column_blob).
 //
+// Appends: the store evicts what leaves its window on every commit; SQLite is timed doing the
+// same (inserting and deleting the row that left the window), with a transaction per row and
+// with batches of 1000 rows per transaction.
+//
 // Google Benchmark gives the mean per operation; a second pass times single calls and prints
-// p50/p99 and the ratios the issue names (at: p50 <= 200 ns and >= 50x SQLite; append >= 20x).
+// p50/p99 (raw, and less the cost of reading the clock) and the targets: in-place `at` p50 <= 200
+// ns and >= 50x SQLite, a copied `at` <= 1.5x one random load in the held data, append >= 20x.
 #include <cpm/rtdb/Store.hpp>
 
 #include "bench_common.hpp"
@@ -64,7 +70,7 @@ void check(int rc, sqlite3* db, const char* what)
 struct SqliteWork
 {
     sqlite3* db = nullptr;
-    sqlite3_stmt *insert = nullptr, *at_commit = nullptr, *at_data = nullptr, *range = nullptr;
+    sqlite3_stmt *insert = nullptr, *evict = nullptr, *at_commit = nullptr, *at_data = nullptr, *range = nullptr;
     std::vector<uint8_t> payload = std::vector<uint8_t>(kPayload, 0x5a);
     uint64_t next = 1;
 
@@ -75,10 +81,11 @@ struct SqliteWork
                            "CREATE TABLE samples(object INTEGER, commit_ns INTEGER, data_ns INTEGER, valid_after_ns INTEGER,"
                            " source_ns INTEGER, payload BLOB);"
                            "CREATE INDEX by_commit ON samples(object, commit_ns);"
-                           "CREATE INDEX by_data ON samples(object, data_ns);",
+                           "CREATE INDEX by_data ON samples(object, data_ns, commit_ns);",
                            nullptr, nullptr, nullptr),
               db, "schema");
         prepare("INSERT INTO samples VALUES(?1, ?2, ?3, ?3, 0, ?4)", &insert);
+        prepare("DELETE FROM samples WHERE object = ?1 AND commit_ns < ?2", &evict);
         prepare("SELECT commit_ns, data_ns, valid_after_ns, source_ns, payload FROM samples WHERE object = ?1 AND commit_ns <= ?2"
                 " ORDER BY commit_ns DESC LIMIT 1", &at_commit);
         prepare("SELECT commit_ns, data_ns, valid_after_ns, source_ns, payload FROM samples WHERE object = ?1 AND data_ns <= ?2"
@@ -93,7 +100,7 @@ struct SqliteWork
     }
     ~SqliteWork()
     {
-        for (auto* s : {insert, at_commit, at_data, range}) sqlite3_finalize(s);
+        for (auto* s : {insert, evict, at_commit, at_data, range}) sqlite3_finalize(s);
         sqlite3_close(db);
     }
     void prepare(const char* sql, sqlite3_stmt** s) { check(sqlite3_prepare_v2(db, sql, -1, s, nullptr), db, sql); }
@@ -106,6 +113,37 @@ struct SqliteWork
         sqlite3_bind_blob(insert, 4, payload.data(), int(payload.size()), SQLITE_STATIC);
         check(sqlite3_step(insert), db, "insert");
         sqlite3_reset(insert);
+    }
+    /// put(k, i), and what left object k's window with it deleted, as the store evicts.
+    void put_and_evict(int k, uint64_t i)
+    {
+        put(k, i);
+        if (i <= kSamples) return;
+        sqlite3_bind_int64(evict, 1, k);
+        sqlite3_bind_int64(evict, 2, int64_t((i - kSamples + 1) * kCycle + k));
+        check(sqlite3_step(evict), db, "evict");
+        sqlite3_reset(evict);
+    }
+    /// Appends in transactions of `batch` rows (1: each row its own, SQLite's autocommit).
+    int batch = 1, in_batch = 0;
+    void append(int k)
+    {
+        if (batch > 1 && in_batch == 0) check(sqlite3_exec(db, "BEGIN", nullptr, nullptr, nullptr), db, "begin");
+        put_and_evict(k, next++);
+        if (batch > 1 && ++in_batch == batch) {
+            check(sqlite3_exec(db, "COMMIT", nullptr, nullptr, nullptr), db, "commit");
+            in_batch = 0;
+        }
+    }
+    /// The query plan, one line per step.
+    std::string plan(sqlite3_stmt* s)
+    {
+        sqlite3_stmt* explain = nullptr;
+        prepare(("EXPLAIN QUERY PLAN " + std::string(sqlite3_sql(s))).c_str(), &explain);
+        std::string out;
+        while (sqlite3_step(explain) == SQLITE_ROW) out += std::string(out.empty() ? "" : "; ") + (const char*)sqlite3_column_text(explain, 3);
+        sqlite3_finalize(explain);
+        return out;
     }
     /// The newest row of the statement's answer seen in place, the way Store::view answers: its
     /// times and SQLite's pointer to the payload (valid until the next step), no copy.
@@ -154,6 +192,12 @@ auto& store_work() { return work<StoreWork, 0>(); }
 auto& sqlite_work() { return work<SqliteWork, 0>(); }
 auto& append_store() { return work<StoreWork, 1>(); }
 auto& append_sqlite() { return work<SqliteWork, 1>(); }
+auto& append_sqlite_batched()
+{
+    auto& w = work<SqliteWork, 2>();
+    w.batch = 1000;
+    return w;
+}
 
 /// Query times spread over the held window (between the 100th oldest and the 100th newest of
 /// the kSamples held), drawn before any timing starts.
@@ -185,7 +229,12 @@ void BM_Store_Append(benchmark::State& state)
 void BM_Sqlite_Append(benchmark::State& state)
 {
     auto& w = append_sqlite();
-    for (auto _ : state) w.put(0, w.next++);
+    for (auto _ : state) w.append(0);
+}
+void BM_Sqlite_AppendBatched(benchmark::State& state)
+{
+    auto& w = append_sqlite_batched();
+    for (auto _ : state) w.append(0);
 }
 // The four ways of asking `at`, object k at time t; each side does the same work.
 using cpm::rtdb::By;
@@ -258,6 +307,7 @@ void BM_Sqlite_Range100(benchmark::State& state)
 
 BENCHMARK(BM_Store_Append);
 BENCHMARK(BM_Sqlite_Append);
+BENCHMARK(BM_Sqlite_AppendBatched);
 BENCHMARK(BM_At<store_copied, By::commit>)->Name("BM_Store_AtCommit");
 BENCHMARK(BM_At<sqlite_copied, By::commit>)->Name("BM_Sqlite_AtCommit");
 BENCHMARK(BM_At<store_copied, By::data>)->Name("BM_Store_AtData");
@@ -269,11 +319,17 @@ BENCHMARK(BM_At<sqlite_in_place, By::data>)->Name("BM_Sqlite_AtDataInPlace");
 BENCHMARK(BM_Store_Range100);
 BENCHMARK(BM_Sqlite_Range100);
 
-/// Single calls timed one by one: p50 and p99 in ns, less `clock_ns` (reading the clock twice).
-/// As many calls untimed first, so that the caches hold what this operation uses (not what
-/// the one before used), as Google Benchmark's own warm-up does.
+/// p50 and p99 of single calls, in ns.
+struct Percentiles
+{
+    double p50 = 0, p99 = 0;
+};
+
+/// Single calls timed one by one: p50 and p99 in ns as measured (reading the clock twice
+/// included). As many calls untimed first, so that the caches hold what this operation uses
+/// (not what the one before used), as Google Benchmark's own warm-up does.
 template <typename F>
-std::pair<double, double> percentiles(F&& op, double clock_ns, int n = 200'000)
+Percentiles percentiles(F&& op, int n = 200'000)
 {
     for (int i = 0; i < n; ++i) op();
     std::vector<double> ns(n);
@@ -283,7 +339,7 @@ std::pair<double, double> percentiles(F&& op, double clock_ns, int n = 200'000)
         ns[i] = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
     }
     const bench::Stats st = bench::stats_of(std::move(ns));  // its unit is whatever is given: ns here
-    return {st.p50 - clock_ns, st.p99 - clock_ns};
+    return {st.p50, st.p99};
 }
 
 /// This machine's latency of one dependent load at random within `bytes` (a pointer chase):
@@ -319,24 +375,35 @@ double block_ns(F&& op, int n)
 /// and SQLite blocks; within one run the rounds agree closely, and their median is the run's ratio.
 void print_rounds()
 {
-    constexpr int kRounds = 7, kStoreCalls = 200'000, kSqliteCalls = 20'000;
+    constexpr int kRounds = 7, kCalls = 20'000;
     Times times;
     std::printf("interleaved rounds (%d; each a block of %d store calls, then %d SQLite calls, each warmed up first), mean ns a call:\n",
-                kRounds, kStoreCalls, kSqliteCalls);
+                kRounds, kCalls, kCalls);
     for (const AtCase& c : kAtCases) {
         std::vector<double> store, sqlite, ratio;
         for (int r = 0; r < kRounds; ++r) {
-            store.push_back(block_ns([&] { times.ask(c.store, c.by); }, kStoreCalls));
-            sqlite.push_back(block_ns([&] { times.ask(c.sqlite, c.by); }, kSqliteCalls));
+            store.push_back(block_ns([&] { times.ask(c.store, c.by); }, kCalls));
+            sqlite.push_back(block_ns([&] { times.ask(c.sqlite, c.by); }, kCalls));
             ratio.push_back(sqlite.back() / store.back());
         }
         auto [slo, shi] = std::minmax_element(store.begin(), store.end());
         auto [qlo, qhi] = std::minmax_element(sqlite.begin(), sqlite.end());
         std::sort(ratio.begin(), ratio.end());
         const double median = ratio[kRounds / 2];
-        std::printf("%-20s store %6.0f-%-6.0f ns | sqlite %6.0f-%-6.0f ns | sqlite/store per round %5.1f-%-5.1fx, median %5.1fx (target >= 50x: %s)\n",
-                    c.what, *slo, *shi, *qlo, *qhi, ratio.front(), ratio.back(), median, median >= 50 ? "met" : "not met");
+        // The >= 50x target is the in-place `at`'s; a copy is judged against memory (print_percentiles).
+        const bool judged = c.store == store_in_place;
+        std::printf("%-20s store %6.0f-%-6.0f ns | sqlite %6.0f-%-6.0f ns | sqlite/store per round %5.1f-%-5.1fx, median %5.1fx%s\n",
+                    c.what, *slo, *shi, *qlo, *qhi, ratio.front(), ratio.back(), median,
+                    !judged ? "" : median >= 50 ? " (target >= 50x: met)" : " (target >= 50x: not met)");
     }
+}
+
+/// Heap the process holds: malloc's in-use bytes plus its mmap'd blocks (large allocations,
+/// such as the store's chunks, live there and not in uordblks).
+size_t heap_in_use()
+{
+    const auto m = mallinfo2();
+    return m.uordblks + m.hblkhd;
 }
 
 void print_percentiles()
@@ -345,35 +412,50 @@ void print_percentiles()
     auto& q = sqlite_work();
     auto& sa = append_store();
     auto& qa = append_sqlite();
+    auto& qb = append_sqlite_batched();
     Times times;
-    const double clock = percentiles([] {}, 0).first;
-    std::printf("single calls, %.0f ns of reading the clock around each subtracted:\n", clock);
-    // `verdict` says whether the store's p50 meets `at`'s target of 200 ns.
-    auto line = [&](const char* what, auto&& store_op, auto&& sqlite_op, int n = 200'000, bool verdict = false) {
-        const auto store = percentiles(store_op, clock, n), sqlite = percentiles(sqlite_op, clock, n);
-        std::printf("%-20s store p50 %8.0f ns  p99 %8.0f ns | sqlite p50 %8.0f ns  p99 %8.0f ns | sqlite/store at p50 %6.1fx%s\n",
-                    what, store.first, store.second, sqlite.first, sqlite.second, sqlite.first / store.first,
-                    !verdict ? "" : store.first <= 200 ? " (p50 <= 200 ns: met)" : " (p50 <= 200 ns: not met)");
+    const double clock = percentiles([] {}).p50;
+    std::printf("SQLite's plans: at by commit: %s | at by data: %s | range: %s\n", q.plan(q.at_commit).c_str(), q.plan(q.at_data).c_str(),
+                q.plan(q.range).c_str());
+    // The store's memory per sample beyond its payload: heap in use around building a second
+    // store like the query fixture (100,000 samples of 150 bytes).
+    const size_t before = heap_in_use();
+    auto extra = std::make_unique<StoreWork>();
+    const size_t held = heap_in_use() - before;
+    const auto st2 = extra->store.stats();
+    extra.reset();
+    const double dram_ns = load_latency_ns(held);
+    std::printf("single calls; raw p50 (clock read included, %.0f ns) and less it; targets judged on raw p50:\n", clock);
+    // `verdict`: the store's raw p50 against the in-place target (200 ns) or, for a copy,
+    // against one random load in the held data (1.5x).
+    enum Verdict { none, in_place, copied };
+    auto line = [&](const char* what, auto&& store_op, auto&& sqlite_op, int n = 200'000, Verdict verdict = none) {
+        const auto store = percentiles(store_op, n), sqlite = percentiles(sqlite_op, n);
+        std::string judged;
+        if (verdict == in_place) judged = store.p50 <= 200 ? " (p50 <= 200 ns: met)" : " (p50 <= 200 ns: not met)";
+        if (verdict == copied) {
+            char b[96];
+            std::snprintf(b, sizeof b, " (p50 <= 1.5 x %.0f ns DRAM load: %s)", dram_ns, store.p50 <= 1.5 * dram_ns ? "met" : "not met");
+            judged = b;
+        }
+        std::printf("%-26s store p50 %6.0f (%6.0f) ns p99 %7.0f | sqlite p50 %7.0f (%7.0f) ns p99 %8.0f | sqlite/store p50 %6.1fx%s\n",
+                    what, store.p50, store.p50 - clock, store.p99, sqlite.p50, sqlite.p50 - clock, sqlite.p99, sqlite.p50 / store.p50,
+                    judged.c_str());
     };
-    line("append", [&] { sa.put(2, sa.next++); }, [&] { qa.put(2, qa.next++); });
+    line("append (sqlite: txn a row)", [&] { sa.put(2, sa.next++); }, [&] { qa.append(2); });
+    line("append (sqlite: 1000/txn)", [&] { sa.put(3, sa.next++); }, [&] { qb.append(3); });
     for (const AtCase& c : kAtCases) {
-        line(c.what, [&] { times.ask(c.store, c.by); }, [&] { times.ask(c.sqlite, c.by); }, 200'000, true);
+        line(c.what, [&] { times.ask(c.store, c.by); }, [&] { times.ask(c.sqlite, c.by); }, 200'000,
+             c.store == store_in_place ? in_place : copied);
     }
     line("range 100", [&] { const uint64_t t0 = times.t(); s.store.range(s.oids[1], t0, t0 + 100 * kCycle); },
          [&] { const uint64_t t0 = times.t(); q.query(q.range, 1, t0, t0 + 100 * kCycle); }, 20'000);
-    // The store's own memory per sample beyond its payload: heap in use around building a
-    // second store like the query fixture (100,000 samples of 150 bytes).
-    const size_t before = mallinfo2().uordblks;
-    auto extra = std::make_unique<StoreWork>();
-    const size_t held = mallinfo2().uordblks - before;
-    const auto st2 = extra->store.stats();
-    extra.reset();
-    std::printf("store memory: %.1f bytes per sample beyond its payload (heap in use, %llu samples; target <= 64)\n",
+    std::printf("store memory: %.1f bytes per sample beyond its payload (heap in use incl. mmap'd blocks, %llu samples; target <= 64)\n",
                 (double(held) - double(st2.bytes)) / double(st2.samples), (unsigned long long)st2.samples);
     std::printf("one dependent cache-line load at random within 1 MiB: %.0f ns, 4 MiB: %.0f ns, the store's %.1f MB: %.0f ns\n"
                 "(a copied `at` fetches at least one payload line from anywhere in the store, so the last figure\n"
                 " bounds it from below; the in-place one does not touch the payload)\n",
-                load_latency_ns(1 << 20), load_latency_ns(4 << 20), double(held) / 1e6, load_latency_ns(held));
+                load_latency_ns(1 << 20), load_latency_ns(4 << 20), double(held) / 1e6, dram_ns);
     auto st = s.store.stats();
     std::printf("store holds %llu samples, %llu payload bytes\n", (unsigned long long)st.samples, (unsigned long long)st.bytes);
 }
@@ -392,6 +474,7 @@ int main(int argc, char** argv)
     sqlite_work();
     append_store();
     append_sqlite();
+    append_sqlite_batched();
     benchmark::RunSpecifiedBenchmarks();
     print_percentiles();
     print_rounds();
