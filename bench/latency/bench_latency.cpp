@@ -43,11 +43,14 @@ constexpr int kMaxTries = 20;
 const cpm::WriterOptions kWriterOptions{.reliable = true, .keep_all = false, .history_depth = 1, .data_sharing = bench::data_sharing()};
 const cpm::ReaderOptions kReaderOptions{.reliable = true, .keep_all = false, .history_depth = 1, .data_sharing = bench::data_sharing()};
 
-cpm::ParticipantOptions options_for(int domain)
+/// cpm's default transports (loopback UDP + shared memory), or loopback UDP only (the
+/// transport Cyclone's ddsperf uses here).
+cpm::ParticipantOptions options_for(int domain, bool shared_memory = true)
 {
     cpm::ParticipantOptions o;
     o.domain_id = domain;
     o.name = "bench_latency";
+    o.shared_memory = shared_memory;
     return o;
 }
 
@@ -62,9 +65,9 @@ std::atomic<bool> g_stop{false};
 
 // ---- pong side: echoes every ping back on "pong" ----------------------------------------
 
-void pong_cpm(int domain)
+void pong_cpm(int domain, bool shared_memory)
 {
-    cpm::Participant participant(options_for(domain));
+    cpm::Participant participant(options_for(domain, shared_memory));
     cpm::Writer<BenchPayload> pong(participant, "pong", kWriterOptions);
     cpm::AsyncReader<BenchPayload> ping(
         [&](std::vector<BenchPayload>& batch) {
@@ -158,8 +161,8 @@ protected:
 class CpmPinger : public Pinger
 {
 public:
-    explicit CpmPinger(int domain)
-        : participant_(options_for(domain)),
+    CpmPinger(int domain, bool shared_memory)
+        : participant_(options_for(domain, shared_memory)),
           ping_(participant_, "ping", kWriterOptions),
           pong_(participant_, "pong", kReaderOptions)
     {
@@ -229,7 +232,7 @@ private:
 // ddsperf prints one line per second: "... size S mean Xus min Xus 50% Xus 90% Xus 99% Xus max Xus cnt N".
 // Percentiles are per one-second window; we report the median window's value (first window
 // dropped as warm-up), and min/max/n over all windows.
-bench::Stats ddsperf_latency(int domain, size_t size, int seconds)
+bench::Stats ddsperf_latency(int domain, size_t size, int seconds, size_t& windows)
 {
     const std::string pong_out = "/tmp/bench_ddsperf_pong_" + std::to_string(getpid());
     const std::string ping_out = "/tmp/bench_ddsperf_ping_" + std::to_string(getpid());
@@ -267,6 +270,7 @@ bench::Stats ddsperf_latency(int domain, size_t size, int seconds)
     }
     std::remove(pong_out.c_str());
     std::remove(ping_out.c_str());
+    windows = p50s.size();
     if (p50s.empty()) return {};
     s.p50 = bench::stats_of(p50s).p50;
     s.p90 = bench::stats_of(p90s).p50;
@@ -283,7 +287,7 @@ int main(int argc, char** argv)
     if (role == "pong") {
         std::signal(SIGTERM, [](int) { g_stop = true; });
         const std::string impl = bench::arg(argc, argv, "--impl", "cpm");
-        if (impl == "cpm") pong_cpm(domain);
+        if (impl == "cpm" || impl == "cpm_udp") pong_cpm(domain, impl == "cpm");
         else if (impl == "raw_listener") pong_raw_listener(domain);
         else pong_raw_waitset(domain);
         return 0;
@@ -308,6 +312,7 @@ int main(int argc, char** argv)
         std::string impl, label;
     };
     const std::vector<Case> cases{{"cpm", "cpm Writer/AsyncReader"},
+                                  {"cpm_udp", "cpm, loopback UDP only"},
                                   {"raw_listener", "raw Fast DDS (listener pong)"},
                                   {"raw_waitset", "raw Fast DDS (wait-set pong)"}};
     const int rounds = 10;
@@ -319,7 +324,8 @@ int main(int argc, char** argv)
         for (size_t k = 0; k < cases.size(); ++k) {
             const int d = domain + int(k);
             pongs.push_back(bench::spawn_self({"--role", "pong", "--impl", cases[k].impl, "--domain", std::to_string(d)}));
-            if (cases[k].impl == "cpm") pingers.push_back(std::make_unique<CpmPinger>(d));
+            if (cases[k].impl == "cpm" || cases[k].impl == "cpm_udp")
+                pingers.push_back(std::make_unique<CpmPinger>(d, cases[k].impl == "cpm"));
             else pingers.push_back(std::make_unique<RawPinger>(d));
         }
         std::vector<std::vector<double>> samples(cases.size());
@@ -347,16 +353,28 @@ int main(int argc, char** argv)
             bench::print_row(cases[k].label, results[cases[k].impl]);
         }
         const int seconds = 5;
-        results["cyclone"] = ddsperf_latency(domain, size, seconds);
+        size_t windows = 0;
+        results["cyclone"] = ddsperf_latency(domain + int(cases.size()), size, seconds, windows);
         bench::print_row("Cyclone DDS ddsperf ping/pong (" + std::to_string(seconds) + " s)", results["cyclone"]);
+        // ddsperf prints a line a second; the first is warm-up. Fewer windows: an incomplete run.
+        const bool cyclone_complete = windows + 2 >= size_t(seconds);
         if (results.count("cpm") && results.count("raw_listener")) {
             bench::print_ratio("cpm / raw Fast DDS (listener pong)", results["cpm"], results["raw_listener"]);
         }
         if (results.count("cpm") && results.count("raw_waitset")) {
             bench::print_ratio("cpm / raw Fast DDS (wait-set pong)", results["cpm"], results["raw_waitset"]);
         }
-        if (results.count("cpm") && results["cyclone"].n > 0) {
-            bench::print_ratio("cpm / Cyclone DDS", results["cpm"], results["cyclone"]);
+        if (!cyclone_complete) {
+            std::printf("Cyclone DDS: %zu of %d one-second windows; incomplete, no ratio\n", windows, seconds - 1);
+            exit_code = 1;
+        } else {
+            // Not the same estimator: ddsperf's figures are medians of its per-second percentiles,
+            // and ddsperf runs on loopback UDP (its shared memory needs iceoryx); cpm's are
+            // per-sample percentiles.
+            if (results.count("cpm"))
+                bench::print_ratio("cpm / Cyclone (UDP; its per-second medians)", results["cpm"], results["cyclone"]);
+            if (results.count("cpm_udp"))
+                bench::print_ratio("cpm UDP only / Cyclone (same transport)", results["cpm_udp"], results["cyclone"]);
         }
     }
     return exit_code;
