@@ -12,7 +12,6 @@
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
-#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <fastrtps/utils/IPLocator.h>
 
 #include <gmock/gmock.h>
@@ -149,22 +148,4 @@ TEST(Participant, ReadersAndWritersMeetThroughADiscoveryServer)
     ASSERT_TRUE(writer.write(cpm_test::vehicle_state(5, 1, 1)));
     ASSERT_TRUE(reader.wait_for_data(5000ms));
     EXPECT_EQ(reader.take().at(0).vehicle_id(), 5);
-}
-
-// ctest runs each test in a process of its own: the default participant does not exist yet.
-TEST(Participant, MakeDefaultMakesTheDefaultParticipantFromTheOptionsGivenOnce)
-{
-    auto options = cpm_test::isolated_options();
-    options.name = "made_default";
-    options.shared_memory = false;
-    ASSERT_TRUE(cpm::Participant::make_default(options));
-    auto& p = cpm::Participant::default_participant();
-    EXPECT_EQ(p.domain_id(), options.domain_id);
-    EXPECT_EQ(p.native()->get_qos().name().to_string(), "made_default");
-    for (const auto& t : p.native()->get_qos().transport().user_transports) {
-        EXPECT_EQ(std::dynamic_pointer_cast<eprosima::fastdds::rtps::SharedMemTransportDescriptor>(t), nullptr) << "shared memory";
-    }
-    options.name = "too_late";
-    EXPECT_FALSE(cpm::Participant::make_default(options));  // it exists: nothing changes
-    EXPECT_EQ(&cpm::Participant::default_participant(), &p);
 }
