@@ -14,7 +14,7 @@
 #include <fastrtps/utils/IPLocator.h>
 
 #include <algorithm>
-#include <mutex>
+#include <cstdlib>
 
 namespace cpm {
 namespace detail {
@@ -203,28 +203,12 @@ Participant::~Participant() = default;
 Participant::Participant(Participant&&) noexcept = default;
 Participant& Participant::operator=(Participant&&) noexcept = default;
 
-namespace {
-
-// Never destroyed: readers and writers in static objects may outlive main(), and Fast DDS's
-// factory deletes whatever participants remain when the process ends.
-std::mutex default_mutex;
-Participant* default_instance = nullptr;
-
-}  // namespace
-
 Participant& Participant::default_participant()
 {
-    std::lock_guard lock(default_mutex);
-    if (!default_instance) default_instance = new Participant(ParticipantOptions::from_init());
-    return *default_instance;
-}
-
-bool Participant::make_default(const ParticipantOptions& options)
-{
-    std::lock_guard lock(default_mutex);
-    if (default_instance) return false;
-    default_instance = new Participant(options);
-    return true;
+    // Never destroyed: readers and writers in static objects may outlive main(), and Fast
+    // DDS's factory deletes whatever participants remain when the process ends.
+    static Participant* instance = new Participant(ParticipantOptions::from_init());
+    return *instance;
 }
 
 int Participant::domain_id() const { return core_->domain_id(); }

@@ -1,7 +1,6 @@
 #include <cpm/topics.hpp>
 #include <cpm/rtdb/HistoryService.hpp>
 
-#include <cpm/Logging.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
@@ -41,24 +40,10 @@ bool intraprocess_off()
     return true;
 }
 
-/// The participant for requests, replies and status. It talks loopback UDP, not shared memory:
-/// after the process was stopped past the lease, Fast DDS 2.9 over shared memory sometimes never
-/// matched this participant's writers with the recorder (in the same process) again — its own
-/// status went unrecorded, 1 run in 4 to 6 under load; over UDP it rematched in 10 of 10. Its
-/// traffic is a few samples a second; the recorder keeps shared memory for the lab's data.
-/// Unless the options name one, it is the process's default participant (the one cpm::Logging
-/// uses too), so the process shows as one participant of its name besides its recorder.
 Participant* serving_participant(const ServiceOptions& options, std::unique_ptr<Participant>& own)
 {
-    ParticipantOptions srv = options.participant.value_or(ParticipantOptions::from_init());
-    srv.shared_memory = false;
-    if (!options.participant) {
-        if (!Participant::make_default(srv)) {
-            CPM_LOG_WARN("cpm_history: the process's default participant existed before the service; its requests and "
-                         "status go over shared memory, which may not recover from a freeze past the lease");
-        }
-        return &Participant::default_participant();
-    }
+    if (!options.participant) return &Participant::default_participant();
+    ParticipantOptions srv = *options.participant;
     if (srv.name.empty()) srv.name = "cpm_history";
     own = std::make_unique<Participant>(srv);
     return own.get();

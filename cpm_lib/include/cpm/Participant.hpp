@@ -51,10 +51,6 @@ public:
     /// The process-wide participant that readers and writers use when none is given;
     /// created on first use from cpm::init's settings. Thread-safe.
     static Participant& default_participant();
-    /// Makes the process's default participant from these options instead of cpm::init's
-    /// alone (a program that needs more, such as no shared memory). False, changing nothing,
-    /// when the default participant exists already. Thread-safe.
-    static bool make_default(const ParticipantOptions& options);
 
     int domain_id() const;
     /// The Fast DDS participant, for what cpm does not wrap. Owned by this object.
