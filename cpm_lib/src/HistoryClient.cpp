@@ -1,9 +1,9 @@
-#include <cpm/topics.hpp>
 #include <cpm/AsyncReader.hpp>
-#include <cpm/HistoryClient.hpp>
-#include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/HistoryClient.hpp>
 #include <cpm/stamp_message.hpp>
+#include <cpm/topics.hpp>
+#include <cpm/Writer.hpp>
 
 #include <algorithm>
 #include <atomic>
@@ -15,10 +15,6 @@
 #include <unistd.h>
 
 namespace cpm {
-
-namespace {
-
-}  // namespace
 
 /// The history service over DDS: requests on historyRequest, replies matched by client and
 /// request id on historyReply.

@@ -1,7 +1,7 @@
 #include "LabTimer.hpp"
 
-#include <cpm/topics.hpp>
 #include <cpm/Logging.hpp>
+#include <cpm/topics.hpp>
 
 #include "lab_clock.hpp"
 #include "lab_topics.hpp"

@@ -1,5 +1,5 @@
-#include <cpm/topics.hpp>
 #include <cpm/Logging.hpp>
+#include <cpm/topics.hpp>
 
 #include <cpm/AsyncReader.hpp>
 #include <cpm/Error.hpp>

@@ -1,6 +1,6 @@
-#include <cpm/topics.hpp>
 #include <cpm/ParameterServer.hpp>
 #include <cpm/read_text_file.hpp>
+#include <cpm/topics.hpp>
 
 #include <cpm/AsyncReader.hpp>
 #include <cpm/Error.hpp>

@@ -1,5 +1,5 @@
-#include <cpm/topics.hpp>
 #include <cpm/TimeMaster.hpp>
+#include <cpm/topics.hpp>
 
 #include "lab_topics.hpp"
 

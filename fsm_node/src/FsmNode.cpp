@@ -1,5 +1,5 @@
-#include <cpm/topics.hpp>
 #include <cpm/fsm/FsmNode.hpp>
+#include <cpm/topics.hpp>
 
 #include <cpm/Logging.hpp>
 #include <cpm/Reader.hpp>

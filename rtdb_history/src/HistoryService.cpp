@@ -1,5 +1,5 @@
-#include <cpm/topics.hpp>
 #include <cpm/rtdb/HistoryService.hpp>
+#include <cpm/topics.hpp>
 
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>

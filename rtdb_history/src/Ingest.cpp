@@ -1,10 +1,10 @@
 #include "Ingest.hpp"
 
-#include <cpm/topics.hpp>
 #include <cpm/Error.hpp>
-#include <cpm/Logging.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/Logging.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
+#include <cpm/topics.hpp>
 
 #include "RawType.hpp"
 

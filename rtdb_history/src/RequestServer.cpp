@@ -1,9 +1,9 @@
 #include "RequestServer.hpp"
 
-#include <cpm/topics.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/rtdb/Requests.hpp>
 #include <cpm/stamp_message.hpp>
+#include <cpm/topics.hpp>
 
 namespace cpm::rtdb {
 

@@ -92,6 +92,15 @@ TEST(HistoryRequests, MalformedRequestsGetAnErrorNamingWhatIsWrong)
     rq.kind("wait_next");
     rq.timeout_ns(3'600'000'000'000ull);
     EXPECT_EQ(answer(f.store, rq).error(), "timeout_ns 3600000000000 is above 60 s");
+    rq.timeout_ns(0);
+    rq.kind("snapshot");
+    rq.t0(250);
+    EXPECT_EQ(answer(f.store, rq).status(), "error");
+    EXPECT_EQ(answer(f.store, rq).error(), "snapshot: objects is empty");
+    rq.objects({"vehicleState/3", "noSuchTopic"});
+    const auto unknown_member = answer(f.store, rq);
+    EXPECT_EQ(unknown_member.status(), "unknown_object");
+    EXPECT_NE(unknown_member.error().find("no object 'noSuchTopic'"), std::string::npos) << unknown_member.error();
     EXPECT_EQ(f.ask("latest").status(), "ok");  // and it still answers
 }
 
