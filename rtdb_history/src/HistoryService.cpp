@@ -1,9 +1,10 @@
 #include <cpm/rtdb/HistoryService.hpp>
-#include <cpm/topics.hpp>
 
+#include <cpm/Logging.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
+#include <cpm/topics.hpp>
 
 #include <HistoryStatus.h>
 #include <cpm_topic_types.hpp>
@@ -83,7 +84,7 @@ struct HistoryService::Impl
 
     void control_loop()
     {
-        uint64_t next_status = 0;
+        uint64_t next_status = 0, unmatched_since = 0;
         while (ingest.process_events(std::chrono::milliseconds(100))) {
             const uint64_t now = cpm::get_time_ns();
             ingest.locked([&] { store.expire(now); });
@@ -91,7 +92,28 @@ struct HistoryService::Impl
                 publish_status(now);
                 next_status = now + options.status_period_ns;
             }
+            heal_one_sided_drop(now, unmatched_since);
         }
+    }
+
+    /// After this process was stopped past the lease (SIGSTOP, a debugger, a stalled VM), the
+    /// serving participant may drop the recorder while the recorder keeps it; Fast DDS 2.9 then
+    /// never exchanges their endpoints again (seen as the status writer matching no reader for
+    /// good, about 1 freeze in 8 under load; Fast DDS issues #155 and #457), and the service's
+    /// own status goes unrecorded. A status writer that the recording reader has not matched
+    /// for 2 s gets the recorder replaced: a new participant meets everyone afresh.
+    void heal_one_sided_drop(uint64_t now, uint64_t& unmatched_since)
+    {
+        if (!ingest.records(topics::history_status.name) || status.matched_subscriptions() > 0) {
+            unmatched_since = 0;
+            return;
+        }
+        if (unmatched_since == 0) unmatched_since = now;
+        if (now - unmatched_since < 2'000'000'000ull) return;
+        CPM_LOG_WARN("cpm_history: the recorder lost the service's own status for 2 s (a freeze past the lease?); "
+                     "replacing the recording participant");
+        ingest.rebuild();
+        unmatched_since = 0;
     }
 
     void publish_status(uint64_t now)

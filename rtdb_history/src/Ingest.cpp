@@ -91,13 +91,22 @@ struct Ingest::Impl : public dds::DomainParticipantListener
         void on_data_available(dds::DataReader* r) override { ingest->ingest(*this, r); }
     };
 
+    /// What a topic's reader had counted when its recorder was replaced (rebuild()).
+    struct Carried
+    {
+        uint64_t received = 0, lost = 0;
+        std::map<rtps::GUID_t, uint64_t> last_sequence;
+    };
+
     Ingest& self;
     Outlet& out;
     Registry registry;
     std::vector<std::regex> include, exclude;
+    ParticipantOptions recorder_options;
     std::unique_ptr<Participant> recorder;
     dds::Subscriber* raw_subscriber = nullptr;
     std::map<std::string, std::unique_ptr<TopicRec>> topics;  // under self.mutex_
+    std::map<std::string, Carried> carried;                   // under self.mutex_
 
     std::mutex events_mutex;
     std::condition_variable events_cv;
@@ -107,26 +116,61 @@ struct Ingest::Impl : public dds::DomainParticipantListener
     Impl(Ingest& i, const ServiceOptions& options, Outlet& o)
         : self(i), out(o), registry(o), include(compile(options.include, "--include")), exclude(compile(options.exclude, "--exclude"))
     {
-        ParticipantOptions rec = options.participant.value_or(ParticipantOptions::from_init());
-        rec.name = (rec.name.empty() ? std::string("cpm_history") : rec.name) + "_recorder";
-        rec.discovery_listener = this;
-        recorder = std::make_unique<Participant>(rec);
-        raw_subscriber = recorder->native()->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
-        if (!raw_subscriber) throw Error("cpm_history: cannot create the recording subscriber");
+        recorder_options = options.participant.value_or(ParticipantOptions::from_init());
+        recorder_options.name = (recorder_options.name.empty() ? std::string("cpm_history") : recorder_options.name) + "_recorder";
+        recorder_options.discovery_listener = this;
+        open();
     }
 
     ~Impl() override
     {
-        // Readers first, while their listeners (TopicRec) still exist.
-        for (auto& [name, t] : topics) {
+        close_readers(topics);
+        close();
+    }
+
+    void open()
+    {
+        recorder = std::make_unique<Participant>(recorder_options);
+        raw_subscriber = recorder->native()->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
+        if (!raw_subscriber) throw Error("cpm_history: cannot create the recording subscriber");
+    }
+
+    /// Deletes the readers while their listeners (the TopicRecs) still exist.
+    void close_readers(std::map<std::string, std::unique_ptr<TopicRec>>& recs)
+    {
+        for (auto& [name, t] : recs) {
             if (t->reader) {
                 t->reader->set_listener(nullptr);
                 raw_subscriber->delete_datareader(t->reader);
+                t->reader = nullptr;
             }
             if (t->topic) recorder->native()->delete_topic(t->topic);
+            t->topic = nullptr;
         }
+    }
+
+    void close()
+    {
         recorder->native()->delete_subscriber(raw_subscriber);
         recorder->native()->set_listener(nullptr);
+        recorder.reset();
+    }
+
+    /// A new recording participant in place of the old one: every other participant meets it
+    /// as new, so discovery runs afresh on both sides. Each topic is subscribed again as its
+    /// writers are found; what its readers counted carries over, and samples of a writer that
+    /// were taken before (a transient-local writer's history, sent again to the new reader) are
+    /// skipped by their sequence numbers.
+    void rebuild()
+    {
+        std::map<std::string, std::unique_ptr<TopicRec>> old;
+        self.locked([&] { old.swap(topics); });
+        close_readers(old);
+        self.locked([&] {
+            for (auto& [name, t] : old) carried[name] = {t->received, t->lost, std::move(t->last_sequence)};
+        });
+        close();
+        open();
     }
 
     // ---- discovery -------------------------------------------------------------------------
@@ -228,6 +272,12 @@ struct Ingest::Impl : public dds::DomainParticipantListener
         }
         CPM_LOG_INFO("cpm_history: recording topic '%s' (type '%s'%s)", e.topic.c_str(), e.type_name.c_str(), e.keyed ? ", keyed" : "");
         std::lock_guard lock(self.mutex_);
+        if (auto c = carried.find(e.topic); c != carried.end()) {
+            rec->received = c->second.received;
+            rec->lost = c->second.lost;
+            rec->last_sequence = std::move(c->second.last_sequence);
+            carried.erase(c);
+        }
         topics[e.topic] = std::move(rec);
     }
 
@@ -249,13 +299,15 @@ struct Ingest::Impl : public dds::DomainParticipantListener
 
     /// The samples its writer sent before this one that never arrived: a writer numbers
     /// everything it sends, so a jump means a best-effort sample dropped or a reliable writer's
-    /// history overwritten while the service could not keep up.
-    uint64_t lost_before(TopicRec& t, const rtps::GUID_t& writer, uint64_t seq)
+    /// history overwritten while the service could not keep up. nullopt for a sample taken
+    /// before (sent again to a reader made anew).
+    std::optional<uint64_t> lost_before(TopicRec& t, const rtps::GUID_t& writer, uint64_t seq)
     {
         auto [last, first] = t.last_sequence.try_emplace(writer, seq);
         if (first) return 0;
-        const uint64_t lost = seq > last->second + 1 ? seq - last->second - 1 : 0;
-        last->second = std::max(last->second, seq);
+        if (seq <= last->second) return std::nullopt;
+        const uint64_t lost = seq - last->second - 1;
+        last->second = seq;
         return lost;
     }
 
@@ -268,7 +320,9 @@ struct Ingest::Impl : public dds::DomainParticipantListener
             const uint64_t now = cpm::get_time_ns();
             rtps::GUID_t writer;
             rtps::iHandle2GUID(writer, info.publication_handle);
-            const uint64_t lost = lost_before(t, writer, info.sample_identity.sequence_number().to64long());
+            const auto gap = lost_before(t, writer, info.sample_identity.sequence_number().to64long());
+            if (!gap) continue;  // taken before
+            const uint64_t lost = *gap;
             t.lost += lost;
             self.lost_ += lost;
             if (!info.valid_data) {
@@ -319,6 +373,14 @@ struct Ingest::Impl : public dds::DomainParticipantListener
 };
 
 Ingest::Ingest(const ServiceOptions& options, Outlet& out) : impl_(std::make_unique<Impl>(*this, options, out)) {}
+
+void Ingest::rebuild() { impl_->rebuild(); }
+
+bool Ingest::records(const std::string& topic) const
+{
+    std::lock_guard lock(mutex_);
+    return impl_->topics.count(topic) != 0;
+}
 
 Ingest::~Ingest()
 {

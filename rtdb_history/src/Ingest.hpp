@@ -50,6 +50,12 @@ public:
         return f();
     }
 
+    /// Replaces the recording participant with a new one (see Ingest.cpp); on the caller's
+    /// thread, not in a DDS callback.
+    void rebuild();
+    /// Whether a reader records this topic.
+    bool records(const std::string& topic) const;
+
     uint64_t received() const { return received_; }
     uint64_t dropped() const { return dropped_; }
     uint64_t lost() const { return lost_; }
