@@ -66,14 +66,14 @@ LabTimer::LabTimer(Participant& participant, std::string node_id, uint64_t perio
     // The trigger reader exists from construction on, so a trigger sent while the program
     // is still preparing is not missed; a stop trigger (UINT64_MAX) ends every timer.
     if (wait_for_start_) {
-        ready_writer_ = std::make_unique<Writer<ReadyStatus>>(participant, topics::ready_status.name, lab_control_writer_options());
+        ready_writer_ = std::make_unique<Writer<ReadyStatus>>(participant, topics::ready_status.name, topics::ready_status.writer);
     }
     trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
         [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name,
-        lab_control_reader_options());
+        topics::system_trigger.reader);
     live_trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
         [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name,
-        lab_control_live_reader_options());
+        live_reader_options(topics::system_trigger));
 }
 
 LabTimer::~LabTimer()

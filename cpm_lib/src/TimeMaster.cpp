@@ -21,9 +21,9 @@ using namespace detail;
 struct TimeMaster::Impl
 {
     explicit Impl(Participant& participant)
-        : ready(participant, topics::ready_status.name, lab_control_reader_options()),
-          live_ready(participant, topics::ready_status.name, lab_control_live_reader_options()),
-          trigger(participant, topics::system_trigger.name, lab_control_writer_options())
+        : ready(participant, topics::ready_status.name, topics::ready_status.reader),
+          live_ready(participant, topics::ready_status.name, live_reader_options(topics::ready_status)),
+          trigger(participant, topics::system_trigger.name, topics::system_trigger.writer)
     {
     }
 

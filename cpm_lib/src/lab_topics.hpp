@@ -15,16 +15,12 @@ constexpr uint64_t kStopTrigger = UINT64_MAX;
 /// the current state. Readers keep a few and take the largest value: Fast DDS was seen
 /// delivering an older sample of an instance after a newer one.
 /// A transient-local reader does not match a volatile writer (cpm_lab's LCC writes its
-/// SystemTrigger with a plain reliable writer): the control topics are read twice, by a
-/// transient-local reader for what was sent before it matched and by a volatile one that
-/// matches every writer and so gets every sample sent after.
-/// Both topics have the same QoS (topics::ready_status, topics::system_trigger).
-static_assert(topics::ready_status.reader.history_depth == topics::system_trigger.reader.history_depth);
-inline WriterOptions lab_control_writer_options() { return topics::system_trigger.writer; }
-inline ReaderOptions lab_control_reader_options() { return topics::system_trigger.reader; }
-inline ReaderOptions lab_control_live_reader_options()
+/// SystemTrigger with a plain reliable writer): the control topics are read twice, by the
+/// table's transient-local reader for what was sent before it matched and by this volatile one,
+/// which matches every writer and so gets every sample sent after.
+inline ReaderOptions live_reader_options(const TopicSpec& topic)
 {
-    ReaderOptions o = topics::system_trigger.reader;
+    ReaderOptions o = topic.reader;
     o.transient_local = false;
     return o;
 }

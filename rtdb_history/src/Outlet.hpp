@@ -35,7 +35,6 @@ public:
         store_.mark_deleted(oid, now);
         each([&](IngestSink& s) { s.object_deleted(oid, now); });
     }
-    const Store& store() const { return store_; }
 
 private:
     /// A sink that throws is logged once and left out from then on; the store and the other

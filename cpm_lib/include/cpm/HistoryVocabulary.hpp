@@ -12,6 +12,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 
 namespace cpm::history {
 
@@ -34,11 +35,43 @@ enum class Kind {
 /// Which of a sample's two indexed times a query goes by.
 enum class By { commit, data };
 
-inline constexpr std::array kAllStatuses{Status::ok,      Status::not_found, Status::evicted,        Status::not_yet, Status::timeout,
-                                         Status::gap,     Status::partial,   Status::unknown_object, Status::error};
-inline constexpr std::array kAllKinds{Kind::latest,    Kind::at,       Kind::older,     Kind::younger, Kind::range,
-                                      Kind::wait_next, Kind::successor, Kind::snapshot, Kind::info,    Kind::search,
-                                      Kind::list,      Kind::wait_object, Kind::changes};
+/// Each word with its spelling, in the order above: the one list the conversions and the
+/// kAll* arrays are made from.
+inline constexpr std::array<std::pair<Status, std::string_view>, 9> kStatusNames{{{Status::ok, "ok"},
+                                                                                  {Status::not_found, "not_found"},
+                                                                                  {Status::evicted, "evicted"},
+                                                                                  {Status::not_yet, "not_yet"},
+                                                                                  {Status::timeout, "timeout"},
+                                                                                  {Status::gap, "gap"},
+                                                                                  {Status::partial, "partial"},
+                                                                                  {Status::unknown_object, "unknown_object"},
+                                                                                  {Status::error, "error"}}};
+inline constexpr std::array<std::pair<Kind, std::string_view>, 13> kKindNames{{{Kind::latest, "latest"},
+                                                                               {Kind::at, "at"},
+                                                                               {Kind::older, "older"},
+                                                                               {Kind::younger, "younger"},
+                                                                               {Kind::range, "range"},
+                                                                               {Kind::wait_next, "wait_next"},
+                                                                               {Kind::successor, "successor"},
+                                                                               {Kind::snapshot, "snapshot"},
+                                                                               {Kind::info, "info"},
+                                                                               {Kind::search, "search"},
+                                                                               {Kind::list, "list"},
+                                                                               {Kind::wait_object, "wait_object"},
+                                                                               {Kind::changes, "changes"}}};
+
+namespace detail {
+template <class E, size_t N>
+constexpr std::array<E, N> words_of(const std::array<std::pair<E, std::string_view>, N>& names)
+{
+    std::array<E, N> out{};
+    for (size_t i = 0; i < N; ++i) out[i] = names[i].first;
+    return out;
+}
+}  // namespace detail
+
+inline constexpr auto kAllStatuses = detail::words_of(kStatusNames);
+inline constexpr auto kAllKinds = detail::words_of(kKindNames);
 
 std::string_view to_string(Status s);
 std::string_view to_string(Kind k);
