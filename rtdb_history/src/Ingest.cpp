@@ -48,8 +48,8 @@ std::string key_text(const rtps::InstanceHandle_t& h, bool keyed)
 struct Event
 {
     enum Kind { writer_found, writer_gone, process_found, process_gone } kind;
-    std::string topic, type_name, name;
-    bool keyed = false, reliable = false, transient_local = false;
+    RawEndpoint writer;  ///< writer_found, writer_gone
+    std::string name;    ///< process_found: the participant's name
     rtps::GUID_t guid;
 };
 
@@ -199,11 +199,7 @@ struct Ingest::Impl : public dds::DomainParticipantListener
     {
         Event e{};
         e.guid = info.info.guid();
-        e.topic = info.info.topicName().to_string();
-        e.type_name = info.info.typeName().to_string();
-        e.keyed = info.info.topicKind() == rtps::WITH_KEY;
-        e.reliable = info.info.m_qos.m_reliability.kind == dds::RELIABLE_RELIABILITY_QOS;
-        e.transient_local = info.info.m_qos.m_durability.kind != dds::VOLATILE_DURABILITY_QOS;
+        e.writer = raw_endpoint(info.info);
         switch (info.status) {
         case rtps::WriterDiscoveryInfo::DISCOVERED_WRITER: e.kind = Event::writer_found; break;
         case rtps::WriterDiscoveryInfo::REMOVED_WRITER: e.kind = Event::writer_gone; break;
@@ -230,12 +226,12 @@ struct Ingest::Impl : public dds::DomainParticipantListener
         switch (e.kind) {
         case Event::process_found: return registry.process_found(e.guid.guidPrefix, e.name, now);
         case Event::process_gone: return registry.process_gone(e.guid.guidPrefix, now);
-        case Event::writer_gone: return registry.writer_gone(e.topic, e.guid, now);
+        case Event::writer_gone: return registry.writer_gone(e.writer.topic, e.guid, now);
         case Event::writer_found: return;  // subscribe(), outside the lock
         }
     }
 
-    void subscribe(const Event& e)
+    void subscribe(const RawEndpoint& e)
     {
         auto rec = std::make_unique<TopicRec>();
         rec->ingest = this;
@@ -248,14 +244,9 @@ struct Ingest::Impl : public dds::DomainParticipantListener
             rec->has_header = types->has_header(e.type_name);
         }
         auto* participant = recorder->native();
-        if (participant->find_type(e.type_name).empty()) {
-            dds::TypeSupport type(new RawType(e.type_name, e.keyed, types));
-            type->auto_fill_type_information(false);
-            type->auto_fill_type_object(false);
-            if (type.register_type(participant) != ReturnCode_t::RETCODE_OK) {
-                CPM_LOG_ERROR("cpm_history: cannot register type '%s' of topic '%s'; not recorded", e.type_name.c_str(), e.topic.c_str());
-                return;
-            }
+        if (!register_raw_type(participant, e, types)) {
+            CPM_LOG_ERROR("cpm_history: cannot register type '%s' of topic '%s'; not recorded", e.type_name.c_str(), e.topic.c_str());
+            return;
         }
         rec->topic = participant->create_topic(e.topic, e.type_name, dds::TOPIC_QOS_DEFAULT);
         if (!rec->topic) {
@@ -345,7 +336,7 @@ struct Ingest::Impl : public dds::DomainParticipantListener
                 for (size_t i = 0; i < 8; ++i) v |= uint64_t(b[at + (little ? i : 7 - i)]) << (8 * i);
                 return v;
             };
-            const uint64_t source = uint64_t(info.source_timestamp.seconds()) * 1'000'000'000ull + info.source_timestamp.nanosec();
+            const uint64_t source = source_time_ns(info);
             // A type the IDL does not describe is taken to begin with a Header when its first
             // sample's stamps look like one (valid after created, by less than an hour, and not
             // from the future); a Log's string or a Parameter's name do not.
@@ -410,8 +401,8 @@ bool Ingest::process_events(std::chrono::milliseconds wait)
         // Creating a reader takes Fast DDS locks that its receive threads hold while they
         // call ingest(): never under the lock.
         if (e.kind == Event::writer_found) {
-            const bool known = locked([&] { return d.topics.count(e.topic) != 0; });
-            if (!known && d.wanted(e.topic)) d.subscribe(e);
+            const bool known = locked([&] { return d.topics.count(e.writer.topic) != 0; });
+            if (!known && d.wanted(e.writer.topic)) d.subscribe(e.writer);
         } else {
             locked([&] { d.handle(e, now); });
         }

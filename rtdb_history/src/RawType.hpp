@@ -7,11 +7,17 @@
 // it is the octet right after a 16-byte Header (a lab type's vehicle_id).
 #include <cpm/rtdb/IdlDecoder.hpp>
 
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+#include <fastdds/rtps/common/Guid.h>
 #include <fastdds/dds/topic/TopicDataType.hpp>
 #include <fastrtps/utils/md5.h>
 
 #include <cstring>
+#include <sstream>
+#include <string>
 #include <vector>
 
 namespace cpm::rtdb {
@@ -93,5 +99,47 @@ private:
     std::string type_name_;
     const IdlDecoder* types_;
 };
+
+/// What a discovered endpoint says of its topic, as the raw readers need it.
+struct RawEndpoint
+{
+    std::string topic, type_name;
+    bool keyed = false, reliable = false, transient_local = false;
+};
+
+/// From a WriterProxyData or ReaderProxyData (discovery's view of an endpoint).
+template <class ProxyData>
+RawEndpoint raw_endpoint(const ProxyData& info)
+{
+    namespace dds = eprosima::fastdds::dds;
+    return {info.topicName().to_string(), info.typeName().to_string(), info.topicKind() == eprosima::fastrtps::rtps::WITH_KEY,
+            info.m_qos.m_reliability.kind == dds::RELIABLE_RELIABILITY_QOS,
+            info.m_qos.m_durability.kind != dds::VOLATILE_DURABILITY_QOS};
+}
+
+/// Registers the raw type under `type_name` in the participant unless a type of that name is
+/// there already; false when DDS refuses.
+inline bool register_raw_type(eprosima::fastdds::dds::DomainParticipant* participant, const RawEndpoint& e, const IdlDecoder* types)
+{
+    if (!participant->find_type(e.type_name).empty()) return true;
+    eprosima::fastdds::dds::TypeSupport type(new RawType(e.type_name, e.keyed, types));
+    type->auto_fill_type_information(false);
+    type->auto_fill_type_object(false);
+    return type.register_type(participant) == ReturnCode_t::RETCODE_OK;
+}
+
+/// The writer's source timestamp of a sample, in ns.
+inline uint64_t source_time_ns(const eprosima::fastdds::dds::SampleInfo& info)
+{
+    return uint64_t(info.source_timestamp.seconds()) * 1'000'000'000ull + info.source_timestamp.nanosec();
+}
+
+/// A participant's GUID prefix as Fast DDS prints it.
+inline std::string guid_prefix_text(const eprosima::fastrtps::rtps::GuidPrefix_t& p)
+{
+    std::ostringstream s;
+    s << p;
+    return s.str();
+}
 
 }  // namespace cpm::rtdb

@@ -1,15 +1,7 @@
 #include "Registry.hpp"
 
-#include <sstream>
 
 namespace cpm::rtdb {
-
-std::string guid_prefix_text(const rtps::GuidPrefix_t& p)
-{
-    std::ostringstream s;
-    s << p;
-    return s.str();
-}
 
 void Registry::process_found(const rtps::GuidPrefix_t& prefix, const std::string& name, uint64_t now)
 {

@@ -4,6 +4,7 @@
 // instance alive. An instance ends when it is disposed, or when its last writer or that
 // writer's process leaves. Not thread-safe: the ingest calls it under its lock.
 #include "Outlet.hpp"
+#include "RawType.hpp"
 
 #include <fastdds/rtps/common/Guid.h>
 #include <fastdds/rtps/common/InstanceHandle.h>
@@ -16,8 +17,6 @@
 namespace cpm::rtdb {
 
 namespace rtps = eprosima::fastrtps::rtps;
-
-std::string guid_prefix_text(const rtps::GuidPrefix_t& p);
 
 class Registry
 {

@@ -18,7 +18,6 @@
 #include <deque>
 #include <map>
 #include <mutex>
-#include <sstream>
 
 namespace cpm::rtdb {
 
@@ -27,10 +26,9 @@ namespace rtps = eprosima::fastrtps::rtps;
 
 namespace {
 
-struct Seen
+struct Seen : RawEndpoint
 {
-    std::string topic, type_name;
-    bool keyed = false, reliable = false, transient_local = false, is_writer = false;
+    bool is_writer = false;
 };
 
 }  // namespace
@@ -75,9 +73,7 @@ struct TopicProbe::Impl : public dds::DomainParticipantListener  // a DataReader
             endpoints.erase(guid);
             return;
         }
-        endpoints[guid] = {info.topicName().to_string(), info.typeName().to_string(), info.topicKind() == rtps::WITH_KEY,
-                           info.m_qos.m_reliability.kind == dds::RELIABLE_RELIABILITY_QOS,
-                           info.m_qos.m_durability.kind != dds::VOLATILE_DURABILITY_QOS, is_writer};
+        endpoints[guid] = {raw_endpoint(info), is_writer};
         discovered.notify_all();
     }
 
@@ -99,7 +95,7 @@ struct TopicProbe::Impl : public dds::DomainParticipantListener  // a DataReader
             if (!info.valid_data) continue;
             ProbeSample s;
             s.payload = std::move(raw.bytes);
-            s.source_ns = uint64_t(info.source_timestamp.seconds()) * 1'000'000'000ull + info.source_timestamp.nanosec();
+            s.source_ns = source_time_ns(info);
             s.received_ns = get_time_ns();
             std::lock_guard lock(samples_mutex);
             samples.push_back(std::move(s));
@@ -110,9 +106,7 @@ struct TopicProbe::Impl : public dds::DomainParticipantListener  // a DataReader
     std::string name_of(const rtps::GuidPrefix_t& prefix) const
     {
         if (auto n = participant_names.find(prefix); n != participant_names.end()) return n->second;
-        std::ostringstream s;
-        s << prefix;
-        return s.str();
+        return guid_prefix_text(prefix);
     }
 };
 
@@ -172,13 +166,8 @@ bool TopicProbe::subscribe(const std::string& topic_name, std::chrono::milliseco
         if (!impl_->discovered.wait_for(lock, timeout, find)) return false;
     }
     auto* p = impl_->participant->native();
-    if (p->find_type(writer.type_name).empty()) {
-        dds::TypeSupport type(new RawType(writer.type_name, writer.keyed, IdlDecoder::lab_types()));
-        type->auto_fill_type_information(false);
-        type->auto_fill_type_object(false);
-        if (type.register_type(p) != ReturnCode_t::RETCODE_OK)
-            throw Error("topic '" + topic_name + "': cannot register its type '" + writer.type_name + "'");
-    }
+    if (!register_raw_type(p, writer, IdlDecoder::lab_types()))
+        throw Error("topic '" + topic_name + "': cannot register its type '" + writer.type_name + "'");
     impl_->topic = p->create_topic(topic_name, writer.type_name, dds::TOPIC_QOS_DEFAULT);
     if (!impl_->topic) throw Error("topic '" + topic_name + "': cannot create it with type '" + writer.type_name + "'");
     impl_->subscriber = p->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
