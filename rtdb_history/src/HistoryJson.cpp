@@ -42,10 +42,8 @@ nlohmann::json sample_json(const HistorySample& s, const HistoryObject* o, const
         j["type"] = o->type_name();
         // A type without a Header has no create_stamp: data_ns is the writer's source timestamp.
         if (o->data_time() == "source_timestamp") j["data_time"] = "source_timestamp";
-        if (types) {
-            j.update(types->describe(o->type_name(), s.payload()));
-            return j;
-        }
+        j.update(describe(types, o->type_name(), s.payload()));
+        return j;
     }
     j["payload_base64"] = base64(s.payload());
     return j;

@@ -275,6 +275,12 @@ nlohmann::json IdlDecoder::describe(const std::string& type_name, const std::vec
     return {{"payload_base64", base64(payload)}};
 }
 
+nlohmann::json describe(const IdlDecoder* types, const std::string& type_name, const std::vector<uint8_t>& payload)
+{
+    if (types) return types->describe(type_name, payload);
+    return {{"payload_base64", base64(payload)}};
+}
+
 std::string base64(const std::vector<uint8_t>& b)
 {
     static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";

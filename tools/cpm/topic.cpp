@@ -179,7 +179,7 @@ int topic_echo(const std::vector<std::string>& args)
         if (!batch.empty()) last = std::chrono::steady_clock::now();
         for (const auto& s : batch) {
             nlohmann::json line{{"topic", topic}, {"type", type}, {"source_ns", s.source_ns}};
-            line.update(types ? types->describe(type, s.payload) : nlohmann::json{{"payload_base64", cpm::rtdb::base64(s.payload)}});
+            line.update(cpm::rtdb::describe(types, type, s.payload));
             if (json) {
                 std::printf("%s\n", line.dump().c_str());
             } else if (log_table && line.contains("data")) {

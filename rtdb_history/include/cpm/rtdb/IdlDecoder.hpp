@@ -67,6 +67,8 @@ private:
     std::map<std::string, std::vector<std::string>> enums_;
 };
 
+/// describe() with the lab's IDL when there is one (`types` may be null: then the bytes).
+nlohmann::json describe(const IdlDecoder* types, const std::string& type_name, const std::vector<uint8_t>& payload);
 /// RFC 4648 base64 of the bytes, with padding.
 std::string base64(const std::vector<uint8_t>& bytes);
 
