@@ -1,13 +1,11 @@
 #include <cpm/Logging.hpp>
-#include <cpm/topics.hpp>
 
 #include <cpm/AsyncReader.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
-
-#include "lab_topics.hpp"
+#include <cpm/topics.hpp>
 
 #include <Log.h>
 #include <LogLevel.h>

@@ -6,7 +6,6 @@
 #include <cpm/Error.hpp>
 #include <cpm/Writer.hpp>
 
-#include "lab_topics.hpp"
 #include "parameter_types.hpp"
 
 #include <Parameter.h>

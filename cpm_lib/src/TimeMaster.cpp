@@ -1,5 +1,4 @@
 #include <cpm/TimeMaster.hpp>
-#include <cpm/topics.hpp>
 
 #include "lab_topics.hpp"
 

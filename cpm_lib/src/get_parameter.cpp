@@ -1,11 +1,10 @@
 #include <cpm/get_parameter.hpp>
-#include <cpm/topics.hpp>
 
 #include <cpm/AsyncReader.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/Writer.hpp>
+#include <cpm/topics.hpp>
 
-#include "lab_topics.hpp"
 #include "parameter_types.hpp"
 
 #include <Parameter.h>

@@ -1,5 +1,4 @@
 #include <cpm/fsm/FsmNode.hpp>
-#include <cpm/topics.hpp>
 
 #include <cpm/Logging.hpp>
 #include <cpm/Reader.hpp>
@@ -8,6 +7,7 @@
 #include <cpm/get_time_ns.hpp>
 #include <cpm/percentile.hpp>
 #include <cpm/stamp_message.hpp>
+#include <cpm/topics.hpp>
 
 #include <FsmStatus.h>
 #include <StopRequest.h>
