@@ -216,7 +216,11 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
     cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});
     cpm::Writer<VehicleCommandSpeedCurvature> writer(participant, "vehicleCommandSpeedCurvature");
     std::map<int, std::vector<uint64_t>> stamps;
-    std::vector<std::pair<uint64_t, uint64_t>> delays;  // (create, valid_after - create)
+    struct Delays
+    {
+        uint64_t created, to_publication, to_arrival;  ///< create_stamp; valid_after - create; taken here - create
+    };
+    std::vector<Delays> delays;
     std::atomic<bool> stop{false};
     std::thread commander([&] {
         VehicleCommandSpeedCurvature c;
@@ -243,15 +247,13 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
     CpuMeter cpu;
     cpu.start();
     uint64_t t0 = cpm::get_time_ns(), t1 = t0 + uint64_t(seconds) * 1'000'000'000ull;
-    std::vector<std::pair<uint64_t, uint64_t>> arrivals;  // (create, arrival - create)
     while (cpm::get_time_ns() < t1 + 200'000'000ull) {
         if (!states.wait_for_data(5ms)) continue;
         const uint64_t arrived = cpm::get_time_ns();
         for (auto& s : states.take()) {
             uint64_t created = s.header().create_stamp().nanoseconds();
             stamps[s.vehicle_id()].push_back(created);
-            delays.emplace_back(created, s.header().valid_after_stamp().nanoseconds() - created);
-            arrivals.emplace_back(created, arrived > created ? arrived - created : 0);
+            delays.push_back({created, s.header().valid_after_stamp().nanoseconds() - created, arrived > created ? arrived - created : 0});
         }
     }
     CapacityResult r;
@@ -262,14 +264,12 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
     bench::wait_child(fleet, 20);
 
     const uint64_t period = 20'000'000, expected_delivery = 1'000'000;
-    for (auto [created, delay] : delays) {
-        if (created < t0 || created >= t1) continue;
-        uint64_t publish = delay > expected_delivery ? delay - expected_delivery : 0;
+    for (const auto& d : delays) {
+        if (d.created < t0 || d.created >= t1) continue;
+        uint64_t publish = d.to_publication > expected_delivery ? d.to_publication - expected_delivery : 0;
         r.publish_delay_us.push_back(double(publish) * 1e-3);
         r.late += publish > period / 2;
-    }
-    for (auto [created, delay] : arrivals) {
-        if (created >= t0 && created < t1) r.arrival_delay_us.push_back(double(delay) * 1e-3);
+        r.arrival_delay_us.push_back(double(d.to_arrival) * 1e-3);
     }
     for (int id = 1; id <= cars; ++id) {
         auto& v = stamps[id];
