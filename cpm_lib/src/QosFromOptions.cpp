@@ -16,7 +16,7 @@ constexpr int32_t kKeepAllMaxInstances = 256;
 // the type has instances (an unkeyed topic has one, and only max_samples applies to it).
 template <class Qos>
 void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, int depth, int keep_all_limit,
-                  bool keyed, bool data_sharing, const std::string& topic, const char* role)
+                  bool keyed, bool data_sharing, uint32_t max_sample_bytes, const std::string& topic, const char* role)
 {
     if (!keep_all && depth < 1) {
         throw Error(std::string(role) + " on topic '" + topic + "': history_depth = " + std::to_string(depth) +
@@ -43,12 +43,15 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
         qos.data_sharing().automatic();
     } else {
         qos.data_sharing().off();  // shared-memory transport instead: faster for small samples
+        if (max_sample_bytes > kLargeSampleBytes) {
+            qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
+        }
     }
 }
 
 }  // namespace
 
-dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic, bool keyed)
+dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic, bool keyed, uint32_t max_sample_bytes)
 {
     dds::DataWriterQos qos = dds::DATAWRITER_QOS_DEFAULT;
     if (options.keep_all && options.max_unacknowledged < 1) {
@@ -58,19 +61,19 @@ dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& t
     // An unlimited keep-all writer slows down quadratically in Fast DDS 2.9 (its per-reader
     // list of changes grows one element at a time); a bounded window also bounds memory.
     apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth,
-                 options.max_unacknowledged, keyed, options.data_sharing, topic, "Writer");
+                 options.max_unacknowledged, keyed, options.data_sharing, max_sample_bytes, topic, "Writer");
     // Fast DDS's default heartbeat (3 s) delays recovery of a lost sample by seconds.
     qos.reliable_writer_qos().times.heartbeatPeriod = {0, 100'000'000};
     qos.reliability().max_blocking_time = {0, 100'000'000};
     return qos;
 }
 
-dds::DataReaderQos reader_qos(const ReaderOptions& options, const std::string& topic)
+dds::DataReaderQos reader_qos(const ReaderOptions& options, const std::string& topic, uint32_t max_sample_bytes)
 {
     dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
     // A keep-all reader keeps what was not taken yet, without limit.
     apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth, 0,
-                 true, options.data_sharing, topic, "Reader");
+                 true, options.data_sharing, max_sample_bytes, topic, "Reader");
     return qos;
 }
 

@@ -11,7 +11,14 @@ namespace cpm::detail {
 
 /// The DDS QoS for cpm's options. Throws cpm::Error naming the topic and the bad value.
 /// `keyed`: the type has a key (instances), which decides how keep_all's window is bounded.
-eprosima::fastdds::dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic, bool keyed);
-eprosima::fastdds::dds::DataReaderQos reader_qos(const ReaderOptions& options, const std::string& topic);
+/// `max_sample_bytes`: the type's largest serialized size; above kLargeSampleBytes the histories
+/// allocate each sample at its real size instead of preallocating the largest (a CameraFrame
+/// may be 6 MB; a reader preallocates 100 samples), unless data sharing needs them preallocated.
+eprosima::fastdds::dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic, bool keyed,
+                                                 uint32_t max_sample_bytes = 0);
+eprosima::fastdds::dds::DataReaderQos reader_qos(const ReaderOptions& options, const std::string& topic,
+                                                 uint32_t max_sample_bytes = 0);
+
+inline constexpr uint32_t kLargeSampleBytes = 64 * 1024;
 
 }  // namespace cpm::detail

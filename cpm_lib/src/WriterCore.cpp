@@ -46,7 +46,7 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
 {
     if (topic.empty()) throw Error("Writer: the topic name is empty");
     const std::unique_ptr<dds::TopicDataType> type(make_type());
-    const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined);
+    const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined, type->m_typeSize);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type);
     impl_->incompatible = std::make_unique<IncompatibleQos>(false, topic, options.reliable, options.transient_local);
     impl_->writer = impl_->topic.participant().publisher()->create_datawriter(

@@ -51,10 +51,10 @@ std::vector<Marker> parse_markers(const json& markers, const std::string& source
         const json& m = markers[i];
         if (!m.is_object()) fail(source, where, "expected an object, got " + m.dump());
         for (auto it = m.begin(); it != m.end(); ++it) {
-            static const char* known[] = {"id", "x", "y", "yaw", "size"};
+            static const char* known[] = {"id", "x", "y", "yaw", "size", "z"};
             bool ok = false;
             for (auto* k : known) ok = ok || it.key() == k;
-            if (!ok) fail(source, where + "." + it.key(), "unknown member (known: id, x, y, yaw, size)");
+            if (!ok) fail(source, where + "." + it.key(), "unknown member (known: id, x, y, yaw, size, z)");
         }
         Marker marker;
         if (!m.contains("id") || !m["id"].is_number_integer()) fail(source, where + ".id", "expected an integer id");
@@ -65,16 +65,54 @@ std::vector<Marker> parse_markers(const json& markers, const std::string& source
         }
         if (m.contains("size")) marker.size = number_at(m["size"], source, where + ".size");
         if (marker.size <= 0) fail(source, where + ".size", "must be > 0");
+        if (m.contains("z")) marker.z = number_at(m["z"], source, where + ".z");
+        if (marker.z - marker.size / 2 < 0) fail(source, where + ".z", "the marker's lower edge is below the floor (z < size / 2)");
+        for (const Marker& other : out) {
+            if (other.id == marker.id) fail(source, where + ".id", "id " + std::to_string(marker.id) + " is used twice");
+        }
         out.push_back(marker);
+    }
+    return out;
+}
+
+std::vector<Gate> parse_gates(const json& gates, const std::vector<Marker>& markers, const std::string& source)
+{
+    if (!gates.is_array()) fail(source, "gates", "expected an array of {\"left\": ID, \"right\": ID}");
+    std::vector<Gate> out;
+    for (size_t i = 0; i < gates.size(); ++i) {
+        std::string where = "gates[" + std::to_string(i) + "]";
+        const json& g = gates[i];
+        if (!g.is_object()) fail(source, where, "expected an object, got " + g.dump());
+        for (auto it = g.begin(); it != g.end(); ++it) {
+            if (it.key() != "left" && it.key() != "right") fail(source, where + "." + it.key(), "unknown member (known: left, right)");
+        }
+        Gate gate;
+        for (auto [name, field] : {std::pair{"left", &gate.left}, {"right", &gate.right}}) {
+            if (!g.contains(name) || !g[name].is_number_integer()) fail(source, where + "." + name, "expected a marker id");
+            *field = g[name].get<int>();
+            bool known = false;
+            for (const Marker& m : markers) known = known || m.id == *field;
+            if (!known) fail(source, where + "." + name, "no marker has id " + std::to_string(*field));
+        }
+        if (gate.left == gate.right) fail(source, where, "left and right are the same marker");
+        out.push_back(gate);
     }
     return out;
 }
 
 }  // namespace
 
-World::World(std::vector<Segment> walls, std::vector<Marker> markers)
-    : walls_(std::move(walls)), markers_(std::move(markers))
+World::World(std::vector<Segment> walls, std::vector<Marker> markers, std::vector<Gate> gates)
+    : walls_(std::move(walls)), markers_(std::move(markers)), gates_(std::move(gates))
 {
+}
+
+const Marker* World::marker(int id) const
+{
+    for (const Marker& m : markers_) {
+        if (m.id == id) return &m;
+    }
+    return nullptr;
 }
 
 World World::load(const std::string& path)
@@ -90,13 +128,16 @@ World World::parse(const std::string& json_text, const std::string& source)
     } catch (const json::parse_error& e) {
         throw Error(source + ": not valid JSON (" + e.what() + ")");
     }
-    if (!j.is_object()) fail(source, "$", "expected an object with \"walls\" and \"markers\"");
+    if (!j.is_object()) fail(source, "$", "expected an object with \"walls\", \"markers\" and \"gates\"");
     for (auto it = j.begin(); it != j.end(); ++it) {
-        if (it.key() != "walls" && it.key() != "markers") fail(source, it.key(), "unknown member (known: walls, markers)");
+        if (it.key() != "walls" && it.key() != "markers" && it.key() != "gates") {
+            fail(source, it.key(), "unknown member (known: walls, markers, gates)");
+        }
     }
     std::vector<Segment> walls = j.contains("walls") ? parse_walls(j["walls"], source) : std::vector<Segment>{};
     std::vector<Marker> markers = j.contains("markers") ? parse_markers(j["markers"], source) : std::vector<Marker>{};
-    return World(std::move(walls), std::move(markers));
+    std::vector<Gate> gates = j.contains("gates") ? parse_gates(j["gates"], markers, source) : std::vector<Gate>{};
+    return World(std::move(walls), std::move(markers), std::move(gates));
 }
 
 double ray_segment_distance(double x, double y, double dx, double dy, const Segment& s)

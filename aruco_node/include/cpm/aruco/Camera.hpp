@@ -1,0 +1,47 @@
+#pragma once
+#include <opencv2/core.hpp>
+
+#include <string>
+
+/// The perception half of the lab: camera model, marker detection and pose, the synthetic
+/// camera, calibration, and the aruco_node / camera_sim programs' work (DESIGN.md §7).
+namespace cpm::aruco {
+
+/// Where the camera sits on the car. Car frame: x forward, y left, z up from the ground,
+/// metres; yaw turns the camera left, pitch tilts it down (radians).
+struct CameraMount
+{
+    double x = 0, y = 0, z = 0.1, yaw = 0, pitch = 0;
+};
+
+/// A pinhole camera with OpenCV's distortion model and its mounting on the car. Camera frame
+/// (OpenCV): x right, y down, z along the optical axis.
+struct Camera
+{
+    int width = 640, height = 480;
+    cv::Matx33d camera_matrix = cv::Matx33d::eye();
+    cv::Vec<double, 5> distortion{0, 0, 0, 0, 0};
+    CameraMount mount;
+
+    /// Reads a camera file (OpenCV FileStorage YAML: image_width, image_height, camera_matrix
+    /// 3×3, distortion_coefficients 1×5, mount_x, mount_y, mount_z, mount_yaw, mount_pitch).
+    /// Throws cpm::Error naming the file and the missing or wrong field.
+    static Camera load(const std::string& path);
+    /// Writes the same format.
+    void save(const std::string& path) const;
+
+    /// An ideal camera (no distortion, principal point at the centre) with this horizontal
+    /// field of view, radians.
+    static Camera ideal(int width, int height, double horizontal_fov, CameraMount mount = {});
+
+    double fx() const { return camera_matrix(0, 0); }
+    double fy() const { return camera_matrix(1, 1); }
+
+    /// Rotation taking camera-frame vectors into the car frame.
+    cv::Matx33d car_from_camera_rotation() const;
+    /// A point in the camera frame, expressed in the car frame (and back).
+    cv::Vec3d to_car(const cv::Vec3d& p_camera) const;
+    cv::Vec3d to_camera(const cv::Vec3d& p_car) const;
+};
+
+}  // namespace cpm::aruco

@@ -1,0 +1,101 @@
+#include <cpm/aruco/CameraSimNode.hpp>
+
+#include <cpm/LogThrottle.hpp>
+#include <cpm/Logging.hpp>
+#include <cpm/Reader.hpp>
+#include <cpm/Timer.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/percentile.hpp>
+#include <cpm/topics.hpp>
+
+#include <CameraFrame.h>
+#include <VehicleObservation.h>
+
+#include <cstdio>
+#include <cstring>
+#include <mutex>
+#include <vector>
+
+namespace cpm::aruco {
+
+struct CameraSimNode::Impl
+{
+    explicit Impl(CameraSimOptions o)
+        : options(std::move(o)), renderer(options.world, options.camera, options.render),
+          poses(topics::vehicle_observation.name, topics::vehicle_observation.reader_for(options.vehicle_id)),
+          frames(topics::camera_frame.name, topics::camera_frame.writer)
+    {
+        message.vehicle_id(options.vehicle_id);
+        message.width(uint32_t(options.camera.width));
+        message.height(uint32_t(options.camera.height));
+        message.encoding("mono8");
+    }
+
+    void tick()
+    {
+        const uint64_t now = get_time_ns();
+        auto pose = poses.get_sample(now);
+        if (!pose.valid) {
+            std::lock_guard<std::mutex> lock(mutex);
+            ++without_pose;
+            uint64_t held = 0;
+            if (no_pose_log.allow(now, held)) {
+                CPM_LOG_WARN("camera_sim %u: no VehicleObservation of the car yet; no frame", unsigned(options.vehicle_id));
+            }
+            return;
+        }
+        const auto& p = pose.sample.pose();
+        renderer.render({p.x(), p.y(), p.yaw()}, image);
+        message.header() = pose.sample.header();
+        auto& data = message.data();
+        data.resize(image.total());
+        std::memcpy(data.data(), image.data, image.total());
+        (void)frames.write(message);
+        std::lock_guard<std::mutex> lock(mutex);
+        ++count;
+        render_ns.push_back(get_time_ns() - now);
+        if (render_ns.size() > 100000) render_ns.erase(render_ns.begin(), render_ns.begin() + 50000);
+    }
+
+    CameraSimOptions options;
+    Renderer renderer;
+    Reader<VehicleObservation> poses;
+    Writer<CameraFrame> frames;
+    CameraFrame message;
+    cv::Mat image;
+    mutable std::mutex mutex;
+    uint64_t count = 0, without_pose = 0;
+    std::vector<uint64_t> render_ns;
+    LogThrottle no_pose_log;
+};
+
+CameraSimNode::CameraSimNode(CameraSimOptions options) : impl_(std::make_unique<Impl>(std::move(options))) {}
+
+CameraSimNode::~CameraSimNode() = default;
+
+void CameraSimNode::run(const std::function<bool()>& stop_requested)
+{
+    const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
+    auto timer = Timer::create("camera_sim_" + std::to_string(impl_->options.vehicle_id), period_ns, 0,
+                               TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
+    timer->start([&](uint64_t) {
+        if (stop_requested()) {
+            timer->stop();
+            return;
+        }
+        impl_->tick();
+    });
+}
+
+std::string CameraSimNode::stats_json() const
+{
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    char line[256];
+    std::snprintf(line, sizeof line, "{\"vehicle_id\": %u, \"frames\": %llu, \"without_pose\": %llu, \"render_ms_p50\": %.3f}",
+                  unsigned(impl_->options.vehicle_id), (unsigned long long)impl_->count, (unsigned long long)impl_->without_pose,
+                  percentile(impl_->render_ns, 0.5) * 1e-6);
+    return line;
+}
+
+}  // namespace cpm::aruco

@@ -1,0 +1,198 @@
+#include <cpm/aruco/Renderer.hpp>
+
+#include "ArucoCompat.hpp"
+
+#include <cpm/Error.hpp>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace cpm::aruco {
+
+struct Renderer::Impl
+{
+    std::shared_ptr<const compat::Dictionary> dictionary;
+    int cells = 6;  // black border + bits, per side
+    std::map<std::pair<int, int>, cv::Mat> textures;  // (id, px per cell) → marker with its quiet zone
+    cv::RNG rng;
+
+    const cv::Mat& texture(int id, int px_per_cell)
+    {
+        auto key = std::make_pair(id, px_per_cell);
+        auto it = textures.find(key);
+        if (it != textures.end()) return it->second;
+        if (textures.size() > 512) textures.clear();  // bounded: many ids × many scales
+        cv::Mat marker = compat::draw_marker(*dictionary, id, cells * px_per_cell);
+        cv::Mat padded;
+        cv::copyMakeBorder(marker, padded, px_per_cell, px_per_cell, px_per_cell, px_per_cell, cv::BORDER_CONSTANT, 255);
+        return textures.emplace(key, padded).first->second;
+    }
+};
+
+Renderer::Renderer(vehicle::World world, Camera camera, RenderOptions options)
+    : world_(std::move(world)), camera_(std::move(camera)), options_(std::move(options)), impl_(std::make_unique<Impl>())
+{
+    impl_->dictionary = compat::dictionary(options_.dictionary);
+    impl_->cells = compat::marker_bits(*impl_->dictionary) + 2;
+    impl_->rng = cv::RNG(options_.seed);
+    for (const auto& m : world_.markers()) {
+        // drawMarker asserts on ids outside the dictionary; say which marker instead.
+        const int size = compat::dictionary_size(*impl_->dictionary);
+        if (m.id < 0 || m.id >= size) {
+            throw Error("marker id " + std::to_string(m.id) + " is not in " + options_.dictionary + " (ids 0.." +
+                        std::to_string(size - 1) + ")");
+        }
+    }
+}
+
+Renderer::~Renderer() = default;
+
+cv::Mat Renderer::render(const vehicle::Pose& car, std::vector<RenderedMarker>* truth)
+{
+    cv::Mat frame;
+    render(car, frame, truth);
+    return frame;
+}
+
+void Renderer::render(const vehicle::Pose& car, cv::Mat& frame, std::vector<RenderedMarker>* truth)
+{
+    const int w = camera_.width, h = camera_.height;
+    frame.create(h, w, CV_8UC1);
+    // Background: wall above the horizon, floor below (the camera does not roll).
+    const cv::Vec3d ahead = camera_.car_from_camera_rotation().t() * cv::Vec3d(std::cos(camera_.mount.yaw), std::sin(camera_.mount.yaw), 0);
+    const double horizon = ahead[2] > 1e-9 ? camera_.camera_matrix(1, 2) + camera_.fy() * ahead[1] / ahead[2] : (camera_.mount.pitch > 0 ? -1 : h);
+    const int split = std::clamp(int(std::lround(horizon)), 0, h);
+    frame.rowRange(0, split).setTo(options_.wall_grey);
+    frame.rowRange(split, h).setTo(options_.floor_grey);
+    if (truth) truth->clear();
+
+    const double c = std::cos(car.yaw), s = std::sin(car.yaw);
+    const cv::Vec3d cam_car(camera_.mount.x, camera_.mount.y, camera_.mount.z);
+    const double cam_wx = car.x + c * cam_car[0] - s * cam_car[1], cam_wy = car.y + s * cam_car[0] + c * cam_car[1];
+
+    struct Visible
+    {
+        const vehicle::Marker* marker;
+        cv::Vec3d centre_car;
+        double normal_yaw;
+        double distance;
+    };
+    std::vector<Visible> visible;
+    for (const auto& m : world_.markers()) {
+        const double dx = m.x - car.x, dy = m.y - car.y;
+        const cv::Vec3d centre(c * dx + s * dy, -s * dx + c * dy, m.z);
+        const double yaw = m.yaw - car.yaw;
+        const cv::Vec3d normal(std::cos(yaw), std::sin(yaw), 0);
+        if (normal.dot(cam_car - centre) <= 0) continue;  // facing away
+        // Hidden by a wall: the sight lines to both vertical edges, stopped 1 cm short.
+        const double half = m.size / 2;
+        bool hidden = false;
+        for (double side : {-1.0, 1.0}) {
+            const double ex = m.x + side * half * -std::sin(m.yaw), ey = m.y + side * half * std::cos(m.yaw);
+            const double len = std::hypot(ex - cam_wx, ey - cam_wy);
+            if (len < 0.02) continue;
+            const double k = (len - 0.01) / len;
+            vehicle::Segment sight{cam_wx, cam_wy, cam_wx + k * (ex - cam_wx), cam_wy + k * (ey - cam_wy)};
+            if (world_.wall_hit({sight})) hidden = true;
+        }
+        if (hidden) continue;
+        visible.push_back({&m, centre, yaw, cv::norm(centre - cam_car)});
+    }
+    std::sort(visible.begin(), visible.end(), [](const Visible& a, const Visible& b) { return a.distance > b.distance; });
+
+    for (const auto& v : visible) {
+        const auto& m = *v.marker;
+        const double cells = impl_->cells;
+        const cv::Vec3d right(-std::sin(v.normal_yaw), std::cos(v.normal_yaw), 0), up(0, 0, 1);
+        // The black square's corners and the quiet zone's (one cell wider on each side).
+        auto corners_at = [&](double half) {
+            return std::array<cv::Vec3d, 4>{camera_.to_camera(v.centre_car - half * right + half * up),
+                                            camera_.to_camera(v.centre_car + half * right + half * up),
+                                            camera_.to_camera(v.centre_car + half * right - half * up),
+                                            camera_.to_camera(v.centre_car - half * right - half * up)};
+        };
+        const auto black = corners_at(m.size / 2);
+        const auto outer = corners_at(m.size / 2 * (cells + 2) / cells);
+        bool in_front = true;
+        for (const auto& p : outer) in_front = in_front && p[2] > 0.05;
+        if (!in_front) continue;  // projectPoints would mirror points behind the camera
+
+        std::vector<cv::Point3d> object(black.begin(), black.end());
+        object.insert(object.end(), outer.begin(), outer.end());
+        std::vector<cv::Point2d> image;
+        cv::projectPoints(object, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), camera_.camera_matrix, camera_.distortion, image);
+        double side = 0, shortest = 1e9;
+        for (int i = 0; i < 4; ++i) {
+            const double edge = cv::norm(image[i] - image[(i + 1) % 4]);
+            side += edge / 4;
+            shortest = std::min(shortest, edge);
+        }
+        if (side < 4) continue;
+
+        // A texture no finer than the marker's most foreshortened edge: warping then only
+        // magnifies, and a bilinear edge crosses mid-grey where the true edge is (minifying
+        // would alias and move edges by a good part of a pixel).
+        const int ppc = std::clamp(int(std::floor(shortest / cells)), 1, 64);
+        const cv::Mat& tex = impl_->texture(m.id, ppc);
+        const double a = ppc - 0.5, b = ppc + cells * ppc - 0.5;  // the black square's edges in the texture
+        const cv::Point2f src[4] = {{float(a), float(a)}, {float(b), float(a)}, {float(b), float(b)}, {float(a), float(b)}};
+        const cv::Point2f dst[4] = {image[0], image[1], image[2], image[3]};
+        cv::Matx33d hom = cv::getPerspectiveTransform(src, dst);
+
+        cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>{image[4], image[5], image[6], image[7]});
+        box.x -= 1;
+        box.y -= 1;
+        box.width += 3;
+        box.height += 3;
+        box &= cv::Rect(0, 0, w, h);
+        if (box.empty()) continue;
+        const cv::Matx33d shift(1, 0, -box.x, 0, 1, -box.y, 0, 0, 1);
+        cv::Mat roi = frame(box);
+        cv::warpPerspective(tex, roi, shift * hom, roi.size(), cv::INTER_LINEAR, cv::BORDER_TRANSPARENT);
+
+        if (truth) {
+            RenderedMarker t;
+            t.id = m.id;
+            bool inside = true;
+            for (int i = 0; i < 4; ++i) {
+                t.corners[i] = image[i];
+                inside = inside && image[i].x >= 3 && image[i].y >= 3 && image[i].x <= w - 4 && image[i].y <= h - 4;
+            }
+            t.x = v.centre_car[0];
+            t.y = v.centre_car[1];
+            t.z = v.centre_car[2];
+            t.yaw = std::remainder(v.normal_yaw, 2 * M_PI);
+            t.distance = v.distance;
+            t.side_px = side;
+            t.whole_in_view = inside;
+            truth->push_back(t);
+        }
+    }
+
+    if (options_.blur > 1) cv::blur(frame, frame, cv::Size(options_.blur, options_.blur));
+    if (options_.noise_sigma > 0) {
+        cv::Mat noise(h, w, CV_16S);
+        impl_->rng.fill(noise, cv::RNG::NORMAL, 0, options_.noise_sigma);
+        cv::Mat sum;
+        frame.convertTo(sum, CV_16S);
+        sum += noise;
+        sum.convertTo(frame, CV_8U);
+    }
+}
+
+void write_image(const std::string& path, const cv::Mat& image)
+{
+    bool ok = false;
+    try {
+        ok = cv::imwrite(path, image);
+    } catch (const cv::Exception& e) {
+        throw Error(path + ": cannot write the image (" + e.err + ")");
+    }
+    if (!ok) throw Error(path + ": cannot write the image");
+}
+
+}  // namespace cpm::aruco
