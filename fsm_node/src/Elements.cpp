@@ -145,15 +145,24 @@ private:
     bool done_ = false;
 };
 
+std::optional<Target> gate_centre(const Inputs& in, int a, int b, double range);
+
 /// Drives to a point given in the car's frame at entry (dead reckoning from odometer and IMU
-/// yaw), steering proportionally to the bearing; finishes within `tolerance`.
+/// yaw), steering proportionally to the bearing; finishes within `tolerance`. With a target
+/// (a gate: its centre and the direction it faces) the point is `before` m in front of the
+/// target, and with `lookahead` > 0 the car follows the line through the target along that
+/// direction (pure pursuit, aiming `lookahead` m ahead on the line), so that it arrives facing
+/// the gate; it then finishes once it is level with the point and faces along the line (within
+/// 0.05 rad; not yet facing it, it follows the line on to 0.3 m before the target). With `track` it re-aims at the
+/// gate whenever the camera sees both of its markers again (nearer is more precise).
 class ApproachPoint : public State
 {
 public:
     ApproachPoint(int id, const Params& p, const Settings& s)
         : State(id, "ApproachPoint"), tx_(p["x"].get<double>()), ty_(p["y"].get<double>()),
           tolerance_(p["tolerance"].get<double>()), throttle_(p["speed"].get<double>() * s.throttle_per_speed),
-          gain_(p["steering_gain"].get<double>())
+          gain_(p["steering_gain"].get<double>()), before_(p["before"].get<double>()), lookahead_(p["lookahead"].get<double>()),
+          track_(p["track"].get<bool>())
     {
     }
     void on_enter(const Inputs& in) override
@@ -171,10 +180,32 @@ public:
         double heading = in.yaw - yaw0_;
         x_ += ds * std::cos(heading);
         y_ += ds * std::sin(heading);
-        double dx = tx_ - x_, dy = ty_ - y_;
-        done_ = std::hypot(dx, dy) <= tolerance_;
+        if (track_ && gate_) {
+            if (auto seen = gate_centre(in, gate_->marker_a, gate_->marker_b, 1e9)) {
+                // The gate as seen now, from the car's frame into the frame at entry.
+                const double c = std::cos(heading), s = std::sin(heading);
+                Target t = *seen;
+                t.x = x_ + c * seen->x - s * seen->y;
+                t.y = y_ + s * seen->x + c * seen->y;
+                t.yaw = seen->yaw + heading;
+                aim_at(t);
+            }
+        }
+        double aim_x = tx_, aim_y = ty_;
+        if (line_) {
+            // Along the line (dx, dy) through the point: u < 0 before it.
+            // Level with the point and facing along the line; or, not yet facing it, on along
+            // the line (it leads through the target) until 0.3 m before the target.
+            const double u = (x_ - tx_) * dx_ + (y_ - ty_) * dy_;
+            const double misalignment = std::abs(std::remainder(heading - std::atan2(dy_, dx_), 2 * M_PI));
+            done_ = (u >= -tolerance_ && misalignment <= kAligned) || u >= std::max(-tolerance_, before_ - 0.3);
+            aim_x = tx_ + (u + lookahead_) * dx_;
+            aim_y = ty_ + (u + lookahead_) * dy_;
+        } else {
+            done_ = std::hypot(tx_ - x_, ty_ - y_) <= tolerance_;
+        }
         if (done_) return {};
-        double bearing = std::remainder(std::atan2(dy, dx) - heading, 2 * M_PI);
+        double bearing = std::remainder(std::atan2(aim_y - y_, aim_x - x_) - heading, 2 * M_PI);
         return {clamp1(throttle_), clamp1(gain_ * bearing)};
     }
     bool can_finish() const override { return true; }
@@ -182,12 +213,27 @@ public:
     bool can_take_target() const override { return true; }
     void set_target(const Target& t) override
     {
-        tx_ = t.x;
-        ty_ = t.y;
+        aim_at(t);
+        if (t.marker_a >= 0 || t.marker_b >= 0) gate_ = t;
     }
 
 private:
-    double tx_, ty_, tolerance_, throttle_, gain_;
+    void aim_at(const Target& t)
+    {
+        // t.yaw is the direction the target faces (towards the car); the car drives against it.
+        tx_ = t.x + before_ * std::cos(t.yaw);
+        ty_ = t.y + before_ * std::sin(t.yaw);
+        dx_ = -std::cos(t.yaw);
+        dy_ = -std::sin(t.yaw);
+        line_ = lookahead_ > 0;
+    }
+
+    static constexpr double kAligned = 0.05;  // rad
+    double tx_, ty_, tolerance_, throttle_, gain_, before_, lookahead_;
+    bool track_;
+    std::optional<Target> gate_;
+    double dx_ = 1, dy_ = 0;
+    bool line_ = false;
     double x_ = 0, y_ = 0, yaw0_ = 0, odo_ = 0;
     bool done_ = false;
 };
@@ -204,22 +250,35 @@ std::optional<Target> gate_centre(const Inputs& in, int a, int b, double range)
         else if (!second && is_b && &m != first) second = &m;
     }
     if (!first || !second) return std::nullopt;
-    return Target{(first->x + second->x) / 2, (first->y + second->y) / 2, (first->yaw + second->yaw) / 2};
+    // The gate faces the car along the normal of the line between its markers (two positions
+    // are steadier than either marker's own facing).
+    const double cx = (first->x + second->x) / 2, cy = (first->y + second->y) / 2;
+    double nx = -(second->y - first->y), ny = second->x - first->x;
+    if (nx * -cx + ny * -cy < 0) {
+        nx = -nx;
+        ny = -ny;
+    }
+    return Target{cx, cy, std::atan2(ny, nx), a, b};
 }
 
-/// Turns (full lock, at `speed`) until the car faces the gate's centre; finishes when aligned.
+/// Turns (full lock, at `speed`) until the car faces the gate's centre; finishes when aligned,
+/// or when it has not seen the gate for `blind` seconds. Until it sees the gate it drives
+/// straight on.
 class ArucoGateCenter : public State
 {
 public:
     ArucoGateCenter(int id, const Params& p, const Settings& s)
         : State(id, "ArucoGateCenter"), a_(p["marker_a"].get<int>()), b_(p["marker_b"].get<int>()),
-          tolerance_(p["tolerance"].get<double>()), throttle_(p["speed"].get<double>() * s.throttle_per_speed)
+          tolerance_(p["tolerance"].get<double>()), throttle_(p["speed"].get<double>() * s.throttle_per_speed),
+          blind_(p["blind"].get<double>())
     {
     }
     void on_enter(const Inputs& in) override
     {
         State::on_enter(in);
         done_ = false;
+        seen_ = false;
+        last_seen_t_ = in.t;
     }
     Output tick(const Inputs& in, double) override
     {
@@ -227,8 +286,13 @@ public:
             double bearing = std::atan2(c->y, c->x);
             done_ = std::abs(bearing) <= tolerance_;
             direction_ = bearing >= 0 ? 1.0 : -1.0;
+            seen_ = true;
+            last_seen_t_ = in.t;
         }
-        if (done_) return {clamp1(throttle_), 0.0};
+        // Never turning blind: until the gate has been seen, straight on; out of sight for
+        // `blind` seconds (too close to see both markers), it is done.
+        if (in.t - last_seen_t_ > blind_) done_ = true;
+        if (done_ || !seen_) return {clamp1(throttle_), 0.0};
         return {clamp1(throttle_), direction_};
     }
     bool can_finish() const override { return true; }
@@ -236,8 +300,8 @@ public:
 
 private:
     int a_, b_;
-    double tolerance_, throttle_, direction_ = 1.0;
-    bool done_ = false;
+    double tolerance_, throttle_, blind_, direction_ = 1.0, last_seen_t_ = 0;
+    bool done_ = false, seen_ = false;
 };
 
 /// A nested machine; finishes when it reaches a state marked "final".
@@ -377,11 +441,15 @@ const std::vector<StateFactory>& state_factories()
           {{"x", "number", "0", "point ahead in the car's frame at entry, m", -100, 100},
            {"y", "number", "0", "point to the left, m", -100, 100},
            {"tolerance", "number", "0.1", "finishes within this distance, m", 0.001, 10}, {"speed", "number", "0.4", "m/s", 0, 3},
-           {"steering_gain", "number", "2", "steering per rad of bearing", 0, 100}}},
+           {"steering_gain", "number", "2", "steering per rad of bearing", 0, 100},
+           {"before", "number", "0", "with a target: the point this far in front of it (along the way it faces), m", -10, 10},
+           {"lookahead", "number", "0", "with a target: > 0 follows the line through it, aiming this far ahead, m", 0, 10},
+           {"track", "bool", "true", "with a gate as target: re-aim whenever both its markers are seen"}}},
          [](int id, const Params& p, const Settings& s) { return std::make_unique<ApproachPoint>(id, p, s); }},
         {{"ArucoGateCenter", true, true, false,
           {{"marker_a", "integer", "-1", "marker id (-1: any)", -1, 999}, {"marker_b", "integer", "-1", "marker id (-1: any)", -1, 999},
-           {"tolerance", "number", "0.05", "aligned within this bearing, rad", 0.001, 3.15}, {"speed", "number", "0.3", "m/s", 0, 3}}},
+           {"tolerance", "number", "0.05", "aligned within this bearing, rad", 0.001, 3.15}, {"speed", "number", "0.3", "m/s", 0, 3},
+           {"blind", "number", "0.3", "finishes after this long without seeing the gate, s", 0, 60}}},
          [](int id, const Params& p, const Settings& s) { return std::make_unique<ArucoGateCenter>(id, p, s); }},
         {{"FSMState", true, true, false,
           {{"machine", "machine", "", "a nested machine: an object like this file's, or \"file\": a path"},

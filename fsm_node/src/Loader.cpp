@@ -61,6 +61,7 @@ json default_value(const ParameterInfo& p)
 {
     if (p.kind == "number") return std::stod(p.fallback);
     if (p.kind == "integer") return std::stoi(p.fallback);
+    if (p.kind == "bool") return p.fallback == "true";
     return p.fallback;
 }
 

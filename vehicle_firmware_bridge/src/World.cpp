@@ -107,6 +107,18 @@ World::World(std::vector<Segment> walls, std::vector<Marker> markers, std::vecto
 {
 }
 
+std::string World::to_json() const
+{
+    json j;
+    j["walls"] = json::array();
+    for (const auto& w : walls_) j["walls"].push_back({w.x1, w.y1, w.x2, w.y2});
+    j["markers"] = json::array();
+    for (const auto& m : markers_) j["markers"].push_back({{"id", m.id}, {"x", m.x}, {"y", m.y}, {"yaw", m.yaw}, {"size", m.size}, {"z", m.z}});
+    j["gates"] = json::array();
+    for (const auto& g : gates_) j["gates"].push_back({{"left", g.left}, {"right", g.right}});
+    return j.dump(2) + "\n";
+}
+
 const Marker* World::marker(int id) const
 {
     for (const Marker& m : markers_) {

@@ -36,10 +36,12 @@ struct Output
     bool brake = false;  ///< Stop: brake, not coast (throttle and steering are 0)
 };
 
-/// A point (and heading) in the car's frame at the moment a transition fires.
+/// A point (and heading) in the car's frame at the moment a transition fires; for a gate, the
+/// ids of its markers (-1: any), so that the next state can keep looking at it.
 struct Target
 {
     double x = 0, y = 0, yaw = 0;
+    int marker_a = -1, marker_b = -1;
 };
 
 /// A driving function. tick() runs while the state is active.

@@ -38,6 +38,9 @@ public:
     /// The same from JSON text; `source` names it in error messages.
     static World parse(const std::string& json_text, const std::string& source);
 
+    /// The map file's JSON text (what load() reads back).
+    std::string to_json() const;
+
     const std::vector<Segment>& walls() const { return walls_; }
     const std::vector<Marker>& markers() const { return markers_; }
     const std::vector<Gate>& gates() const { return gates_; }
