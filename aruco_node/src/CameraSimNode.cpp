@@ -12,6 +12,7 @@
 #include <CameraFrame.h>
 #include <VehicleObservation.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <mutex>
@@ -45,9 +46,28 @@ struct CameraSimNode::Impl
             }
             return;
         }
+        // The exposure is now: the newest pose moved on by the motion between the last two
+        // (observations come at 50 Hz; up to 100 ms ahead).
+        const uint64_t stamp = pose.sample.header().create_stamp().nanoseconds();
         const auto& p = pose.sample.pose();
-        renderer.render({p.x(), p.y(), p.yaw()}, image);
-        message.header() = pose.sample.header();
+        if (stamp != newest_stamp) {
+            previous = newest;
+            previous_stamp = newest_stamp;
+            newest = {p.x(), p.y(), p.yaw()};
+            newest_stamp = stamp;
+        }
+        vehicle::Pose at = newest;
+        uint64_t exposure = newest_stamp;
+        if (previous_stamp && newest_stamp > previous_stamp && now > newest_stamp && now - newest_stamp <= 100'000'000) {
+            const double k = double(now - newest_stamp) / double(newest_stamp - previous_stamp);
+            at.x += k * (newest.x - previous.x);
+            at.y += k * (newest.y - previous.y);
+            at.yaw += k * std::remainder(newest.yaw - previous.yaw, 2 * M_PI);
+            exposure = now;
+        }
+        renderer.render(at, image);
+        message.header().create_stamp().nanoseconds(exposure);
+        message.header().valid_after_stamp().nanoseconds(exposure);
         auto& data = message.data();
         data.resize(image.total());
         std::memcpy(data.data(), image.data, image.total());
@@ -64,6 +84,8 @@ struct CameraSimNode::Impl
     Writer<CameraFrame> frames;
     CameraFrame message;
     cv::Mat image;
+    vehicle::Pose newest, previous;
+    uint64_t newest_stamp = 0, previous_stamp = 0;
     mutable std::mutex mutex;
     uint64_t count = 0, without_pose = 0;
     std::vector<uint64_t> render_ns;

@@ -4,6 +4,7 @@
 #include <cpm/ChildProcess.hpp>
 #include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
+#include <cpm/aruco/Camera.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 
 #include <chrono>
@@ -19,25 +20,36 @@ namespace {
 
 const char* const kVehicleSimHelp =
     "usage: cpm vehicle sim --id N [--count K] [--map FILE] [--start X,Y,YAW] [--spacing M]\n"
-    "                       [--params FILE] [--calibration FILE] [--dds_domain N]\n"
+    "                       [--params FILE] [--calibration FILE] [--camera FILE [--camera-rate HZ]]\n"
+    "                       [--dds_domain N]\n"
     "\n"
     "Starts simulated car N: firmware_sim (vehicle model, sensors, watchdog) and vehicle_bridge,\n"
     "joined by a pseudo-terminal exactly as a real car's computer and microcontroller are by a\n"
     "serial line. The car publishes vehicleState, rangeSensors and vehicleObservation and obeys\n"
     "vehicleCommand* for its id. With --count K, cars N .. N+K-1 share one world, each --spacing\n"
     "metres (default 0.6) behind the previous one along the start heading; their rangers see\n"
-    "each other. Runs until Ctrl-C, then prints each process's statistics (JSON lines).\n";
+    "each other. With --camera FILE (a camera file; needs --map), each car also gets a synthetic\n"
+    "camera (camera_sim) publishing cameraFrame at --camera-rate Hz (default 30) from its true\n"
+    "pose; run aruco_node to turn the frames into arucoMarkers. Runs until Ctrl-C, then prints\n"
+    "each process's statistics (JSON lines).\n";
 
 int vehicle_sim(const std::vector<std::string>& args)
 {
     auto parsed = cpm::cli::parse_flags(args,
                                        {{"--id", true}, {"--count", true}, {"--map", true}, {"--start", true},
-                                        {"--spacing", true}, {"--params", true}, {"--calibration", true}},
+                                        {"--spacing", true}, {"--params", true}, {"--calibration", true},
+                                        {"--camera", true}, {"--camera-rate", true}},
                                        "cpm vehicle sim");
     if (!parsed.has("--id")) throw cpm::cli::UsageError("cpm vehicle sim: --id is required (the vehicle id, 1..255)");
     long long first = cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255);
     long long count = cpm::cli::parse_integer("--count", parsed.get("--count", "1"), 1, 256 - first);
     double spacing = cpm::cli::parse_number("--spacing", parsed.get("--spacing", "0.6"), 0, 100);
+    if (parsed.has("--camera") && !parsed.has("--map")) {
+        throw cpm::cli::UsageError("cpm vehicle sim: --camera needs --map (the world whose markers the camera sees)");
+    }
+    if (parsed.has("--camera")) cpm::aruco::Camera::load(parsed.get("--camera"));  // a wrong file fails here, not in a child
+    const std::string camera_rate = parsed.get("--camera-rate", "30");
+    cpm::cli::parse_number("--camera-rate", camera_rate, 0.1, 1000);
     auto start = cpm::vehicle::parse_pose("--start", parsed.get("--start", "0,0,0"));
     double x0 = start.x, y0 = start.y, yaw = start.yaw;
 
@@ -78,6 +90,7 @@ int vehicle_sim(const std::vector<std::string>& args)
 
     const std::string firmware_sim = cpm::sibling_executable("firmware_sim");
     const std::string vehicle_bridge = cpm::sibling_executable("vehicle_bridge");
+    const std::string camera_sim = parsed.has("--camera") ? cpm::sibling_executable("camera_sim") : "";
     for (long long k = 0; k < count; ++k) {
         const std::string id = std::to_string(first + k);
         char pose[96];
@@ -97,6 +110,12 @@ int vehicle_sim(const std::vector<std::string>& args)
         cpm::ChildProcess& bridge = launch("vehicle_bridge " + id, bridge_argv, false);
         std::printf("vehicle %s: firmware_sim pid %d on %s, vehicle_bridge pid %d, start %s\n", id.c_str(), sim_pid, device.c_str(),
                     bridge.pid(), pose);
+        if (!camera_sim.empty()) {
+            cpm::ChildProcess& camera = launch("camera_sim " + id, {camera_sim, "--vehicle_id", id, "--camera", parsed.get("--camera"),
+                                                                    "--map", parsed.get("--map"), "--rate", camera_rate},
+                                               false);
+            std::printf("vehicle %s: camera_sim pid %d, %s Hz\n", id.c_str(), camera.pid(), camera_rate.c_str());
+        }
         std::fflush(stdout);
         copiers.emplace_back([&sim] {
             while (auto l = sim.read_line()) {

@@ -19,9 +19,10 @@ struct CameraSimOptions
     double rate_hz = 30;
 };
 
-/// camera_sim's work: at rate_hz, renders what the car's camera sees from its newest true pose
-/// (VehicleObservation) and publishes it as a mono8 CameraFrame whose create_stamp is that
-/// pose's time. Uses the process's default participant (cpm::init first).
+/// camera_sim's work: at rate_hz, renders what the car's camera sees from its true pose
+/// (VehicleObservation, moved on to the moment of the frame by the car's motion between its
+/// last two observations) and publishes it as a mono8 CameraFrame whose create_stamp is that
+/// moment, the exposure. Uses the process's default participant (cpm::init first).
 class CameraSimNode
 {
 public:

@@ -1,0 +1,321 @@
+// Real processes: cpm vehicle sim --camera (firmware_sim, vehicle_bridge, camera_sim) →
+// aruco_node → arucoMarkers over DDS against the simulator's ground truth; the gate course
+// driven by fsm_node; calibration from rendered ChArUco photos; each bad input.
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/aruco/Calibration.hpp>
+#include <cpm/aruco/Camera.hpp>
+#include <cpm/aruco/GateCourse.hpp>
+#include <cpm/aruco/Renderer.hpp>
+#include <cpm/get_time_ns.hpp>
+
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+
+#include <ArucoMarkers.h>
+#include <CameraFrame.h>
+#include <VehicleObservation.h>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+using cpm_test::Process;
+
+namespace {
+
+const std::string kRoot = CPM_SOURCE_DIR;
+const std::string kCamera = kRoot + "/scenarios/cameras/sim_640x480.yaml";
+const std::string kGates = kRoot + "/scenarios/maps/gates.json";
+
+std::filesystem::path temp_dir(const std::string& name)
+{
+    auto dir = std::filesystem::temp_directory_path() / ("cpm_aruco_e2e_" + std::to_string(::getpid()) + "_" + name);
+    std::filesystem::create_directories(dir);
+    return dir;
+}
+
+/// The last line of a program's output that is a JSON object.
+nlohmann::json last_json_line(const std::string& output)
+{
+    std::istringstream in(output);
+    std::string line;
+    nlohmann::json found;
+    while (std::getline(in, line)) {
+        if (!line.empty() && line[0] == '{') found = nlohmann::json::parse(line, nullptr, false);
+    }
+    return found;
+}
+
+struct Seen
+{
+    double x, y;
+};
+
+/// Where a world marker is in the frame of a car at `pose`.
+Seen in_car_frame(const cpm::vehicle::Marker& m, const Pose2D& pose)
+{
+    const double dx = m.x - pose.x(), dy = m.y - pose.y(), c = std::cos(pose.yaw()), s = std::sin(pose.yaw());
+    return {c * dx + s * dy, -s * dx + c * dy};
+}
+
+}  // namespace
+
+TEST(ArucoEndToEnd, CameraSimThroughArucoNodeGivesTheTrueRelativePose)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<ArucoMarkers> markers(participant, "arucoMarkers", {.keep_all = true});
+    cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
+    Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", kGates, "--camera", kCamera, "--start", "1.0,0.1,0.2"});
+    Process node({built_program("aruco_node"), "--vehicle_id", "5", "--camera", kCamera, "--world", kGates});
+    std::vector<ArucoMarkers> got;
+    VehicleObservation truth;
+    bool have_truth = false;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        for (auto& m : markers.take()) got.push_back(m);
+        for (auto& o : observations.take()) {
+            truth = o;
+            have_truth = true;
+        }
+        return got.size() >= 60 && have_truth;
+    }, 30s, 20ms)) << got.size() << " ArucoMarkers\n" << node.output() << node.errors() << car.errors();
+    node.kill(SIGINT);
+    ASSERT_EQ(node.wait(10s), 0) << node.errors();
+    car.kill(SIGINT);
+    car.wait(10s);
+
+    const auto world = cpm::vehicle::World::load(kGates);
+    // The car stands still: every frame shows the first gate's markers where they truly are.
+    int checked = 0;
+    for (const auto& frame : got) {
+        EXPECT_EQ(frame.vehicle_id(), 5);
+        for (const auto& m : frame.markers()) {
+            if (m.id() > 1) continue;  // the far gates' markers are small: not the nearby pose's test
+            const auto expected = in_car_frame(*world.marker(m.id()), truth.pose());
+            EXPECT_NEAR(m.pose().x(), expected.x, 0.03) << "marker " << m.id();
+            EXPECT_NEAR(m.pose().y(), expected.y, 0.03) << "marker " << m.id();
+            ++checked;
+        }
+    }
+    EXPECT_GE(checked, 100);
+    // Every processed frame gave one ArucoMarkers; the node's statistics say so.
+    auto stats = last_json_line(node.output());
+    ASSERT_TRUE(stats.is_object()) << node.output();
+    EXPECT_GE(stats["frames"].get<int>(), int(got.size()));
+    EXPECT_EQ(stats["bad_frames"].get<int>(), 0);
+    EXPECT_GT(stats["latency_ms_p50"].get<double>(), 0.0);
+}
+
+TEST(ArucoEndToEnd, AFrameThatDisagreesWithTheCameraFileIsCountedAndTheNodeGoesOn)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::Writer<CameraFrame> frames(participant, "cameraFrame");
+    cpm::ReaderAbstract<ArucoMarkers> markers(participant, "arucoMarkers", {.keep_all = true});
+    Process node({built_program("aruco_node"), "--vehicle_id", "7", "--camera", kCamera, "--marker-size", "0.2"});
+    ASSERT_TRUE(frames.wait_for_matched(1, 20s)) << node.errors();
+    ASSERT_TRUE(markers.wait_for_matched(1, 20s)) << node.errors();
+    auto send = [&](uint32_t w, uint32_t h, const std::string& encoding, size_t bytes) {
+        CameraFrame f;
+        f.vehicle_id(7);
+        f.width(w);
+        f.height(h);
+        f.encoding(encoding);
+        f.data(std::vector<uint8_t>(bytes, 128));
+        f.header().create_stamp().nanoseconds(cpm::get_time_ns());
+        ASSERT_TRUE(frames.write(f));
+    };
+    send(320, 240, "mono8", 320 * 240);    // wrong size
+    std::this_thread::sleep_for(200ms);
+    send(640, 480, "yuv422", 640 * 480 * 2);  // unknown encoding
+    std::this_thread::sleep_for(200ms);
+    send(640, 480, "mono8", 100);          // too few bytes
+    std::this_thread::sleep_for(200ms);
+    send(640, 480, "mono8", 640 * 480);    // a good (empty) frame
+    std::vector<ArucoMarkers> got;
+    EXPECT_TRUE(cpm_test::wait_until([&] {
+        for (auto& m : markers.take()) got.push_back(m);
+        return !got.empty();
+    }, 10s)) << node.errors();
+    ASSERT_EQ(got.size(), 1u);
+    EXPECT_TRUE(got[0].markers().empty());
+    node.kill(SIGINT);
+    ASSERT_EQ(node.wait(10s), 0) << node.errors();
+    auto stats = last_json_line(node.output());
+    EXPECT_EQ(stats["bad_frames"].get<int>(), 3) << node.output();
+    EXPECT_EQ(stats["frames"].get<int>(), 1);
+    // Logged (at most once a second), naming what was wrong.
+    EXPECT_NE(node.errors().find("320×240 px, the camera file says 640×480"), std::string::npos) << node.errors();
+}
+
+TEST(ArucoEndToEnd, BadInputAtStartIsNamedWithANonZeroExit)
+{
+    const auto dir = temp_dir("bad");
+    auto run = [](std::vector<std::string> argv) {
+        Process p(std::move(argv));
+        int code = p.wait(20s);
+        return std::make_pair(code, p.errors() + p.output());
+    };
+    const std::string node = built_program("aruco_node"), cpm = built_program("cpm");
+    // A missing camera file, a camera file without a field, an unknown dictionary.
+    auto [c1, e1] = run({node, "--vehicle_id", "5", "--camera", "/nonexistent/cam.yaml"});
+    EXPECT_NE(c1, 0);
+    EXPECT_NE(e1.find("/nonexistent/cam.yaml: cannot read the camera file"), std::string::npos) << e1;
+    const auto partial = (dir / "partial.yaml").string();
+    std::ofstream(partial) << "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n";
+    auto [c2, e2] = run({node, "--vehicle_id", "5", "--camera", partial});
+    EXPECT_NE(c2, 0);
+    EXPECT_NE(e2.find(partial + ": missing field camera_matrix"), std::string::npos) << e2;
+    auto [c3, e3] = run({node, "--vehicle_id", "5", "--camera", kCamera, "--dictionary", "DICT_5X5_51"});
+    EXPECT_NE(c3, 0);
+    EXPECT_NE(e3.find("unknown dictionary 'DICT_5X5_51'"), std::string::npos) << e3;
+    // A missing device, video or image folder; a folder without images.
+    auto [c4, e4] = run({node, "--vehicle_id", "5", "--camera", kCamera, "--device", "/dev/video99"});
+    EXPECT_NE(c4, 0);
+    EXPECT_NE(e4.find("/dev/video99: no such device"), std::string::npos) << e4;
+    auto [c5, e5] = run({node, "--vehicle_id", "5", "--camera", kCamera, "--video", "/nonexistent/drive.avi"});
+    EXPECT_NE(c5, 0);
+    EXPECT_NE(e5.find("/nonexistent/drive.avi: no such video file"), std::string::npos) << e5;
+    auto [c6, e6] = run({node, "--vehicle_id", "5", "--camera", kCamera, "--images", dir.string()});
+    EXPECT_NE(c6, 0);
+    EXPECT_NE(e6.find(dir.string() + ": no images"), std::string::npos) << e6;
+    // cpm aruco detect: an unreadable image, and one whose size is not the camera's.
+    const auto not_image = (dir / "not_an_image.png").string();
+    std::ofstream(not_image) << "text";
+    auto [c7, e7] = run({cpm, "aruco", "detect", not_image, "--camera", kCamera});
+    EXPECT_NE(c7, 0);
+    EXPECT_NE(e7.find(not_image + ": cannot read the image"), std::string::npos) << e7;
+    const auto small = (dir / "small.png").string();
+    cpm::aruco::write_image(small, cv::Mat(100, 120, CV_8UC1, cv::Scalar(0)));
+    auto [c8, e8] = run({cpm, "aruco", "detect", small, "--camera", kCamera});
+    EXPECT_NE(c8, 0);
+    EXPECT_NE(e8.find(small + ": 120×100 px, but the camera file says 640×480"), std::string::npos) << e8;
+    std::filesystem::remove_all(dir);
+}
+
+TEST(ArucoEndToEnd, ImagesReplayedFromAFolderGiveOneArucoMarkersEach)
+{
+    const auto dir = temp_dir("replay");
+    cpm::aruco::Renderer renderer(cpm::vehicle::World::load(kGates), cpm::aruco::Camera::load(kCamera));
+    for (int i = 0; i < 5; ++i) {
+        cpm::aruco::write_image((dir / ("frame_" + std::to_string(i) + ".png")).string(), renderer.render({1.0 + 0.1 * i, 0.1, 0.2}));
+    }
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<ArucoMarkers> markers(participant, "arucoMarkers", {.keep_all = true});
+    // The node's writer is best effort (as every sensor topic): its first frame may go out
+    // before it matched this reader; it replays slowly so that the rest arrive.
+    Process node({built_program("aruco_node"), "--vehicle_id", "5", "--camera", kCamera, "--world", kGates, "--images", dir.string(), "--fps", "2"});
+    std::vector<ArucoMarkers> got;
+    EXPECT_EQ(node.wait(30s), 0) << node.errors();
+    cpm_test::wait_until([&] {
+        for (auto& m : markers.take()) got.push_back(m);
+        return got.size() >= 4;
+    }, 5s);
+    auto stats = last_json_line(node.output());
+    EXPECT_EQ(stats["frames"].get<int>(), 5) << node.output();
+    EXPECT_GE(got.size(), 4u);  // the first may go out before the reader matched (best effort)
+    for (const auto& m : got) EXPECT_GE(m.markers().size(), 2u);
+    std::filesystem::remove_all(dir);
+}
+
+TEST(ArucoEndToEnd, CalibrationFromRenderedCharucoPhotosFindsTheIntrinsics)
+{
+    const auto dir = temp_dir("calib");
+    cpm::aruco::Camera truth = cpm::aruco::Camera::ideal(640, 480, 1.1);
+    truth.camera_matrix(0, 2) = 331.0;  // the principal point off centre
+    truth.camera_matrix(1, 2) = 232.5;
+    const auto board = cpm::aruco::CharucoBoard::parse("charuco:5x7,0.04,0.03");
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> tilt(-0.5, 0.5), shift(-0.05, 0.05);
+    for (int i = 0; i < 14; ++i) {
+        // The board (0.2 × 0.28 m) 0.3..0.45 m ahead, tilted up to ±0.5 rad each way.
+        const cv::Vec3d rvec(tilt(rng), tilt(rng), 0.2 * tilt(rng));
+        const cv::Vec3d tvec(-0.1 + shift(rng), -0.14 + shift(rng), 0.3 + 0.01 * i);
+        cpm::aruco::write_image((dir / ("view_" + std::to_string(i) + ".png")).string(),
+                                cpm::aruco::render_board_view(board, truth, rvec, tvec));
+    }
+    const auto out = (dir / "camera.yaml").string();
+    Process calibrate({built_program("cpm"), "camera", "calibrate", "--images", dir.string(), "--board", "charuco:5x7,0.04,0.03",
+                       "--out", out});
+    ASSERT_EQ(calibrate.wait(60s), 0) << calibrate.errors() << calibrate.output();
+    EXPECT_NE(calibrate.output().find("reprojection error"), std::string::npos);
+    const auto found = cpm::aruco::Camera::load(out);
+    for (auto [row, col] : {std::pair{0, 0}, {1, 1}, {0, 2}, {1, 2}}) {
+        EXPECT_NEAR(found.camera_matrix(row, col), truth.camera_matrix(row, col), 0.01 * truth.camera_matrix(row, col))
+            << "K(" << row << "," << col << ")";
+    }
+    // A board with an even number of rows is refused, saying why.
+    Process even({built_program("cpm"), "camera", "calibrate", "--images", dir.string(), "--board", "charuco:5x6,0.04,0.03", "--out", out});
+    EXPECT_EQ(even.wait(20s), 2);
+    EXPECT_NE(even.errors().find("use an odd number of rows"), std::string::npos) << even.errors();
+    std::filesystem::remove_all(dir);
+}
+
+namespace {
+
+/// One drive of the gate machine on car 5 through `world` from `start`: the true path until
+/// fsm_node stops in its final state.
+struct GateDrive
+{
+    std::vector<cpm::aruco::PathPoint> path;
+    int fsm_exit = -1;
+    std::string output;
+};
+
+GateDrive drive_gates(const std::string& world_file, const std::string& start)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
+    Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", world_file, "--camera", kCamera, "--start", start});
+    Process node({built_program("aruco_node"), "--vehicle_id", "5", "--camera", kCamera, "--world", world_file});
+    Process fsm({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", kRoot + "/scenarios/fsm/gates.json"});
+    GateDrive run;
+    auto collect = [&] {
+        for (auto& o : observations.take()) {
+            run.path.push_back({o.header().create_stamp().nanoseconds() * 1e-9, {o.pose().x(), o.pose().y(), o.pose().yaw()}});
+        }
+    };
+    const bool stopped = cpm_test::wait_until([&] {
+        collect();
+        return fsm.wait(0ms) >= 0;
+    }, 120s, 20ms);
+    EXPECT_TRUE(stopped) << fsm.output() << fsm.errors();
+    collect();
+    run.fsm_exit = fsm.wait(10s);
+    run.output = fsm.output();
+    node.kill(SIGINT);
+    node.wait(10s);
+    car.kill(SIGINT);
+    car.wait(10s);
+    return run;
+}
+
+}  // namespace
+
+TEST(ArucoEndToEnd, FsmNodeDrivesThroughEveryGateOfSeededCourses)
+{
+    const cpm::vehicle::VehicleParameters params;
+    const auto dir = temp_dir("gates");
+    for (uint32_t seed : {11u, 12u, 13u}) {
+        const auto world = cpm::aruco::gate_course(seed);
+        const auto file = (dir / ("course_" + std::to_string(seed) + ".json")).string();
+        std::ofstream(file) << world.to_json();
+        std::mt19937 rng(seed);
+        const double heading = std::uniform_real_distribution<double>(-M_PI / 4, M_PI / 4)(rng);
+        auto run = drive_gates(file, "0,0," + std::to_string(heading));
+        EXPECT_EQ(run.fsm_exit, 0) << run.output;
+        auto passages = cpm::aruco::gate_passages(world, run.path, params.width);
+        std::string why;
+        EXPECT_TRUE(cpm::aruco::all_gates_passed(passages, 0.05, &why)) << "seed " << seed << ": " << why << "\n" << run.output;
+        for (const auto& p : passages) std::printf("seed %u gate %d: %.3f m from its centre\n", seed, p.gate + 1, p.offset);
+    }
+    std::filesystem::remove_all(dir);
+}

@@ -1,0 +1,177 @@
+// cpm aruco detect, cpm camera render | calibrate: the perception library on files.
+#include "Command.hpp"
+
+#include <cpm/Error.hpp>
+#include <cpm/aruco/Calibration.hpp>
+#include <cpm/aruco/DetectorFlags.hpp>
+#include <cpm/aruco/Renderer.hpp>
+#include <cpm/vehicle/VehicleModel.hpp>
+
+#include <nlohmann/json.hpp>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace {
+
+using cpm::tools::UsageError;
+
+const std::string kDetectHelp = std::string(
+    "usage: cpm aruco detect IMAGE... --camera FILE [--world FILE] [--marker-size M] [--dictionary NAME] [--json]\n"
+    "\n"
+    "Finds the ArUco markers in still images with the same code as aruco_node: ids, corners (px)\n"
+    "and, when the marker's size is known, its pose in the car frame through the camera's\n"
+    "mounting (x forward, y left, yaw of the marker's face; distance from the camera).\n"
+    "--json prints one line per image: {\"image\": …, \"markers\": [{\"id\": …, \"corners\": [[u, v] ×4],\n"
+    "\"x\": …, \"y\": …, \"yaw\": …, \"distance\": …}]} (pose null when the size is unknown).\n"
+    "\n") + cpm::aruco::kDetectorFlagsHelp;
+
+int aruco_detect(const std::vector<std::string>& args)
+{
+    auto flags = cpm::aruco::detector_flags();
+    flags.push_back({"--json", false});
+    auto parsed = cpm::tools::parse_args(args, flags, "cpm aruco detect");
+    if (parsed.positional.empty()) throw UsageError("cpm aruco detect: give one or more images");
+    auto setup = cpm::aruco::detector_setup(parsed, "cpm aruco detect");
+    // Every image is read before any is searched: a wrong path fails at once.
+    std::vector<cv::Mat> images;
+    for (const auto& path : parsed.positional) {
+        cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+        if (image.empty()) throw cpm::Error(path + ": cannot read the image");
+        if (image.cols != setup.camera.width || image.rows != setup.camera.height) {
+            throw cpm::Error(path + ": " + std::to_string(image.cols) + "×" + std::to_string(image.rows) + " px, but the camera file says " +
+                             std::to_string(setup.camera.width) + "×" + std::to_string(setup.camera.height));
+        }
+        images.push_back(image);
+    }
+    cpm::aruco::MarkerDetector detector(setup.camera, setup.options, setup.sizes);
+    const bool json = parsed.has("--json");
+    for (size_t i = 0; i < images.size(); ++i) {
+        auto markers = detector.observe(images[i]);
+        std::sort(markers.begin(), markers.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
+        if (json) {
+            nlohmann::json line{{"image", parsed.positional[i]}, {"markers", nlohmann::json::array()}};
+            for (const auto& m : markers) {
+                nlohmann::json corners = nlohmann::json::array();
+                for (const auto& c : m.corners) corners.push_back({c.x, c.y});
+                nlohmann::json entry{{"id", m.id}, {"corners", corners}};
+                for (auto [name, value] : {std::pair{"x", m.x}, {"y", m.y}, {"yaw", m.yaw}, {"distance", m.distance}}) {
+                    entry[name] = m.has_pose ? nlohmann::json(value) : nlohmann::json(nullptr);
+                }
+                line["markers"].push_back(entry);
+            }
+            std::printf("%s\n", line.dump().c_str());
+            continue;
+        }
+        std::printf("%s: %zu marker(s)\n", parsed.positional[i].c_str(), markers.size());
+        for (const auto& m : markers) {
+            if (m.has_pose) {
+                std::printf("  id %d: x %.3f m, y %.3f m, yaw %.1f°, distance %.3f m\n", m.id, m.x, m.y, m.yaw * 180 / M_PI, m.distance);
+            } else {
+                std::printf("  id %d: corners (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f); size unknown, no pose\n", m.id,
+                            m.corners[0].x, m.corners[0].y, m.corners[1].x, m.corners[1].y, m.corners[2].x, m.corners[2].y,
+                            m.corners[3].x, m.corners[3].y);
+            }
+        }
+    }
+    return 0;
+}
+
+const char* const kRenderHelp =
+    "usage: cpm camera render --world FILE --camera FILE --pose X,Y,YAW --out FRAME.png\n"
+    "                         [--noise SIGMA] [--blur K] [--seed S] [--dictionary NAME]\n"
+    "\n"
+    "Renders one frame of the synthetic camera (what camera_sim publishes) for a car at the\n"
+    "pose (rear axle, world frame: metres, radians) and lists the markers drawn, as they truly\n"
+    "are in the car frame.\n";
+
+int camera_render(const std::vector<std::string>& args)
+{
+    auto parsed = cpm::tools::parse_flags(args,
+                                          {{"--world", true}, {"--camera", true}, {"--pose", true}, {"--out", true}, {"--noise", true},
+                                           {"--blur", true}, {"--seed", true}, {"--dictionary", true}},
+                                          "cpm camera render");
+    for (const char* flag : {"--world", "--camera", "--pose", "--out"}) {
+        if (!parsed.has(flag)) throw UsageError(std::string("cpm camera render: ") + flag + " is required");
+    }
+    cpm::aruco::RenderOptions options;
+    options.noise_sigma = cpm::cli::parse_number("--noise", parsed.get("--noise", "0"), 0, 128);
+    options.blur = int(cpm::cli::parse_integer("--blur", parsed.get("--blur", "0"), 0, 31));
+    options.seed = uint32_t(cpm::cli::parse_integer("--seed", parsed.get("--seed", "1"), 0, UINT32_MAX));
+    options.dictionary = parsed.get("--dictionary", "DICT_4X4_50");
+    const auto pose = cpm::vehicle::parse_pose("--pose", parsed.get("--pose"));
+    cpm::aruco::Renderer renderer(cpm::vehicle::World::load(parsed.get("--world")), cpm::aruco::Camera::load(parsed.get("--camera")), options);
+    std::vector<cpm::aruco::RenderedMarker> truth;
+    cv::Mat frame = renderer.render(pose, &truth);
+    cpm::aruco::write_image(parsed.get("--out"), frame);
+    std::printf("%s: %d×%d, %zu marker(s) drawn\n", parsed.get("--out").c_str(), frame.cols, frame.rows, truth.size());
+    for (const auto& t : truth) {
+        std::printf("  id %d: x %.3f m, y %.3f m, yaw %.1f°, distance %.3f m, side %.1f px%s\n", t.id, t.x, t.y, t.yaw * 180 / M_PI,
+                    t.distance, t.side_px, t.whole_in_view ? "" : " (partly outside the image)");
+    }
+    return 0;
+}
+
+const char* const kCalibrateHelp =
+    "usage: cpm camera calibrate --images DIR --board charuco:XxY,SQUARE,MARKER[,DICT] --out camera.yaml\n"
+    "\n"
+    "Calibrates a camera from photos of a ChArUco board (OpenCV's calibrateCameraCharuco): XxY\n"
+    "squares of SQUARE metres with markers of MARKER metres (default dictionary DICT_4X4_50; Y\n"
+    "odd). Take 10-20 photos from different angles and distances, the board filling a good part\n"
+    "of the image. Writes the camera file with the camera matrix and distortion (mount_* zero:\n"
+    "set them to where the camera sits on the car) and prints the reprojection error.\n";
+
+int camera_calibrate(const std::vector<std::string>& args)
+{
+    auto parsed = cpm::tools::parse_flags(args, {{"--images", true}, {"--board", true}, {"--out", true}}, "cpm camera calibrate");
+    for (const char* flag : {"--images", "--board", "--out"}) {
+        if (!parsed.has(flag)) throw UsageError(std::string("cpm camera calibrate: ") + flag + " is required");
+    }
+    cpm::aruco::CharucoBoard board;
+    try {
+        board = cpm::aruco::CharucoBoard::parse(parsed.get("--board"));
+    } catch (const cpm::Error& e) {
+        throw UsageError(std::string("cpm camera calibrate: --board: ") + e.what());
+    }
+    const std::string dir = parsed.get("--images");
+    std::error_code ec;
+    if (!std::filesystem::is_directory(dir, ec)) throw cpm::Error(dir + ": not a folder of images");
+    std::vector<std::string> images;
+    for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+        std::string ext = entry.path().extension().string();
+        std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+        if (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".tif" || ext == ".tiff" || ext == ".pgm") {
+            images.push_back(entry.path().string());
+        }
+    }
+    std::sort(images.begin(), images.end());
+    if (images.empty()) throw cpm::Error(dir + ": no images (.png, .jpg, .bmp, .tif, .pgm) in the folder");
+    auto result = cpm::aruco::calibrate(images, board);
+    for (const auto& s : result.skipped) std::fprintf(stderr, "skipped %s\n", s.c_str());
+    result.camera.save(parsed.get("--out"));
+    const auto& k = result.camera.camera_matrix;
+    std::printf("calibrated from %d of %zu images: reprojection error %.3f px\n", result.images_used, images.size(), result.rms_error);
+    std::printf("fx %.2f fy %.2f cx %.2f cy %.2f px; distortion k1 %.4f k2 %.4f p1 %.4f p2 %.4f k3 %.4f\n", k(0, 0), k(1, 1), k(0, 2),
+                k(1, 2), result.camera.distortion[0], result.camera.distortion[1], result.camera.distortion[2], result.camera.distortion[3],
+                result.camera.distortion[4]);
+    std::printf("wrote %s (set mount_x/y/z/yaw/pitch to where the camera sits on the car)\n", parsed.get("--out").c_str());
+    return 0;
+}
+
+}  // namespace
+
+namespace cpm::tools {
+
+std::vector<Command> aruco_commands()
+{
+    return {{"aruco", "detect", "find ArUco markers and their poses in images (the code aruco_node runs)", kDetectHelp.c_str(), aruco_detect},
+            {"camera", "render", "render one frame of the synthetic camera from a pose", kRenderHelp, camera_render},
+            {"camera", "calibrate", "calibrate a camera from ChArUco board photos", kCalibrateHelp, camera_calibrate}};
+}
+
+}  // namespace cpm::tools
