@@ -164,6 +164,83 @@ TEST(FsmEngine, ArucoGateCenterTurnsTowardsTheGateUntilItFacesItsCentre)
     EXPECT_EQ(sut->active().id(), 1);  // finished, then Stop
 }
 
+TEST(FsmEngine, AGateIsApproachedAlongItsLineToAPointInFrontOfItAndFollowedWhileSeen)
+{
+    // A gate 2 m ahead, 0.4 m to the left, turned 30° (its markers' line is not across the
+    // car's way): the point 1 m in front of it is reached along the gate's line.
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "Motor", "speed": 0.3},
+                   {"id": 1, "type": "ApproachPoint", "speed": 0.3, "tolerance": 0.02, "before": 1.0, "lookahead": 0.4},
+                   {"id": 2, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "ArucoGateFound", "from": 0, "to": 1, "marker_a": 3, "marker_b": 4, "range": 3.0},
+                        {"id": 1, "type": "Finished", "from": 1, "to": 2}]})");
+    const double a = M_PI / 6;  // the way through the gate
+    const double cx = 2.0, cy = 0.4, w = 0.4;
+    Inputs in = at(0, 0);
+    in.markers = {{3, cx - w * std::sin(a), cy + w * std::cos(a), 0, 2.0}, {4, cx + w * std::sin(a), cy - w * std::cos(a), 0, 2.0}};
+    sut->tick(in, 0.02);
+    ASSERT_EQ(sut->active().id(), 1);
+    // The point: (2 - cos 30°, 0.4 - sin 30°) = (1.134, -0.1), the line leading up to it from the
+    // lower left: standing at the origin facing +x, the car first steers hard right, onto the
+    // line (aiming 0.4 m along it from where it stands), not at the point itself (-0.18).
+    auto out = sut->tick(at(0.02, 0.0), 0.02);
+    EXPECT_LT(out.steering, -0.8);
+    // The car goes 0.755 m to its right, onto the line (x = 0, y = -0.755), then along it.
+    Inputs step = at(0.04, 0.755);
+    step.yaw = -M_PI / 2;
+    sut->tick(step, 0.02);
+    step = at(0.06, 0.755 + 1.0);
+    step.yaw = a;
+    out = sut->tick(step, 0.02);
+    EXPECT_NEAR(out.steering, 0.0, 0.02);  // on the line, facing along it
+    EXPECT_EQ(sut->active().id(), 1);      // 0.31 m short of the point
+    step = at(0.08, 0.755 + 1.134 / std::cos(a));
+    step.yaw = a;
+    sut->tick(step, 0.02);
+    sut->tick(step, 0.02);
+    EXPECT_EQ(sut->active().id(), 2);  // level with the point, facing the gate: finished
+}
+
+TEST(FsmEngine, TheGateDirectionComesFromTheTwoMarkersPositions)
+{
+    // Both markers report a facing 20° off (a single marker's facing is noisy); the target's
+    // direction is the normal of the line between them, towards the car.
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "Motor", "speed": 0.3},
+                   {"id": 1, "type": "ApproachPoint", "speed": 0.3, "tolerance": 0.02, "before": 0.5},
+                   {"id": 2, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "ArucoGateFound", "from": 0, "to": 1, "marker_a": 3, "marker_b": 4, "range": 3.0},
+                        {"id": 1, "type": "Finished", "from": 1, "to": 2}]})");
+    Inputs in = at(0, 0);
+    in.markers = {{3, 2.0, 0.4, M_PI - 0.35, 2.0}, {4, 2.0, -0.4, M_PI - 0.35, 2.0}};
+    sut->tick(in, 0.02);
+    ASSERT_EQ(sut->active().id(), 1);
+    // The point 0.5 m in front of the gate is (1.5, 0): straight ahead, no steering...
+    EXPECT_NEAR(sut->tick(at(0.02, 0.0), 0.02).steering, 0.0, 1e-9);
+    // ...and there it finishes.
+    sut->tick(at(0.04, 1.5), 0.02);
+    sut->tick(at(0.06, 1.5), 0.02);
+    EXPECT_EQ(sut->active().id(), 2);
+}
+
+TEST(FsmEngine, ArucoGateCenterNeverTurnsBlindAndGivesUpOutOfSight)
+{
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "ArucoGateCenter", "marker_a": 3, "marker_b": 4, "speed": 0.2, "tolerance": 0.05, "blind": 0.3},
+                   {"id": 1, "type": "Stop"}],
+        "transitions": [{"id": 0, "type": "Finished", "from": 0, "to": 1}]})");
+    Inputs in = at(0, 0);
+    in.markers = {{3, 1.0, 0.3, 0, 1.04}};  // one marker only: no gate
+    EXPECT_EQ(sut->tick(in, 0.02).steering, 0.0);
+    in.t = 0.2;
+    sut->tick(in, 0.02);
+    EXPECT_EQ(sut->active().id(), 0);
+    in.t = 0.35;  // 0.35 s without the gate
+    sut->tick(in, 0.02);
+    sut->tick(in, 0.02);
+    EXPECT_EQ(sut->active().id(), 1);
+}
+
 TEST(FsmEngine, NestedMachineFinishesWhenItReachesAFinalState)
 {
     auto sut = machine(R"({"root": 0,
