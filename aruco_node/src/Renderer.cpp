@@ -168,6 +168,7 @@ void Renderer::render(const vehicle::Pose& car, cv::Mat& frame, std::vector<Rend
             t.yaw = std::remainder(v.normal_yaw, 2 * M_PI);
             t.distance = v.distance;
             t.side_px = side;
+            t.shortest_side_px = shortest;
             t.whole_in_view = inside;
             truth->push_back(t);
         }

@@ -32,6 +32,7 @@ struct RenderedMarker
     double x = 0, y = 0, z = 0, yaw = 0; ///< centre and facing in the car frame (m, rad)
     double distance = 0;                 ///< camera to centre, m
     double side_px = 0;                  ///< mean projected side of the black square
+    double shortest_side_px = 0;         ///< its most foreshortened side (what limits detection)
     bool whole_in_view = false;          ///< all four corners at least 3 px inside the image
 };
 
