@@ -1,4 +1,5 @@
 #include "ArucoCompat.hpp"
+#include "CornerRefine.hpp"
 
 #include <cpm/Error.hpp>
 
@@ -44,6 +45,7 @@ cv::Ptr<cv::aruco::DetectorParameters> parameters(const DetectorSettings& s)
     p->adaptiveThreshWinSizeMin = s.adaptive_window_min;
     p->adaptiveThreshWinSizeMax = s.adaptive_window_max;
     p->adaptiveThreshWinSizeStep = s.adaptive_window_step;
+    p->perspectiveRemovePixelPerCell = s.pixels_per_cell;
     return p;
 }
 
@@ -107,6 +109,7 @@ void Detector::detect(const cv::Mat& gray, std::vector<int>& ids, std::vector<st
             double shortest = 1e9;
             for (int k = 0; k < 4; ++k) shortest = std::min(shortest, double(cv::norm(quad[k] - quad[(k + 1) % 4])));
             const int window = std::clamp(int(std::lround(0.45 * shortest / cells)), 1, std::max(1, impl_->max_window));
+            if (refine_corners_by_edges(gray, quad, int(cells))) continue;
             cv::cornerSubPix(gray, quad, cv::Size(window, window), cv::Size(-1, -1),
                              cv::TermCriteria(cv::TermCriteria::MAX_ITER | cv::TermCriteria::EPS, 30, 0.01));
         }

@@ -29,7 +29,12 @@ struct DetectorSettings
     int subpixel_window = 5;      ///< px, the largest window (half side, as cornerSubPix's winSize)
     bool aruco3 = false;          ///< useAruco3Detection (multi-scale)
     double min_perimeter_rate = 0.03;
-    int adaptive_window_min = 3, adaptive_window_max = 23, adaptive_window_step = 10;
+    // Two threshold scales (5, 15 px) instead of OpenCV's three (3, 13, 23) and 6 px per cell
+    // when reading the bits (OpenCV: 4): measured on noisy, blurred markers of 20-30 px,
+    // 88 % → 97 % found (bench/aruco), no slower, still no false marker in 1000 cluttered
+    // frames (8 px per cell found 99 % but one false marker).
+    int adaptive_window_min = 5, adaptive_window_max = 23, adaptive_window_step = 10;
+    int pixels_per_cell = 6;
 };
 
 /// Detector state: the dictionary and OpenCV's parameter object, made once.

@@ -74,9 +74,13 @@ void detection_cost()
 
     aruco::MarkerDetector detector(camera, {}, aruco::MarkerSizes::from_world(world));
     auto dict = cv::aruco::getPredefinedDictionary(cv::aruco::DICT_4X4_50);
-    auto subpix = cv::aruco::DetectorParameters::create();
-    subpix->cornerRefinementMethod = cv::aruco::CORNER_REFINE_SUBPIX;
+    // The same parameters as aruco_node's (two threshold scales from 5 px, 6 px per cell).
     auto none = cv::aruco::DetectorParameters::create();
+    none->adaptiveThreshWinSizeMin = 5;
+    none->perspectiveRemovePixelPerCell = 6;
+    auto subpix = cv::aruco::DetectorParameters::create();
+    *subpix = *none;
+    subpix->cornerRefinementMethod = cv::aruco::CORNER_REFINE_SUBPIX;
     std::vector<int> ids;
     std::vector<std::vector<cv::Point2f>> corners;
     std::vector<aruco::MarkerObservation> seen;
