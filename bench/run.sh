@@ -24,3 +24,6 @@ echo "== bench_history_store (the history store vs SQLite in memory, indexed, pr
 echo
 echo "== bench_history_service (cpm_history: ingest without loss, query round trip vs plain ping-pong, memory)"
 "$bin/bench_history_service"
+echo
+echo "== bench_aruco (perception: aruco_node vs plain OpenCV and AprilTag 3; detection, pose, latency, CameraFrame over DDS)"
+"$bin/bench_aruco"

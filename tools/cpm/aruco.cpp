@@ -5,14 +5,22 @@
 #include <cpm/aruco/Calibration.hpp>
 #include <cpm/aruco/DetectorFlags.hpp>
 #include <cpm/aruco/Renderer.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/aruco/GateCourse.hpp>
+#include <cpm/topics.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
+
+#include <CameraFrame.h>
+#include <VehicleObservation.h>
 
 #include <nlohmann/json.hpp>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
+#include <thread>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -163,6 +171,81 @@ int camera_calibrate(const std::vector<std::string>& args)
     return 0;
 }
 
+const char* const kGatesHelp =
+    "usage: cpm aruco gates --map FILE --id N [--timeout 120s] [--frame-out FRAME.png] [--dds_domain N]\n"
+    "\n"
+    "Watches car N's true pose (vehicleObservation) and prints each gate of the map as the car\n"
+    "drives through it, with how far from the gate's centre and how much room was left to the\n"
+    "nearer marker. Ends when every gate is passed (exit 0), or at the timeout or Ctrl-C (exit 1,\n"
+    "naming the gates not passed). --frame-out saves the car's camera frame from 2 m before the\n"
+    "first gate (its approach view), when the car has a camera.\n";
+
+int aruco_gates(const std::vector<std::string>& args)
+{
+    auto parsed = cpm::tools::parse_flags(args, {{"--map", true}, {"--id", true}, {"--timeout", true}, {"--frame-out", true}},
+                                          "cpm aruco gates");
+    if (!parsed.has("--map")) throw UsageError("cpm aruco gates: --map FILE is required (the world with its gates)");
+    if (!parsed.has("--id")) throw UsageError("cpm aruco gates: --id N is required (the car)");
+    const auto world = cpm::vehicle::World::load(parsed.get("--map"));
+    if (world.gates().empty()) throw cpm::Error(parsed.get("--map") + ": the map has no gates");
+    const auto id = uint8_t(cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255));
+    const uint64_t timeout = cpm::tools::parse_duration("--timeout", parsed.get("--timeout", "120s"));
+    const cpm::vehicle::VehicleParameters car;
+    cpm::ReaderAbstract<VehicleObservation> poses(cpm::topics::vehicle_observation.name,
+                                                  {.keep_all = true, .vehicle_id = id});
+    std::unique_ptr<cpm::ReaderAbstract<CameraFrame>> frames;
+    if (parsed.has("--frame-out")) {
+        frames = std::make_unique<cpm::ReaderAbstract<CameraFrame>>(cpm::topics::camera_frame.name,
+                                                                    cpm::ReaderOptions{.history_depth = 4, .vehicle_id = id});
+    }
+    std::vector<cpm::aruco::PathPoint> path;
+    size_t reported = 0;
+    bool frame_saved = false;
+    cpm::cli::stop_on_signals();
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::nanoseconds(timeout);
+    std::printf("watching car %u for %zu gate(s) of %s\n", unsigned(id), world.gates().size(), parsed.get("--map").c_str());
+    std::fflush(stdout);
+    std::vector<cpm::aruco::GatePassage> passages;
+    while (!cpm::cli::stop_requested() && std::chrono::steady_clock::now() < deadline) {
+        for (auto& o : poses.take()) {
+            path.push_back({o.header().create_stamp().nanoseconds() * 1e-9, {o.pose().x(), o.pose().y(), o.pose().yaw()}});
+        }
+        if (frames && !frame_saved && !path.empty()) {
+            // The first frame taken within 2 m of the first gate: its approach view.
+            auto newest = frames->take();
+            const auto& first = world.gates()[0];
+            const auto *l = world.marker(first.left), *r = world.marker(first.right);
+            const auto& at = path.back().pose;
+            if (!newest.empty() && std::hypot((l->x + r->x) / 2 - at.x, (l->y + r->y) / 2 - at.y) <= 2.0) {
+                const CameraFrame& f = newest.back();
+                if (f.encoding() == "mono8" && f.data().size() == size_t(f.width()) * f.height()) {
+                    cv::Mat image(int(f.height()), int(f.width()), CV_8UC1, const_cast<uint8_t*>(f.data().data()));
+                    cpm::aruco::write_image(parsed.get("--frame-out"), image);
+                    std::printf("saved the camera's view 2 m before gate 1 as %s\n", parsed.get("--frame-out").c_str());
+                    std::fflush(stdout);
+                }
+                frame_saved = true;
+            }
+        }
+        passages = cpm::aruco::gate_passages(world, path, car.width);
+        while (reported < passages.size() && passages[reported].passed) {
+            const auto& p = passages[reported];
+            std::printf("gate %d passed: %.3f m %s of its centre, %.3f m from the nearer marker\n", p.gate + 1, std::abs(p.offset),
+                        p.offset >= 0 ? "left" : "right", p.clearance);
+            std::fflush(stdout);
+            ++reported;
+        }
+        if (reported == passages.size()) return 0;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    std::string missing;
+    for (const auto& p : passages) {
+        if (!p.passed) missing += (missing.empty() ? "" : ", ") + std::to_string(p.gate + 1);
+    }
+    std::fprintf(stderr, "cpm aruco gates: gate(s) %s not passed\n", missing.c_str());
+    return 1;
+}
+
 }  // namespace
 
 namespace cpm::tools {
@@ -170,6 +253,7 @@ namespace cpm::tools {
 std::vector<Command> aruco_commands()
 {
     return {{"aruco", "detect", "find ArUco markers and their poses in images (the code aruco_node runs)", kDetectHelp.c_str(), aruco_detect},
+            {"aruco", "gates", "print each gate of a map as a car drives through it", kGatesHelp, aruco_gates},
             {"camera", "render", "render one frame of the synthetic camera from a pose", kRenderHelp, camera_render},
             {"camera", "calibrate", "calibrate a camera from ChArUco board photos", kCalibrateHelp, camera_calibrate}};
 }
