@@ -75,7 +75,7 @@ rm -f /tmp/cpm_demo_sim.$$.out /tmp/cpm_demo_history.$$.out
 echo
 gates="$root/scenarios/maps/gates.json"
 camera="$root/scenarios/cameras/sim_640x480.yaml"
-frame="${CPM_DEMO_FRAME:-$PWD/cpm_demo_camera.png}"
+frame="${CPM_DEMO_FRAME:-$build/cpm_demo_camera.png}"
 echo "demo: simulated car 6 with a camera in scenarios/maps/gates.json; aruco_node finds the markers,"
 echo "      fsm_node drives scenarios/fsm/gates.json through the three gates"
 "$bin/cpm" vehicle sim --id 6 --map "$gates" --camera "$camera" --start 0,0,0.3 > /tmp/cpm_demo_sim.$$.out 2>&1 &
