@@ -179,11 +179,11 @@ void ArucoNode::run(const std::function<bool()>& stop_requested)
         cv::Mat gray = d.source->next();
         if (gray.empty()) break;  // the end of a video or folder
         if (gray.type() != CV_8UC1) {
-            d.bad_frame("unreadable image in " + d.source->name());
+            d.bad_frame(d.source->current() + ": cannot read the image");
             continue;
         }
         if (gray.cols != d.options.camera.width || gray.rows != d.options.camera.height) {
-            d.bad_frame(std::to_string(gray.cols) + "×" + std::to_string(gray.rows) + " px from " + d.source->name() +
+            d.bad_frame(d.source->current() + ": " + std::to_string(gray.cols) + "×" + std::to_string(gray.rows) + " px" +
                         ", the camera file says " + std::to_string(d.options.camera.width) + "×" +
                         std::to_string(d.options.camera.height));
             continue;

@@ -1,6 +1,7 @@
 #include "FrameSource.hpp"
 
 #include <cpm/Error.hpp>
+#include <cpm/aruco/Renderer.hpp>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -64,7 +65,7 @@ public:
         if (!capture_.read(frame)) return {};
         return to_grey(frame);
     }
-    std::string name() const override { return path_; }
+    std::string current() const override { return path_; }
 
 private:
     std::string path_;
@@ -76,41 +77,24 @@ private:
 class Images : public FrameSource
 {
 public:
-    Images(const std::string& folder, double fps) : folder_(folder), pace_(fps)
-    {
-        std::error_code ec;
-        if (!std::filesystem::is_directory(folder, ec)) throw Error(folder + ": not a folder of images");
-        for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
-            std::string ext = entry.path().extension().string();
-            std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
-            if (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".pgm" || ext == ".ppm" || ext == ".tif" ||
-                ext == ".tiff") {
-                files_.push_back(entry.path().string());
-            }
-        }
-        if (ec) throw Error(folder + ": cannot list the folder (" + ec.message() + ")");
-        if (files_.empty()) throw Error(folder + ": no images (.png, .jpg, .bmp, .pgm, .tif) in the folder");
-        std::sort(files_.begin(), files_.end());
-    }
+    Images(const std::string& folder, double fps) : folder_(folder), pace_(fps), files_(list_images(folder)) {}
     cv::Mat next() override
     {
         while (index_ < files_.size()) {
             pace_.wait();
             cv::Mat image = cv::imread(files_[index_++], cv::IMREAD_GRAYSCALE);
             if (!image.empty()) return image;
-            last_bad_ = files_[index_ - 1];
             return cv::Mat(1, 1, CV_8UC3);  // unreadable: a frame the node counts as bad
         }
         return {};
     }
-    std::string name() const override { return folder_; }
+    std::string current() const override { return index_ ? files_[index_ - 1] : folder_; }
 
 private:
     std::string folder_;
     Pace pace_;
     std::vector<std::string> files_;
     size_t index_ = 0;
-    std::string last_bad_;
 };
 
 }  // namespace

@@ -14,8 +14,8 @@ public:
     virtual ~FrameSource() = default;
     /// The next frame (grey), or an empty Mat at the end. Blocks until it is due.
     virtual cv::Mat next() = 0;
-    /// What it reads, for messages.
-    virtual std::string name() const = 0;
+    /// What the last frame came from (the device, the video, the image file), for messages.
+    virtual std::string current() const = 0;
 };
 
 /// Each throws cpm::Error naming the path when it cannot be opened or holds no frame.

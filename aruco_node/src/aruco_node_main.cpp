@@ -49,11 +49,7 @@ int run(int argc, char** argv)
     }
     cpm::init(argc, argv);
     cpm::aruco::ArucoNode node(std::move(o));
-    cpm::cli::stop_on_signals();
-    node.run(cpm::cli::stop_requested);
-    std::printf("%s\n", node.stats_json().c_str());
-    std::fflush(stdout);
-    return 0;
+    return cpm::cli::run_node(node);
 }
 
 }  // namespace

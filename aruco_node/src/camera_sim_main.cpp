@@ -42,11 +42,7 @@ int run(int argc, char** argv)
     o.render.dictionary = parsed.get("--dictionary", "DICT_4X4_50");
     cpm::init(argc, argv);
     cpm::aruco::CameraSimNode node(std::move(o));
-    cpm::cli::stop_on_signals();
-    node.run(cpm::cli::stop_requested);
-    std::printf("%s\n", node.stats_json().c_str());
-    std::fflush(stdout);
-    return 0;
+    return cpm::cli::run_node(node);
 }
 
 }  // namespace

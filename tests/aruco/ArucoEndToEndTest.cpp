@@ -133,25 +133,36 @@ TEST(ArucoEndToEnd, AFrameThatDisagreesWithTheCameraFileIsCountedAndTheNodeGoesO
         f.header().create_stamp().nanoseconds(cpm::get_time_ns());
         ASSERT_TRUE(frames.write(f));
     };
+    std::vector<ArucoMarkers> got;
+    auto answered = [&](size_t n) {
+        return cpm_test::wait_until([&] {
+            for (auto& m : markers.take()) got.push_back(m);
+            return got.size() >= n;
+        }, 2s);
+    };
+    // First a good (empty) frame until the node answers: both sides have matched (a best-effort
+    // sample written before the reader matched the writer is lost, and would not be counted).
+    bool up = false;
+    for (int i = 0; i < 20 && !up; ++i) {
+        send(640, 480, "mono8", 640 * 480);
+        up = answered(1);
+    }
+    ASSERT_TRUE(up) << node.errors();
+    const size_t good_before = got.size();
     send(320, 240, "mono8", 320 * 240);    // wrong size
     std::this_thread::sleep_for(200ms);
     send(640, 480, "yuv422", 640 * 480 * 2);  // unknown encoding
     std::this_thread::sleep_for(200ms);
     send(640, 480, "mono8", 100);          // too few bytes
     std::this_thread::sleep_for(200ms);
-    send(640, 480, "mono8", 640 * 480);    // a good (empty) frame
-    std::vector<ArucoMarkers> got;
-    EXPECT_TRUE(cpm_test::wait_until([&] {
-        for (auto& m : markers.take()) got.push_back(m);
-        return !got.empty();
-    }, 10s)) << node.errors();
-    ASSERT_EQ(got.size(), 1u);
-    EXPECT_TRUE(got[0].markers().empty());
+    send(640, 480, "mono8", 640 * 480);    // a good (empty) frame: the node still answers
+    EXPECT_TRUE(answered(good_before + 1)) << node.errors();
+    EXPECT_TRUE(got.back().markers().empty());
     node.kill(SIGINT);
     ASSERT_EQ(node.wait(10s), 0) << node.errors();
     auto stats = last_json_line(node.output());
     EXPECT_EQ(stats["bad_frames"].get<int>(), 3) << node.output();
-    EXPECT_EQ(stats["frames"].get<int>(), 1);
+    EXPECT_GE(stats["frames"].get<int>(), int(got.size()));  // one ArucoMarkers per good frame (best effort: some may not arrive)
     // Logged (at most once a second), naming what was wrong.
     EXPECT_NE(node.errors().find("320×240 px, the camera file says 640×480"), std::string::npos) << node.errors();
 }

@@ -7,8 +7,7 @@
 #include <cpm/aruco/GateCourse.hpp>
 #include <cpm/aruco/Renderer.hpp>
 #include <cpm/fsm/Loader.hpp>
-#include <cpm/vehicle/BridgeCore.hpp>
-#include <cpm/vehicle/FirmwareSim.hpp>
+#include "../fsm/ClosedLoopCar.hpp"
 
 #include <gtest/gtest.h>
 
@@ -31,8 +30,7 @@ struct Run
 Run drive(const vehicle::World& world, vehicle::Pose start, double seconds)
 {
     vehicle::VehicleParameters params;
-    vehicle::FirmwareSim car(params, world, start, 1, 1);
-    vehicle::BridgeCore bridge(1, vehicle::Calibration{}, start);
+    cpm_test::ClosedLoopCar car(params, world, start);
     const auto camera = aruco::Camera::load(std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/sim_640x480.yaml");
     aruco::Renderer renderer(world, camera, {.noise_sigma = 2, .seed = 3});
     aruco::MarkerDetector detector(camera, {}, aruco::MarkerSizes::from_world(world));
@@ -42,40 +40,20 @@ Run drive(const vehicle::World& world, vehicle::Pose start, double seconds)
     if (!loaded.ok()) return run;
     auto& machine = *loaded.machine;
     std::vector<fsm::MarkerSighting> seen;  // the newest frame's markers (one frame late)
-    uint64_t t_ns = 1'000'000'000;
     for (int cycle = 0; cycle < int(seconds * 50); ++cycle) {
-        for (int i = 0; i < 5; ++i) car.step();
-        t_ns += 20'000'000;
-        auto packet = car.make_state_packet();
-        fsm::Inputs in;
-        in.t = t_ns * 1e-9;
-        in.odometer = packet.odometer_steps / params.ticks_per_metre;
-        in.yaw = packet.imu_yaw_e4 * 1e-4;
-        in.speed = packet.speed_mm_s * 1e-3;
-        in.front = packet.us_front_mm * 1e-3;
-        in.left = packet.us_left_mm * 1e-3;
-        in.right = packet.us_right_mm * 1e-3;
+        fsm::Inputs in = car.step();
         in.markers = seen;
         if (cycle % 2 == 0) {
             seen.clear();
-            for (const auto& m : detector.observe(renderer.render(car.model().pose()))) {
+            for (const auto& m : detector.observe(renderer.render(car.pose()))) {
                 if (m.has_pose) seen.push_back({m.id, m.x, m.y, m.yaw, m.distance});
             }
         }
         auto out = machine.tick(in, 0.02);
-
-        vehicle::CommandInputs commands;
-        VehicleCommandDirect direct;
-        direct.vehicle_id(1);
-        direct.motor_throttle(out.throttle);
-        direct.steering_servo(out.steering);
-        direct.header().create_stamp().nanoseconds(t_ns);
-        commands.direct = {direct, 0, true};
-        auto frame = vehicle::encode_frame(bridge.on_state_packet(packet, t_ns, commands).command);
-        car.receive(frame.data(), frame.size());
-        run.path.push_back({in.t, car.model().pose()});
+        car.command(out);
+        run.path.push_back({in.t, car.pose()});
         if (std::getenv("GATE_TRACE") && cycle % 10 == 0) {
-            const auto& p = car.model().pose();
+            const auto& p = car.pose();
             std::string ids;
             for (const auto& m : in.markers) {
                 // Each marker's position as seen, in the world through the true pose.
@@ -87,12 +65,12 @@ Run drive(const vehicle::World& world, vehicle::Pose start, double seconds)
             std::printf("t %.1f state %d (%s) pose %.2f %.2f %.2f steer %.2f markers%s\n", in.t, machine.active().id(),
                         machine.active().type().c_str(), p.x, p.y, p.yaw, out.steering, ids.c_str());
         }
-        if (machine.in_final_state() && std::abs(car.model().speed()) < 1e-3) {
+        if (machine.in_final_state() && std::abs(car.car().model().speed()) < 1e-3) {
             run.stopped = true;
             break;
         }
     }
-    run.wall_hits = int(car.stats().wall_collisions);
+    run.wall_hits = int(car.car().stats().wall_collisions);
     return run;
 }
 

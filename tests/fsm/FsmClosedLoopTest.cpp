@@ -1,8 +1,7 @@
 // The shipped machines driving the simulated car (FirmwareSim, its vehicle model and rangers in
 // the shipped corridor) through the bridge's command path, in-process at 50 Hz, noise off.
 #include <cpm/fsm/Loader.hpp>
-#include <cpm/vehicle/BridgeCore.hpp>
-#include <cpm/vehicle/FirmwareSim.hpp>
+#include "ClosedLoopCar.hpp"
 
 #include <gtest/gtest.h>
 
@@ -28,8 +27,7 @@ std::vector<Step> drive(const std::string& machine_file, double seconds)
     vehicle::VehicleParameters params;
     params.imu_yaw_rate_noise = params.imu_acceleration_noise = params.ultrasonic_noise = 0;
     const vehicle::Pose start{0, -0.01, 0};
-    vehicle::FirmwareSim car(params, world, start, 1, 1);
-    vehicle::BridgeCore bridge(1, vehicle::Calibration{}, start);
+    cpm_test::ClosedLoopCar car(params, world, start);
     auto loaded = fsm::load_file(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/" + machine_file);
     EXPECT_TRUE(loaded.ok()) << (loaded.errors.empty() ? "" : loaded.errors[0].text());
     if (!loaded.ok()) return {};
@@ -37,39 +35,19 @@ std::vector<Step> drive(const std::string& machine_file, double seconds)
     const auto& mount = params.ultrasonic[2];
 
     std::vector<Step> trace;
-    uint64_t t_ns = 1'000'000'000;
     for (int cycle = 0; cycle < int(seconds * 50); ++cycle) {
-        for (int i = 0; i < 5; ++i) car.step();
-        t_ns += 20'000'000;
-        auto packet = car.make_state_packet();
-        fsm::Inputs in;
-        in.t = t_ns * 1e-9;
-        in.odometer = packet.odometer_steps / params.ticks_per_metre;
-        in.yaw = packet.imu_yaw_e4 * 1e-4;
-        in.speed = packet.speed_mm_s * 1e-3;
-        in.front = packet.us_front_mm * 1e-3;
-        in.left = packet.us_left_mm * 1e-3;
-        in.right = packet.us_right_mm * 1e-3;
+        const fsm::Inputs in = car.step();
         auto out = machine.tick(in, 0.02);
+        car.command(out);
 
-        vehicle::CommandInputs commands;
-        VehicleCommandDirect direct;
-        direct.vehicle_id(1);
-        direct.motor_throttle(out.throttle);
-        direct.steering_servo(out.steering);
-        direct.header().create_stamp().nanoseconds(t_ns);
-        commands.direct = {direct, 0, true};
-        auto frame = vehicle::encode_frame(bridge.on_state_packet(packet, t_ns, commands).command);
-        car.receive(frame.data(), frame.size());
-
-        const auto& pose = car.model().pose();
+        const auto& pose = car.pose();
         const double sensor_y = pose.y + std::sin(pose.yaw) * mount.x + std::cos(pose.yaw) * mount.y;
         trace.push_back({pose, machine.active().id(), out.steering, sensor_y + 0.6});
         if (std::getenv("FSM_TRACE") && cycle % 10 == 0) {
             std::printf("t %.1f state %d pose %.2f %.3f %.2f clearance %.3f right %.3f front %.2f steer %.2f\n", cycle * 0.02,
                         machine.active().id(), pose.x, pose.y, pose.yaw, trace.back().clearance, in.right, in.front, out.steering);
         }
-        if (machine.in_final_state() && std::abs(car.model().speed()) < 1e-3) break;
+        if (machine.in_final_state() && std::abs(car.car().model().speed()) < 1e-3) break;
     }
     return trace;
 }

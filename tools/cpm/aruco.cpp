@@ -21,7 +21,6 @@
 #include <chrono>
 #include <cstdio>
 #include <thread>
-#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -146,19 +145,7 @@ int camera_calibrate(const std::vector<std::string>& args)
     } catch (const cpm::Error& e) {
         throw UsageError(std::string("cpm camera calibrate: --board: ") + e.what());
     }
-    const std::string dir = parsed.get("--images");
-    std::error_code ec;
-    if (!std::filesystem::is_directory(dir, ec)) throw cpm::Error(dir + ": not a folder of images");
-    std::vector<std::string> images;
-    for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
-        std::string ext = entry.path().extension().string();
-        std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
-        if (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".tif" || ext == ".tiff" || ext == ".pgm") {
-            images.push_back(entry.path().string());
-        }
-    }
-    std::sort(images.begin(), images.end());
-    if (images.empty()) throw cpm::Error(dir + ": no images (.png, .jpg, .bmp, .tif, .pgm) in the folder");
+    const auto images = cpm::aruco::list_images(parsed.get("--images"));
     auto result = cpm::aruco::calibrate(images, board);
     for (const auto& s : result.skipped) std::fprintf(stderr, "skipped %s\n", s.c_str());
     result.camera.save(parsed.get("--out"));

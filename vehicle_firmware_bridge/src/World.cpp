@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <initializer_list>
 
 namespace cpm::vehicle {
 namespace {
@@ -24,6 +25,19 @@ double number_at(const json& j, const std::string& source, const std::string& wh
     double v = j.get<double>();
     if (!std::isfinite(v)) fail(source, where, "expected a finite number");
     return v;
+}
+
+/// Fails on a member of `object` that is not one of `known` (listed in the message).
+void only_members(const json& object, std::initializer_list<const char*> known, const std::string& source, const std::string& where)
+{
+    for (auto it = object.begin(); it != object.end(); ++it) {
+        bool ok = false;
+        for (auto* k : known) ok = ok || it.key() == k;
+        if (ok) continue;
+        std::string list;
+        for (auto* k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+        fail(source, where.empty() ? it.key() : where + "." + it.key(), "unknown member (known: " + list + ")");
+    }
 }
 
 std::vector<Segment> parse_walls(const json& walls, const std::string& source)
@@ -50,12 +64,7 @@ std::vector<Marker> parse_markers(const json& markers, const std::string& source
         std::string where = "markers[" + std::to_string(i) + "]";
         const json& m = markers[i];
         if (!m.is_object()) fail(source, where, "expected an object, got " + m.dump());
-        for (auto it = m.begin(); it != m.end(); ++it) {
-            static const char* known[] = {"id", "x", "y", "yaw", "size", "z"};
-            bool ok = false;
-            for (auto* k : known) ok = ok || it.key() == k;
-            if (!ok) fail(source, where + "." + it.key(), "unknown member (known: id, x, y, yaw, size, z)");
-        }
+        only_members(m, {"id", "x", "y", "yaw", "size", "z"}, source, where);
         Marker marker;
         if (!m.contains("id") || !m["id"].is_number_integer()) fail(source, where + ".id", "expected an integer id");
         marker.id = m["id"].get<int>();
@@ -83,9 +92,7 @@ std::vector<Gate> parse_gates(const json& gates, const std::vector<Marker>& mark
         std::string where = "gates[" + std::to_string(i) + "]";
         const json& g = gates[i];
         if (!g.is_object()) fail(source, where, "expected an object, got " + g.dump());
-        for (auto it = g.begin(); it != g.end(); ++it) {
-            if (it.key() != "left" && it.key() != "right") fail(source, where + "." + it.key(), "unknown member (known: left, right)");
-        }
+        only_members(g, {"left", "right"}, source, where);
         Gate gate;
         for (auto [name, field] : {std::pair{"left", &gate.left}, {"right", &gate.right}}) {
             if (!g.contains(name) || !g[name].is_number_integer()) fail(source, where + "." + name, "expected a marker id");
@@ -141,11 +148,7 @@ World World::parse(const std::string& json_text, const std::string& source)
         throw Error(source + ": not valid JSON (" + e.what() + ")");
     }
     if (!j.is_object()) fail(source, "$", "expected an object with \"walls\", \"markers\" and \"gates\"");
-    for (auto it = j.begin(); it != j.end(); ++it) {
-        if (it.key() != "walls" && it.key() != "markers" && it.key() != "gates") {
-            fail(source, it.key(), "unknown member (known: walls, markers, gates)");
-        }
-    }
+    only_members(j, {"walls", "markers", "gates"}, source, "");
     std::vector<Segment> walls = j.contains("walls") ? parse_walls(j["walls"], source) : std::vector<Segment>{};
     std::vector<Marker> markers = j.contains("markers") ? parse_markers(j["markers"], source) : std::vector<Marker>{};
     std::vector<Gate> gates = j.contains("gates") ? parse_gates(j["gates"], markers, source) : std::vector<Gate>{};

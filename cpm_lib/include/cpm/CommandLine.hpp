@@ -2,6 +2,7 @@
 #include <cpm/Error.hpp>
 
 #include <cstdint>
+#include <cstdio>
 #include <functional>
 #include <map>
 #include <string>
@@ -89,5 +90,17 @@ bool stop_requested();
 /// with exit code 1.
 int run_main(int argc, char** argv, const char* program, const char* help,
              const std::function<int(int, char**)>& run);
+
+/// A node program's life after its setup: runs `node.run(stop_requested)` until SIGINT or
+/// SIGTERM (or the node ends by itself), then prints `node.stats_json()` as one line on stdout.
+template <class Node>
+int run_node(Node& node)
+{
+    stop_on_signals();
+    node.run(stop_requested);
+    std::printf("%s\n", node.stats_json().c_str());
+    std::fflush(stdout);
+    return 0;
+}
 
 }  // namespace cpm::cli
