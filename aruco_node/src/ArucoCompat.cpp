@@ -100,16 +100,16 @@ void Detector::detect(const cv::Mat& gray, std::vector<int>& ids, std::vector<st
 {
     cv::aruco::detectMarkers(gray, impl_->dictionary->cv, impl_->corners, ids, impl_->parameters);
     if (impl_->subpixel) {
-        // Each marker's corners with a window of about 0.45 of its bit's side (along its most
-        // foreshortened edge) (at most
-        // subpixel_window): a larger one reaches the inner bits' corners and pulls the corner
-        // off by a pixel or more on small markers.
+        // Corners from lines fitted to the marker's edges; where an edge cannot be located,
+        // cornerSubPix with a window of about 0.45 of a bit's side along the most foreshortened
+        // edge (at most subpixel_window): a larger one reaches the inner bits' corners and pulls
+        // the corner off by a pixel or more on small markers.
         const double cells = impl_->dictionary->cv->markerSize + 2;
         for (auto& quad : impl_->corners) {
+            if (refine_corners_by_edges(gray, quad, int(cells))) continue;
             double shortest = 1e9;
             for (int k = 0; k < 4; ++k) shortest = std::min(shortest, double(cv::norm(quad[k] - quad[(k + 1) % 4])));
             const int window = std::clamp(int(std::lround(0.45 * shortest / cells)), 1, std::max(1, impl_->max_window));
-            if (refine_corners_by_edges(gray, quad, int(cells))) continue;
             cv::cornerSubPix(gray, quad, cv::Size(window, window), cv::Size(-1, -1),
                              cv::TermCriteria(cv::TermCriteria::MAX_ITER | cv::TermCriteria::EPS, 30, 0.01));
         }

@@ -25,8 +25,8 @@ int dictionary_size(const Dictionary& dictionary);
 /// The detector parameters cpm exposes (OpenCV's defaults otherwise).
 struct DetectorSettings
 {
-    bool subpixel = true;         ///< sub-pixel corners, window ≈ 0.45 × each marker's bit side
-    int subpixel_window = 5;      ///< px, the largest window (half side, as cornerSubPix's winSize)
+    bool subpixel = true;         ///< sub-pixel corners: lines fitted to the edges (cornerSubPix where that fails)
+    int subpixel_window = 5;      ///< px, cornerSubPix's largest window (half side, its winSize)
     bool aruco3 = false;          ///< useAruco3Detection (multi-scale)
     double min_perimeter_rate = 0.03;
     // Two threshold scales (5, 15 px) instead of OpenCV's three (3, 13, 23) and 6 px per cell

@@ -19,8 +19,8 @@ namespace cpm::aruco {
 struct DetectorOptions
 {
     std::string dictionary = "DICT_4X4_50";
-    bool subpixel = true;      ///< sub-pixel corner refinement, a window per marker (≈ 0.45 × its bit's side)
-    int subpixel_window = 5;   ///< px, the largest window (half side)
+    bool subpixel = true;      ///< sub-pixel corners: lines fitted to the marker's edges, met at the corners
+    int subpixel_window = 5;   ///< px, the largest window of the fallback (cornerSubPix), half side
     bool aruco3 = false;       ///< OpenCV's multi-scale ArUco3 search
 };
 
