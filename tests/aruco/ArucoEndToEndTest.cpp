@@ -20,6 +20,7 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/videoio.hpp>
 
 #include <cmath>
 #include <csignal>
@@ -234,6 +235,34 @@ TEST(ArucoEndToEnd, ImagesReplayedFromAFolderGiveOneArucoMarkersEach)
     EXPECT_EQ(stats["frames"].get<int>(), 5) << node.output();
     EXPECT_GE(got.size(), 4u);  // the first may go out before the reader matched (best effort)
     for (const auto& m : got) EXPECT_GE(m.markers().size(), 2u);
+    std::filesystem::remove_all(dir);
+}
+
+TEST(ArucoEndToEnd, AVideoFileIsReplayedFrameByFrame)
+{
+    // A recorded drive as a video (Motion-JPEG in AVI, which OpenCV writes and reads by itself).
+    const auto dir = temp_dir("video");
+    const auto video = (dir / "drive.avi").string();
+    {
+        cpm::aruco::Renderer renderer(cpm::vehicle::World::load(kGates), cpm::aruco::Camera::load(kCamera));
+        cv::VideoWriter writer(video, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 5.0, cv::Size(640, 480), false);
+        ASSERT_TRUE(writer.isOpened());
+        for (int i = 0; i < 6; ++i) writer.write(renderer.render({1.0 + 0.1 * i, 0.1, 0.2}));
+    }
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<ArucoMarkers> markers(participant, "arucoMarkers", {.keep_all = true});
+    Process node({built_program("aruco_node"), "--vehicle_id", "5", "--camera", kCamera, "--world", kGates, "--video", video});
+    EXPECT_EQ(node.wait(30s), 0) << node.errors();  // it ends with the video
+    std::vector<ArucoMarkers> got;
+    cpm_test::wait_until([&] {
+        for (auto& m : markers.take()) got.push_back(m);
+        return got.size() >= 5;
+    }, 5s);
+    auto stats = last_json_line(node.output());
+    EXPECT_EQ(stats["frames"].get<int>(), 6) << node.output();
+    EXPECT_EQ(stats["bad_frames"].get<int>(), 0);
+    EXPECT_GE(got.size(), 5u);  // the first may go out before the writer matched (best effort)
+    for (const auto& m : got) EXPECT_GE(m.markers().size(), 2u);  // the first gate, through JPEG
     std::filesystem::remove_all(dir);
 }
 
