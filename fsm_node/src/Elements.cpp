@@ -111,8 +111,9 @@ class FollowWallRamp : public BasicFollowWall
 {
 public:
     FollowWallRamp(int id, const Params& p, const Settings& s)
-        : BasicFollowWall(id, "FollowWallRamp", p, s), target_clearance_(p["target_clearance"].get<double>()),
-          distance_(p["distance"].get<double>())
+        : BasicFollowWall(id, "FollowWallRamp", p, s), configured_clearance_(p["target_clearance"].get<double>()),
+          configured_distance_(p["distance"].get<double>()), target_clearance_(configured_clearance_),
+          distance_(configured_distance_)
     {
     }
     void on_enter(const Inputs& in) override
@@ -120,6 +121,8 @@ public:
         BasicFollowWall::on_enter(in);
         start_clearance_ = side_range(in, side_);
         done_ = false;
+        target_clearance_ = configured_clearance_;  // a target, if any, comes after entry
+        distance_ = configured_distance_;
     }
     Output tick(const Inputs& in, double) override
     {
@@ -141,7 +144,7 @@ public:
     }
 
 private:
-    double target_clearance_, distance_, start_clearance_ = 0;
+    double configured_clearance_, configured_distance_, target_clearance_, distance_, start_clearance_ = 0;
     bool done_ = false;
 };
 
@@ -153,13 +156,14 @@ std::optional<Target> gate_centre(const Inputs& in, int a, int b, double range);
 /// target, and with `lookahead` > 0 the car follows the line through the target along that
 /// direction (pure pursuit, aiming `lookahead` m ahead on the line), so that it arrives facing
 /// the gate; it then finishes once it is level with the point and faces along the line (within
-/// 0.05 rad; not yet facing it, it follows the line on to 0.3 m before the target). With `track` it re-aims at the
-/// gate whenever the camera sees both of its markers again (nearer is more precise).
+/// 0.05 rad; not yet facing it, it follows the line on to 0.3 m before the target). With
+/// `track` it re-aims at the gate whenever the camera sees both of its markers again (nearer
+/// is more precise). Entered without a target, it drives to its own x, y again.
 class ApproachPoint : public State
 {
 public:
     ApproachPoint(int id, const Params& p, const Settings& s)
-        : State(id, "ApproachPoint"), tx_(p["x"].get<double>()), ty_(p["y"].get<double>()),
+        : State(id, "ApproachPoint"), x0_(p["x"].get<double>()), y0_(p["y"].get<double>()), tx_(x0_), ty_(y0_),
           tolerance_(p["tolerance"].get<double>()), throttle_(p["speed"].get<double>() * s.throttle_per_speed),
           gain_(p["steering_gain"].get<double>()), before_(p["before"].get<double>()), lookahead_(p["lookahead"].get<double>()),
           track_(p["track"].get<bool>())
@@ -172,6 +176,11 @@ public:
         yaw0_ = in.yaw;
         odo_ = in.odometer;
         done_ = false;
+        // A target, if any, comes after entry (set_target); until then the state's own point.
+        tx_ = x0_;
+        ty_ = y0_;
+        line_ = false;
+        gate_.reset();
     }
     Output tick(const Inputs& in, double) override
     {
@@ -229,7 +238,7 @@ private:
     }
 
     static constexpr double kAligned = 0.05;  // rad
-    double tx_, ty_, tolerance_, throttle_, gain_, before_, lookahead_;
+    double x0_, y0_, tx_, ty_, tolerance_, throttle_, gain_, before_, lookahead_;
     bool track_;
     std::optional<Target> gate_;
     double dx_ = 1, dy_ = 0;

@@ -201,6 +201,29 @@ TEST(FsmEngine, AGateIsApproachedAlongItsLineToAPointInFrontOfItAndFollowedWhile
     EXPECT_EQ(sut->active().id(), 2);  // level with the point, facing the gate: finished
 }
 
+TEST(FsmEngine, AStateEnteredAgainWithoutATargetGoesBackToItsOwnPoint)
+{
+    // ApproachPoint 1 is entered first with a gate as target, then again by a plain transition:
+    // the second time it drives to its own point (1, 0), not to the old gate.
+    auto sut = machine(R"({"root": 0,
+        "states": [{"id": 0, "type": "Motor", "speed": 0.3},
+                   {"id": 1, "type": "ApproachPoint", "x": 1.0, "y": 0.0, "speed": 0.3, "tolerance": 0.05},
+                   {"id": 2, "type": "Motor", "speed": 0.3, "distance": 0.1}],
+        "transitions": [{"id": 0, "type": "ArucoGateFound", "from": 0, "to": 1, "marker_a": 3, "marker_b": 4, "range": 3.0},
+                        {"id": 1, "type": "Timeout", "from": 1, "to": 2, "seconds": 0.05},
+                        {"id": 2, "type": "Finished", "from": 2, "to": 1}]})");
+    Inputs in = at(0, 0);
+    in.markers = {{3, 2.0, 1.4, M_PI, 2.4}, {4, 2.0, 0.6, M_PI, 2.1}};  // a gate up to the left
+    sut->tick(in, 0.02);
+    ASSERT_EQ(sut->active().id(), 1);
+    EXPECT_GT(sut->tick(at(0.02, 0.0), 0.02).steering, 0.3);  // towards the gate: left
+    sut->tick(at(0.1, 0.0), 0.02);  // timeout → Motor
+    ASSERT_EQ(sut->active().id(), 2);
+    sut->tick(at(0.12, 0.2), 0.02);  // Motor's 0.1 m done → back into ApproachPoint, no target
+    ASSERT_EQ(sut->active().id(), 1);
+    EXPECT_NEAR(sut->tick(at(0.14, 0.2), 0.02).steering, 0.0, 1e-9);  // straight ahead to (1, 0)
+}
+
 TEST(FsmEngine, TheGateDirectionComesFromTheTwoMarkersPositions)
 {
     // Both markers report a facing 20° off (a single marker's facing is noisy); the target's
