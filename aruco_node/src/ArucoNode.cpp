@@ -61,11 +61,8 @@ cv::Mat frame_image(const CameraFrame& frame, const Camera& camera, std::string&
         why = "encoding '" + enc + "' (known: mono8, bgr8)";
         return {};
     }
-    if (int(frame.width()) != camera.width || int(frame.height()) != camera.height) {
-        why = std::to_string(frame.width()) + "×" + std::to_string(frame.height()) + " px, the camera file says " +
-              std::to_string(camera.width) + "×" + std::to_string(camera.height);
-        return {};
-    }
+    why = camera.size_mismatch(int(frame.width()), int(frame.height()));
+    if (!why.empty()) return {};
     if (frame.data().size() != size_t(frame.width()) * frame.height() * channels) {
         why = std::to_string(frame.data().size()) + " bytes of data for " + std::to_string(frame.width()) + "×" +
               std::to_string(frame.height()) + " " + enc;
@@ -182,10 +179,8 @@ void ArucoNode::run(const std::function<bool()>& stop_requested)
             d.bad_frame(d.source->current() + ": cannot read the image");
             continue;
         }
-        if (gray.cols != d.options.camera.width || gray.rows != d.options.camera.height) {
-            d.bad_frame(d.source->current() + ": " + std::to_string(gray.cols) + "×" + std::to_string(gray.rows) + " px" +
-                        ", the camera file says " + std::to_string(d.options.camera.width) + "×" +
-                        std::to_string(d.options.camera.height));
+        if (const std::string why = d.options.camera.size_mismatch(gray.cols, gray.rows); !why.empty()) {
+            d.bad_frame(d.source->current() + ": " + why);
             continue;
         }
         d.process(gray, get_time_ns());

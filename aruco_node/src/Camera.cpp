@@ -100,6 +100,13 @@ Camera Camera::ideal(int width, int height, double horizontal_fov, CameraMount m
     return c;
 }
 
+std::string Camera::size_mismatch(int image_width, int image_height) const
+{
+    if (image_width == width && image_height == height) return "";
+    return std::to_string(image_width) + "×" + std::to_string(image_height) + " px, the camera file says " + std::to_string(width) +
+           "×" + std::to_string(height);
+}
+
 cv::Matx33d Camera::car_from_camera_rotation() const
 {
     // A camera looking along the car's x axis: its x (right) is the car's -y, its y (down) the

@@ -1,7 +1,7 @@
 #include "FrameSource.hpp"
 
 #include <cpm/Error.hpp>
-#include <cpm/aruco/Renderer.hpp>
+#include <cpm/aruco/Images.hpp>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>

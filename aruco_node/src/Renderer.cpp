@@ -5,13 +5,10 @@
 #include <cpm/Error.hpp>
 
 #include <opencv2/calib3d.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
-#include <filesystem>
 
 namespace cpm::aruco {
 
@@ -185,35 +182,6 @@ void Renderer::render(const vehicle::Pose& car, cv::Mat& frame, std::vector<Rend
         sum += noise;
         sum.convertTo(frame, CV_8U);
     }
-}
-
-void write_image(const std::string& path, const cv::Mat& image)
-{
-    bool ok = false;
-    try {
-        ok = cv::imwrite(path, image);
-    } catch (const cv::Exception& e) {
-        throw Error(path + ": cannot write the image (" + e.err + ")");
-    }
-    if (!ok) throw Error(path + ": cannot write the image");
-}
-
-std::vector<std::string> list_images(const std::string& folder)
-{
-    std::error_code ec;
-    if (!std::filesystem::is_directory(folder, ec)) throw Error(folder + ": not a folder of images");
-    std::vector<std::string> files;
-    for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
-        std::string ext = entry.path().extension().string();
-        std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-        for (const char* known : {".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff"}) {
-            if (ext == known) files.push_back(entry.path().string());
-        }
-    }
-    if (ec) throw Error(folder + ": cannot list the folder (" + ec.message() + ")");
-    if (files.empty()) throw Error(folder + ": no images (.png, .jpg, .bmp, .pgm, .ppm, .tif) in the folder");
-    std::sort(files.begin(), files.end());
-    return files;
 }
 
 }  // namespace cpm::aruco

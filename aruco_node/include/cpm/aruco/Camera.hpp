@@ -34,6 +34,10 @@ struct Camera
     /// field of view, radians.
     static Camera ideal(int width, int height, double horizontal_fov, CameraMount mount = {});
 
+    /// Empty when an image of width × height px is this camera's; else what disagrees:
+    /// "320×240 px, the camera file says 640×480".
+    std::string size_mismatch(int image_width, int image_height) const;
+
     double fx() const { return camera_matrix(0, 0); }
     double fy() const { return camera_matrix(1, 1); }
 

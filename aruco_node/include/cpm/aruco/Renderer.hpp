@@ -1,5 +1,6 @@
 #pragma once
 #include <cpm/aruco/Camera.hpp>
+#include <cpm/aruco/Images.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 #include <cpm/vehicle/World.hpp>
 
@@ -64,13 +65,5 @@ private:
     RenderOptions options_;
     std::unique_ptr<Impl> impl_;
 };
-
-/// Writes an image (the format from the file's extension: .png, .jpg, …); throws cpm::Error
-/// naming `path` when it cannot.
-void write_image(const std::string& path, const cv::Mat& image);
-
-/// The images in a folder (.png, .jpg, .jpeg, .bmp, .pgm, .ppm, .tif, .tiff), in name order.
-/// Throws cpm::Error naming the folder when it is not one or holds no image.
-std::vector<std::string> list_images(const std::string& folder);
 
 }  // namespace cpm::aruco
