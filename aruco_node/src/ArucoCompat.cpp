@@ -41,11 +41,13 @@ cv::Ptr<cv::aruco::DetectorParameters> parameters(const DetectorSettings& s)
     // every marker, which misplaces the corners of small ones (fixed in 4.9).
     p->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;
     p->useAruco3Detection = s.aruco3;
-    p->minMarkerPerimeterRate = s.min_perimeter_rate;
-    p->adaptiveThreshWinSizeMin = s.adaptive_window_min;
-    p->adaptiveThreshWinSizeMax = s.adaptive_window_max;
-    p->adaptiveThreshWinSizeStep = s.adaptive_window_step;
-    p->perspectiveRemovePixelPerCell = s.pixels_per_cell;
+    // Two threshold scales (5, 15 px) instead of OpenCV's three (3, 13, 23) and 6 px per cell
+    // when reading the bits (OpenCV: 4): measured on noisy, blurred markers of 20-30 px,
+    // 88 % → 97 % found (bench/aruco), no slower, still no false marker in 1000 cluttered
+    // frames (8 px per cell found 99 % but one false marker). bench/aruco's plain reference
+    // uses the same two values.
+    p->adaptiveThreshWinSizeMin = 5;
+    p->perspectiveRemovePixelPerCell = 6;
     return p;
 }
 
@@ -65,13 +67,6 @@ std::shared_ptr<const Dictionary> dictionary(const std::string& name)
     std::string list;
     for (const auto& [known, id] : kDictionaries) list += (list.empty() ? "" : ", ") + std::string(known);
     throw Error("unknown dictionary '" + name + "' (known: " + list + ")");
-}
-
-std::vector<std::string> dictionary_names()
-{
-    std::vector<std::string> out;
-    for (const auto& entry : kDictionaries) out.emplace_back(entry.first);
-    return out;
 }
 
 int marker_bits(const Dictionary& dictionary) { return dictionary.cv->markerSize; }
@@ -133,8 +128,6 @@ cv::Mat draw_charuco(const CharucoSpec& spec, cv::Size size, int margin)
     board(spec)->draw(size, out, margin, 1);
     return out;
 }
-
-std::vector<cv::Point3f> charuco_corners(const CharucoSpec& spec) { return board(spec)->chessboardCorners; }
 
 void find_charuco(const cv::Mat& gray, const CharucoSpec& spec, std::vector<int>& ids, std::vector<cv::Point2f>& corners)
 {

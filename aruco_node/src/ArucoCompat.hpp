@@ -15,26 +15,17 @@ namespace cpm::aruco::compat {
 /// Throws cpm::Error naming the name and listing the known ones.
 struct Dictionary;
 std::shared_ptr<const Dictionary> dictionary(const std::string& name);
-/// The known names.
-std::vector<std::string> dictionary_names();
 /// Bits per side of the dictionary's markers (4 for DICT_4X4_*).
 int marker_bits(const Dictionary& dictionary);
 /// How many markers it has (ids 0 .. size-1).
 int dictionary_size(const Dictionary& dictionary);
 
-/// The detector parameters cpm exposes (OpenCV's defaults otherwise).
+/// The detector parameters cpm exposes (the others: see parameters() in the .cpp).
 struct DetectorSettings
 {
     bool subpixel = true;         ///< sub-pixel corners: lines fitted to the edges (cornerSubPix where that fails)
     int subpixel_window = 5;      ///< px, cornerSubPix's largest window (half side, its winSize)
     bool aruco3 = false;          ///< useAruco3Detection (multi-scale)
-    double min_perimeter_rate = 0.03;
-    // Two threshold scales (5, 15 px) instead of OpenCV's three (3, 13, 23) and 6 px per cell
-    // when reading the bits (OpenCV: 4): measured on noisy, blurred markers of 20-30 px,
-    // 88 % → 97 % found (bench/aruco), no slower, still no false marker in 1000 cluttered
-    // frames (8 px per cell found 99 % but one false marker).
-    int adaptive_window_min = 5, adaptive_window_max = 23, adaptive_window_step = 10;
-    int pixels_per_cell = 6;
 };
 
 /// Detector state: the dictionary and OpenCV's parameter object, made once.
@@ -65,8 +56,6 @@ struct CharucoSpec
 };
 /// The board as an image of `size` px with `margin` px of white around it.
 cv::Mat draw_charuco(const CharucoSpec& spec, cv::Size size, int margin);
-/// The board's chessboard corners in the board frame (metres, z = 0), indexed by corner id.
-std::vector<cv::Point3f> charuco_corners(const CharucoSpec& spec);
 /// The chessboard corners found in one image (ids and sub-pixel positions); empty when fewer
 /// than `min_markers` markers are seen.
 void find_charuco(const cv::Mat& gray, const CharucoSpec& spec, std::vector<int>& ids, std::vector<cv::Point2f>& corners);

@@ -94,14 +94,15 @@ struct ArucoNode::Impl
     void process(const cv::Mat& gray, uint64_t exposure_ns)
     {
         const uint64_t start = get_time_ns();
-        ArucoMarkers message;
-        {
-            std::lock_guard<std::mutex> lock(mutex);
-            message = markers_message(detector, options.vehicle_id, gray, exposure_ns, &counts);
-        }
+        // Counted aside and added under the lock afterwards: stats() never waits for a detection.
+        ArucoNodeStats frame;
+        const ArucoMarkers message = markers_message(detector, options.vehicle_id, gray, exposure_ns, &frame);
         (void)writer.write(message);
         const uint64_t done = get_time_ns();
         std::lock_guard<std::mutex> lock(mutex);
+        counts.frames += frame.frames;
+        counts.markers += frame.markers;
+        counts.unknown_size += frame.unknown_size;
         processing_ns.push_back(done - start);
         latency_ns.push_back(done > exposure_ns ? done - exposure_ns : 0);
         if (processing_ns.size() > 100000) {  // bounded: keep the newest

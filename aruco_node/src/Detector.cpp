@@ -125,6 +125,4 @@ bool MarkerDetector::estimate_pose(MarkerObservation& m, double size) const
     return true;
 }
 
-std::vector<std::string> dictionary_names() { return compat::dictionary_names(); }
-
 }  // namespace cpm::aruco

@@ -55,8 +55,9 @@ public:
         if (!capture_.isOpened()) {
             throw Error(path + ": cannot open the " + std::string(device ? "camera device (is it a V4L2 capture device?)" : "video file"));
         }
-        double fps = capture_.get(cv::CAP_PROP_FPS);
-        pace_ = Pace(device || !(fps > 0) ? 1000 : fps);
+        // A video is replayed at its own rate (unknown: as fast as it decodes); a device paces itself.
+        const double fps = capture_.get(cv::CAP_PROP_FPS);
+        if (!device) pace_ = Pace(fps > 0 ? fps : 1000);
     }
     cv::Mat next() override
     {

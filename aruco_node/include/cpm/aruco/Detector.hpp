@@ -74,7 +74,4 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-/// The known dictionary names (for --help and errors).
-std::vector<std::string> dictionary_names();
-
 }  // namespace cpm::aruco
