@@ -238,10 +238,16 @@ nlohmann::json last_json_line(const std::string& output)
     return last;
 }
 
-double speed_between(const VehicleObservation& a, const VehicleObservation& b)
+/// Mean speed along the observed path: its length over the time its stamps span.
+double mean_speed(const std::vector<VehicleObservation>& points)
 {
-    double dt = double(b.header().create_stamp().nanoseconds() - a.header().create_stamp().nanoseconds()) * 1e-9;
-    return std::hypot(b.pose().x() - a.pose().x(), b.pose().y() - a.pose().y()) / dt;
+    double length = 0;
+    for (size_t i = 1; i < points.size(); ++i) {
+        length += std::hypot(points[i].pose().x() - points[i - 1].pose().x(), points[i].pose().y() - points[i - 1].pose().y());
+    }
+    double dt = double(points.back().header().create_stamp().nanoseconds() -
+                       points.front().header().create_stamp().nanoseconds()) * 1e-9;
+    return length / dt;
 }
 
 class VehicleEndToEnd : public ::testing::Test
@@ -264,7 +270,7 @@ TEST_F(VehicleEndToEnd, SpeedCurvatureCommandDrivesACircleOfTheCommandedRadius)
     auto points = watch.observations_between(t0, cpm::get_time_ns());
     ASSERT_GT(points.size(), 100u);
     EXPECT_NEAR(fitted_radius(points), 0.8, 0.08);
-    EXPECT_NEAR(speed_between(points.front(), points[10]), 1.0, 0.1);
+    EXPECT_NEAR(mean_speed(points), 1.0, 0.1);
 }
 
 TEST_F(VehicleEndToEnd, DirectCommandOverridesATrajectoryUntilItIsStale)
@@ -303,12 +309,37 @@ TEST_F(VehicleEndToEnd, DirectCommandOverridesATrajectoryUntilItIsStale)
     EXPECT_LT(std::hypot(observed.back().pose().x(), observed.back().pose().y()), 0.05);  // held where it stood
 
     override_.reset();
-    std::this_thread::sleep_for(1500ms);  // the direct command is stale after 1 s
-    // The trajectory's again: the car drives after the left-turning path, steering left (no
-    // command at all would be steering 0 and throttle 0; the direct one, -1 and 0).
-    const auto back = watch.states().back();
-    EXPECT_GT(back.steering_servo(), 0.05);  // measured 0.12-0.16
-    EXPECT_GT(back.motor_throttle(), 0.0);
+    // The direct command is stale after 1 s; then the trajectory's again. The car, 3 s behind
+    // its reference, catches up on the left-turning circle: steering left on the whole (no
+    // command at all would be steering 0 and throttle 0; the direct one, -1 and 0) and on the
+    // circle x^2 + (y - 1)^2 = 1 two seconds later.
+    const uint64_t released = cpm::get_time_ns();
+    uint64_t t_free = 0;
+    ASSERT_TRUE(cpm_test::wait_until(
+        [&] {
+            for (auto& s : watch.states()) {
+                if (s.header().create_stamp().nanoseconds() > released && s.steering_servo() != -1.0) {
+                    t_free = s.header().create_stamp().nanoseconds();
+                    return true;
+                }
+            }
+            return false;
+        },
+        3s));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return !watch.observations_between(t_free + 2 * kSecond, UINT64_MAX).empty(); }, 5s));
+    double steering_sum = 0, throttle_sum = 0;
+    size_t n = 0;
+    for (auto& s : watch.states()) {
+        const uint64_t t = s.header().create_stamp().nanoseconds();
+        if (t < t_free || t >= t_free + 2 * kSecond) continue;
+        steering_sum += s.steering_servo(), throttle_sum += s.motor_throttle(), ++n;
+    }
+    ASSERT_GT(n, 50u);
+    EXPECT_GT(steering_sum / double(n), 0.05);
+    EXPECT_GT(throttle_sum / double(n), 0.0);
+    const auto on = watch.observations_between(t_free + 2 * kSecond, UINT64_MAX).front().pose();
+    EXPECT_NEAR(std::hypot(on.x(), on.y() - 1.0), 1.0, 0.1) << on.x() << ", " << on.y();
+    EXPECT_GT(std::hypot(on.x(), on.y()), 0.5);  // and it left the place it was held at
 }
 
 TEST_F(VehicleEndToEnd, TrajectoryLineThenArcIsFollowedWithinFiveCentimetres)
@@ -418,7 +449,7 @@ TEST_F(VehicleEndToEnd, CorruptBytesOnTheLineAreSurvivedBothWays)
         << watch.states_created_after(t0) - watch.states_created_after(t0 + kSecond);
     auto recent = watch.observations_between(t0, t0 + kSecond / 2);
     ASSERT_GT(recent.size(), 10u);
-    EXPECT_NEAR(speed_between(recent.front(), recent.back()), 0.5, 0.1);  // and still driving
+    EXPECT_NEAR(mean_speed(recent), 0.5, 0.1);  // and still driving
 
     car.bridge->kill(SIGTERM);
     car.sim->kill(SIGTERM);

@@ -54,7 +54,7 @@ struct FirmwareSimNode::Impl
     }
     void trace(uint64_t now);
     void tick(uint64_t t_nominal);
-    void publish_and_see_others();
+    void publish_and_see_others(uint64_t t_model);
     void report_collisions();
     void publish_loop();
 
@@ -116,12 +116,15 @@ void FirmwareSimNode::Impl::report_collisions()
     }
 }
 
-void FirmwareSimNode::Impl::publish_and_see_others()
+void FirmwareSimNode::Impl::publish_and_see_others(uint64_t t_model)
 {
     uint64_t now = get_time_ns();
     if (!sim.drop_observation()) {
+        // Stamped with the model time the pose belongs to, not the moment a late tick ran: a
+        // loaded machine delays the tick, not the car, and a speed computed from the stamps
+        // must not see that delay.
         VehicleObservation o;
-        stamp_message(o, now, 0);
+        stamp_message(o, t_model, 0);
         o.vehicle_id(options.vehicle_id);
         auto pose = sim.observed_pose();
         o.pose().x(pose.x);
@@ -176,7 +179,7 @@ void FirmwareSimNode::Impl::tick(uint64_t t_nominal)
             frame[corruption() % frame.size()] ^= uint8_t(1 + corruption() % 255);
         }
         write_line(frame);
-        publish_and_see_others();
+        publish_and_see_others(t_nominal);
     }
     trace(get_time_ns());
 }
