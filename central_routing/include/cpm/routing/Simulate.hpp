@@ -1,0 +1,53 @@
+#pragma once
+// The planner against ideal cars that follow their plans exactly: no DDS, as fast as it runs.
+// What `cpm routing simulate` prints, and what the tests and the benchmark measure.
+#include <cpm/routing/Planner.hpp>
+
+#include <string>
+#include <vector>
+
+namespace cpm::routing {
+
+struct SimulationOptions
+{
+    size_t vehicles = 4;
+    double duration = 60;     ///< s of simulated time
+    double period = 0.4;      ///< s between planning cycles
+    double sample = 0.02;     ///< s between the distance checks
+    PlannerOptions planner;   ///< its seed also places the cars
+};
+
+struct SimulationSummary
+{
+    size_t vehicles = 0;
+    double duration_s = 0;
+    size_t collisions = 0;        ///< times two bodies began to overlap
+    double min_distance_m = 0;    ///< between any two bodies at any sample
+    double max_wait_s = 0;        ///< the longest any car stood still
+    bool stalled = false;         ///< a car stood still for more than 10 s
+    std::vector<double> distance_m;  ///< per car, in id order
+    double throughput_per_min = 0;   ///< cars into the busiest conflict zone per minute
+    double plan_ms_p50 = 0, plan_ms_p99 = 0;
+    // Beyond the printed line, for tests and benchmarks:
+    double max_speed = 0, max_acceleration = 0;  ///< over every car's plan at every sample
+    double mean_delay = 0;        ///< time taken over free-flow time at v_max, less one, mean over cars
+    size_t busiest_zone = 0;
+    std::vector<double> plan_ms;  ///< every cycle's planning time
+
+    /// One JSON object in one line, the fields `cpm routing simulate --json` prints.
+    std::string to_json() const;
+};
+
+/// Start poses for n cars on the graph: outside the conflict zones, no two within the planner's
+/// margin of each other (and 0.1 m more), chosen by the seed. Throws cpm::Error when n cars do not fit.
+
+std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed);
+
+/// Places the cars (ids 1..n, at spread_cars unless `starts` gives their poses) and runs.
+SimulationSummary simulate(const LaneGraph& graph, const SimulationOptions& options, const std::vector<Pose>& starts = {});
+
+/// The same loop on a planner the caller set up (its cars placed, goals set): for tests that
+/// build their own situations. `observe` (optional) sees every sample's time.
+SimulationSummary simulate(Planner& planner, const SimulationOptions& options);
+
+}  // namespace cpm::routing
