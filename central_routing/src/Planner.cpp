@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <limits>
 
 namespace cpm::routing {
@@ -13,6 +12,7 @@ namespace {
 
 constexpr double kFollowTolerance = 0.10;  // m between a car's measured and planned position
 constexpr double kSpeedTolerance = 0.25;   // m/s between its measured and planned speed
+constexpr double kMoving = 0.05;           // m/s: a car faster than this drives
 
 }  // namespace
 
@@ -42,7 +42,8 @@ struct Planner::Car
     std::vector<uint32_t> at_step;   // the sample the car occupies at each step (current plan)
     std::vector<double> fs, fv;      // fallback: the previous plan, carried to this cycle
     double key = 0;                  // priority: smaller plans first
-    bool off_plan = false;           // measured too far from its plan: it brakes, the others keep clear
+    bool distrusted = false;         // measured off its plan: the others plan around it braking
+    std::vector<uint32_t> braking_at_step;  // where it would be, braking from where it is measured
 };
 
 struct Planner::Impl
@@ -220,19 +221,25 @@ void Planner::Impl::prepare(Car& c, double t, const CarState* m)
     if (!c.ps.empty()) evaluate(c, t, s, v);
     const double s_plan = s;
     const double v_plan = v;
-    c.off_plan = false;
     if (m) {
         if (auto located = locate(c, m->pose, s_plan)) {
             s = *located;
             v = std::clamp(m->speed, 0.0, o.v_max);
             // A car that does not follow its plan (stopped by hand, slipping, held by its
-            // controller) cannot be relied on to: it brakes where it is, and the others plan around that.
-            if (c.ps.size() > 1 && (std::abs(s - s_plan) > kFollowTolerance || std::abs(v - v_plan) > kSpeedTolerance)) {
-                c.off_plan = true;
+            // controller) cannot be relied on: the others plan around it as if it braked where
+            // it is, until it is seen driving as planned again. It is still sent its plan.
+            const bool off = c.ps.size() > 1 && (std::abs(s - s_plan) > kFollowTolerance || std::abs(v - v_plan) > kSpeedTolerance);
+            if (off && !c.distrusted) {
                 char buf[200];
-                std::snprintf(buf, sizeof buf, "vehicle %d: %.2f m and %.2f m/s off its plan; it brakes and is planned around",
+                std::snprintf(buf, sizeof buf, "vehicle %d: %.2f m and %.2f m/s off its plan; planned around as braking until it follows again",
                               c.id, s - s_plan, v - v_plan);
                 warnings.push_back(buf);
+            }
+            if (off) {
+                c.distrusted = true;
+            } else if (c.distrusted && v >= kMoving) {
+                c.distrusted = false;
+                warnings.push_back("vehicle " + std::to_string(c.id) + ": follows its plan again");
             }
         } else {
             char buf[200];
@@ -251,7 +258,7 @@ void Planner::Impl::prepare(Car& c, double t, const CarState* m)
         c.fv[k] = fv;
     }
     c.fv[0] = v;
-    if (c.ps.size() == 1 || c.off_plan) {  // a car that joins (moving or not), or left its plan: brake
+    if (c.ps.size() == 1 || c.distrusted) {  // a car that joins (moving or not), or left its plan: brake
         for (size_t k = 1; k <= steps; ++k) {
             c.fv[k] = std::max(0.0, c.fv[k - 1] - o.a_max * o.dt);
             c.fs[k] = c.fs[k - 1] + (c.fv[k - 1] + c.fv[k]) / 2 * o.dt;
@@ -264,6 +271,7 @@ void Planner::Impl::prepare(Car& c, double t, const CarState* m)
     c.ps = c.fs;
     c.pv = c.fv;
     record_steps(c);
+    c.braking_at_step = c.at_step;
     // Priority: the earliest it could reach its next conflict zone, less the time it has waited.
     if (v < 0.01) {
         if (std::isnan(c.standing_since)) c.standing_since = t;
@@ -309,9 +317,13 @@ void Planner::Impl::mark_blocked(const Car& c, const std::vector<const Car*>& be
                 if (size_t(i) < here) behind = true;
             }
             if (pinned && behind) continue;
-            for (size_t k = 0; k <= steps; ++k) {
-                for (uint32_t n : table.conflicts(other->at_step[std::min(k, other->at_step.size() - 1)])) {
-                    for (int32_t i = window_head[n]; i >= 0; i = window_next[size_t(i)]) blocked[k * w + size_t(i)] = 1;
+            // A distrusted car planned before this one: both its plan and its braking.
+            for (const auto* occupied : {&other->at_step, other->distrusted ? &other->braking_at_step : nullptr}) {
+                if (!occupied || occupied->empty()) continue;
+                for (size_t k = 0; k <= steps; ++k) {
+                    for (uint32_t n : table.conflicts((*occupied)[std::min(k, occupied->size() - 1)])) {
+                        for (int32_t i = window_head[n]; i >= 0; i = window_next[size_t(i)]) blocked[k * w + size_t(i)] = 1;
+                    }
                 }
             }
         }
@@ -385,11 +397,14 @@ void Planner::Impl::plan_cooperative(Car& c)
             }
         }
         if (taken) continue;
-        if (on_fallback) {
+        // No safe way on (another car did not do what it was planned to): keep to the previous
+        // plan while that meets no one, else brake.
+        if (on_fallback && !blocked_at(c, k + 1, c.fs[k + 1])) {
             ps.push_back(c.fs[k + 1]), pv.push_back(c.fv[k + 1]);
         } else {
             const double v1 = std::max(0.0, v - a * dt);
             ps.push_back(s + (v + v1) / 2 * dt), pv.push_back(v1);
+            on_fallback = false;
         }
     }
     c.ps = std::move(ps);
@@ -471,13 +486,12 @@ void Planner::Impl::plan_cycle(double t, const std::vector<CarState>& measured)
     }
     if (o.mode == Mode::Cooperative) {
         std::stable_sort(order.begin(), order.end(), [](const Car* a, const Car* b) {
-            if (a->off_plan != b->off_plan) return a->off_plan;
+            if (a->distrusted != b->distrusted) return b->distrusted;  // the distrusted plan last
             return a->key < b->key || (a->key == b->key && a->id < b->id);
         });
     }
     for (size_t i = 0; i < order.size(); ++i) {
         Car& c = *order[i];
-        if (c.off_plan) continue;  // its braking fallback is its plan
         std::vector<const Car*> before(order.begin(), order.begin() + long(i));
         std::vector<const Car*> after;
         if (o.mode == Mode::Cooperative) after.assign(order.begin() + long(i) + 1, order.end());
@@ -577,6 +591,19 @@ PlanSample Planner::sample(int id, double t) const
     const size_t i = d.route_index(c, s);
     out.edge = c.route[i];
     out.edge_s = s - c.route_s0[i];
+    return out;
+}
+
+std::vector<TrajectorySample> Planner::trajectory(int id, double from, double step) const
+{
+    std::vector<TrajectorySample> out;
+    const double end = plan_end();
+    for (size_t k = 0;; ++k) {
+        const double t = from + double(k) * step;
+        if (t > end + 1e-9) break;
+        const auto p = sample(id, t);
+        out.push_back({t, p.pose.x, p.pose.y, p.speed * std::cos(p.pose.yaw), p.speed * std::sin(p.pose.yaw)});
+    }
     return out;
 }
 

@@ -51,7 +51,7 @@ void RoutingNode::Impl::cycle(uint64_t t_ns)
         if (!fresh) {
             if (planner.has_car(id)) {
                 planner.remove_car(id);
-                CPM_LOG_WARN("central_routing: vehicle %u dropped from planning: %s", unsigned(id),
+                CPM_LOG_WARN("vehicle %u dropped from planning: %s", unsigned(id),
                              result.valid ? ("its state is " + std::to_string(result.age_ns / 1'000'000) + " ms old").c_str()
                                           : "no state");
             }
@@ -63,10 +63,10 @@ void RoutingNode::Impl::cycle(uint64_t t_ns)
             try {
                 planner.add_car(id, pose, s.speed());
                 off_graph.erase(id);
-                CPM_LOG_INFO("central_routing: vehicle %u taken into planning at x %.3f y %.3f yaw %.3f", unsigned(id), pose.x,
+                CPM_LOG_INFO("vehicle %u taken into planning at x %.3f y %.3f yaw %.3f", unsigned(id), pose.x,
                              pose.y, pose.yaw);
             } catch (const cpm::Error& e) {
-                if (off_graph.insert(id).second) CPM_LOG_ERROR("central_routing: %s; not planned until it is on a lane", e.what());
+                if (off_graph.insert(id).second) CPM_LOG_ERROR("%s; not planned until it is on a lane", e.what());
                 continue;
             }
         }
@@ -77,15 +77,15 @@ void RoutingNode::Impl::cycle(uint64_t t_ns)
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     plan_ms.push_back(ms);
     ++cycles;
-    for (const auto& w : planner.warnings()) CPM_LOG_WARN("central_routing: %s", w.c_str());
+    for (const auto& w : planner.warnings()) CPM_LOG_WARN("%s", w.c_str());
     for (int id : planner.car_ids()) send(uint8_t(id), t_ns, t);
     const double d = planner.min_planned_distance();
     if (std::isfinite(d)) min_distance = std::min(min_distance, d);
     if (ms * 1e6 > double(options.period_ns)) {
         ++overruns;
-        CPM_LOG_WARN("central_routing: planning took %.1f ms, longer than the period of %.0f ms", ms, double(options.period_ns) * 1e-6);
+        CPM_LOG_WARN("planning took %.1f ms, longer than the period of %.0f ms", ms, double(options.period_ns) * 1e-6);
     }
-    CPM_LOG_DEBUG("central_routing: cycle %zu: %zu cars planned in %.2f ms, smallest planned distance %.3f m", cycles,
+    CPM_LOG_DEBUG("cycle %zu: %zu cars planned in %.2f ms, smallest planned distance %.3f m", cycles,
                   planner.car_ids().size(), ms, std::isfinite(d) ? d : -1.0);
 }
 
@@ -95,21 +95,19 @@ void RoutingNode::Impl::send(uint8_t id, uint64_t t_ns, double t)
     stamp_message(command, t_ns, 0);
     command.vehicle_id(id);
     std::vector<TrajectoryPoint> points;
-    const double end = planner.plan_end();
-    for (double at = t; at <= end + 1e-9; at += options.trajectory_step) {
-        const auto p = planner.sample(id, at);
+    for (const auto& p : planner.trajectory(id, t, options.trajectory_step)) {
         TrajectoryPoint point;
-        point.t().nanoseconds(t_ns + uint64_t(std::llround((at - t) * 1e9)));
-        point.px(p.pose.x);
-        point.py(p.pose.y);
-        point.vx(p.speed * std::cos(p.pose.yaw));
-        point.vy(p.speed * std::sin(p.pose.yaw));
+        point.t().nanoseconds(t_ns + uint64_t(std::llround((p.t - t) * 1e9)));
+        point.px(p.x);
+        point.py(p.y);
+        point.vx(p.vx);
+        point.vy(p.vy);
         points.push_back(point);
     }
     command.trajectory_points(std::move(points));
     if (!trajectories.write(command)) {
         ++refused_writes;
-        CPM_LOG_WARN("central_routing: DDS refused vehicle %u's trajectory", unsigned(id));
+        CPM_LOG_WARN("DDS refused vehicle %u's trajectory", unsigned(id));
     }
 }
 

@@ -41,7 +41,7 @@ std::string SimulationSummary::to_json() const
     return j.dump();
 }
 
-std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed)
+std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed, double gap)
 {
     std::vector<uint32_t> candidates;
     for (uint32_t i = 0; i < table.sample_count(); ++i) {
@@ -58,7 +58,7 @@ std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t see
         const auto& near = table.conflicts(c);
         bool free = !taken[c] && std::none_of(near.begin(), near.end(), [&](uint32_t n) { return taken[n]; }) &&
                     std::all_of(placed.begin(), placed.end(),
-                                [&](const Pose& q) { return footprint_distance(o.footprint, p, q) >= o.margin + 0.1; });
+                                [&](const Pose& q) { return footprint_distance(o.footprint, p, q) >= o.margin + gap; });
         if (!free) continue;
         placed.push_back(p);
         taken[c] = true;
@@ -70,10 +70,24 @@ std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t see
     return placed;
 }
 
+size_t central_zone(const ConflictTable& table)
+{
+    double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+    for (const auto& n : table.graph().nodes) {
+        x0 = std::min(x0, n.p.x()), y0 = std::min(y0, n.p.y()), x1 = std::max(x1, n.p.x()), y1 = std::max(y1, n.p.y());
+    }
+    const Vec2 middle((x0 + x1) / 2, (y0 + y1) / 2);
+    size_t best = 0;
+    for (size_t z = 0; z < table.zones().size(); ++z) {
+        if ((table.zones()[z].centre - middle).norm() < (table.zones()[best].centre - middle).norm()) best = z;
+    }
+    return best;
+}
+
 SimulationSummary simulate(const LaneGraph& graph, const SimulationOptions& options, const std::vector<Pose>& starts)
 {
     Planner planner(graph, options.planner);
-    const auto poses = starts.empty() ? spread_cars(planner.conflicts(), options.vehicles, options.planner.seed) : starts;
+    const auto poses = starts.empty() ? spread_cars(planner.conflicts(), options.vehicles, options.planner.seed, options.start_gap) : starts;
     for (size_t i = 0; i < poses.size(); ++i) planner.add_car(int(i + 1), poses[i]);
     return simulate(planner, options);
 }
@@ -101,6 +115,15 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
         const auto t0 = std::chrono::steady_clock::now();
         planner.plan(t_cycle);
         out.plan_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+        // What central_routing would send: points 0.1 s apart from now to the plan's end.
+        for (int id : ids) {
+            const auto points = planner.trajectory(id, t_cycle, 0.1);
+            for (size_t k = 1; k < points.size(); ++k) {
+                out.max_point_spacing = std::max(out.max_point_spacing, std::hypot(points[k].x - points[k - 1].x, points[k].y - points[k - 1].y));
+            }
+            const double reach = points.empty() ? 0 : points.back().t - t_cycle;
+            out.min_reach_s = cycle == 0 && id == ids.front() ? reach : std::min(out.min_reach_s, reach);
+        }
         for (size_t k = 1; k <= samples_per_cycle; ++k) {
             const double t = t_cycle + double(k) * options.sample;
             if (t > options.duration + 1e-9) break;
@@ -137,6 +160,7 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
     }
     for (size_t i = 0; i < n; ++i) out.distance_m.push_back(last_s[i] - start_s[i]);
     out.stalled = out.max_wait_s > 10.0;
+    out.zone_entries = zone_entries;
     if (!zone_entries.empty()) {
         out.busiest_zone = size_t(std::max_element(zone_entries.begin(), zone_entries.end()) - zone_entries.begin());
         out.throughput_per_min = double(zone_entries[out.busiest_zone]) / (options.duration / 60.0);

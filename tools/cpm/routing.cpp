@@ -26,7 +26,7 @@ const char* kRenderHelp =
 
 const char* kSimulateHelp =
     "usage: cpm routing simulate --lanes FILE --vehicles N --duration T [--seed S] [--mode M]\n"
-    "                            [--period P] [--margin M] [--v-max V] [--json]\n"
+    "                            [--period P] [--margin M] [--v-max V] [--start-gap G] [--json]\n"
     "\n"
     "Runs the central planner against ideal cars that follow their plans exactly (no DDS, as\n"
     "fast as it can), N cars placed by the seed, for T of simulated time (e.g. 60s), and prints\n"
@@ -34,7 +34,8 @@ const char* kSimulateHelp =
     "max_wait_s (longest standstill), stalled (a car stood over 10 s), distance_m (per car),\n"
     "throughput_per_min (cars into the busiest conflict zone), plan_ms_p50, plan_ms_p99.\n"
     "--mode cooperative (default) or cpm_lab (cpm_lab's fixed-priority speed capping, the\n"
-    "baseline). --period defaults to 400ms, --margin to 0.05 m, --v-max to 1.0 m/s.\n"
+    "baseline). --period defaults to 400ms, --margin to 0.05 m, --v-max to 1.0 m/s; the cars start\n"
+    "outside conflict zones, their bodies at least the margin and --start-gap (0.1 m) apart.\n"
     "--json prints the summary as one JSON line.\n";
 
 /// Loads a graph, printing its errors; nullopt when it has any.
@@ -81,7 +82,8 @@ int routing_simulate(const std::vector<std::string>& args)
 {
     const auto parsed = parse_flags(args,
                                     {{"--lanes", true}, {"--vehicles", true}, {"--duration", true}, {"--seed", true},
-                                     {"--mode", true}, {"--period", true}, {"--margin", true}, {"--v-max", true}, {"--json", false}},
+                                     {"--mode", true}, {"--period", true}, {"--margin", true}, {"--v-max", true}, {"--start-gap", true},
+                                     {"--json", false}},
                                     "cpm routing simulate");
     for (const char* required : {"--lanes", "--vehicles", "--duration"}) {
         if (!parsed.has(required)) throw UsageError(std::string("cpm routing simulate: ") + required + " is required");
@@ -99,6 +101,7 @@ int routing_simulate(const std::vector<std::string>& args)
     }
     if (parsed.has("--seed")) options.planner.seed = uint64_t(cpm::cli::parse_integer("--seed", parsed.get("--seed"), 0, 1ll << 53));
     if (parsed.has("--margin")) options.planner.margin = cpm::cli::parse_number("--margin", parsed.get("--margin"), 0, 1);
+    if (parsed.has("--start-gap")) options.start_gap = cpm::cli::parse_number("--start-gap", parsed.get("--start-gap"), 0, 10);
     if (parsed.has("--v-max")) options.planner.v_max = cpm::cli::parse_number("--v-max", parsed.get("--v-max"), 0.1, 3);
     if (parsed.has("--mode")) {
         auto mode = cpm::routing::mode_from_string(parsed.get("--mode"));

@@ -5,6 +5,7 @@
 #include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/aruco/Camera.hpp>
+#include <cpm/routing/Simulate.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 
 #include <chrono>
@@ -20,6 +21,7 @@ namespace {
 
 const char* const kVehicleSimHelp =
     "usage: cpm vehicle sim --id N [--count K] [--map FILE] [--start X,Y,YAW] [--spacing M]\n"
+    "                       [--lanes FILE [--seed S]]\n"
     "                       [--params FILE] [--calibration FILE] [--camera FILE [--camera-rate HZ]]\n"
     "                       [--dds_domain N]\n"
     "\n"
@@ -28,17 +30,26 @@ const char* const kVehicleSimHelp =
     "serial line. The car publishes vehicleState, rangeSensors and vehicleObservation and obeys\n"
     "vehicleCommand* for its id. With --count K, cars N .. N+K-1 share one world, each --spacing\n"
     "metres (default 0.6) behind the previous one along the start heading; their rangers see\n"
-    "each other. With --camera FILE (a camera file; needs --map), each car also gets a synthetic\n"
+    "each other. With --lanes FILE (a lane graph) the cars are spread over its lanes instead, as\n"
+    "`cpm routing simulate` spreads them (outside conflict zones, chosen by --seed, default 1),\n"
+    "ready for central_routing. With --camera FILE (a camera file; needs --map), each car also gets a synthetic\n"
     "camera (camera_sim) publishing cameraFrame at --camera-rate Hz (default 30) from its true\n"
     "pose; run aruco_node to turn the frames into arucoMarkers. Runs until Ctrl-C, then prints\n"
     "each process's statistics (JSON lines).\n";
+
+std::string pose_text(double x, double y, double yaw)
+{
+    char text[96];
+    std::snprintf(text, sizeof text, "%.6f,%.6f,%.6f", x, y, yaw);
+    return text;
+}
 
 int vehicle_sim(const std::vector<std::string>& args)
 {
     auto parsed = cpm::cli::parse_flags(args,
                                        {{"--id", true}, {"--count", true}, {"--map", true}, {"--start", true},
                                         {"--spacing", true}, {"--params", true}, {"--calibration", true},
-                                        {"--camera", true}, {"--camera-rate", true}},
+                                        {"--camera", true}, {"--camera-rate", true}, {"--lanes", true}, {"--seed", true}},
                                        "cpm vehicle sim");
     if (!parsed.has("--id")) throw cpm::cli::UsageError("cpm vehicle sim: --id is required (the vehicle id, 1..255)");
     long long first = cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255);
@@ -52,6 +63,21 @@ int vehicle_sim(const std::vector<std::string>& args)
     cpm::cli::parse_number("--camera-rate", camera_rate, 0.1, 1000);
     auto start = cpm::vehicle::parse_pose("--start", parsed.get("--start", "0,0,0"));
     double x0 = start.x, y0 = start.y, yaw = start.yaw;
+    // Start poses: a row behind --start, or spread over a lane graph as central_routing's
+    // simulation spreads them (outside conflict zones, by the seed).
+    std::vector<std::string> poses;
+    if (parsed.has("--lanes")) {
+        if (parsed.has("--start")) throw cpm::cli::UsageError("cpm vehicle sim: give --start or --lanes, not both");
+        const auto graph = cpm::routing::load_lane_graph_or_throw(parsed.get("--lanes"));
+        const cpm::routing::ConflictTable table(graph, {});
+        const auto seed = uint64_t(cpm::cli::parse_integer("--seed", parsed.get("--seed", "1"), 0, 1ll << 53));
+        for (const auto& p : cpm::routing::spread_cars(table, size_t(count), seed)) poses.push_back(pose_text(p.x, p.y, p.yaw));
+    } else {
+        if (parsed.has("--seed")) throw cpm::cli::UsageError("cpm vehicle sim: --seed places cars on --lanes; give --lanes too");
+        for (long long k = 0; k < count; ++k) {
+            poses.push_back(pose_text(x0 - double(k) * spacing * std::cos(yaw), y0 - double(k) * spacing * std::sin(yaw), yaw));
+        }
+    }
 
     // One name a child: "firmware_sim 3", "vehicle_bridge 3". A deque: references stay valid.
     std::deque<std::pair<std::string, cpm::ChildProcess>> children;
@@ -93,8 +119,7 @@ int vehicle_sim(const std::vector<std::string>& args)
     const std::string camera_sim = parsed.has("--camera") ? cpm::sibling_executable("camera_sim") : "";
     for (long long k = 0; k < count; ++k) {
         const std::string id = std::to_string(first + k);
-        char pose[96];
-        std::snprintf(pose, sizeof pose, "%.6f,%.6f,%.6f", x0 - k * spacing * std::cos(yaw), y0 - k * spacing * std::sin(yaw), yaw);
+        const std::string& pose = poses[size_t(k)];
         std::vector<std::string> sim_argv{firmware_sim, "--vehicle_id", id, "--start", pose};
         for (const char* flag : {"--map", "--params"}) {
             if (parsed.has(flag)) sim_argv.insert(sim_argv.end(), {flag, parsed.get(flag)});
@@ -109,7 +134,7 @@ int vehicle_sim(const std::vector<std::string>& args)
         const int sim_pid = sim.pid();
         cpm::ChildProcess& bridge = launch("vehicle_bridge " + id, bridge_argv, false);
         std::printf("vehicle %s: firmware_sim pid %d on %s, vehicle_bridge pid %d, start %s\n", id.c_str(), sim_pid, device.c_str(),
-                    bridge.pid(), pose);
+                    bridge.pid(), pose.c_str());
         if (!camera_sim.empty()) {
             cpm::ChildProcess& camera = launch("camera_sim " + id, {camera_sim, "--vehicle_id", id, "--camera", parsed.get("--camera"),
                                                                     "--map", parsed.get("--map"), "--rate", camera_rate},

@@ -50,6 +50,13 @@ struct CarState
     double speed = 0;
 };
 
+/// A point of a trajectory as VehicleCommandTrajectory carries it.
+struct TrajectorySample
+{
+    double t = 0;  ///< s, planner time
+    double x = 0, y = 0, vx = 0, vy = 0;
+};
+
 /// A point of a car's plan at a time: where, heading, speed.
 struct PlanSample
 {
@@ -84,6 +91,8 @@ public:
 
     /// A car's plan at time t (held at its ends).
     PlanSample sample(int id, double t) const;
+    /// A car's plan as trajectory points every `step` seconds from `from` to the plan's end.
+    std::vector<TrajectorySample> trajectory(int id, double from, double step) const;
     /// The time the current plans start at and reach to.
     double plan_start() const;
     double plan_end() const;

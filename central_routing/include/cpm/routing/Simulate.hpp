@@ -14,6 +14,7 @@ struct SimulationOptions
     double duration = 60;     ///< s of simulated time
     double period = 0.4;      ///< s between planning cycles
     double sample = 0.02;     ///< s between the distance checks
+    double start_gap = 0.1;   ///< m between the cars' bodies at the start, beyond the margin
     PlannerOptions planner;   ///< its seed also places the cars
 };
 
@@ -30,18 +31,23 @@ struct SimulationSummary
     double plan_ms_p50 = 0, plan_ms_p99 = 0;
     // Beyond the printed line, for tests and benchmarks:
     double max_speed = 0, max_acceleration = 0;  ///< over every car's plan at every sample
+    double max_point_spacing = 0;  ///< m between the trajectory points sent (0.1 s apart)
+    double min_reach_s = 0;        ///< the least time ahead a sent trajectory covered
     double mean_delay = 0;        ///< time taken over free-flow time at v_max, less one, mean over cars
     size_t busiest_zone = 0;
+    std::vector<size_t> zone_entries;  ///< cars into each conflict zone (ConflictTable::zones order)
     std::vector<double> plan_ms;  ///< every cycle's planning time
 
     /// One JSON object in one line, the fields `cpm routing simulate --json` prints.
     std::string to_json() const;
 };
 
-/// Start poses for n cars on the graph: outside the conflict zones, no two within the planner's
-/// margin of each other (and 0.1 m more), chosen by the seed. Throws cpm::Error when n cars do not fit.
+/// Start poses for n cars on the graph: outside the conflict zones, their bodies at least the
+/// margin and `gap` apart, chosen by the seed. Throws cpm::Error when n cars do not fit.
+std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed, double gap = 0.1);
 
-std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed);
+/// The conflict zone nearest the middle of the map (the central intersection of a lab map).
+size_t central_zone(const ConflictTable& table);
 
 /// Places the cars (ids 1..n, at spread_cars unless `starts` gives their poses) and runs.
 SimulationSummary simulate(const LaneGraph& graph, const SimulationOptions& options, const std::vector<Pose>& starts = {});

@@ -1,0 +1,206 @@
+// Real processes: simulated cars (firmware_sim + vehicle_bridge behind ptys) driven by
+// central_routing over DDS, judged by the simulator's true poses (vehicleObservation); a car
+// off the graph, a car that goes silent, and bad input.
+#include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/routing/Conflicts.hpp>
+
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+
+#include <VehicleObservation.h>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <thread>
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+using cpm_test::Process;
+
+namespace {
+
+const std::string kRoot = CPM_SOURCE_DIR;
+const std::string kLanes = kRoot + "/scenarios/lanes/intersection.json";
+
+/// Every observation of every car, collected while `run` lasts.
+std::map<int, std::vector<VehicleObservation>> watch(cpm::ReaderAbstract<VehicleObservation>& reader, std::chrono::seconds run)
+{
+    std::map<int, std::vector<VehicleObservation>> seen;
+    const auto end = std::chrono::steady_clock::now() + run;
+    while (std::chrono::steady_clock::now() < end) {
+        for (auto& o : reader.take()) seen[o.vehicle_id()].push_back(o);
+        std::this_thread::sleep_for(20ms);
+    }
+    return seen;
+}
+
+double path_length(const std::vector<VehicleObservation>& track)
+{
+    double d = 0;
+    for (size_t i = 1; i < track.size(); ++i) {
+        d += std::hypot(track[i].pose().x() - track[i - 1].pose().x(), track[i].pose().y() - track[i - 1].pose().y());
+    }
+    return d;
+}
+
+/// The longest time a car stayed within 2 cm of one place.
+double longest_standstill(const std::vector<VehicleObservation>& track)
+{
+    double longest = 0;
+    size_t anchor = 0;
+    for (size_t i = 1; i < track.size(); ++i) {
+        if (std::hypot(track[i].pose().x() - track[anchor].pose().x(), track[i].pose().y() - track[anchor].pose().y()) > 0.02) {
+            anchor = i;
+            continue;
+        }
+        longest = std::max(longest, double(track[i].header().create_stamp().nanoseconds() -
+                                           track[anchor].header().create_stamp().nanoseconds()) * 1e-9);
+    }
+    return longest;
+}
+
+cpm::vehicle::Pose pose_of(const VehicleObservation& o) { return {o.pose().x(), o.pose().y(), o.pose().yaw()}; }
+
+std::string log_text(const Process& p) { return p.output() + p.errors(); }
+
+}  // namespace
+
+TEST(RoutingEndToEnd, EightCarsDriveTwoMinutesWithoutTouchingAndNoneStandsLong)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
+    Process cars({built_program("cpm"), "vehicle", "sim", "--id", "1", "--count", "8", "--lanes", kLanes});
+    Process routing({built_program("central_routing"), "--vehicle_ids", "1,2,3,4,5,6,7,8", "--lanes", kLanes, "--no-wait-for-start"});
+    const auto seen = watch(observations, 120s);
+    routing.kill(SIGINT);
+    ASSERT_EQ(routing.wait(10s), 0) << log_text(routing);
+    cars.kill(SIGINT);
+    cars.wait(15s);
+
+    ASSERT_EQ(seen.size(), 8u) << log_text(cars);
+    // At every 20 ms of the run, the bodies of every two cars (their newest poses, at most
+    // 40 ms old) do not overlap.
+    const cpm::routing::Footprint body;
+    uint64_t t0 = UINT64_MAX, t1 = 0;
+    for (const auto& [id, track] : seen) {
+        t0 = std::min(t0, track.front().header().create_stamp().nanoseconds());
+        t1 = std::max(t1, track.back().header().create_stamp().nanoseconds());
+    }
+    std::map<int, size_t> next;
+    double closest = 1e9;
+    size_t checked = 0;
+    for (uint64_t t = t0; t <= t1; t += 20'000'000) {
+        std::vector<cpm::vehicle::Pose> now;
+        for (const auto& [id, track] : seen) {
+            size_t& i = next[id];
+            while (i + 1 < track.size() && track[i + 1].header().create_stamp().nanoseconds() <= t) ++i;
+            const uint64_t stamp = track[i].header().create_stamp().nanoseconds();
+            if (stamp <= t && t - stamp <= 40'000'000) now.push_back(pose_of(track[i]));
+        }
+        for (size_t a = 0; a < now.size(); ++a) {
+            for (size_t b = a + 1; b < now.size(); ++b) closest = std::min(closest, cpm::routing::footprint_distance(body, now[a], now[b]));
+        }
+        checked += now.size() == 8;
+    }
+    EXPECT_GT(checked, 5000u);  // of about 6000 instants, all eight cars known
+    EXPECT_GT(closest, 0.0) << "two cars' bodies overlapped";
+    for (const auto& [id, track] : seen) {
+        EXPECT_GE(path_length(track), 20.0) << "vehicle " << id;
+        EXPECT_LE(longest_standstill(track), 10.0) << "vehicle " << id;
+    }
+    std::printf("closest bodies %.3f m\n", closest);
+}
+
+TEST(RoutingEndToEnd, ACarOnNoLaneIsLoggedWithItsPoseAndTheOthersAreServed)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
+    Process on_lane({built_program("cpm"), "vehicle", "sim", "--id", "1", "--lanes", kLanes});
+    Process off_lane({built_program("cpm"), "vehicle", "sim", "--id", "2", "--start", "8,8,0"});
+    Process routing({built_program("central_routing"), "--vehicle_ids", "1,2", "--lanes", kLanes, "--no-wait-for-start"});
+    const auto seen = watch(observations, 12s);
+    EXPECT_TRUE(cpm_test::wait_until([&] { return log_text(routing).find("vehicle 2 at x 8.000 y 8.000 yaw 0.000 is on no lane") != std::string::npos; }, 5s))
+        << log_text(routing);
+    ASSERT_TRUE(seen.count(1));
+    EXPECT_GT(path_length(seen.at(1)), 3.0);  // car 1 drives all the same
+    routing.kill(SIGINT);
+    EXPECT_EQ(routing.wait(10s), 0);
+}
+
+TEST(RoutingEndToEnd, ACarThatGoesSilentIsDroppedAndTakenBackWhenItReturns)
+{
+    Process cars({built_program("cpm"), "vehicle", "sim", "--id", "3", "--lanes", kLanes});
+    Process routing({built_program("central_routing"), "--vehicle_ids", "3", "--lanes", kLanes, "--no-wait-for-start"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return log_text(routing).find("vehicle 3 taken into planning") != std::string::npos; }, 15s))
+        << log_text(routing);
+    cars.kill(SIGSTOP);  // the simulator and bridge freeze: no more vehicleState
+    const bool dropped = cpm_test::wait_until([&] { return log_text(routing).find("vehicle 3 dropped from planning") != std::string::npos; }, 5s);
+    cars.kill(SIGCONT);
+    EXPECT_TRUE(dropped) << log_text(routing);
+    EXPECT_TRUE(cpm_test::wait_until([&] {
+        const std::string log = log_text(routing);
+        const auto drop = log.find("dropped from planning");
+        return drop != std::string::npos && log.find("vehicle 3 taken into planning", drop) != std::string::npos;
+    }, 10s)) << log_text(routing);
+    routing.kill(SIGINT);
+    EXPECT_EQ(routing.wait(10s), 0);
+}
+
+TEST(RoutingEndToEnd, BadFilesAndFlagsAreNamedAndExitNonZero)
+{
+    const auto dir = std::filesystem::temp_directory_path() / ("cpm_routing_e2e_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir);
+    const std::string bad = (dir / "bad_lanes.json").string();
+    std::ofstream(bad) << R"({"lane_width": 0.3, "nodes": [{"id": 1, "x": 0, "y": 0, "yaw": 0}],
+                            "edges": [{"from": 1, "to": 7, "points": [[0, 0], [0.04, 0]]}]})";
+    struct Case
+    {
+        std::vector<std::string> argv;
+        std::string says;
+    };
+    const std::vector<Case> cases{
+        {{built_program("central_routing"), "--vehicle_ids", "1", "--lanes", bad}, "$.edges[0].to: node 7 does not exist"},
+        {{built_program("central_routing"), "--vehicle_ids", "1", "--lanes", kLanes, "--period", "30ms"}, "--period 30ms"},
+        {{built_program("central_routing"), "--vehicle_ids", "1,0", "--lanes", kLanes}, "--vehicle_ids"},
+        {{built_program("central_routing"), "--lanes", kLanes}, "--vehicle_ids is required"},
+        {{built_program("central_routing"), "--vehicle_ids", "1", "--lanes", kLanes, "--mode", "fastest"}, "--mode fastest"},
+        {{built_program("cpm"), "routing", "check", bad}, "$.edges[0].to: node 7 does not exist"},
+        {{built_program("cpm"), "routing", "render", kLanes, "--out", (dir / "map.gif").string()}, "must end in .svg or .png"},
+        {{built_program("cpm"), "routing", "simulate", "--lanes", kLanes, "--vehicles", "500", "--duration", "1s"}, "--vehicles"},
+        {{built_program("cpm"), "routing", "simulate", "--lanes", kLanes, "--vehicles", "80", "--duration", "1s"}, "cars fit on this lane graph"},
+        {{built_program("cpm"), "vehicle", "sim", "--id", "1", "--lanes", kLanes, "--start", "0,0,0"}, "--start or --lanes"},
+    };
+    for (const auto& c : cases) {
+        Process p(c.argv);
+        const int code = p.wait(20s);
+        std::string line;
+        for (const auto& a : c.argv) line += a + " ";
+        EXPECT_NE(code, 0) << line;
+        EXPECT_NE(log_text(p).find(c.says), std::string::npos) << line << "\n" << log_text(p);
+    }
+    std::filesystem::remove_all(dir);
+}
+
+TEST(RoutingEndToEnd, CheckAndRenderTheLabMap)
+{
+    const auto png = std::filesystem::temp_directory_path() / ("cpm_routing_map_" + std::to_string(::getpid()) + ".svg");
+    Process check({built_program("cpm"), "routing", "check", kLanes});
+    ASSERT_EQ(check.wait(20s), 0) << log_text(check);
+    EXPECT_NE(check.output().find("ok (32 nodes, 38 edges"), std::string::npos) << check.output();
+    Process render({built_program("cpm"), "routing", "render", kLanes, "--out", png.string()});
+    ASSERT_EQ(render.wait(20s), 0) << log_text(render);
+    std::ifstream in(png);
+    const std::string svg((std::istreambuf_iterator<char>(in)), {});
+    EXPECT_NE(svg.find("<svg"), std::string::npos);
+    EXPECT_NE(svg.find(">31</text>"), std::string::npos);  // node ids are drawn
+    EXPECT_NE(svg.find("#e4572e"), std::string::npos);     // and the conflict zones
+    std::filesystem::remove(png);
+}

@@ -1,0 +1,39 @@
+// The planner on the lab map for N = 1..20 cars and five seeds, 60 simulated seconds each,
+// against ideal cars: what it sends stays within the limits and no two bodies come closer than
+// the margin at any 20 ms sample.
+#include <cpm/routing/Simulate.hpp>
+
+#include <gtest/gtest.h>
+
+using namespace cpm::routing;
+
+class RoutingSweep : public ::testing::TestWithParam<size_t>
+{
+};
+
+TEST_P(RoutingSweep, SixtySecondsWithinTheMarginAndTheLimitsForFiveSeeds)
+{
+    const auto graph = load_lane_graph_or_throw(std::string(CPM_SOURCE_DIR) + "/scenarios/lanes/intersection.json");
+    for (uint64_t seed = 1; seed <= 5; ++seed) {
+        SimulationOptions options;
+        options.vehicles = GetParam();
+        options.duration = 60;
+        options.planner.seed = seed;
+        const auto s = simulate(graph, options);
+        SCOPED_TRACE("seed " + std::to_string(seed) + ": " + s.to_json());
+        EXPECT_EQ(s.collisions, 0u);
+        if (options.vehicles > 1) {
+            EXPECT_GE(s.min_distance_m, options.planner.margin);
+        }
+        EXPECT_LE(s.max_speed, options.planner.v_max + 1e-9);
+        EXPECT_LE(s.max_acceleration, options.planner.a_max + 1e-6);
+        EXPECT_LE(s.max_point_spacing, options.planner.v_max * 0.1 + 1e-6);  // points 0.1 s apart
+        EXPECT_GE(s.min_reach_s, 1.0);  // every trajectory sent covers at least a second ahead
+        double total = 0;
+        for (double d : s.distance_m) total += d;
+        EXPECT_GT(total / double(options.vehicles), 10.0);  // and the cars do drive
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(Cars, RoutingSweep, ::testing::Range<size_t>(1, 21),
+                         [](const ::testing::TestParamInfo<size_t>& info) { return std::to_string(info.param) + "Cars"; });
