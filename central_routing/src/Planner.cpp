@@ -55,6 +55,7 @@ struct Planner::Impl
     double t0 = 0;
     size_t steps = 0;  // K: steps 0..K
     double min_distance = std::numeric_limits<double>::infinity();
+    ClosestPair closest;
     bool gave_up = false;
     std::vector<std::string> warnings;
     // Scratch for the window lookup, reused across cars.
@@ -62,6 +63,7 @@ struct Planner::Impl
     std::vector<uint8_t> blocked;
     std::vector<int> last_blocked;  // per window sample: the last step it is blocked at (-1: never)
     std::vector<size_t> edge_load;  // cars on each edge at the start of the cycle
+    std::vector<double> follow_errors;  // |measured - planned| along the route, every measured car and cycle
 
     Impl(const LaneGraph& g, PlannerOptions options)
         : graph(g), o(options),
@@ -229,6 +231,7 @@ void Planner::Impl::prepare(Car& c, double t, const CarState* m)
             // controller) cannot be relied on: the others plan around it as if it braked where
             // it is, until it is seen driving as planned again. It is still sent its plan.
             const bool off = c.ps.size() > 1 && (std::abs(s - s_plan) > kFollowTolerance || std::abs(v - v_plan) > kSpeedTolerance);
+            if (c.ps.size() > 1) follow_errors.push_back(std::abs(s - s_plan));
             if (off && !c.distrusted) {
                 char buf[200];
                 std::snprintf(buf, sizeof buf, "vehicle %d: %.2f m and %.2f m/s off its plan; planned around as braking until it follows again",
@@ -241,6 +244,11 @@ void Planner::Impl::prepare(Car& c, double t, const CarState* m)
                 c.distrusted = false;
                 warnings.push_back("vehicle " + std::to_string(c.id) + ": follows its plan again");
             }
+            // A car that follows its plan keeps it: planned again from where it was meant to
+            // be, not from a few centimetres behind (every real car lags a little, and lag
+            // taken on as the new plan piles up cycle by cycle into promises the others rely
+            // on and it cannot keep). Its controller closes the gap.
+            if (!c.distrusted && c.ps.size() > 1) s = s_plan, v = v_plan;
         } else {
             char buf[200];
             std::snprintf(buf, sizeof buf, "vehicle %d: measured at x %.3f y %.3f yaw %.3f, more than 0.3 m from its route; kept its plan",
@@ -305,30 +313,49 @@ void Planner::Impl::mark_blocked(const Car& c, const std::vector<const Car*>& be
         for (const Car* other : *group) {
             const Pose& q = table.pose(other->at_step[0]);
             if (std::hypot(q.x - me.x, q.y - me.y) > far) continue;
-            // Already too close at the start (measurement off its plan) and behind this car: its
-            // marks would pin this car where it stands; it is the one that must keep back.
+            // Already too close at the start (a measurement off its plan) and behind this car:
+            // where it reaches now, around this car, is ignored (this car may stay or drive
+            // away, the one behind must keep back), but not where its plan reaches beyond.
             bool pinned = false, behind = false;
+            int32_t reach_now = -1;
             for (uint32_t n : table.conflicts(other->at_step[0])) {
                 for (int32_t i = window_head[n]; i >= 0; i = window_next[size_t(i)]) {
                     if (size_t(i) == here) pinned = true;
+                    reach_now = std::max(reach_now, i);
                 }
             }
             for (int32_t i = window_head[other->at_step[0]]; i >= 0; i = window_next[size_t(i)]) {
                 if (size_t(i) < here) behind = true;
             }
-            if (pinned && behind) continue;
+            const int32_t ignore_up_to = pinned && behind ? reach_now : -1;
             // A distrusted car planned before this one: both its plan and its braking.
             for (const auto* occupied : {&other->at_step, other->distrusted ? &other->braking_at_step : nullptr}) {
                 if (!occupied || occupied->empty()) continue;
                 for (size_t k = 0; k <= steps; ++k) {
                     for (uint32_t n : table.conflicts((*occupied)[std::min(k, occupied->size() - 1)])) {
-                        for (int32_t i = window_head[n]; i >= 0; i = window_next[size_t(i)]) blocked[k * w + size_t(i)] = 1;
+                        for (int32_t i = window_head[n]; i >= 0; i = window_next[size_t(i)]) {
+                            if (i > ignore_up_to) blocked[k * w + size_t(i)] = 1;
+                        }
                     }
                 }
             }
         }
     }
     for (size_t i = 0; i < w; ++i) window_head[c.wsample[i]] = -1;
+    // Slack in time: a place is blocked from time_slack before another car comes until
+    // time_slack after it has gone, so that a car a little late on its plan (real cars lag
+    // theirs by a few centimetres) still keeps its distance.
+    const size_t slack = size_t(std::llround(o.time_slack / o.dt));
+    if (slack > 0) {
+        std::vector<uint8_t> dilated(blocked.size(), 0);
+        for (size_t i = 0; i < w; ++i) {
+            for (size_t k = 0; k <= steps; ++k) {
+                if (!blocked[k * w + i]) continue;
+                for (size_t m = k > slack ? k - slack : 0; m <= std::min(steps, k + slack); ++m) dilated[m * w + i] = 1;
+            }
+        }
+        blocked.swap(dilated);
+    }
     last_blocked.assign(w, -1);
     for (size_t k = 0; k <= steps; ++k) {
         for (size_t i = 0; i < w; ++i) {
@@ -397,9 +424,9 @@ void Planner::Impl::plan_cooperative(Car& c)
             }
         }
         if (taken) continue;
-        // No safe way on (another car did not do what it was planned to): keep to the previous
-        // plan while that meets no one, else brake.
-        if (on_fallback && !blocked_at(c, k + 1, c.fs[k + 1])) {
+        // No safe way on (a car, this one or another, lags its plan): keep to the previous plan,
+        // which every other car planned around this cycle; once off it, brake.
+        if (on_fallback) {
             ps.push_back(c.fs[k + 1]), pv.push_back(c.fv[k + 1]);
         } else {
             const double v1 = std::max(0.0, v - a * dt);
@@ -511,7 +538,11 @@ void Planner::Impl::plan_cycle(double t, const std::vector<CarState>& measured)
             for (size_t j = i + 1; j < order.size(); ++j) {
                 const Pose b = pose_on_route(*order[j], order[j]->ps[k]);
                 if (std::hypot(a.x - b.x, a.y - b.y) > 1.0 + o.margin) continue;
-                min_distance = std::min(min_distance, footprint_distance(o.footprint, a, b));
+                const double d = footprint_distance(o.footprint, a, b);
+                if (d < min_distance) {
+                    min_distance = d;
+                    closest = {order[i]->id, order[j]->id, double(k) * o.dt};
+                }
             }
         }
     }
@@ -607,9 +638,17 @@ std::vector<TrajectorySample> Planner::trajectory(int id, double from, double st
     return out;
 }
 
+std::vector<double> Planner::take_follow_errors()
+{
+    std::vector<double> out;
+    out.swap(impl_->follow_errors);
+    return out;
+}
+
 double Planner::plan_start() const { return impl_->t0; }
 double Planner::plan_end() const { return impl_->t0 + double(impl_->steps) * impl_->o.dt; }
 double Planner::min_planned_distance() const { return impl_->min_distance; }
+ClosestPair Planner::closest_pair() const { return impl_->closest; }
 bool Planner::gave_up() const { return impl_->gave_up; }
 const std::vector<std::string>& Planner::warnings() const { return impl_->warnings; }
 const ConflictTable& Planner::conflicts() const { return impl_->table; }

@@ -16,9 +16,15 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <set>
 
 namespace cpm::routing {
+namespace {
+
+constexpr double kStartWait = 3.0;  // s the first plan waits for every listed car
+
+}  // namespace
 
 struct RoutingNode::Impl
 {
@@ -28,7 +34,11 @@ struct RoutingNode::Impl
     Writer<VehicleCommandTrajectory> trajectories{"vehicleCommandTrajectory"};
     uint64_t t_first = 0;
     std::set<uint8_t> off_graph;  // cars reported as on no lane (reported again once they were placed)
-    std::vector<double> plan_ms;
+    std::set<uint8_t> silent;     // planned cars whose state went stale
+    std::set<uint8_t> commanded;  // cars sent a trajectory this cycle
+    std::map<uint8_t, Pose> last_pose;
+    bool started = false, said_waiting = false;
+    std::vector<double> plan_ms, follow_errors;
     size_t cycles = 0, overruns = 0, refused_writes = 0;
     double min_distance = std::numeric_limits<double>::infinity();
 
@@ -46,41 +56,72 @@ void RoutingNode::Impl::cycle(uint64_t t_ns)
     if (t_first == 0) t_first = t_ns;
     const double t = double(t_ns - t_first) * 1e-9;
     std::vector<CarState> measured;
+    commanded.clear();
     for (auto& [id, result] : states.get_samples(t_ns)) {
         const bool fresh = result.valid && result.age_ns <= options.stale_ns;
         if (!fresh) {
             if (planner.has_car(id)) {
-                planner.remove_car(id);
-                CPM_LOG_WARN("vehicle %u dropped from planning: %s", unsigned(id),
-                             result.valid ? ("its state is " + std::to_string(result.age_ns / 1'000'000) + " ms old").c_str()
-                                          : "no state");
+                // Out of planning, but not out of the way: the others keep clear of where it
+                // was last seen, as if it stood there.
+                if (silent.insert(id).second) {
+                    CPM_LOG_WARN("vehicle %u dropped from planning: %s; the others keep clear of where it was last seen", unsigned(id),
+                                 result.valid ? ("its state is " + std::to_string(result.age_ns / 1'000'000) + " ms old").c_str()
+                                              : "no state");
+                }
+                measured.push_back({id, last_pose[id], 0.0});
             }
             continue;
         }
         const auto& s = result.sample;
-        const Pose pose{s.pose().x(), s.pose().y(), s.pose().yaw()};
+        // Where the car is now: its state moved on by its speed over the state's age.
+        const double age = double(result.age_ns) * 1e-9;
+        const Pose pose{s.pose().x() + s.speed() * age * std::cos(s.pose().yaw()),
+                        s.pose().y() + s.speed() * age * std::sin(s.pose().yaw()), s.pose().yaw()};
         if (!planner.has_car(id)) {
             try {
                 planner.add_car(id, pose, s.speed());
                 off_graph.erase(id);
-                CPM_LOG_INFO("vehicle %u taken into planning at x %.3f y %.3f yaw %.3f", unsigned(id), pose.x,
-                             pose.y, pose.yaw);
+                CPM_LOG_INFO("vehicle %u taken into planning at x %.3f y %.3f yaw %.3f", unsigned(id), pose.x, pose.y, pose.yaw);
             } catch (const cpm::Error& e) {
                 if (off_graph.insert(id).second) CPM_LOG_ERROR("%s; not planned until it is on a lane", e.what());
                 continue;
             }
+        } else if (silent.erase(id)) {
+            CPM_LOG_INFO("vehicle %u is back: taken into planning again at x %.3f y %.3f yaw %.3f", unsigned(id), pose.x, pose.y, pose.yaw);
         }
+        last_pose[id] = pose;
         measured.push_back({id, pose, s.speed()});
+        commanded.insert(id);
+    }
+    // The first plan waits (up to kStartWait) for every listed car: one not yet known could be
+    // standing where another is sent.
+    if (!started) {
+        std::string missing;
+        for (uint8_t id : options.vehicle_ids) {
+            if (!planner.has_car(id) && !off_graph.count(id)) missing += (missing.empty() ? "" : ", ") + std::to_string(id);
+        }
+        if (!missing.empty() && t < kStartWait) {
+            if (!said_waiting) CPM_LOG_INFO("waiting for vehicle(s) %s before the first plan", missing.c_str());
+            said_waiting = true;
+            return;
+        }
+        if (!missing.empty()) CPM_LOG_WARN("no state from vehicle(s) %s after %.0f s; planning the others", missing.c_str(), kStartWait);
+        started = true;
     }
     const auto t0 = std::chrono::steady_clock::now();
     planner.plan(t, measured);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     plan_ms.push_back(ms);
+    for (double e : planner.take_follow_errors()) follow_errors.push_back(e);
     ++cycles;
     for (const auto& w : planner.warnings()) CPM_LOG_WARN("%s", w.c_str());
-    for (int id : planner.car_ids()) send(uint8_t(id), t_ns, t);
+    for (uint8_t id : commanded) send(id, t_ns, t);
     const double d = planner.min_planned_distance();
     if (std::isfinite(d)) min_distance = std::min(min_distance, d);
+    if (d < options.planner.margin / 2) {
+        const auto pair = planner.closest_pair();
+        CPM_LOG_WARN("vehicles %d and %d %.3f m apart %.2f s into the plan (a car off its trajectory?)", pair.a, pair.b, d, pair.after);
+    }
     if (ms * 1e6 > double(options.period_ns)) {
         ++overruns;
         CPM_LOG_WARN("planning took %.1f ms, longer than the period of %.0f ms", ms, double(options.period_ns) * 1e-6);
@@ -135,14 +176,18 @@ void RoutingNode::run(const std::function<bool()>& stop_requested)
 std::string RoutingNode::stats_json() const
 {
     const auto& d = *impl_;
-    auto sorted = d.plan_ms;
-    std::sort(sorted.begin(), sorted.end());
-    auto at = [&](double p) { return sorted.empty() ? 0.0 : sorted[std::min(sorted.size() - 1, size_t(p * double(sorted.size() - 1) + 0.5))]; };
+    auto percentile = [](std::vector<double> v, double p) {
+        std::sort(v.begin(), v.end());
+        return v.empty() ? 0.0 : v[std::min(v.size() - 1, size_t(p * double(v.size() - 1) + 0.5))];
+    };
+    auto at = [&](double p) { return percentile(d.plan_ms, p); };
     nlohmann::ordered_json j{{"cycles", d.cycles},
                              {"cars_planned", d.planner.car_ids().size()},
                              {"plan_ms_p50", at(0.5)},
                              {"plan_ms_p99", at(0.99)},
                              {"overruns", d.overruns},
+                             {"follow_error_m_p50", percentile(d.follow_errors, 0.5)},
+                             {"follow_error_m_p99", percentile(d.follow_errors, 0.99)},
                              {"refused_writes", d.refused_writes},
                              {"min_planned_distance_m", std::isfinite(d.min_distance) ? nlohmann::json(d.min_distance) : nlohmann::json()}};
     return j.dump();

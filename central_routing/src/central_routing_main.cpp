@@ -12,11 +12,12 @@ namespace {
 
 const char* kHelp =
     "usage: central_routing --vehicle_ids 1,2,… --lanes FILE.json [--seed S] [--period 400ms]\n"
-    "                       [--mode cooperative|cpm_lab] [--margin 0.05] [--v-max 1.0]\n"
+    "                       [--mode cooperative|cpm_lab] [--margin 0.08] [--v-max 1.0]\n"
     "                       [--no-wait-for-start] [--dds_domain N] [--simulated_time]\n"
     "\n"
     "Plans every listed car's motion on the lane graph (checked first: every error with its JSON\n"
-    "path, exit 1) so that no two bodies come closer than --margin metres, and sends each car a\n"
+    "path, exit 1) so that no two bodies come closer than --margin metres (default 0.08: real cars\n"
+    "follow their trajectories to a few centimetres, and the margin has to hold that), and sends each car a\n"
     "VehicleCommandTrajectory every period reaching about 5 s ahead (its plan ends at standstill).\n"
     "Routes are random walks from the seed. Cars are placed on the graph from their VehicleState\n"
     "when they appear (a car on no lane is logged with its pose and left out); a car whose state is\n"
@@ -43,7 +44,7 @@ int run(int argc, char** argv)
         throw cpm::cli::UsageError("central_routing: --period " + parsed.get("--period") + ": must be a positive multiple of 50ms");
     }
     options.planner.seed = uint64_t(cpm::cli::parse_integer("--seed", parsed.get("--seed", "1"), 0, 1ll << 53));
-    options.planner.margin = cpm::cli::parse_number("--margin", parsed.get("--margin", "0.05"), 0, 1);
+    options.planner.margin = cpm::cli::parse_number("--margin", parsed.get("--margin", "0.08"), 0, 1);
     options.planner.v_max = cpm::cli::parse_number("--v-max", parsed.get("--v-max", "1.0"), 0.1, 3);
     if (parsed.has("--mode")) {
         auto mode = cpm::routing::mode_from_string(parsed.get("--mode"));

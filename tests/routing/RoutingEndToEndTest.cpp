@@ -127,8 +127,11 @@ TEST(RoutingEndToEnd, ACarOnNoLaneIsLoggedWithItsPoseAndTheOthersAreServed)
     Process off_lane({built_program("cpm"), "vehicle", "sim", "--id", "2", "--start", "8,8,0"});
     Process routing({built_program("central_routing"), "--vehicle_ids", "1,2", "--lanes", kLanes, "--no-wait-for-start"});
     const auto seen = watch(observations, 12s);
-    EXPECT_TRUE(cpm_test::wait_until([&] { return log_text(routing).find("vehicle 2 at x 8.000 y 8.000 yaw 0.000 is on no lane") != std::string::npos; }, 5s))
-        << log_text(routing);
+    EXPECT_TRUE(cpm_test::wait_until([&] {
+        const std::string log = log_text(routing);
+        const auto at = log.find("vehicle 2 at x 8.000 y 8.000 yaw");
+        return at != std::string::npos && log.find("is on no lane", at) != std::string::npos;
+    }, 5s)) << log_text(routing);
     ASSERT_TRUE(seen.count(1));
     EXPECT_GT(path_length(seen.at(1)), 3.0);  // car 1 drives all the same
     routing.kill(SIGINT);
@@ -148,7 +151,7 @@ TEST(RoutingEndToEnd, ACarThatGoesSilentIsDroppedAndTakenBackWhenItReturns)
     EXPECT_TRUE(cpm_test::wait_until([&] {
         const std::string log = log_text(routing);
         const auto drop = log.find("dropped from planning");
-        return drop != std::string::npos && log.find("vehicle 3 taken into planning", drop) != std::string::npos;
+        return drop != std::string::npos && log.find("vehicle 3 is back: taken into planning again", drop) != std::string::npos;
     }, 10s)) << log_text(routing);
     routing.kill(SIGINT);
     EXPECT_EQ(routing.wait(10s), 0);

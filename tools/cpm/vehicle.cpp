@@ -31,8 +31,9 @@ const char* const kVehicleSimHelp =
     "vehicleCommand* for its id. With --count K, cars N .. N+K-1 share one world, each --spacing\n"
     "metres (default 0.6) behind the previous one along the start heading; their rangers see\n"
     "each other. With --lanes FILE (a lane graph) the cars are spread over its lanes instead, as\n"
-    "`cpm routing simulate` spreads them (outside conflict zones, chosen by --seed, default 1),\n"
-    "ready for central_routing. With --camera FILE (a camera file; needs --map), each car also gets a synthetic\n"
+    "`cpm routing simulate` spreads them (outside conflict zones, bodies at least 0.38 m apart,\n"
+    "chosen by --seed, default 1), ready for central_routing.\n"
+    "With --camera FILE (a camera file; needs --map), each car also gets a synthetic\n"
     "camera (camera_sim) publishing cameraFrame at --camera-rate Hz (default 30) from its true\n"
     "pose; run aruco_node to turn the frames into arucoMarkers. Runs until Ctrl-C, then prints\n"
     "each process's statistics (JSON lines).\n";
@@ -69,9 +70,11 @@ int vehicle_sim(const std::vector<std::string>& args)
     if (parsed.has("--lanes")) {
         if (parsed.has("--start")) throw cpm::cli::UsageError("cpm vehicle sim: give --start or --lanes, not both");
         const auto graph = cpm::routing::load_lane_graph_or_throw(parsed.get("--lanes"));
-        const cpm::routing::ConflictTable table(graph, {});
+        cpm::routing::ConflictOptions spread;  // apart as central_routing keeps them (0.08 m), and 0.3 m more
+        spread.margin = 0.08;
+        const cpm::routing::ConflictTable table(graph, spread);
         const auto seed = uint64_t(cpm::cli::parse_integer("--seed", parsed.get("--seed", "1"), 0, 1ll << 53));
-        for (const auto& p : cpm::routing::spread_cars(table, size_t(count), seed)) poses.push_back(pose_text(p.x, p.y, p.yaw));
+        for (const auto& p : cpm::routing::spread_cars(table, size_t(count), seed, 0.3)) poses.push_back(pose_text(p.x, p.y, p.yaw));
     } else {
         if (parsed.has("--seed")) throw cpm::cli::UsageError("cpm vehicle sim: --seed places cars on --lanes; give --lanes too");
         for (long long k = 0; k < count; ++k) {

@@ -37,6 +37,7 @@ struct PlannerOptions
     double horizon = 8.0;    ///< s: every plan ends at standstill within it
     double dt = 0.05;        ///< s between the profile's steps
     double margin = 0.05;    ///< m between the cars' bodies
+    double time_slack = 0.1; ///< s between one car leaving a place and another taking it
     Footprint footprint;     ///< the cars' bodies (Footprint::of(vehicle parameters))
     uint64_t seed = 1;       ///< the routes' random walks
     double cpm_lab_v_min = 0.5;  ///< Mode::CpmLab: the least speed once moving
@@ -48,6 +49,13 @@ struct CarState
     int id = 0;
     Pose pose;
     double speed = 0;
+};
+
+/// The two cars that come closest in the newest plans, and when (s after the plan's start).
+struct ClosestPair
+{
+    int a = 0, b = 0;
+    double after = 0;
 };
 
 /// A point of a trajectory as VehicleCommandTrajectory carries it.
@@ -93,11 +101,15 @@ public:
     PlanSample sample(int id, double t) const;
     /// A car's plan as trajectory points every `step` seconds from `from` to the plan's end.
     std::vector<TrajectorySample> trajectory(int id, double from, double step) const;
+    /// How far each measured car was from its plan along its route (m), per car and cycle,
+    /// since the last call.
+    std::vector<double> take_follow_errors();
     /// The time the current plans start at and reach to.
     double plan_start() const;
     double plan_end() const;
     /// The smallest distance between two cars' bodies over the newest plans' steps (m).
     double min_planned_distance() const;
+    ClosestPair closest_pair() const;
     /// Mode::CpmLab: true once the planner gave up (a conflict it could not avoid).
     bool gave_up() const;
     /// Cars whose pose could not be found on their route when replanned; they keep their plan.

@@ -21,13 +21,14 @@ struct RoutingNodeOptions
 };
 
 /// Reads every car's VehicleState (MultiVehicleReader), places each on the lane graph when it
-/// first appears (a car on no lane is logged with its pose and left out, the others go on),
-/// replans every period from the measured states (cpm::Timer: synchronised start, simulated
-/// time when the lab runs on it) and writes one VehicleCommandTrajectory per car per period
-/// reaching to the end of its plan. A car whose state is older than stale_ns is dropped and
-/// logged, and taken back when it returns. Logs every cycle's planning time and the smallest
-/// planned distance; warns when planning took longer than the period. Uses the process's
-/// default participant (cpm::init first).
+/// first appears (a car on no lane is logged with its pose and left out, the others go on;
+/// the first plan waits up to 3 s for every listed car), replans every period from the
+/// measured states (cpm::Timer: synchronised start, simulated time when the lab runs on it)
+/// and writes one VehicleCommandTrajectory per car per period reaching to the end of its plan.
+/// A car whose state is older than stale_ns is dropped from planning and logged (the others
+/// keep clear of where it was last seen), and taken back when it returns. Logs every cycle's
+/// planning time and the smallest planned distance (debug level); warns when planning took
+/// longer than the period. Uses the process's default participant (cpm::init first).
 class RoutingNode
 {
 public:
