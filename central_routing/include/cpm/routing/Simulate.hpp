@@ -15,7 +15,16 @@ struct SimulationOptions
     double period = 0.4;      ///< s between planning cycles
     double sample = 0.02;     ///< s between the distance checks
     double start_gap = 0.1;   ///< m between the cars' bodies at the start, beyond the margin
-    PlannerOptions planner;   ///< its seed also places the cars
+    /// Its seed also places the cars. No time slack: ideal cars keep their plans to the
+    /// microsecond, and the slack is for real cars' lag.
+    PlannerOptions planner = ideal_cars();
+
+    static PlannerOptions ideal_cars()
+    {
+        PlannerOptions o;
+        o.time_slack = 0;
+        return o;
+    }
 };
 
 struct SimulationSummary
