@@ -27,3 +27,6 @@ echo "== bench_history_service (cpm_history: ingest without loss, query round tr
 echo
 echo "== bench_aruco (perception: aruco_node vs plain OpenCV and AprilTag 3; detection, pose, latency, CameraFrame over DDS)"
 "$bin/bench_aruco"
+echo
+echo "== bench_routing (central routing: planning time per cycle, start-up, intersection throughput vs cpm_lab's scheme)"
+"$bin/bench_routing"

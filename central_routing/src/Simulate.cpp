@@ -41,11 +41,11 @@ std::string SimulationSummary::to_json() const
     return j.dump();
 }
 
-std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed, double gap)
+std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed, double gap, bool anywhere)
 {
     std::vector<uint32_t> candidates;
     for (uint32_t i = 0; i < table.sample_count(); ++i) {
-        if (table.zone_of(i) < 0) candidates.push_back(i);
+        if (anywhere || table.zone_of(i) < 0) candidates.push_back(i);
     }
     std::vector<bool> taken(table.sample_count(), false);
     std::mt19937_64 rng(seed);

@@ -4,7 +4,7 @@
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/get_time_ns.hpp>
-#include <cpm/routing/Conflicts.hpp>
+#include <cpm/routing/TrafficWatch.hpp>
 
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
@@ -14,6 +14,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <csignal>
 #include <filesystem>
@@ -51,24 +52,6 @@ double path_length(const std::vector<VehicleObservation>& track)
     return d;
 }
 
-/// The longest time a car stayed within 2 cm of one place.
-double longest_standstill(const std::vector<VehicleObservation>& track)
-{
-    double longest = 0;
-    size_t anchor = 0;
-    for (size_t i = 1; i < track.size(); ++i) {
-        if (std::hypot(track[i].pose().x() - track[anchor].pose().x(), track[i].pose().y() - track[anchor].pose().y()) > 0.02) {
-            anchor = i;
-            continue;
-        }
-        longest = std::max(longest, double(track[i].header().create_stamp().nanoseconds() -
-                                           track[anchor].header().create_stamp().nanoseconds()) * 1e-9);
-    }
-    return longest;
-}
-
-cpm::vehicle::Pose pose_of(const VehicleObservation& o) { return {o.pose().x(), o.pose().y(), o.pose().yaw()}; }
-
 std::string log_text(const Process& p) { return p.output() + p.errors(); }
 
 }  // namespace
@@ -86,37 +69,25 @@ TEST(RoutingEndToEnd, EightCarsDriveTwoMinutesWithoutTouchingAndNoneStandsLong)
     cars.wait(15s);
 
     ASSERT_EQ(seen.size(), 8u) << log_text(cars);
-    // At every 20 ms of the run, the bodies of every two cars (their newest poses, at most
-    // 40 ms old) do not overlap.
-    const cpm::routing::Footprint body;
-    uint64_t t0 = UINT64_MAX, t1 = 0;
+    // Every pose in the order it was taken: bodies compared with the others' newest poses
+    // (at most 40 ms old), distance and standstills per car.
+    std::vector<VehicleObservation> all;
     for (const auto& [id, track] : seen) {
-        t0 = std::min(t0, track.front().header().create_stamp().nanoseconds());
-        t1 = std::max(t1, track.back().header().create_stamp().nanoseconds());
+        EXPECT_GT(track.size(), 5000u) << "vehicle " << id << ": 50 Hz for two minutes";
+        all.insert(all.end(), track.begin(), track.end());
     }
-    std::map<int, size_t> next;
-    double closest = 1e9;
-    size_t checked = 0;
-    for (uint64_t t = t0; t <= t1; t += 20'000'000) {
-        std::vector<cpm::vehicle::Pose> now;
-        for (const auto& [id, track] : seen) {
-            size_t& i = next[id];
-            while (i + 1 < track.size() && track[i + 1].header().create_stamp().nanoseconds() <= t) ++i;
-            const uint64_t stamp = track[i].header().create_stamp().nanoseconds();
-            if (stamp <= t && t - stamp <= 40'000'000) now.push_back(pose_of(track[i]));
-        }
-        for (size_t a = 0; a < now.size(); ++a) {
-            for (size_t b = a + 1; b < now.size(); ++b) closest = std::min(closest, cpm::routing::footprint_distance(body, now[a], now[b]));
-        }
-        checked += now.size() == 8;
+    std::stable_sort(all.begin(), all.end(), [](const auto& a, const auto& b) {
+        return a.header().create_stamp().nanoseconds() < b.header().create_stamp().nanoseconds();
+    });
+    cpm::routing::TrafficWatch watch;
+    for (const auto& o : all) watch.add(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
+    EXPECT_EQ(watch.overlaps(), 0u) << watch.report();
+    EXPECT_GT(watch.min_distance(), 0.0) << watch.report();
+    for (const auto& [id, car] : watch.cars()) {
+        EXPECT_GE(car.distance, 20.0) << "vehicle " << id;
+        EXPECT_LE(car.longest_standstill, 10.0) << "vehicle " << id;
     }
-    EXPECT_GT(checked, 5000u);  // of about 6000 instants, all eight cars known
-    EXPECT_GT(closest, 0.0) << "two cars' bodies overlapped";
-    for (const auto& [id, track] : seen) {
-        EXPECT_GE(path_length(track), 20.0) << "vehicle " << id;
-        EXPECT_LE(longest_standstill(track), 10.0) << "vehicle " << id;
-    }
-    std::printf("closest bodies %.3f m\n", closest);
+    std::printf("%s", watch.report().c_str());
 }
 
 TEST(RoutingEndToEnd, ACarOnNoLaneIsLoggedWithItsPoseAndTheOthersAreServed)

@@ -1,11 +1,18 @@
 // cpm routing check | render | simulate: lane graphs and the central planner, without DDS.
 #include "Command.hpp"
 
+#include <cpm/ReaderAbstract.hpp>
 #include <cpm/routing/Render.hpp>
 #include <cpm/routing/Simulate.hpp>
+#include <cpm/routing/TrafficWatch.hpp>
+#include <cpm/topics.hpp>
+
+#include <VehicleObservation.h>
 
 #include <chrono>
 #include <cstdio>
+#include <set>
+#include <thread>
 
 namespace cpm::tools {
 namespace {
@@ -37,6 +44,15 @@ const char* kSimulateHelp =
     "baseline). --period defaults to 400ms, --margin to 0.05 m, --v-max to 1.0 m/s; the cars start\n"
     "outside conflict zones, their bodies at least the margin and --start-gap (0.1 m) apart.\n"
     "--json prints the summary as one JSON line.\n";
+
+const char* kWatchHelp =
+    "usage: cpm routing watch --duration T [--vehicles 1,2,…] [--lanes FILE --picture OUT.svg|OUT.png]\n"
+    "\n"
+    "Watches the cars' true poses (vehicleObservation, from the simulator or the lab's positioning\n"
+    "system) for T (e.g. 60s) and prints how far each drove, its longest standstill, and the\n"
+    "smallest distance between two cars' bodies (the simulator's 1:10 car). --vehicles limits it\n"
+    "to those ids. --picture draws the lane graph with the cars where they were last seen.\n"
+    "Exit code 1 when two cars touched, or when a listed car was never seen.\n";
 
 /// Loads a graph, printing its errors; nullopt when it has any.
 std::optional<cpm::routing::LaneGraph> load_graph(const std::string& file)
@@ -128,13 +144,59 @@ int routing_simulate(const std::vector<std::string>& args)
     return 0;
 }
 
+int routing_watch(const std::vector<std::string>& args)
+{
+    const auto parsed = parse_flags(args, {{"--duration", true}, {"--vehicles", true}, {"--lanes", true}, {"--picture", true}},
+                                    "cpm routing watch");
+    if (!parsed.has("--duration")) throw UsageError("cpm routing watch: --duration is required (e.g. 60s)");
+    if (parsed.has("--picture") != parsed.has("--lanes")) throw UsageError("cpm routing watch: --picture needs --lanes, and --lanes is only for --picture");
+    const uint64_t duration = parse_duration("--duration", parsed.get("--duration"));
+    std::set<int> only;
+    if (parsed.has("--vehicles")) {
+        for (const auto& id : split_list("--vehicles", parsed.get("--vehicles"))) only.insert(int(cpm::cli::parse_integer("--vehicles", id, 1, 255)));
+    }
+    std::optional<cpm::routing::LaneGraph> graph;
+    if (parsed.has("--lanes")) {
+        graph = load_graph(parsed.get("--lanes"));
+        if (!graph) return 1;
+    }
+    cpm::ReaderAbstract<VehicleObservation> poses(cpm::topics::vehicle_observation.name, {.keep_all = true});
+    cpm::routing::TrafficWatch watch(cpm::routing::Footprint::of(cpm::vehicle::VehicleParameters{}));
+    cpm::cli::stop_on_signals();
+    const auto end = std::chrono::steady_clock::now() + std::chrono::nanoseconds(duration);
+    while (!cpm::cli::stop_requested() && std::chrono::steady_clock::now() < end) {
+        for (const auto& o : poses.take()) {
+            if (!only.empty() && !only.count(o.vehicle_id())) continue;
+            watch.add(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    std::fputs(watch.report().c_str(), stdout);
+    bool missing = false;
+    for (int id : only) {
+        if (!watch.cars().count(id)) {
+            std::printf("vehicle %d: never seen\n", id);
+            missing = true;
+        }
+    }
+    if (graph) {
+        cpm::routing::ConflictTable table(*graph, {});
+        std::vector<cpm::routing::DrawnCar> cars;
+        for (const auto& [id, c] : watch.cars()) cars.push_back({id, c.last});
+        cpm::routing::render_lane_graph(table, parsed.get("--picture"), cars);
+        std::printf("the cars where they were last seen: %s\n", parsed.get("--picture").c_str());
+    }
+    return watch.overlaps() > 0 || missing ? 1 : 0;
+}
+
 }  // namespace
 
 std::vector<Command> routing_commands()
 {
     return {{"routing", "check", "check a lane graph file and count its conflict zones", kCheckHelp, routing_check},
             {"routing", "render", "draw a lane graph with its conflict zones (SVG or PNG)", kRenderHelp, routing_render},
-            {"routing", "simulate", "run the central planner against ideal cars and summarise", kSimulateHelp, routing_simulate}};
+            {"routing", "simulate", "run the central planner against ideal cars and summarise", kSimulateHelp, routing_simulate},
+            {"routing", "watch", "watch the cars' true poses: distance driven, standstills, closest bodies", kWatchHelp, routing_watch}};
 }
 
 }  // namespace cpm::tools

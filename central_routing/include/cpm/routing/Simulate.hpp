@@ -53,7 +53,8 @@ struct SimulationSummary
 
 /// Start poses for n cars on the graph: outside the conflict zones, their bodies at least the
 /// margin and `gap` apart, chosen by the seed. Throws cpm::Error when n cars do not fit.
-std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed, double gap = 0.1);
+/// With `anywhere`, zones too (for loads the map cannot hold outside them).
+std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed, double gap = 0.1, bool anywhere = false);
 
 /// The conflict zone nearest the middle of the map (the central intersection of a lab map).
 size_t central_zone(const ConflictTable& table);
