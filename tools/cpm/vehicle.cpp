@@ -32,8 +32,8 @@ const char* const kVehicleSimHelp =
     "metres (default 0.6) behind the previous one along the start heading; their rangers see\n"
     "each other. With --lanes FILE (a lane graph) the cars are spread over its lanes instead, as\n"
     "`cpm routing simulate` spreads them (outside conflict zones, bodies at least 0.38 m apart,\n"
-    "chosen by --seed, default 1), ready for central_routing.\n"
-    "With --camera FILE (a camera file; needs --map), each car also gets a synthetic\n"
+    "chosen by --seed, default 1), ready for central_routing. With --camera FILE (a camera file;\n"
+    "needs --map), each car also gets a synthetic\n"
     "camera (camera_sim) publishing cameraFrame at --camera-rate Hz (default 30) from its true\n"
     "pose; run aruco_node to turn the frames into arucoMarkers. Runs until Ctrl-C, then prints\n"
     "each process's statistics (JSON lines).\n";
