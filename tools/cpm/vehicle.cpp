@@ -33,9 +33,9 @@ const char* const kVehicleSimHelp =
     "each other. With --lanes FILE (a lane graph) the cars are spread over its lanes instead, as\n"
     "`cpm routing simulate` spreads them (outside conflict zones, bodies at least 0.38 m apart,\n"
     "chosen by --seed, default 1), ready for central_routing. With --camera FILE (a camera file;\n"
-    "needs --map), each car also gets a synthetic\n"
-    "camera (camera_sim) publishing cameraFrame at --camera-rate Hz (default 30) from its true\n"
-    "pose; run aruco_node to turn the frames into arucoMarkers. Runs until Ctrl-C, then prints\n"
+    "needs --map), each car also gets a synthetic camera (camera_sim) publishing cameraFrame at\n"
+    "--camera-rate Hz (default 30) from its true pose; run aruco_node to turn the frames into\n"
+    "arucoMarkers. Runs until Ctrl-C, then prints\n"
     "each process's statistics (JSON lines).\n";
 
 std::string pose_text(double x, double y, double yaw)
