@@ -35,8 +35,7 @@ const char* const kVehicleSimHelp =
     "chosen by --seed, default 1), ready for central_routing. With --camera FILE (a camera file;\n"
     "needs --map), each car also gets a synthetic camera (camera_sim) publishing cameraFrame at\n"
     "--camera-rate Hz (default 30) from its true pose; run aruco_node to turn the frames into\n"
-    "arucoMarkers. Runs until Ctrl-C, then prints\n"
-    "each process's statistics (JSON lines).\n";
+    "arucoMarkers. Runs until Ctrl-C, then prints each process's statistics (JSON lines).\n";
 
 std::string pose_text(double x, double y, double yaw)
 {
