@@ -23,6 +23,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <csignal>
@@ -535,6 +536,39 @@ TEST_F(VehicleEndToEnd, WrongFilesAndFlagsAreNamedAndExitNonZero)
     Process not_a_tty({built_program("vehicle_bridge"), "--vehicle_id", "1", "--device", "/dev/null"});
     EXPECT_EQ(not_a_tty.wait(10s), 1);
     EXPECT_NE(not_a_tty.errors().find("/dev/null: not a terminal device"), std::string::npos) << not_a_tty.errors();
+}
+
+TEST_F(VehicleEndToEnd, CpmVehicleSimPassesItsDdsFlagsToTheProgramsItStarts)
+{
+    // `cpm vehicle sim --dds_domain N` must put its simulator and bridge on domain N too (they
+    // once fell back to the environment's domain). Here N is this test's own domain, so a
+    // failure cannot leak into another test's; the children's command lines tell.
+    const std::string domain = std::to_string(cpm_test::test_domain_id());
+    Process sut({built_program("cpm"), "vehicle", "sim", "--id", "9", "--dds_domain", domain});
+    std::string sim_pid, bridge_pid;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        std::istringstream out(sut.output());
+        for (std::string line; std::getline(out, line);) {
+            const auto sim = line.find("firmware_sim pid "), bridge = line.find("vehicle_bridge pid ");
+            if (sim == std::string::npos || bridge == std::string::npos) continue;
+            sim_pid = line.substr(sim + 17, line.find(' ', sim + 17) - sim - 17);
+            bridge_pid = line.substr(bridge + 19, line.find(',', bridge + 19) - bridge - 19);
+            return true;
+        }
+        return false;
+    }, 10s)) << sut.output() << sut.errors();
+    for (const auto& [pid, program] : {std::pair{sim_pid, "firmware_sim"}, std::pair{bridge_pid, "vehicle_bridge"}}) {
+        std::string cmdline;
+        EXPECT_TRUE(cpm_test::wait_until([&] {  // once the child has replaced itself with the program
+            std::ifstream in("/proc/" + pid + "/cmdline");
+            cmdline.assign(std::istreambuf_iterator<char>(in), {});
+            std::replace(cmdline.begin(), cmdline.end(), '\0', ' ');
+            return cmdline.find(program) != std::string::npos;
+        }, 5s)) << cmdline;
+        EXPECT_NE(cmdline.find("--dds_domain " + domain), std::string::npos) << program << " " << pid << ": " << cmdline;
+    }
+    sut.kill(SIGINT);
+    EXPECT_EQ(sut.wait(10s), 0) << sut.errors();
 }
 
 TEST_F(VehicleEndToEnd, CpmVehicleSimStartsCarsThatSeeEachOther)

@@ -49,14 +49,18 @@ std::string overview(const std::vector<Command>& all, const std::string& group)
 }
 
 /// The command line without cpm::init's flags (which may stand anywhere, before the command too).
-std::vector<std::string> command_words(int argc, char** argv)
+std::vector<std::string> command_words(int argc, char** argv, std::vector<std::string>* init_flags = nullptr)
 {
     std::vector<std::string> words;
     for (int i = 1; i < argc; ++i) {
         std::string arg = argv[i];
         bool takes_value = false;
         if (cpm::is_init_flag(arg.substr(0, arg.find('=')), takes_value)) {
-            if (takes_value && arg.find('=') == std::string::npos) ++i;
+            if (init_flags) init_flags->push_back(arg);
+            if (takes_value && arg.find('=') == std::string::npos && i + 1 < argc) {
+                ++i;
+                if (init_flags) init_flags->push_back(argv[i]);
+            }
             continue;
         }
         words.push_back(arg);
@@ -69,7 +73,8 @@ bool names_a_command(const char* message) { return std::strncmp(message, "cpm ",
 
 int dispatch(int argc, char** argv)
 {
-    const std::vector<std::string> args = command_words(argc, argv);
+    std::vector<std::string> init_flags;
+    const std::vector<std::string> args = command_words(argc, argv, &init_flags);
     const bool help = cpm::cli::wants_help(args);
     const auto all = all_commands();
     if (args.empty()) {
@@ -95,7 +100,10 @@ int dispatch(int argc, char** argv)
             return 0;
         }
         cpm::init(argc, argv);  // cpm's own flags, checked before any waiting
-        const std::vector<std::string> rest(args.begin() + (verbless ? 1 : 2), args.end());
+        // The verb's arguments, and cpm's own flags after them: a verb that starts programs
+        // (cpm vehicle sim) passes those on, so its children join the same domain.
+        std::vector<std::string> rest(args.begin() + (verbless ? 1 : 2), args.end());
+        rest.insert(rest.end(), init_flags.begin(), init_flags.end());
         try {
             return c.run(rest);
         } catch (const UsageError& e) {
