@@ -1,4 +1,5 @@
 #include <cpm/routing/RoutingNode.hpp>
+#include <cpm/routing/Simulate.hpp>
 
 #include <cpm/Error.hpp>
 #include <cpm/Logging.hpp>
@@ -176,10 +177,6 @@ void RoutingNode::run(const std::function<bool()>& stop_requested)
 std::string RoutingNode::stats_json() const
 {
     const auto& d = *impl_;
-    auto percentile = [](std::vector<double> v, double p) {
-        std::sort(v.begin(), v.end());
-        return v.empty() ? 0.0 : v[std::min(v.size() - 1, size_t(p * double(v.size() - 1) + 0.5))];
-    };
     auto at = [&](double p) { return percentile(d.plan_ms, p); };
     nlohmann::ordered_json j{{"cycles", d.cycles},
                              {"cars_planned", d.planner.car_ids().size()},

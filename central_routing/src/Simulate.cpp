@@ -13,16 +13,16 @@
 namespace cpm::routing {
 namespace {
 
+double round_to(double v, double unit) { return std::round(v / unit) * unit; }
+
+}  // namespace
+
 double percentile(std::vector<double> values, double p)
 {
     if (values.empty()) return 0;
     std::sort(values.begin(), values.end());
     return values[std::min(values.size() - 1, size_t(p * double(values.size() - 1) + 0.5))];
 }
-
-double round_to(double v, double unit) { return std::round(v / unit) * unit; }
-
-}  // namespace
 
 std::string SimulationSummary::to_json() const
 {
