@@ -108,18 +108,24 @@ rm -f /tmp/cpm_demo_sim.$$.out /tmp/cpm_demo_aruco.$$.out /tmp/cpm_demo_fsm.$$.o
 echo
 lanes="$root/scenarios/lanes/intersection.json"
 picture="${CPM_DEMO_ROUTING_PICTURE:-$build/cpm_demo_routing.png}"
-routing_seconds="${CPM_DEMO_ROUTING_SECONDS:-40}"
+routing_seconds="${CPM_DEMO_ROUTING_SECONDS:-120}"
 echo "demo: eight simulated cars on scenarios/lanes/intersection.json (a two-lane ring, a cross through"
-echo "      the middle, lane changes); central_routing plans all of them every 400 ms, ${routing_seconds} s"
-"$bin/cpm" vehicle sim --id 1 --count 8 --lanes "$lanes" > /tmp/cpm_demo_sim.$$.out 2>&1 &
+echo "      the middle, lane changes); central_routing plans all of them every 400 ms, ${routing_seconds} s of"
+echo "      simulated time: cpm lab clock steps the cars, their bridge and the planner tick by tick, as fast"
+echo "      as this machine computes (all eight cars in one simulator and one bridge process)"
+"$bin/cpm" vehicle sim --id 1 --count 8 --lanes "$lanes" --simulated_time > /tmp/cpm_demo_sim.$$.out 2>&1 &
 sim=$!
-"$bin/central_routing" --vehicle_ids 1,2,3,4,5,6,7,8 --lanes "$lanes" --no-wait-for-start > /tmp/cpm_demo_routing.$$.out 2>&1 &
+"$bin/central_routing" --vehicle_ids 1,2,3,4,5,6,7,8 --lanes "$lanes" --simulated_time > /tmp/cpm_demo_routing.$$.out 2>&1 &
 routing=$!
-trap 'kill $sim $routing 2>/dev/null || true' EXIT INT TERM
-"$bin/cpm" routing watch --duration "${routing_seconds}s" --vehicles 1,2,3,4,5,6,7,8 --lanes "$lanes" --picture "$picture" || status=$?
-kill -INT $routing 2>/dev/null || true
+"$bin/cpm" routing watch --duration "${routing_seconds}s" --vehicles 1,2,3,4,5,6,7,8 --lanes "$lanes" --picture "$picture" \
+  > /tmp/cpm_demo_watch.$$.out 2>&1 &
+watch=$!
+trap 'kill $sim $routing $watch 2>/dev/null || true' EXIT INT TERM
+"$bin/cpm" lab clock --nodes firmware_sim_1,vehicle_bridge_1,central_routing --simulated --until "$((routing_seconds + 1))s" \
+  || status=$?
+wait $watch || status=$?
+cat /tmp/cpm_demo_watch.$$.out
 wait $routing 2>/dev/null || true
-kill -INT $sim 2>/dev/null || true
 wait $sim 2>/dev/null || true
 echo
 if [ $status -eq 0 ]; then
@@ -130,5 +136,5 @@ else
   echo "demo: central routing FAILED (exit $status); central_routing said:" >&2
   tail -n 20 /tmp/cpm_demo_routing.$$.out >&2
 fi
-rm -f /tmp/cpm_demo_sim.$$.out /tmp/cpm_demo_routing.$$.out
+rm -f /tmp/cpm_demo_sim.$$.out /tmp/cpm_demo_routing.$$.out /tmp/cpm_demo_watch.$$.out
 exit $status

@@ -56,17 +56,29 @@ std::string log_text(const Process& p) { return p.output() + p.errors(); }
 
 }  // namespace
 
-TEST(RoutingEndToEnd, EightCarsDriveTwoMinutesWithoutTouchingAndNoneStandsLong)
+TEST(RoutingEndToEnd, EightCarsDriveTwoSimulatedMinutesWithoutTouchingAndNoneStandsLong)
 {
+    // The whole lab in simulated time: the cars (one simulator, one bridge process), the
+    // planner and the clock that steps them, 120 s of lab time as fast as the machine computes.
     cpm::Participant participant(cpm_test::isolated_options());
     cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
-    Process cars({built_program("cpm"), "vehicle", "sim", "--id", "1", "--count", "8", "--lanes", kLanes});
-    Process routing({built_program("central_routing"), "--vehicle_ids", "1,2,3,4,5,6,7,8", "--lanes", kLanes, "--no-wait-for-start"});
-    const auto seen = watch(observations, 120s);
-    routing.kill(SIGINT);
+    Process cars({built_program("cpm"), "vehicle", "sim", "--id", "1", "--count", "8", "--lanes", kLanes, "--simulated_time"});
+    Process routing({built_program("central_routing"), "--vehicle_ids", "1,2,3,4,5,6,7,8", "--lanes", kLanes, "--simulated_time"});
+    Process clock({built_program("cpm"), "lab", "clock", "--nodes", "firmware_sim_1,vehicle_bridge_1,central_routing", "--simulated",
+                   "--until", "120s"});
+    std::map<int, std::vector<VehicleObservation>> seen;
+    const auto give_up = std::chrono::steady_clock::now() + 150s;
+    int clock_exit = -1;
+    while ((clock_exit = clock.wait(20ms)) == -1 && std::chrono::steady_clock::now() < give_up) {
+        for (auto& o : observations.take()) seen[o.vehicle_id()].push_back(o);
+    }
+    ASSERT_EQ(clock_exit, 0) << clock.output() << clock.errors();
+    std::this_thread::sleep_for(500ms);
+    for (auto& o : observations.take()) seen[o.vehicle_id()].push_back(o);
+    // The clock's stop ends every timer: the planner and the cars end by themselves.
     ASSERT_EQ(routing.wait(10s), 0) << log_text(routing);
-    cars.kill(SIGINT);
-    cars.wait(15s);
+    EXPECT_EQ(cars.wait(15s), 0) << log_text(cars);
+    std::printf("%s", clock.output().c_str());
 
     ASSERT_EQ(seen.size(), 8u) << log_text(cars);
     // Every pose in the order it was taken: bodies compared with the others' newest poses
@@ -74,6 +86,8 @@ TEST(RoutingEndToEnd, EightCarsDriveTwoMinutesWithoutTouchingAndNoneStandsLong)
     std::vector<VehicleObservation> all;
     for (const auto& [id, track] : seen) {
         EXPECT_GT(track.size(), 5000u) << "vehicle " << id << ": 50 Hz for two minutes";
+        // Lab time: the stamps span the two simulated minutes.
+        EXPECT_GT(track.back().header().create_stamp().nanoseconds(), 119'000'000'000ull) << "vehicle " << id;
         all.insert(all.end(), track.begin(), track.end());
     }
     std::stable_sort(all.begin(), all.end(), [](const auto& a, const auto& b) {

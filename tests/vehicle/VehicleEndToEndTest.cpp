@@ -33,6 +33,7 @@
 #include <memory>
 #include <mutex>
 #include <random>
+#include <set>
 #include <sstream>
 #include <thread>
 #include <unistd.h>
@@ -44,6 +45,13 @@ using cpm_test::built_program;
 using cpm_test::Process;
 constexpr uint8_t kId = 7;
 constexpr uint64_t kSecond = 1'000'000'000ull;
+
+size_t count_of(const std::string& text, const std::string& what)
+{
+    size_t n = 0;
+    for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    return n;
+}
 
 /// One simulated car: firmware_sim on a pty, vehicle_bridge on its device.
 struct Car
@@ -172,9 +180,10 @@ template <class T>
 class Repeater
 {
 public:
-    Repeater(cpm::Participant& p, const std::string& topic, T command)
+    Repeater(cpm::Participant& p, const std::string& topic, T command, uint8_t vehicle_id = kId)
         : writer_(p, topic), command_(std::move(command)), thread_([this] { run(); })
     {
+        command_.vehicle_id(vehicle_id);
     }
     ~Repeater()
     {
@@ -185,7 +194,6 @@ public:
 private:
     void run()
     {
-        command_.vehicle_id(kId);
         while (!stop_) {
             cpm::stamp_message(command_, cpm::get_time_ns(), 0);
             (void)writer_.write(command_);
@@ -519,6 +527,81 @@ TEST_F(VehicleEndToEnd, ASecondBridgeOnTheSameLineIsRefusedAndTheFirstKeepsDrivi
     EXPECT_LE(in_one_second, 51u);
 }
 
+TEST_F(VehicleEndToEnd, OneSimulatorAndOneBridgeProcessCarryTwentyCarsEachOnItsOwnCommand)
+{
+    // 20 cars in a row 1 m apart, all in one firmware_sim and one vehicle_bridge process; only
+    // car 25 is commanded. Every car must report at 50 Hz, car 25 drive, the others stay put.
+    cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});
+    cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
+    Process sut({built_program("cpm"), "vehicle", "sim", "--id", "11", "--count", "20", "--spacing", "1.0"});
+    std::set<std::string> sim_pids, bridge_pids;
+    ASSERT_TRUE(cpm_test::wait_until([&] { return count_of(sut.output(), "vehicle_bridge pid ") == 20; }, 20s))
+        << sut.output() << sut.errors();
+    std::istringstream lines(sut.output());
+    for (std::string line; std::getline(lines, line);) {
+        const auto sim = line.find("firmware_sim pid "), bridge = line.find("vehicle_bridge pid ");
+        if (sim == std::string::npos || bridge == std::string::npos) continue;
+        sim_pids.insert(line.substr(sim + 17, line.find(' ', sim + 17) - sim - 17));
+        bridge_pids.insert(line.substr(bridge + 19, line.find(',', bridge + 19) - bridge - 19));
+    }
+    EXPECT_EQ(sim_pids.size(), 1u) << sut.output();
+    EXPECT_EQ(bridge_pids.size(), 1u) << sut.output();
+
+    Repeater<VehicleCommandSpeedCurvature> command(participant, "vehicleCommandSpeedCurvature", speed_curvature(0.5, 0), 25);
+    std::map<int, std::vector<uint64_t>> stamps;
+    std::map<int, std::pair<VehicleObservation, VehicleObservation>> first_last;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        for (auto& s : states.take()) stamps[s.vehicle_id()].push_back(s.header().create_stamp().nanoseconds());
+        return stamps.size() == 20;
+    }, 20s)) << sut.errors();
+    states.take();
+    observations.take();
+    const uint64_t t0 = cpm::get_time_ns() + 500'000'000ull, t1 = t0 + 3 * kSecond;  // a 3 s window after a settling 0.5 s
+    stamps.clear();
+    while (cpm::get_time_ns() < t1 + 300'000'000ull) {
+        for (auto& s : states.take()) stamps[s.vehicle_id()].push_back(s.header().create_stamp().nanoseconds());
+        for (auto& o : observations.take()) {
+            const uint64_t t = o.header().create_stamp().nanoseconds();
+            if (t < t0 || t >= t1) continue;
+            auto [it, fresh] = first_last.try_emplace(o.vehicle_id(), o, o);
+            if (!fresh) it->second.second = o;
+        }
+        std::this_thread::sleep_for(20ms);
+    }
+    for (int id = 11; id <= 30; ++id) {
+        const auto n = std::count_if(stamps[id].begin(), stamps[id].end(), [&](uint64_t t) { return t >= t0 && t < t1; });
+        EXPECT_GE(n, 147) << "vehicle " << id << ": 50 Hz for 3 s, under 2 % missed";
+        ASSERT_TRUE(first_last.count(id)) << "vehicle " << id;
+        const auto& [a, b] = first_last[id];
+        const double moved = std::hypot(b.pose().x() - a.pose().x(), b.pose().y() - a.pose().y());
+        if (id == 25) {
+            EXPECT_GT(moved, 1.2) << "the commanded car drives (0.5 m/s for 3 s)";
+        } else {
+            EXPECT_LT(moved, 0.05) << "vehicle " << id << " was not commanded";
+        }
+    }
+    sut.kill(SIGINT);
+    EXPECT_EQ(sut.wait(15s), 0) << sut.errors();
+    EXPECT_EQ(count_of(sut.output(), "\"cycles\""), 20u) << "one statistics line per car from the bridge";
+    EXPECT_EQ(count_of(sut.output(), "\"state_packets\""), 20u) << "one statistics line per car from the simulator";
+}
+
+TEST_F(VehicleEndToEnd, ManyCarFlagsThatDoNotAddUpAreNamed)
+{
+    const auto fails = [](std::vector<std::string> argv, int code, const std::string& message) {
+        argv[0] = built_program(argv[0]);
+        Process p(argv);
+        EXPECT_EQ(p.wait(10s), code) << p.errors();
+        EXPECT_NE(p.errors().find(message), std::string::npos) << p.errors();
+    };
+    fails({"firmware_sim", "--vehicle_id", "3,4,3"}, 2, "--vehicle_id: vehicle 3 is listed twice");
+    fails({"firmware_sim", "--vehicle_id", "3,4", "--start", "0,0,0"}, 2, "--start: 1 pose(s) for 2 car(s)");
+    fails({"firmware_sim", "--vehicle_id", "3,4", "--start", "0,0,0;1,x,0"}, 2, "--start (pose 2)");
+    fails({"firmware_sim", "--vehicle_id", "3,4", "--trace-pwm"}, 2, "--trace-pwm is for one car; --vehicle_id lists 2");
+    fails({"vehicle_bridge", "--vehicle_id", "3,4", "--device", "/dev/null"}, 2, "--device names 1 device(s) for 2 car(s)");
+    fails({"vehicle_bridge", "--vehicle_id", "3,0", "--device", "/dev/null,/dev/null"}, 2, "--vehicle_id");
+}
+
 TEST_F(VehicleEndToEnd, WrongFilesAndFlagsAreNamedAndExitNonZero)
 {
     Process no_map({built_program("firmware_sim"), "--vehicle_id", "1", "--map", "/nonexistent/map.json"});
@@ -631,13 +714,6 @@ private:
     cpm::vehicle::FrameDecoder decoder_;
     std::vector<cpm::vehicle::CommandPacket> commands_;
 };
-
-size_t count_of(const std::string& text, const std::string& what)
-{
-    size_t n = 0;
-    for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
-    return n;
-}
 
 }  // namespace
 

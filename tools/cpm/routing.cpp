@@ -9,6 +9,7 @@
 
 #include <VehicleObservation.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <set>
@@ -49,9 +50,12 @@ const char* kWatchHelp =
     "usage: cpm routing watch --duration T [--vehicles 1,2,…] [--lanes FILE --picture OUT.svg|OUT.png]\n"
     "\n"
     "Watches the cars' true poses (vehicleObservation, from the simulator or the lab's positioning\n"
-    "system) for T (e.g. 60s) and prints how far each drove, its longest standstill, and the\n"
-    "smallest distance between two cars' bodies (the simulator's 1:10 car). --vehicles limits it\n"
-    "to those ids. --picture draws the lane graph with the cars where they were last seen.\n"
+    "system) for T (e.g. 60s) of lab time, and prints how far each drove, its longest standstill,\n"
+    "and the smallest distance between two cars' bodies (the simulator's 1:10 car). Lab time is\n"
+    "the observations' own clock: real time, or the simulated clock that `cpm lab clock\n"
+    "--simulated` drives (then T passes as fast as the lab computes); the watch also ends when\n"
+    "the observations stop for 3 s. --vehicles limits it to those ids. --picture draws the lane\n"
+    "graph with the cars where they were last seen.\n"
     "Exit code 1 when two cars touched, or when a listed car was never seen.\n";
 
 /// Loads a graph, printing its errors; nullopt when it has any.
@@ -163,14 +167,32 @@ int routing_watch(const std::vector<std::string>& args)
     cpm::ReaderAbstract<VehicleObservation> poses(cpm::topics::vehicle_observation.name, {.keep_all = true});
     cpm::routing::TrafficWatch watch(cpm::routing::Footprint::of(cpm::vehicle::VehicleParameters{}));
     cpm::cli::stop_on_signals();
-    const auto end = std::chrono::steady_clock::now() + std::chrono::nanoseconds(duration);
-    while (!cpm::cli::stop_requested() && std::chrono::steady_clock::now() < end) {
+    // T is counted on the observations' clock (simulated time may run faster than real time);
+    // a lab that never starts is not waited for beyond T of real time and 10 s more.
+    using Clock = std::chrono::steady_clock;
+    const auto give_up = Clock::now() + std::chrono::nanoseconds(duration) + std::chrono::seconds(10);
+    auto last_arrival = Clock::now();
+    uint64_t first = 0, newest = 0;
+    bool stopped = false;
+    while (!cpm::cli::stop_requested()) {
         for (const auto& o : poses.take()) {
             if (!only.empty() && !only.count(o.vehicle_id())) continue;
-            watch.add(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
+            const uint64_t stamp = o.header().create_stamp().nanoseconds();
+            watch.add(o.vehicle_id(), stamp, {o.pose().x(), o.pose().y(), o.pose().yaw()});
+            if (first == 0) first = stamp;
+            newest = std::max(newest, stamp);
+            last_arrival = Clock::now();
         }
+        if (first != 0 && newest - first >= duration) break;
+        if (first != 0 && Clock::now() - last_arrival > std::chrono::seconds(3)) {
+            stopped = true;
+            break;
+        }
+        if (first == 0 && Clock::now() > give_up) break;
         std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
+    std::printf("watched %.1f s of lab time%s\n", double(newest - first) * 1e-9,
+                stopped ? " (then the observations stopped for 3 s)" : "");
     std::fputs(watch.report().c_str(), stdout);
     bool missing = false;
     for (int id : only) {

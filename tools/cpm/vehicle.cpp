@@ -6,8 +6,11 @@
 #include <cpm/Error.hpp>
 #include <cpm/aruco/Camera.hpp>
 #include <cpm/routing/Simulate.hpp>
+#include <cpm/vehicle/BridgeNode.hpp>
+#include <cpm/vehicle/FirmwareSimNode.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -21,7 +24,7 @@ namespace {
 
 const char* const kVehicleSimHelp =
     "usage: cpm vehicle sim --id N [--count K] [--map FILE] [--start X,Y,YAW] [--spacing M]\n"
-    "                       [--lanes FILE [--seed S]]\n"
+    "                       [--lanes FILE [--seed S]] [--process-per-car]\n"
     "                       [--params FILE] [--calibration FILE] [--camera FILE [--camera-rate HZ]]\n"
     "                       [--dds_domain N]\n"
     "\n"
@@ -35,7 +38,10 @@ const char* const kVehicleSimHelp =
     "chosen by --seed, default 1), ready for central_routing. With --camera FILE (a camera file;\n"
     "needs --map), each car also gets a synthetic camera (camera_sim) publishing cameraFrame at\n"
     "--camera-rate Hz (default 30) from its true pose; run aruco_node to turn the frames into\n"
-    "arucoMarkers. Runs until Ctrl-C, then prints each process's statistics (JSON lines).\n";
+    "arucoMarkers. All cars run in one firmware_sim and one vehicle_bridge process (each car still\n"
+    "behind its own pty, line and loop); --process-per-car starts a pair of processes per car\n"
+    "instead (more isolation, fewer cars per machine). Runs until Ctrl-C, then prints each car's\n"
+    "statistics (JSON lines).\n";
 
 std::string pose_text(double x, double y, double yaw)
 {
@@ -49,7 +55,8 @@ int vehicle_sim(const std::vector<std::string>& args)
     auto parsed = cpm::cli::parse_flags(args,
                                        {{"--id", true}, {"--count", true}, {"--map", true}, {"--start", true},
                                         {"--spacing", true}, {"--params", true}, {"--calibration", true},
-                                        {"--camera", true}, {"--camera-rate", true}, {"--lanes", true}, {"--seed", true}},
+                                        {"--camera", true}, {"--camera-rate", true}, {"--lanes", true}, {"--seed", true},
+                                        {"--process-per-car", false}},
                                        "cpm vehicle sim");
     if (!parsed.has("--id")) throw cpm::cli::UsageError("cpm vehicle sim: --id is required (the vehicle id, 1..255)");
     long long first = cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255);
@@ -119,29 +126,50 @@ int vehicle_sim(const std::vector<std::string>& args)
     const std::string firmware_sim = cpm::sibling_executable("firmware_sim");
     const std::string vehicle_bridge = cpm::sibling_executable("vehicle_bridge");
     const std::string camera_sim = parsed.has("--camera") ? cpm::sibling_executable("camera_sim") : "";
-    for (long long k = 0; k < count; ++k) {
-        const std::string id = std::to_string(first + k);
-        const std::string& pose = poses[size_t(k)];
-        std::vector<std::string> sim_argv{firmware_sim, "--vehicle_id", id, "--start", pose};
+    // Every car in one simulator and one bridge process (a machine carries many more cars so),
+    // or with --process-per-car a simulator and a bridge for each (one car's crash is its own).
+    const bool per_car = parsed.has("--process-per-car");
+    auto join = [](const std::vector<std::string>& items, const char* separator) {
+        std::string text;
+        for (const auto& item : items) text += (text.empty() ? "" : separator) + item;
+        return text;
+    };
+    for (long long group = 0; group < (per_car ? count : 1); ++group) {
+        const long long begin = per_car ? group : 0, end = per_car ? group + 1 : count;
+        std::vector<std::string> ids, starts;
+        for (long long k = begin; k < end; ++k) {
+            ids.push_back(std::to_string(first + k));
+            starts.push_back(poses[size_t(k)]);
+        }
+        const std::string name = join(ids, ",");
+        std::vector<std::string> sim_argv{firmware_sim, "--vehicle_id", name, "--start", join(starts, ";")};
         for (const char* flag : {"--map", "--params"}) {
             if (parsed.has(flag)) sim_argv.insert(sim_argv.end(), {flag, parsed.get(flag)});
         }
-        cpm::ChildProcess& sim = launch("firmware_sim " + id, sim_argv, true);
-        const std::string line = sim.read_line().value_or("");
-        if (line.rfind("device: ", 0) != 0) throw cpm::Error("firmware_sim " + id + " did not start (see its error above)");
-        const std::string device = line.substr(8);
-
-        std::vector<std::string> bridge_argv{vehicle_bridge, "--vehicle_id", id, "--device", device, "--start", pose};
+        cpm::ChildProcess& sim = launch("firmware_sim " + name, sim_argv, true);
+        std::vector<std::string> devices;
+        for (const auto& id : ids) {
+            // "device: PATH" for one car, "device ID: PATH" for each of several
+            const std::string line = sim.read_line().value_or("");
+            const std::string prefix = ids.size() == 1 ? "device: " : "device " + id + ": ";
+            if (line.rfind(prefix, 0) != 0) throw cpm::Error("firmware_sim " + name + " did not start (see its error above)");
+            devices.push_back(line.substr(prefix.size()));
+        }
+        std::vector<std::string> bridge_argv{vehicle_bridge, "--vehicle_id", name, "--device", join(devices, ","),
+                                             "--start", join(starts, ";")};
         if (parsed.has("--calibration")) bridge_argv.insert(bridge_argv.end(), {"--calibration", parsed.get("--calibration")});
         const int sim_pid = sim.pid();
-        cpm::ChildProcess& bridge = launch("vehicle_bridge " + id, bridge_argv, false);
-        std::printf("vehicle %s: firmware_sim pid %d on %s, vehicle_bridge pid %d, start %s\n", id.c_str(), sim_pid, device.c_str(),
-                    bridge.pid(), pose.c_str());
-        if (!camera_sim.empty()) {
-            cpm::ChildProcess& camera = launch("camera_sim " + id, {camera_sim, "--vehicle_id", id, "--camera", parsed.get("--camera"),
-                                                                    "--map", parsed.get("--map"), "--rate", camera_rate},
-                                               false);
-            std::printf("vehicle %s: camera_sim pid %d, %s Hz\n", id.c_str(), camera.pid(), camera_rate.c_str());
+        cpm::ChildProcess& bridge = launch("vehicle_bridge " + name, bridge_argv, false);
+        for (size_t k = 0; k < ids.size(); ++k) {
+            const std::string& id = ids[k];
+            std::printf("vehicle %s: firmware_sim pid %d on %s, vehicle_bridge pid %d, start %s\n", id.c_str(), sim_pid,
+                        devices[k].c_str(), bridge.pid(), starts[k].c_str());
+            if (!camera_sim.empty()) {
+                cpm::ChildProcess& camera = launch("camera_sim " + id, {camera_sim, "--vehicle_id", id, "--camera", parsed.get("--camera"),
+                                                                        "--map", parsed.get("--map"), "--rate", camera_rate},
+                                                   false);
+                std::printf("vehicle %s: camera_sim pid %d, %s Hz\n", id.c_str(), camera.pid(), camera_rate.c_str());
+            }
         }
         std::fflush(stdout);
         copiers.emplace_back([&sim] {
@@ -152,12 +180,22 @@ int vehicle_sim(const std::vector<std::string>& args)
         });
     }
 
+    if (std::find(parsed.init_args.begin(), parsed.init_args.end(), "--simulated_time") != parsed.init_args.end()) {
+        std::printf("simulated time: drive the cars with cpm lab clock --simulated --nodes %s,%s[,your nodes]\n",
+                    cpm::vehicle::FirmwareSimNode::timer_name(uint8_t(first)).c_str(),
+                    cpm::vehicle::BridgeNode::timer_name(uint8_t(first)).c_str());
+        if (per_car) std::printf("(with --process-per-car every car's two timers: firmware_sim_ID,vehicle_bridge_ID)\n");
+        std::fflush(stdout);
+    }
     int exit_code = 0;
-    while (!cpm::cli::stop_requested() && exit_code == 0) {
+    for (bool ended = false; !cpm::cli::stop_requested() && !ended;) {
         for (auto& [name, child] : children) {
             if (auto end = child.ended()) {
-                std::fprintf(stderr, "cpm vehicle sim: %s %s; stopping the others\n", name.c_str(), end->describe().c_str());
-                exit_code = 1;
+                // Exit 0 unasked: the lab's clock stopped the timers (cpm lab clock), a normal end.
+                std::fprintf(stderr, "cpm vehicle sim: %s %s%s; stopping the others\n", name.c_str(), end->describe().c_str(),
+                             end->ok() ? " (the lab's clock stopped it)" : "");
+                if (!end->ok()) exit_code = 1;
+                ended = true;
             }
         }
         std::this_thread::sleep_for(std::chrono::milliseconds(50));

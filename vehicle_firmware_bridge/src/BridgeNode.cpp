@@ -2,8 +2,11 @@
 #include <cpm/vehicle/BridgeNode.hpp>
 
 #include <cpm/LogThrottle.hpp>
+#include <cpm/Error.hpp>
 #include <cpm/Logging.hpp>
-#include <cpm/Reader.hpp>
+#include <cpm/Timer.hpp>
+#include <cpm/init.hpp>
+#include <cpm/MultiVehicleReader.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
@@ -18,6 +21,9 @@
 #include <algorithm>
 #include <chrono>
 #include <ctime>
+#include <map>
+#include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -32,27 +38,55 @@ uint64_t thread_cpu_ns()
     return uint64_t(ts.tv_sec) * 1'000'000'000ull + uint64_t(ts.tv_nsec);
 }
 
-/// Everything the bridge reads from and writes to the lab.
+/// Everything the bridge's cars read from and write to the lab: one reader per topic for all
+/// of them (each car picks its own samples), one writer per topic.
 struct LabTopics
 {
-    explicit LabTopics(uint8_t id)
-        : direct(topics::vehicle_command_direct.name, topics::vehicle_command_direct.reader_for(id)),
-          speed_curvature(topics::vehicle_command_speed_curvature.name, topics::vehicle_command_speed_curvature.reader_for(id)),
-          trajectory(topics::vehicle_command_trajectory.name, topics::vehicle_command_trajectory.reader_for(id)),
-          path_tracking(topics::vehicle_command_path_tracking.name, topics::vehicle_command_path_tracking.reader_for(id)),
-          observation(topics::vehicle_observation.name, topics::vehicle_observation.reader_for(id)),
+    explicit LabTopics(const std::vector<uint8_t>& ids)
+        : direct(topics::vehicle_command_direct.name, ids, topics::vehicle_command_direct.reader),
+          speed_curvature(topics::vehicle_command_speed_curvature.name, ids, topics::vehicle_command_speed_curvature.reader),
+          trajectory(topics::vehicle_command_trajectory.name, ids, topics::vehicle_command_trajectory.reader),
+          path_tracking(topics::vehicle_command_path_tracking.name, ids, topics::vehicle_command_path_tracking.reader),
+          observation(topics::vehicle_observation.name, ids, topics::vehicle_observation.reader),
           stop(topics::stop_request.name, topics::stop_request.reader)
     {
     }
-    Reader<VehicleCommandDirect> direct;
-    Reader<VehicleCommandSpeedCurvature> speed_curvature;
-    Reader<VehicleCommandTrajectory> trajectory;
-    Reader<VehicleCommandPathTracking> path_tracking;
-    Reader<VehicleObservation> observation;
+    /// create_stamp of the newest StopRequest for this car or for all (vehicle_id 0).
+    std::optional<uint64_t> stop_request_ns(uint8_t id)
+    {
+        std::lock_guard<std::mutex> lock(stop_mutex);
+        for (const auto& s : stop.take()) {
+            auto& newest = stop_requests[s.vehicle_id()];
+            newest = std::max(newest.value_or(0), s.header().create_stamp().nanoseconds());
+        }
+        auto all = stop_requests[0], mine = stop_requests[id];
+        if (!all) return mine;
+        if (!mine) return all;
+        return std::max(*all, *mine);
+    }
+    MultiVehicleReader<VehicleCommandDirect> direct;
+    MultiVehicleReader<VehicleCommandSpeedCurvature> speed_curvature;
+    MultiVehicleReader<VehicleCommandTrajectory> trajectory;
+    MultiVehicleReader<VehicleCommandPathTracking> path_tracking;
+    MultiVehicleReader<VehicleObservation> observation;
     ReaderAbstract<StopRequest> stop;
+    std::mutex stop_mutex;
+    std::map<uint8_t, std::optional<uint64_t>> stop_requests;
     Writer<VehicleState> state{topics::vehicle_state.name, topics::vehicle_state.writer};
     Writer<RangeSensors> ranges{topics::range_sensors.name, topics::range_sensors.writer};
 };
+
+std::vector<uint8_t> checked_ids(const std::vector<BridgeNodeOptions>& cars)
+{
+    if (cars.empty()) throw Error("vehicle_bridge: no car to serve");
+    std::vector<uint8_t> ids;
+    for (const auto& c : cars) {
+        if (std::find(ids.begin(), ids.end(), c.vehicle_id) != ids.end())
+            throw Error("vehicle_bridge: vehicle " + std::to_string(c.vehicle_id) + " is given twice");
+        ids.push_back(c.vehicle_id);
+    }
+    return ids;
+}
 
 }  // namespace
 
@@ -72,22 +106,29 @@ std::string BridgeNodeStats::to_json() const
     return j.dump();
 }
 
-struct BridgeNode::Impl
+/// One car's loop: its serial line, its BridgeCore, its statistics.
+struct BridgeCar
 {
-    explicit Impl(BridgeNodeOptions o) : options(std::move(o)), lab(options.vehicle_id),
+    BridgeCar(BridgeNodeOptions o, LabTopics& topics) : options(std::move(o)), lab(topics),
         core(options.vehicle_id, options.calibration, options.start) {}
 
+    /// Real time: serves the line until stop_requested().
     void run(const std::function<bool()>& stop_requested);
+    /// Simulated time, once per tick: answers the packet the controller just sent.
+    void serve_tick(const std::function<bool()>& stop_requested);
+    /// Reads the open line once (waiting up to timeout_ms) and answers the newest of this car's
+    /// state packets in it; true when it answered one.
+    bool serve(int timeout_ms, const std::function<bool()>& stop_requested);
     bool open_line();
     void cycle(const StatePacket& packet, uint64_t t_received);
     void report(const std::vector<Notice>& notices);
+    BridgeNodeStats final_stats() const;
 
     BridgeNodeOptions options;
-    LabTopics lab;
+    LabTopics& lab;
     BridgeCore core;
     std::unique_ptr<SerialPort> port;
     FrameDecoder decoder;
-    std::optional<uint64_t> stop_request_ns;
     uint64_t last_observation_ns = 0, last_packet_ns = 0;
     int foreign_in_a_row = 0;
     bool silent_logged = false, waiting_logged = false;
@@ -97,7 +138,7 @@ struct BridgeNode::Impl
     LogThrottle foreign_throttle, leave_throttle{10'000'000'000ull};
 };
 
-bool BridgeNode::Impl::open_line()
+bool BridgeCar::open_line()
 {
     const unsigned id = options.vehicle_id;
     try {
@@ -118,7 +159,7 @@ bool BridgeNode::Impl::open_line()
     return true;
 }
 
-void BridgeNode::Impl::report(const std::vector<Notice>& notices)
+void BridgeCar::report(const std::vector<Notice>& notices)
 {
     for (const auto& n : notices) {
         uint64_t held = 0;
@@ -132,7 +173,7 @@ void BridgeNode::Impl::report(const std::vector<Notice>& notices)
     }
 }
 
-void BridgeNode::Impl::cycle(const StatePacket& packet, uint64_t t_received)
+void BridgeCar::cycle(const StatePacket& packet, uint64_t t_received)
 {
     const uint64_t cpu0 = thread_cpu_ns();
     if (silent_logged) CPM_LOG_INFO("vehicle %u: state packets again", unsigned(options.vehicle_id));
@@ -140,16 +181,17 @@ void BridgeNode::Impl::cycle(const StatePacket& packet, uint64_t t_received)
     last_packet_ns = t_received;
     if (packet.status & kStatusBadCrc) ++stats.controller_reported_bad_crc;
 
-    auto observation = lab.observation.get_sample(t_received);
+    const uint8_t id = options.vehicle_id;
+    auto observation = lab.observation.get_sample(id, t_received);
     uint64_t observed_ns = observation.sample.header().create_stamp().nanoseconds();
     if (observation.valid && observed_ns > last_observation_ns) {
         last_observation_ns = observed_ns;
         const auto& p = observation.sample.pose();
         core.on_observation({p.x(), p.y(), p.yaw()}, observed_ns);
     }
-    CommandInputs inputs{lab.direct.get_sample(t_received), lab.speed_curvature.get_sample(t_received),
-                         lab.trajectory.get_sample(t_received), lab.path_tracking.get_sample(t_received),
-                         stop_request_ns};
+    CommandInputs inputs{lab.direct.get_sample(id, t_received), lab.speed_curvature.get_sample(id, t_received),
+                         lab.trajectory.get_sample(id, t_received), lab.path_tracking.get_sample(id, t_received),
+                         lab.stop_request_ns(id)};
     auto out = core.on_state_packet(packet, t_received, inputs);
     auto frame = encode_frame(out.command);
     port->write_all(frame.data(), frame.size());
@@ -169,34 +211,50 @@ void BridgeNode::Impl::cycle(const StatePacket& packet, uint64_t t_received)
     if (cycle_cpu_ns.size() < 1'000'000) cycle_cpu_ns.push_back(thread_cpu_ns() - cpu0);
 }
 
-void BridgeNode::Impl::run(const std::function<bool()>& stop_requested)
+void BridgeCar::run(const std::function<bool()>& stop_requested)
 {
-    const unsigned id = options.vehicle_id;
     while (!stop_requested()) {
         if (!port && !open_line()) {
             std::this_thread::sleep_for(std::chrono::milliseconds(200));
             continue;
         }
+        serve(100, stop_requested);
+    }
+}
+
+void BridgeCar::serve_tick(const std::function<bool()>& stop_requested)
+{
+    // Simulated time: the controller sent its packet just before this tick (its timer ticks
+    // before ours on the lab's clock), but a pty hands bytes over asynchronously: wait up to
+    // 100 ms of real time for it.
+    if (!port && !open_line()) return;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+    while (port && !stop_requested()) {
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+        if (left.count() <= 0 || serve(int(left.count()), stop_requested)) return;
+    }
+}
+
+bool BridgeCar::serve(int timeout_ms, const std::function<bool()>& stop_requested)
+{
+    const unsigned id = options.vehicle_id;
+    {
         uint8_t buffer[256];
-        long n = port->read_some(buffer, sizeof buffer, 100);
+        long n = port->read_some(buffer, sizeof buffer, timeout_ms);
         uint64_t t_received = get_time_ns();
         if (n < 0) {
             ++stats.link_losses;
             stats.decoder_errors += decoder.errors().total();
             CPM_LOG_ERROR("vehicle %u: serial link to %s lost; no fresh state until it is back", id, options.device.c_str());
             port.reset();
-            continue;
+            return false;
         }
         if (n == 0) {
             if (!silent_logged && t_received - last_packet_ns > 200'000'000ull) {
                 CPM_LOG_WARN("vehicle %u: no state packet from the controller for 200 ms", id);
                 silent_logged = true;
             }
-            continue;
-        }
-        for (const auto& s : lab.stop.take()) {
-            if (s.vehicle_id() != 0 && s.vehicle_id() != id) continue;
-            stop_request_ns = std::max(stop_request_ns.value_or(0), s.header().create_stamp().nanoseconds());
+            return false;
         }
         // Only the newest of this car's states counts: older ones in the same read waited in a
         // buffer. Another car's packets are never used.
@@ -234,26 +292,71 @@ void BridgeNode::Impl::run(const std::function<bool()>& stop_requested)
             port.reset();
             for (int waited = 0; waited < options.foreign_retry_ms && !stop_requested(); waited += 100)
                 std::this_thread::sleep_for(std::chrono::milliseconds(100));
-            continue;
+            return false;
         }
-        if (newest) cycle(*newest, t_received);
+        if (!newest) return false;
+        cycle(*newest, t_received);
+        return true;
     }
 }
 
-BridgeNode::BridgeNode(BridgeNodeOptions options) : impl_(std::make_unique<Impl>(std::move(options))) {}
+BridgeNodeStats BridgeCar::final_stats() const
+{
+    BridgeNodeStats s = stats;
+    s.vehicle_id = options.vehicle_id;
+    s.cycle_cpu_us_p50 = double(percentile(cycle_cpu_ns, 0.5)) / 1e3;
+    s.cycle_cpu_us_p99 = double(percentile(cycle_cpu_ns, 0.99)) / 1e3;
+    if (port) s.decoder_errors += decoder.errors().total();
+    for (size_t k = 0; k < kAnomalyKinds; ++k) s.anomalies[k] = core.anomalies(Anomaly(k));
+    return s;
+}
+
+struct BridgeNode::Impl
+{
+    explicit Impl(std::vector<BridgeNodeOptions> options) : lab(checked_ids(options))
+    {
+        for (auto& o : options) cars.push_back(std::make_unique<BridgeCar>(std::move(o), lab));
+    }
+    LabTopics lab;
+    std::vector<std::unique_ptr<BridgeCar>> cars;
+};
+
+BridgeNode::BridgeNode(BridgeNodeOptions options) : BridgeNode(std::vector<BridgeNodeOptions>{std::move(options)}) {}
+BridgeNode::BridgeNode(std::vector<BridgeNodeOptions> cars) : impl_(std::make_unique<Impl>(std::move(cars))) {}
 BridgeNode::~BridgeNode() = default;
 
-void BridgeNode::run(const std::function<bool()>& stop_requested) { impl_->run(stop_requested); }
+std::string BridgeNode::timer_name(uint8_t first_vehicle_id) { return "vehicle_bridge_" + std::to_string(first_vehicle_id); }
 
-BridgeNodeStats BridgeNode::stats() const
+void BridgeNode::run(const std::function<bool()>& stop_requested)
 {
-    BridgeNodeStats s = impl_->stats;
-    s.vehicle_id = impl_->options.vehicle_id;
-    s.cycle_cpu_us_p50 = double(percentile(impl_->cycle_cpu_ns, 0.5)) / 1e3;
-    s.cycle_cpu_us_p99 = double(percentile(impl_->cycle_cpu_ns, 0.99)) / 1e3;
-    if (impl_->port) s.decoder_errors += impl_->decoder.errors().total();
-    for (size_t k = 0; k < kAnomalyKinds; ++k) s.anomalies[k] = impl_->core.anomalies(Anomaly(k));
-    return s;
+    if (init_settings().simulated_time) {
+        // One tick per state packet, 1 ms after the controller's on the lab's clock: the
+        // controllers' packets of a tick are answered before their next tick.
+        auto& cars = impl_->cars;
+        auto timer = Timer::create(timer_name(cars[0]->options.vehicle_id), cars[0]->options.simulated_state_period_ns, 1'000'000,
+                                   TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
+        timer->start([&](uint64_t) {
+            if (stop_requested()) {
+                timer->stop();
+                return;
+            }
+            for (auto& car : cars) car->serve_tick(stop_requested);
+        });
+        return;
+    }
+    if (impl_->cars.size() == 1) return impl_->cars[0]->run(stop_requested);
+    std::vector<std::thread> threads;
+    for (auto& car : impl_->cars) threads.emplace_back([&car, &stop_requested] { car->run(stop_requested); });
+    for (auto& t : threads) t.join();
+}
+
+BridgeNodeStats BridgeNode::stats() const { return impl_->cars[0]->final_stats(); }
+
+std::vector<BridgeNodeStats> BridgeNode::all_stats() const
+{
+    std::vector<BridgeNodeStats> out;
+    for (const auto& car : impl_->cars) out.push_back(car->final_stats());
+    return out;
 }
 
 }  // namespace cpm::vehicle

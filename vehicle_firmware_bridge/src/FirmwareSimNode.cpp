@@ -1,10 +1,12 @@
 #include <cpm/topics.hpp>
 #include <cpm/vehicle/FirmwareSimNode.hpp>
 
+#include <cpm/Error.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/init.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
@@ -15,34 +17,34 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <condition_variable>
 #include <mutex>
 #include <optional>
 #include <thread>
 #include <cstdio>
 #include <map>
+#include <set>
 #include <random>
 
 namespace cpm::vehicle {
 
-struct FirmwareSimNode::Impl
+namespace {
+
+/// One car of the process: its controller and its line.
+struct Car
 {
-    explicit Impl(FirmwareSimNodeOptions o)
-        : options(std::move(o)), sim(options.parameters, options.world, options.start, options.vehicle_id, options.seed),
-          corruption(options.seed), participant(Participant::default_participant()),
-          observations(participant, topics::vehicle_observation.name, topics::vehicle_observation.writer),
-          others(participant, topics::vehicle_observation.name, topics::vehicle_observation.reader)
+    Car(const SimulatedCar& c, const FirmwareSimNodeOptions& o)
+        : options(c), sim(o.parameters, o.world, c.start, c.vehicle_id, c.seed), corruption(c.seed)
     {
-        if (!options.device.empty()) {
-            port = std::make_unique<SerialPort>(options.device, options.baud);
-            device = options.device;
+        if (!o.device.empty()) {
+            port = std::make_unique<SerialPort>(o.device, o.baud);
+            device = o.device;
         } else {
-            pty = std::make_unique<PseudoTerminal>(options.link);
+            pty = std::make_unique<PseudoTerminal>(c.link);
             device = pty->device_path();
         }
-        publisher = std::thread([this] { publish_loop(); });
     }
-
     long read_line(uint8_t* data, size_t size) { return pty ? pty->read_available(data, size) : port->read_some(data, size, 0); }
     void write_line(const std::vector<uint8_t>& frame)
     {
@@ -52,111 +54,193 @@ struct FirmwareSimNode::Impl
             port->write_all(frame.data(), frame.size());
         }
     }
-    void trace(uint64_t now);
-    void tick(uint64_t t_nominal);
-    void publish_and_see_others(uint64_t t_model);
-    void report_collisions();
-    void publish_loop();
 
-    FirmwareSimNodeOptions options;
+    SimulatedCar options;
     FirmwareSim sim;
     std::mt19937 corruption;
     std::unique_ptr<PseudoTerminal> pty;
     std::unique_ptr<SerialPort> port;
     std::string device;
+    std::pair<MotorMode, uint16_t> traced{MotorMode::Brake, 0};
+    bool host_silent = false;  ///< simulated time: the last state packet went unanswered
+};
+
+void checked(const FirmwareSimNodeOptions& o)
+{
+    if (o.cars.empty()) throw Error("firmware_sim: no car to simulate");
+    std::set<uint8_t> ids;
+    for (const auto& c : o.cars) {
+        if (c.vehicle_id == 0) throw Error("firmware_sim: vehicle id 0 is not a car's (ids are 1..255)");
+        if (!ids.insert(c.vehicle_id).second)
+            throw Error("firmware_sim: vehicle " + std::to_string(c.vehicle_id) + " is given twice");
+    }
+    if (o.cars.size() > 1 && !o.device.empty())
+        throw Error("firmware_sim: a serial device carries one car; " + std::to_string(o.cars.size()) + " were given");
+    if (o.cars.size() > 1 && o.trace_pwm)
+        throw Error("firmware_sim: the pwm trace is for one car; " + std::to_string(o.cars.size()) + " were given");
+}
+
+}  // namespace
+
+struct FirmwareSimNode::Impl
+{
+    explicit Impl(FirmwareSimNodeOptions o)
+        : options(std::move(o)), participant(Participant::default_participant()),
+          observations(participant, topics::vehicle_observation.name, topics::vehicle_observation.writer),
+          others(participant, topics::vehicle_observation.name, topics::vehicle_observation.reader)
+    {
+        checked(options);
+        for (const auto& c : options.cars) {
+            cars.push_back(std::make_unique<Car>(c, options));
+            own_ids.insert(c.vehicle_id);
+        }
+        publisher = std::thread([this] { publish_loop(); });
+    }
+
+    void trace(Car& car, uint64_t now);
+    void read_lines();
+    void await_answers();
+    void tick(uint64_t t_nominal);
+    void publish(Car& car, uint64_t t_model);
+    void see_each_other();
+    void report_collisions(Car& car);
+    void publish_loop();
+
+    FirmwareSimNodeOptions options;
+    std::vector<std::unique_ptr<Car>> cars;
+    std::set<uint8_t> own_ids;
     Participant& participant;
     Writer<VehicleObservation> observations;
     ReaderAbstract<VehicleObservation> others;
-    std::map<uint8_t, std::pair<uint64_t, Pose>> other_cars;
+    std::map<uint8_t, std::pair<uint64_t, Pose>> other_cars;  ///< cars of other processes: (seen at, pose)
     std::shared_ptr<Timer> timer;
+    bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
     uint64_t last_tick_ns = 0, steps = 0, skipped_steps = 0;
-    std::pair<MotorMode, uint16_t> traced{MotorMode::Brake, 0};
-    // The true pose goes out from a thread of its own: a DDS write can stall (a reader's process
-    // killed while holding its shared-memory port), and the microcontroller's clock, commands
-    // and watchdog must not wait for it. Only the newest observation is kept.
+    // The true poses go out from a thread of their own: a DDS write can stall (a reader's
+    // process killed while holding its shared-memory port), and the microcontrollers' clock,
+    // commands and watchdogs must not wait for it. Only the newest observation per car is kept.
     std::mutex publish_mutex;
     std::condition_variable publish_ready;
-    std::optional<VehicleObservation> to_publish;
+    std::map<uint8_t, VehicleObservation> to_publish;
     bool publishing = true;
-    std::thread publisher;  // started once the line is open (the constructor may throw before)
+    std::thread publisher;  // started once the lines are open (the constructor may throw before)
 };
 
 void FirmwareSimNode::Impl::publish_loop()
 {
     for (;;) {
-        VehicleObservation o;
+        std::map<uint8_t, VehicleObservation> batch;
         {
             std::unique_lock<std::mutex> lock(publish_mutex);
-            publish_ready.wait(lock, [&] { return to_publish || !publishing; });
-            if (!to_publish) return;
-            o = *to_publish;
-            to_publish.reset();
+            publish_ready.wait(lock, [&] { return !to_publish.empty() || !publishing; });
+            if (to_publish.empty()) return;
+            batch.swap(to_publish);
         }
-        (void)observations.write(o);
+        for (const auto& [id, o] : batch) (void)observations.write(o);
     }
 }
 
-void FirmwareSimNode::Impl::trace(uint64_t now)
+void FirmwareSimNode::Impl::trace(Car& car, uint64_t now)
 {
     if (!options.trace_pwm) return;
-    auto held = sim.motor_command();
-    if (held == traced) return;
-    traced = held;
+    auto held = car.sim.motor_command();
+    if (held == car.traced) return;
+    car.traced = held;
     std::printf("pwm %llu %d %u\n", static_cast<unsigned long long>(now), static_cast<int>(held.first), unsigned(held.second));
     std::fflush(stdout);
 }
 
-void FirmwareSimNode::Impl::report_collisions()
+void FirmwareSimNode::Impl::report_collisions(Car& car)
 {
-    for (const auto& c : sim.take_collisions()) {
+    for (const auto& c : car.sim.take_collisions()) {
         CPM_LOG_WARN("vehicle %u: hit the wall [%.3f, %.3f, %.3f, %.3f] at x %.3f y %.3f yaw %.3f; stopped against it",
-                     unsigned(options.vehicle_id), c.wall.x1, c.wall.y1, c.wall.x2, c.wall.y2, c.pose.x, c.pose.y,
+                     unsigned(car.options.vehicle_id), c.wall.x1, c.wall.y1, c.wall.x2, c.wall.y2, c.pose.x, c.pose.y,
                      c.pose.yaw);
     }
 }
 
-void FirmwareSimNode::Impl::publish_and_see_others(uint64_t t_model)
+void FirmwareSimNode::Impl::publish(Car& car, uint64_t t_model)
 {
-    uint64_t now = get_time_ns();
-    if (!sim.drop_observation()) {
-        // Stamped with the model time the pose belongs to, not the moment a late tick ran: a
-        // loaded machine delays the tick, not the car, and a speed computed from the stamps
-        // must not see that delay.
-        VehicleObservation o;
-        stamp_message(o, t_model, 0);
-        o.vehicle_id(options.vehicle_id);
-        auto pose = sim.observed_pose();
-        o.pose().x(pose.x);
-        o.pose().y(pose.y);
-        o.pose().yaw(pose.yaw);
-        std::lock_guard<std::mutex> lock(publish_mutex);
-        to_publish = o;
-        publish_ready.notify_one();
-    }
+    if (car.sim.drop_observation()) return;
+    // Stamped with the model time the pose belongs to, not the moment a late tick ran: a
+    // loaded machine delays the tick, not the car, and a speed computed from the stamps
+    // must not see that delay.
+    VehicleObservation o;
+    stamp_message(o, t_model, 0);
+    o.vehicle_id(car.options.vehicle_id);
+    auto pose = car.sim.observed_pose();
+    o.pose().x(pose.x);
+    o.pose().y(pose.y);
+    o.pose().yaw(pose.yaw);
+    std::lock_guard<std::mutex> lock(publish_mutex);
+    to_publish[car.options.vehicle_id] = o;
+    publish_ready.notify_one();
+}
+
+void FirmwareSimNode::Impl::see_each_other()
+{
+    const uint64_t now = get_time_ns();
     for (auto& o : others.take()) {
-        if (o.vehicle_id() == options.vehicle_id) continue;
+        if (own_ids.count(o.vehicle_id())) continue;
         other_cars[o.vehicle_id()] = {o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()}};
     }
-    std::vector<Pose> poses;
+    std::vector<Pose> everyone;  // other processes' cars first, then this process's in order
     for (auto it = other_cars.begin(); it != other_cars.end();) {
         // A car not seen for a second has left the world.
         if (it->second.first + 1'000'000'000ull < now) {
             it = other_cars.erase(it);
         } else {
-            poses.push_back(it->second.second);
+            everyone.push_back(it->second.second);
             ++it;
         }
     }
-    sim.set_other_cars(poses);
+    const size_t foreign = everyone.size();
+    for (const auto& car : cars) everyone.push_back(car->sim.model().pose());
+    std::vector<Pose> poses;
+    for (size_t k = 0; k < cars.size(); ++k) {
+        poses.assign(everyone.begin(), everyone.begin() + long(foreign));
+        for (size_t j = 0; j < cars.size(); ++j) {
+            if (j != k) poses.push_back(everyone[foreign + j]);
+        }
+        cars[k]->sim.set_other_cars(poses);
+    }
+}
+
+void FirmwareSimNode::Impl::read_lines()
+{
+    uint8_t buffer[512];
+    for (auto& car : cars) {
+        for (long n; (n = car->read_line(buffer, sizeof buffer)) > 0;) {
+            car->sim.receive(buffer, size_t(n));
+            trace(*car, get_time_ns());
+        }
+    }
+}
+
+void FirmwareSimNode::Impl::await_answers()
+{
+    // In simulated time the hosts answered the last state packets before the lab clock moved
+    // on (their timers tick between ours), but a pty hands bytes over asynchronously: wait a
+    // little real time for answers still in flight. A car whose host is gone is not waited for
+    // again until it answers once more.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+    for (;;) {
+        read_lines();
+        bool all = true;
+        for (const auto& car : cars) all = all && (car->sim.answered() || car->host_silent);
+        if (all || std::chrono::steady_clock::now() >= deadline) break;
+        std::this_thread::sleep_for(std::chrono::microseconds(50));
+    }
+    for (auto& car : cars) car->host_silent = !car->sim.answered();
 }
 
 void FirmwareSimNode::Impl::tick(uint64_t t_nominal)
 {
-    uint8_t buffer[512];
-    for (long n; (n = read_line(buffer, sizeof buffer)) > 0;) {
-        sim.receive(buffer, size_t(n));
-        trace(get_time_ns());
+    if (simulated) {
+        await_answers();
+    } else {
+        read_lines();
     }
     // Catch up on ticks the timer skipped (up to 1 s), so model time keeps pace with real
     // time; but send only one state packet however many fell due: a controller that fell
@@ -169,24 +253,34 @@ void FirmwareSimNode::Impl::tick(uint64_t t_nominal)
     last_tick_ns = t_nominal;
     bool state_due = false;
     for (uint64_t i = 0; i < due; ++i) {
-        sim.step();
+        for (auto& car : cars) car->sim.step();
         if (++steps % steps_per_state == 0) state_due = true;
     }
-    report_collisions();
+    for (auto& car : cars) report_collisions(*car);
     if (state_due) {
-        auto frame = encode_frame(sim.make_state_packet());
-        if (options.corrupt_rate > 0 && std::uniform_real_distribution<double>(0, 1)(corruption) < options.corrupt_rate) {
-            frame[corruption() % frame.size()] ^= uint8_t(1 + corruption() % 255);
+        for (auto& car : cars) {
+            auto frame = encode_frame(car->sim.make_state_packet());
+            if (options.corrupt_rate > 0 &&
+                std::uniform_real_distribution<double>(0, 1)(car->corruption) < options.corrupt_rate) {
+                frame[car->corruption() % frame.size()] ^= uint8_t(1 + car->corruption() % 255);
+            }
+            car->write_line(frame);
+            publish(*car, t_nominal);
         }
-        write_line(frame);
-        publish_and_see_others(t_nominal);
+        see_each_other();
     }
-    trace(get_time_ns());
+    for (auto& car : cars) trace(*car, get_time_ns());
 }
+
+std::string FirmwareSimNode::timer_name(uint8_t first_vehicle_id) { return "firmware_sim_" + std::to_string(first_vehicle_id); }
 
 FirmwareSimNode::FirmwareSimNode(FirmwareSimNodeOptions options) : impl_(std::make_unique<Impl>(std::move(options)))
 {
-    std::printf("device: %s\n", impl_->device.c_str());
+    if (impl_->cars.size() == 1) {
+        std::printf("device: %s\n", impl_->cars[0]->device.c_str());
+    } else {
+        for (const auto& car : impl_->cars) std::printf("device %u: %s\n", unsigned(car->options.vehicle_id), car->device.c_str());
+    }
     std::fflush(stdout);
 }
 
@@ -200,7 +294,12 @@ FirmwareSimNode::~FirmwareSimNode()
     impl_->publisher.join();
 }
 
-const std::string& FirmwareSimNode::device_path() const { return impl_->device; }
+std::vector<std::pair<uint8_t, std::string>> FirmwareSimNode::devices() const
+{
+    std::vector<std::pair<uint8_t, std::string>> out;
+    for (const auto& car : impl_->cars) out.emplace_back(car->options.vehicle_id, car->device);
+    return out;
+}
 
 void FirmwareSimNode::run(const std::function<bool()>& stop_requested)
 {
@@ -209,8 +308,15 @@ void FirmwareSimNode::run(const std::function<bool()>& stop_requested)
     d.physics_period_ns = static_cast<uint64_t>(1e9 / p.physics_rate);
     d.steps_per_state = std::max<uint64_t>(1, std::llround(p.physics_rate / p.state_rate));
     d.max_catch_up = std::max<uint64_t>(1, uint64_t(p.physics_rate));  // 1 s of model time
-    d.timer = Timer::create(d.participant, "firmware_sim_" + std::to_string(d.options.vehicle_id), d.physics_period_ns,
-                            0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
+    // Real time: a tick per physics step, so commands act within one. Simulated time: a tick
+    // per state packet (the lab's clock steps through every tick of every node, and the host
+    // answers between two), the physics steps in between run at once; and a state packet on
+    // the first tick, so the host's first tick has one to answer.
+    d.simulated = init_settings().simulated_time;
+    const uint64_t period = d.simulated ? d.physics_period_ns * d.steps_per_state : d.physics_period_ns;
+    if (d.simulated) d.steps = d.steps_per_state - 1;
+    d.timer = Timer::create(d.participant, timer_name(d.cars[0]->options.vehicle_id), period, 0,
+                            cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     d.timer->start([&](uint64_t t_nominal) {
         if (stop_requested()) {
             d.timer->stop();
@@ -223,23 +329,27 @@ void FirmwareSimNode::run(const std::function<bool()>& stop_requested)
 std::string FirmwareSimNode::stats_json() const
 {
     const auto& d = *impl_;
-    const auto s = d.sim.stats();
-    nlohmann::ordered_json j{{"vehicle_id", d.options.vehicle_id},
-                             {"state_packets", s.state_packets},
-                             {"unanswered_states", s.unanswered_states},
-                             {"commands", s.commands},
-                             {"wrong_vehicle", s.wrong_vehicle},
-                             {"watchdog_stops", s.watchdog_stops},
-                             {"wall_collisions", s.wall_collisions},
-                             {"missed_ticks", d.timer ? d.timer->missed_deadlines() : 0},
-                             {"model_steps_dropped", d.skipped_steps},
-                             {"decoder_errors",
-                              {{"oversize", s.decoder.oversize},
-                               {"bad_cobs", s.decoder.bad_cobs},
-                               {"too_short", s.decoder.too_short},
-                               {"bad_crc", s.decoder.bad_crc},
-                               {"bad_packet", s.decoder.bad_packet}}}};
-    return j.dump();
+    std::string lines;
+    for (const auto& car : d.cars) {
+        const auto s = car->sim.stats();
+        nlohmann::ordered_json j{{"vehicle_id", car->options.vehicle_id},
+                                 {"state_packets", s.state_packets},
+                                 {"unanswered_states", s.unanswered_states},
+                                 {"commands", s.commands},
+                                 {"wrong_vehicle", s.wrong_vehicle},
+                                 {"watchdog_stops", s.watchdog_stops},
+                                 {"wall_collisions", s.wall_collisions},
+                                 {"missed_ticks", d.timer ? d.timer->missed_deadlines() : 0},
+                                 {"model_steps_dropped", d.skipped_steps},
+                                 {"decoder_errors",
+                                  {{"oversize", s.decoder.oversize},
+                                   {"bad_cobs", s.decoder.bad_cobs},
+                                   {"too_short", s.decoder.too_short},
+                                   {"bad_crc", s.decoder.bad_crc},
+                                   {"bad_packet", s.decoder.bad_packet}}}};
+        lines += (lines.empty() ? "" : "\n") + j.dump();
+    }
+    return lines;
 }
 
 }  // namespace cpm::vehicle

@@ -63,6 +63,36 @@ Pose parse_pose(const std::string& flag, const std::string& text)
             cli::parse_number(flag, items[2], -10, 10)};
 }
 
+std::vector<Pose> parse_poses(const std::string& flag, const std::string& text, size_t count)
+{
+    std::vector<Pose> poses;
+    size_t begin = 0;
+    for (;;) {
+        const size_t end = text.find(';', begin);
+        poses.push_back(parse_pose(count == 1 ? flag : flag + " (pose " + std::to_string(poses.size() + 1) + ")",
+                                   text.substr(begin, end == std::string::npos ? std::string::npos : end - begin)));
+        if (end == std::string::npos) break;
+        begin = end + 1;
+    }
+    if (poses.size() != count) {
+        throw cli::UsageError(flag + ": " + std::to_string(poses.size()) + " pose(s) for " + std::to_string(count) +
+                              " car(s); give one X,Y,YAW per car, separated by ';'");
+    }
+    return poses;
+}
+
+std::vector<uint8_t> parse_vehicle_ids(const std::string& flag, const std::string& text)
+{
+    std::vector<uint8_t> ids;
+    for (const auto& item : cli::split_list(flag, text)) {
+        const auto id = uint8_t(cli::parse_integer(flag, item, 1, 255));
+        if (std::find(ids.begin(), ids.end(), id) != ids.end())
+            throw cli::UsageError(flag + ": vehicle " + item + " is listed twice");
+        ids.push_back(id);
+    }
+    return ids;
+}
+
 double wrap_angle(double a)
 {
     a = std::remainder(a, 2 * M_PI);

@@ -9,7 +9,7 @@
 namespace {
 
 const char* kHelp =
-    "usage: firmware_sim --vehicle_id N [--map FILE] [--params FILE] [--start X,Y,YAW]\n"
+    "usage: firmware_sim --vehicle_id N[,M,…] [--map FILE] [--params FILE] [--start X,Y,YAW[;X,Y,YAW…]]\n"
     "                    [--link PATH | --device TTY [--baud B]] [--seed N] [--trace-pwm]\n"
     "                    [--corrupt-rate P] [--dds_domain N]\n"
     "\n"
@@ -19,18 +19,21 @@ const char* kHelp =
     "without a valid command). Publishes the true pose as VehicleObservation on\n"
     "'vehicleObservation' and sees other simulated cars' bodies with its rangers. The car stops\n"
     "against a wall it drives into; each collision is logged (warn) and counted.\n"
+    "Several ids (--vehicle_id 1,2,3) run several cars in this one process, each behind a pty of\n"
+    "its own (printed as `device ID: PATH`, one line per car), all stepped by one timer; their\n"
+    "rangers see each other. --start then gives one pose per car, separated by ';'.\n"
     "\n"
     "  --map FILE      world of walls (JSON, DESIGN.md §6); default: no walls\n"
     "  --params FILE   vehicle parameters (JSON; see vehicle_firmware_bridge/README.md)\n"
-    "  --start X,Y,YAW start pose in metres and radians (default 0,0,0)\n"
-    "  --link PATH     also make PATH a symlink to the device (a stable name across restarts)\n"
+    "  --start X,Y,YAW start pose in metres and radians (default 0,0,0); one per car\n"
+    "  --link PATH     also make PATH a symlink to the device (a stable name across restarts; one car)\n"
     "  --device TTY    speak on this existing serial device instead of a new pty (e.g. one end of\n"
-    "                  a null-modem cable to a bridge on another computer); --baud B (115200)\n"
-    "  --seed N        noise seed (default: the vehicle id)\n"
-    "  --trace-pwm     print `pwm T_NS MODE PWM` on stdout whenever the motor command the controller\n"
+    "                  a null-modem cable to a bridge on another computer; one car); --baud B (115200)\n"
+    "  --seed N        noise seed (default: the vehicle id); the k-th car (from 0) gets N + k\n"
+    "  --trace-pwm     (one car) print `pwm T_NS MODE PWM` on stdout whenever the motor command the controller\n"
     "                  holds changes (a new command, or the watchdog's brake; MODE 0 brake, 1 fwd, 2 rev)\n"
     "  --corrupt-rate P  flip one random byte in a state frame with probability P (tests the link)\n"
-    "On SIGINT/SIGTERM it prints one JSON line of statistics and exits 0.\n";
+    "On SIGINT/SIGTERM it prints one JSON line of statistics per car and exits 0.\n";
 
 int run(int argc, char** argv)
 {
@@ -43,14 +46,26 @@ int run(int argc, char** argv)
     if (parsed.has("--device") && parsed.has("--link"))
         throw cpm::cli::UsageError("firmware_sim: --link names a new pty; it cannot go with --device");
     cpm::vehicle::FirmwareSimNodeOptions o;
-    o.vehicle_id = static_cast<uint8_t>(cpm::cli::parse_integer("--vehicle_id", parsed.get("--vehicle_id"), 1, 255));
+    const auto ids = cpm::vehicle::parse_vehicle_ids("--vehicle_id", parsed.get("--vehicle_id"));
+    if (ids.size() > 1) {
+        for (const char* one_car : {"--link", "--device", "--trace-pwm"}) {
+            if (parsed.has(one_car))
+                throw cpm::cli::UsageError(std::string("firmware_sim: ") + one_car + " is for one car; --vehicle_id lists " +
+                                           std::to_string(ids.size()));
+        }
+    }
     if (parsed.has("--params")) o.parameters = cpm::vehicle::VehicleParameters::load(parsed.get("--params"));
     if (parsed.has("--map")) o.world = cpm::vehicle::World::load(parsed.get("--map"));
-    if (parsed.has("--start")) o.start = cpm::vehicle::parse_pose("--start", parsed.get("--start"));
-    o.seed = static_cast<uint32_t>(cpm::cli::parse_integer("--seed", parsed.get("--seed", std::to_string(o.vehicle_id)), 0, UINT32_MAX));
+    const auto starts = parsed.has("--start") ? cpm::vehicle::parse_poses("--start", parsed.get("--start"), ids.size())
+                                              : std::vector<cpm::vehicle::Pose>(ids.size());
+    const bool seeded = parsed.has("--seed");
+    const auto seed = seeded ? cpm::cli::parse_integer("--seed", parsed.get("--seed"), 0, UINT32_MAX) : 0;
+    for (size_t k = 0; k < ids.size(); ++k) {
+        o.cars.push_back({.vehicle_id = ids[k], .start = starts[k],
+                          .seed = uint32_t(seeded ? uint64_t(seed) + k : ids[k]), .link = parsed.get("--link")});
+    }
     o.trace_pwm = parsed.has("--trace-pwm");
     o.corrupt_rate = cpm::cli::parse_number("--corrupt-rate", parsed.get("--corrupt-rate", "0"), 0, 1);
-    o.link = parsed.get("--link");
     o.device = parsed.get("--device");
     o.baud = int(cpm::cli::parse_integer("--baud", parsed.get("--baud", "115200"), 1, 4'000'000));
     cpm::init(argc, argv);

@@ -10,8 +10,8 @@
 namespace {
 
 const char* kHelp =
-    "usage: vehicle_bridge --vehicle_id N --device PATH [--baud 115200] [--calibration FILE]\n"
-    "                      [--start X,Y,YAW] [--dds_domain N]\n"
+    "usage: vehicle_bridge --vehicle_id N[,M,…] --device PATH[,PATH…] [--baud 115200]\n"
+    "                      [--calibration FILE] [--start X,Y,YAW[;X,Y,YAW…]] [--dds_domain N]\n"
     "\n"
     "Speaks the serial protocol with vehicle N's microcontroller (real hardware or firmware_sim's\n"
     "pseudo-terminal) and the lab over DDS: every state packet (50 Hz) becomes a VehicleState on\n"
@@ -25,10 +25,12 @@ const char* kHelp =
     "publishing, logs it and reopens the device when it is back. It holds an exclusive lock on\n"
     "the device; another car's packets are ignored, and a line that only carries another car's\n"
     "is left and retried once a second. Samples are stamped with when the controller measured them.\n"
+    "Several ids serve several cars from this one process, car k on the k-th --device (and the\n"
+    "k-th --start, separated by ';'); each keeps its own line, loop and statistics.\n"
     "\n"
     "  --calibration FILE  units, limits and controller gains (JSON; see vehicle_firmware_bridge/README.md)\n"
     "  --start X,Y,YAW     initial pose estimate (metres, radians) before any observation\n"
-    "On SIGINT/SIGTERM it prints one JSON line of statistics and exits 0.\n";
+    "On SIGINT/SIGTERM it prints one JSON line of statistics per car and exits 0.\n";
 
 int run(int argc, char** argv)
 {
@@ -37,23 +39,32 @@ int run(int argc, char** argv)
         "vehicle_bridge");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("vehicle_bridge: --vehicle_id is required");
     if (!parsed.has("--device")) throw cpm::cli::UsageError("vehicle_bridge: --device is required (e.g. /dev/ttyACM0)");
-    cpm::vehicle::BridgeNodeOptions options;
-    options.vehicle_id = static_cast<uint8_t>(cpm::cli::parse_integer("--vehicle_id", parsed.get("--vehicle_id"), 1, 255));
-    options.device = parsed.get("--device");
-    options.baud = int(cpm::cli::parse_integer("--baud", parsed.get("--baud", "115200"), 1, 4'000'000));
-    try {
-        cpm::vehicle::SerialPort::check_baud(options.baud, options.device);
-    } catch (const cpm::Error& e) {
-        throw cpm::cli::UsageError(std::string("--baud: ") + e.what());
+    const auto ids = cpm::vehicle::parse_vehicle_ids("--vehicle_id", parsed.get("--vehicle_id"));
+    const auto devices = cpm::cli::split_list("--device", parsed.get("--device"));
+    if (devices.size() != ids.size()) {
+        throw cpm::cli::UsageError("vehicle_bridge: --device names " + std::to_string(devices.size()) + " device(s) for " +
+                                   std::to_string(ids.size()) + " car(s); give one per --vehicle_id, in the same order");
     }
-    if (parsed.has("--calibration")) options.calibration = cpm::vehicle::Calibration::load(parsed.get("--calibration"));
-    if (parsed.has("--start")) options.start = cpm::vehicle::parse_pose("--start", parsed.get("--start"));
+    const int baud = int(cpm::cli::parse_integer("--baud", parsed.get("--baud", "115200"), 1, 4'000'000));
+    const auto calibration = parsed.has("--calibration") ? cpm::vehicle::Calibration::load(parsed.get("--calibration"))
+                                                         : cpm::vehicle::Calibration{};
+    const auto starts = parsed.has("--start") ? cpm::vehicle::parse_poses("--start", parsed.get("--start"), ids.size())
+                                              : std::vector<cpm::vehicle::Pose>(ids.size());
+    std::vector<cpm::vehicle::BridgeNodeOptions> cars;
+    for (size_t k = 0; k < ids.size(); ++k) {
+        try {
+            cpm::vehicle::SerialPort::check_baud(baud, devices[k]);
+        } catch (const cpm::Error& e) {
+            throw cpm::cli::UsageError(std::string("--baud: ") + e.what());
+        }
+        cars.push_back({.vehicle_id = ids[k], .device = devices[k], .baud = baud, .calibration = calibration, .start = starts[k]});
+    }
     cpm::init(argc, argv);
 
-    cpm::vehicle::BridgeNode node(options);
+    cpm::vehicle::BridgeNode node(std::move(cars));
     cpm::cli::stop_on_signals();
     node.run(cpm::cli::stop_requested);
-    std::printf("%s\n", node.stats().to_json().c_str());
+    for (const auto& stats : node.all_stats()) std::printf("%s\n", stats.to_json().c_str());
     std::fflush(stdout);
     return 0;
 }

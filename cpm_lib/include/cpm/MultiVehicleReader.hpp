@@ -57,6 +57,14 @@ public:
         return results;
     }
 
+    /// One configured vehicle's newest valid sample at t_now and its age (invalid for an id
+    /// that is not configured: reading never throws).
+    SampleResult<T> get_sample(uint8_t vehicle_id, uint64_t t_now)
+    {
+        auto it = buffers_.find(vehicle_id);
+        if (it == buffers_.end()) return {};
+        return detail::select_sample<T>(*it->second, t_now);
+    }
     /// cpm_lab's form: vehicles without a valid sample get age UINT64_MAX and a default sample.
     void get_samples(uint64_t t_now, std::map<uint8_t, T>& samples_out, std::map<uint8_t, uint64_t>& ages_out)
     {

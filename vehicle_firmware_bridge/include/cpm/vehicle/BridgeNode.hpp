@@ -7,6 +7,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace cpm::vehicle {
 
@@ -23,6 +24,9 @@ struct BridgeNodeOptions
     /// `foreign_retry_ms`. Fewer foreign packets among the car's own are ignored (counted).
     int foreign_packets_to_leave = 25;
     int foreign_retry_ms = 1000;
+    /// Under --simulated_time: the controller's state period (firmware_sim's 50 Hz). The bridge
+    /// then ticks on the lab's clock 1 ms after each state packet instead of waiting on the line.
+    uint64_t simulated_state_period_ns = 20'000'000;
 };
 
 /// What a run of the bridge counted; printed as one JSON line when it stops.
@@ -43,18 +47,31 @@ struct BridgeNodeStats
 /// controller restarts, odometer jumps, implausible battery readings, another car's packets)
 /// are logged at most once a second per kind, with a count of the ones held back.
 /// Uses the process's default participant (cpm::init first).
+///
+/// One process can serve many cars (a simulator running many, or a computer wired to several):
+/// each car keeps its own line, loop thread, BridgeCore and statistics; they share one reader
+/// per command topic and one writer per output topic.
 class BridgeNode
 {
 public:
     explicit BridgeNode(BridgeNodeOptions options);
+    /// Several cars, distinct ids; throws cpm::Error naming a repeated id.
+    explicit BridgeNode(std::vector<BridgeNodeOptions> cars);
     ~BridgeNode();
     BridgeNode(const BridgeNode&) = delete;
     BridgeNode& operator=(const BridgeNode&) = delete;
 
+    /// The simulated-time timer's node id for `cpm lab clock --nodes`: vehicle_bridge_<first id>.
+    static std::string timer_name(uint8_t first_vehicle_id);
     /// Runs until `stop_requested()` is true (asked at least every 200 ms), e.g.
-    /// cpm::cli::stop_requested after cpm::cli::stop_on_signals.
+    /// cpm::cli::stop_requested after cpm::cli::stop_on_signals. Under --simulated_time it
+    /// follows the lab's clock (a tick per state packet, 1 ms after the controller's) until the
+    /// clock stops it.
     void run(const std::function<bool()>& stop_requested);
+    /// The first car's statistics.
     BridgeNodeStats stats() const;
+    /// Every car's, in the order given.
+    std::vector<BridgeNodeStats> all_stats() const;
 
 private:
     struct Impl;

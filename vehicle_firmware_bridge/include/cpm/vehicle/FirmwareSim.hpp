@@ -64,6 +64,8 @@ public:
     /// brake); the model feels it input_delay later.
     std::pair<MotorMode, uint16_t> motor_command() const { return motor_command_; }
     uint8_t vehicle_id() const { return vehicle_id_; }
+    /// False from a state packet until a valid command for this car arrives.
+    bool answered() const { return answered_; }
     /// A noisy copy of the true pose (observation_noise), for the indoor positioning system.
     Pose observed_pose();
     /// True when the next observation should be dropped (observation_dropout).

@@ -5,43 +5,62 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace cpm::vehicle {
+
+/// One simulated car of a firmware_sim process.
+struct SimulatedCar
+{
+    uint8_t vehicle_id = 0;
+    Pose start;
+    uint32_t seed = 0;     ///< noise seed
+    std::string link;      ///< also make this path a symlink to the car's new pty (empty: none)
+};
 
 /// What firmware_sim is told on its command line.
 struct FirmwareSimNodeOptions
 {
-    uint8_t vehicle_id = 0;
+    std::vector<SimulatedCar> cars;  ///< one or more, distinct ids; each behind a pty of its own
     VehicleParameters parameters;
     World world;
-    Pose start;
-    uint32_t seed = 0;
-    std::string link;      ///< also make this path a symlink to the new pty (empty: none)
-    std::string device;    ///< speak on this existing serial device instead of a new pty
+    std::string device;    ///< speak on this existing serial device instead of a new pty (one car only)
     int baud = 115200;     ///< with `device`
-    bool trace_pwm = false;     ///< print `pwm T_NS MODE PWM` whenever the held motor command changes
+    bool trace_pwm = false;     ///< print `pwm T_NS MODE PWM` whenever the held motor command changes (one car only)
     double corrupt_rate = 0;    ///< probability of flipping one byte of a state frame
 };
 
-/// firmware_sim's loop: a FirmwareSim behind a pseudo-terminal (or a serial device), stepped
-/// in real time by a cpm::Timer, publishing the true pose as VehicleObservation and seeing
-/// other simulated cars' bodies. A collision with a wall is logged (warn, naming the wall and
-/// the pose) and counted. Writes `device: PATH`, the pwm trace and, at the end, one JSON line
-/// of statistics to stdout. Uses the process's default participant (cpm::init first).
+/// firmware_sim's loop: one or many FirmwareSims, each behind its own pseudo-terminal (or one
+/// behind a serial device), stepped in real time by one cpm::Timer, publishing the true poses
+/// as VehicleObservation. Every car's rangers see the other cars' bodies: those of this
+/// process directly, those of other processes through vehicleObservation. A collision with a
+/// wall is logged (warn, naming the car, the wall and the pose) and counted. Writes
+/// `device: PATH` (one car) or `device ID: PATH` (one line per car), the pwm trace and, at the
+/// end, one JSON line of statistics per car to stdout. Uses the process's default participant
+/// (cpm::init first).
+///
+/// Under --simulated_time the timer follows the lab's simulated clock (node id `timer_name`):
+/// one tick per state packet, the physics steps in between at once, and before each tick it
+/// waits up to 100 ms of real time for every car's host to have answered the last packet, so a
+/// run is repeatable and as fast as the machine computes.
 class FirmwareSimNode
 {
 public:
-    /// Opens the line; throws cpm::Error naming the device when it cannot.
+    /// Opens the lines; throws cpm::Error naming the device when it cannot, or the option
+    /// that is wrong (no car, a repeated id, a device or pwm trace for more than one car).
     explicit FirmwareSimNode(FirmwareSimNodeOptions options);
     ~FirmwareSimNode();
     FirmwareSimNode(const FirmwareSimNode&) = delete;
     FirmwareSimNode& operator=(const FirmwareSimNode&) = delete;
 
-    /// The device path the host opens (the pty's slave, or `device`).
-    const std::string& device_path() const;
-    /// Runs until `stop_requested()` is true (asked every physics tick).
+    /// Each car's id and the device path its host opens (the pty's slave, or `device`).
+    std::vector<std::pair<uint8_t, std::string>> devices() const;
+    /// The timer's node id for `cpm lab clock --nodes`: firmware_sim_<first car's id>.
+    static std::string timer_name(uint8_t first_vehicle_id);
+    /// Runs until `stop_requested()` is true (asked every tick) or the lab's clock stops it.
     void run(const std::function<bool()>& stop_requested);
-    /// {"vehicle_id": …, "state_packets": …, …, "wall_collisions": …, "decoder_errors": {…}}
+    /// One line per car: {"vehicle_id": …, "state_packets": …, …, "wall_collisions": …, "decoder_errors": {…}}
     std::string stats_json() const;
 
 private:

@@ -4,6 +4,7 @@
 #include <array>
 #include <deque>
 #include <string>
+#include <vector>
 
 namespace cpm::vehicle {
 
@@ -60,6 +61,11 @@ struct Pose
 
 /// "X,Y,YAW" (metres, radians) from a command-line flag; throws cpm::cli::UsageError naming it.
 Pose parse_pose(const std::string& flag, const std::string& text);
+/// "X,Y,YAW;X,Y,YAW;…", one pose per car (exactly `count`); throws cpm::cli::UsageError naming
+/// the flag, the pose's place in the list and what is wrong.
+std::vector<Pose> parse_poses(const std::string& flag, const std::string& text, size_t count);
+/// "N" or "N,M,…": distinct vehicle ids in 1..255; throws cpm::cli::UsageError naming the flag.
+std::vector<uint8_t> parse_vehicle_ids(const std::string& flag, const std::string& text);
 
 /// Kinematic bicycle model (reference point: rear axle) with first-order speed and steering
 /// responses and an input delay. Deterministic; not thread-safe.
