@@ -158,7 +158,10 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
             }
         }
     }
-    for (size_t i = 0; i < n; ++i) out.distance_m.push_back(last_s[i] - start_s[i]);
+    for (size_t i = 0; i < n; ++i) {
+        out.distance_m.push_back(last_s[i] - start_s[i]);
+        out.final_poses.emplace_back(ids[i], planner.sample(ids[i], options.duration).pose);
+    }
     out.stalled = out.max_wait_s > 10.0;
     out.zone_entries = zone_entries;
     if (!zone_entries.empty()) {

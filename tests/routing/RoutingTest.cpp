@@ -187,6 +187,16 @@ TEST(Planner, FourCarsReachingTheCentralIntersectionTogetherAllGetThrough)
     EXPECT_FALSE(summary.stalled);
     // Through the middle: each car drove past the far side of the crossing lanes.
     for (size_t i = 0; i < 4; ++i) EXPECT_GT(summary.distance_m[i], 2.0) << "car " << i + 1;
+    // Where each ended (what --picture draws): its plan at the end, on the far side.
+    ASSERT_EQ(summary.final_poses.size(), 4u);
+    for (size_t i = 0; i < 4; ++i) {
+        const auto& [id, pose] = summary.final_poses[i];
+        EXPECT_EQ(id, int(i + 1));
+        const Pose planned = planner.sample(id, options.duration).pose;
+        EXPECT_DOUBLE_EQ(pose.x, planned.x);
+        EXPECT_DOUBLE_EQ(pose.y, planned.y);
+        EXPECT_GT(std::hypot(pose.x - starts[i].x, pose.y - starts[i].y), 0.5) << "car " << id << " is not where it started";
+    }
 }
 
 TEST(Planner, ACarStoppedInItsLaneIsWaitedForNotDrivenInto)

@@ -35,6 +35,7 @@ const char* kRenderHelp =
 const char* kSimulateHelp =
     "usage: cpm routing simulate --lanes FILE --vehicles N --duration T [--seed S] [--mode M]\n"
     "                            [--period P] [--margin M] [--v-max V] [--start-gap G] [--json]\n"
+    "                            [--picture OUT.svg|OUT.png]\n"
     "\n"
     "Runs the central planner against ideal cars that follow their plans exactly (no DDS, as\n"
     "fast as it can), N cars placed by the seed, for T of simulated time (e.g. 60s), and prints\n"
@@ -44,7 +45,7 @@ const char* kSimulateHelp =
     "--mode cooperative (default) or cpm_lab (cpm_lab's fixed-priority speed capping, the\n"
     "baseline). --period defaults to 400ms, --margin to 0.05 m, --v-max to 1.0 m/s; the cars start\n"
     "outside conflict zones, their bodies at least the margin and --start-gap (0.1 m) apart.\n"
-    "--json prints the summary as one JSON line.\n";
+    "--json prints the summary as one JSON line; --picture draws the cars where they ended.\n";
 
 const char* kWatchHelp =
     "usage: cpm routing watch --duration T [--vehicles 1,2,…] [--lanes FILE --picture OUT.svg|OUT.png]\n"
@@ -103,7 +104,7 @@ int routing_simulate(const std::vector<std::string>& args)
     const auto parsed = parse_flags(args,
                                     {{"--lanes", true}, {"--vehicles", true}, {"--duration", true}, {"--seed", true},
                                      {"--mode", true}, {"--period", true}, {"--margin", true}, {"--v-max", true}, {"--start-gap", true},
-                                     {"--json", false}},
+                                     {"--json", false}, {"--picture", true}},
                                     "cpm routing simulate");
     for (const char* required : {"--lanes", "--vehicles", "--duration"}) {
         if (!parsed.has(required)) throw UsageError(std::string("cpm routing simulate: ") + required + " is required");
@@ -131,6 +132,12 @@ int routing_simulate(const std::vector<std::string>& args)
     auto graph = load_graph(parsed.get("--lanes"));
     if (!graph) return 1;
     const auto summary = cpm::routing::simulate(*graph, options);
+    if (parsed.has("--picture")) {
+        cpm::routing::ConflictTable table(*graph, {});
+        std::vector<cpm::routing::DrawnCar> cars;
+        for (const auto& [id, pose] : summary.final_poses) cars.push_back({id, pose});
+        cpm::routing::render_lane_graph(table, parsed.get("--picture"), cars);
+    }
     if (parsed.has("--json")) {
         std::printf("%s\n", summary.to_json().c_str());
         return 0;

@@ -106,6 +106,8 @@ std::string BridgeNodeStats::to_json() const
     return j.dump();
 }
 
+namespace {
+
 /// One car's loop: its serial line, its BridgeCore, its statistics.
 struct BridgeCar
 {
@@ -137,6 +139,8 @@ struct BridgeCar
     LogThrottle throttles[kAnomalyKinds];
     LogThrottle foreign_throttle, leave_throttle{10'000'000'000ull};
 };
+
+}  // namespace
 
 bool BridgeCar::open_line()
 {

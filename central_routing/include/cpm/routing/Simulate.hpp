@@ -46,6 +46,7 @@ struct SimulationSummary
     size_t busiest_zone = 0;
     std::vector<size_t> zone_entries;  ///< cars into each conflict zone (ConflictTable::zones order)
     std::vector<double> plan_ms;  ///< every cycle's planning time
+    std::vector<std::pair<int, Pose>> final_poses;  ///< every car (id, pose) at the end
 
     /// One JSON object in one line, the fields `cpm routing simulate --json` prints.
     std::string to_json() const;
