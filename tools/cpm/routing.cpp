@@ -152,6 +152,12 @@ int routing_simulate(const std::vector<std::string>& args)
     std::printf("distance            %.1f m in all, %.1f m per car\n", total, total / double(summary.vehicles));
     std::printf("throughput          %.1f cars/min through the busiest conflict zone\n", summary.throughput_per_min);
     std::printf("planning            p50 %.2f ms, p99 %.2f ms per cycle\n", summary.plan_ms_p50, summary.plan_ms_p99);
+    if (summary.stalled && options.planner.mode == cpm::routing::Mode::Cooperative) {
+        std::printf("stalled: a car stood still for over 10 s. Many cars on a small map can lock each other\n"
+                    "in a ring of queues (gridlock: no one collides, no one moves); try fewer cars.\n");
+        if (!parsed.has("--picture")) std::printf("--picture OUT.png shows where they stood.\n");
+    }
+    if (parsed.has("--picture")) std::printf("the cars where they ended: %s\n", parsed.get("--picture").c_str());
     return 0;
 }
 
