@@ -101,13 +101,7 @@ void CameraSimNode::run(const std::function<bool()>& stop_requested)
     const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
     auto timer = Timer::create("camera_sim_" + std::to_string(impl_->options.vehicle_id), period_ns, 0,
                                TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
-    timer->start([&](uint64_t) {
-        if (stop_requested()) {
-            timer->stop();
-            return;
-        }
-        impl_->tick();
-    });
+    timer->run_until(stop_requested, [&](uint64_t) { impl_->tick(); });
 }
 
 std::string CameraSimNode::stats_json() const

@@ -165,13 +165,7 @@ void RoutingNode::run(const std::function<bool()>& stop_requested)
     auto& d = *impl_;
     auto timer = Timer::create("central_routing", d.options.period_ns, 0,
                                cpm::TimerOptions{.wait_for_start = d.options.wait_for_start, .simulated_time_allowed = true});
-    timer->start([&](uint64_t t_nominal) {
-        if (stop_requested()) {
-            timer->stop();
-            return;
-        }
-        d.cycle(t_nominal);
-    });
+    timer->run_until(stop_requested, [&](uint64_t t_nominal) { d.cycle(t_nominal); });
 }
 
 std::string RoutingNode::stats_json() const

@@ -13,6 +13,9 @@
 #include <cpm/init.hpp>
 
 #include <algorithm>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
 #include <cerrno>
 #include <cstring>
 
@@ -38,6 +41,36 @@ std::shared_ptr<Timer> Timer::create(Participant& participant, const std::string
 {
     const bool simulated = init_settings().simulated_time && options.simulated_time_allowed;
     return std::make_shared<detail::LabTimer>(participant, node_id, period_ns, offset_ns, options.wait_for_start, simulated);
+}
+
+void Timer::run_until(const std::function<bool()>& stop_requested, Callback callback)
+{
+    std::mutex mutex;
+    std::condition_variable ended;
+    bool done = false;
+    std::thread watcher([&] {
+        std::unique_lock<std::mutex> lock(mutex);
+        while (!done) {
+            if (stop_requested()) {
+                stop();
+                return;
+            }
+            ended.wait_for(lock, std::chrono::milliseconds(50));
+        }
+    });
+    start([&](uint64_t t_nominal) {
+        if (stop_requested()) {
+            stop();
+            return;
+        }
+        callback(t_nominal);
+    });
+    {
+        std::lock_guard<std::mutex> lock(mutex);
+        done = true;
+    }
+    ended.notify_all();
+    watcher.join();
 }
 
 namespace detail {

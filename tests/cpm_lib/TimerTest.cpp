@@ -184,6 +184,38 @@ TEST_F(TimerTest, StopDuringTheStartWaitReturnsAtOnce)
     EXPECT_EQ(calls(), 0u);
 }
 
+TEST_F(TimerTest, RunUntilEndsATimerStillWaitingForTheLabWhenTheStopIsAsked)
+{
+    // A node's Ctrl-C before the lab started (or while a simulated clock stands still) must end
+    // it: nothing ticks that would ask.
+    auto sut = cpm::Timer::create(node, "run_until", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = false});
+    std::atomic<bool> stop{false};
+    std::atomic<bool> returned{false};
+    std::thread runner([&] {
+        sut->run_until([&] { return stop.load(); }, recorder());
+        returned = true;
+    });
+    ASSERT_TRUE(saw_ready_from("run_until"));
+    stop = true;
+    EXPECT_TRUE(cpm_test::wait_until([&] { return returned.load(); }, 2000ms));
+    if (!returned) sut->stop();  // not to hang the suite when it fails
+    runner.join();
+    EXPECT_EQ(calls(), 0u);
+}
+
+TEST_F(TimerTest, RunUntilTicksUntilTheStopIsAsked)
+{
+    auto sut = cpm::Timer::create(node, "run_until_ticks", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
+    std::atomic<bool> stop{false};
+    std::thread runner([&] { sut->run_until([&] { return stop.load(); }, recorder()); });
+    ASSERT_TRUE(cpm_test::wait_until([&] { return calls() >= 3; }));
+    stop = true;
+    runner.join();
+    const size_t at_end = calls();
+    std::this_thread::sleep_for(30ms);
+    EXPECT_EQ(calls(), at_end) << "no tick after run_until returned";
+}
+
 TEST_F(TimerTest, StopShortlyAfterStartAllowsOnlyAFewCallbacks)
 {
     auto sut = cpm::Timer::create(node, "brief", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});

@@ -586,6 +586,24 @@ TEST_F(VehicleEndToEnd, OneSimulatorAndOneBridgeProcessCarryTwentyCarsEachOnItsO
     EXPECT_EQ(count_of(sut.output(), "\"state_packets\""), 20u) << "one statistics line per car from the simulator";
 }
 
+TEST_F(VehicleEndToEnd, InSimulatedTimeTheCarsWaitForTheLabClockAndStillStopOnCtrlC)
+{
+    cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});
+    Process sut({built_program("cpm"), "vehicle", "sim", "--id", "4", "--count", "2", "--simulated_time"});
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        return sut.output().find("cpm lab clock --simulated --nodes firmware_sim_4,vehicle_bridge_4") != std::string::npos;
+    }, 10s)) << sut.output() << sut.errors();
+    std::this_thread::sleep_for(1s);
+    EXPECT_TRUE(states.take().empty()) << "no lab clock runs: no car may tick";
+    // Ctrl-C while the clock stands still: every process ends at once and reports.
+    const auto t0 = std::chrono::steady_clock::now();
+    sut.kill(SIGINT);
+    EXPECT_EQ(sut.wait(10s), 0) << sut.errors();
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 4s) << "a child had to be killed after its 5 s grace";
+    EXPECT_EQ(count_of(sut.output(), "\"cycles\":0"), 2u) << sut.output();
+    EXPECT_EQ(count_of(sut.output(), "\"state_packets\":0"), 2u) << sut.output();
+}
+
 TEST_F(VehicleEndToEnd, ManyCarFlagsThatDoNotAddUpAreNamed)
 {
     const auto fails = [](std::vector<std::string> argv, int code, const std::string& message) {

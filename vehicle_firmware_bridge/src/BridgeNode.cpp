@@ -339,11 +339,7 @@ void BridgeNode::run(const std::function<bool()>& stop_requested)
         auto& cars = impl_->cars;
         auto timer = Timer::create(timer_name(cars[0]->options.vehicle_id), cars[0]->options.simulated_state_period_ns, 1'000'000,
                                    TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
-        timer->start([&](uint64_t) {
-            if (stop_requested()) {
-                timer->stop();
-                return;
-            }
+        timer->run_until(stop_requested, [&](uint64_t) {
             for (auto& car : cars) car->serve_tick(stop_requested);
         });
         return;

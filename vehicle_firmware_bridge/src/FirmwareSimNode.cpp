@@ -317,13 +317,7 @@ void FirmwareSimNode::run(const std::function<bool()>& stop_requested)
     if (d.simulated) d.steps = d.steps_per_state - 1;
     d.timer = Timer::create(d.participant, timer_name(d.cars[0]->options.vehicle_id), period, 0,
                             cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
-    d.timer->start([&](uint64_t t_nominal) {
-        if (stop_requested()) {
-            d.timer->stop();
-            return;
-        }
-        d.tick(t_nominal);
-    });
+    d.timer->run_until(stop_requested, [&](uint64_t t_nominal) { d.tick(t_nominal); });
 }
 
 std::string FirmwareSimNode::stats_json() const

@@ -66,6 +66,12 @@ public:
     virtual void start_async(Callback callback, std::function<void()> on_stop = {}) = 0;
     /// Ends the timer; safe from any thread, any time, more than once.
     virtual void stop() = 0;
+    /// A node's loop: start() on the calling thread until `stop_requested()` turns true (e.g.
+    /// cpm::cli::stop_requested after SIGINT) or the lab stops the timers. It is asked before
+    /// every tick and every 50 ms between, so it also ends a timer still waiting for the lab's
+    /// start or for a simulated clock that does not move. `stop_requested` is called from a
+    /// second thread too, so it must be safe to call from any thread (an atomic flag).
+    void run_until(const std::function<bool()>& stop_requested, Callback callback);
 
     /// The nominal time of the first tick (0 before the start is known).
     virtual uint64_t start_time() const = 0;
