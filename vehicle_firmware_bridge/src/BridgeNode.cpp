@@ -19,6 +19,8 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <atomic>
+#include <exception>
 #include <chrono>
 #include <ctime>
 #include <map>
@@ -345,9 +347,26 @@ void BridgeNode::run(const std::function<bool()>& stop_requested)
         return;
     }
     if (impl_->cars.size() == 1) return impl_->cars[0]->run(stop_requested);
+    // A loop per car. One that fails (a device that is not a terminal) stops the others and
+    // its error is the node's, as with one car.
+    std::mutex mutex;
+    std::exception_ptr failure;
+    std::atomic<bool> failed{false};
+    const std::function<bool()> stop_all = [&] { return failed.load() || stop_requested(); };
     std::vector<std::thread> threads;
-    for (auto& car : impl_->cars) threads.emplace_back([&car, &stop_requested] { car->run(stop_requested); });
+    for (auto& car : impl_->cars) {
+        threads.emplace_back([&] {
+            try {
+                car->run(stop_all);
+            } catch (...) {
+                std::lock_guard<std::mutex> lock(mutex);
+                if (!failure) failure = std::current_exception();
+                failed = true;
+            }
+        });
+    }
     for (auto& t : threads) t.join();
+    if (failure) std::rethrow_exception(failure);
 }
 
 BridgeNodeStats BridgeNode::stats() const { return impl_->cars[0]->final_stats(); }

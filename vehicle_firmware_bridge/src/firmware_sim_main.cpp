@@ -23,7 +23,7 @@ const char* kHelp =
     "its own (printed as `device ID: PATH`, one line per car), all stepped by one timer; their\n"
     "rangers see each other. --start then gives one pose per car, separated by ';'.\n"
     "\n"
-    "  --map FILE      world of walls (JSON, DESIGN.md §6); default: no walls\n"
+    "  --map FILE      world of walls (JSON; the format: scenarios/README.md); default: no walls\n"
     "  --params FILE   vehicle parameters (JSON; see vehicle_firmware_bridge/README.md)\n"
     "  --start X,Y,YAW start pose in metres and radians (default 0,0,0); one per car\n"
     "  --link PATH     also make PATH a symlink to the device (a stable name across restarts; one car)\n"

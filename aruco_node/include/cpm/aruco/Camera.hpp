@@ -4,7 +4,7 @@
 #include <string>
 
 /// The perception half of the lab: camera model, marker detection and pose, the synthetic
-/// camera, calibration, and the aruco_node / camera_sim programs' work (DESIGN.md §7).
+/// camera, calibration, and the aruco_node / camera_sim programs' work (docs/design.md).
 namespace cpm::aruco {
 
 /// Where the camera sits on the car. Car frame: x forward, y left, z up from the ground,

@@ -8,7 +8,7 @@
 
 namespace cpm::aruco {
 
-/// A corridor along +x with gates across it (DESIGN.md §7 world format), generated from a seed.
+/// A corridor along +x with gates across it (the world format of scenarios/README.md), generated from a seed.
 struct GateCourseOptions
 {
     int gates = 3;

@@ -1,5 +1,5 @@
 #pragma once
-// cpm::rtdb — the KogMo-RTDB style time-indexed store (DESIGN.md §4), usable in-process.
+// cpm::rtdb — the KogMo-RTDB style time-indexed store (docs/design.md), usable in-process.
 //
 // An object is one instance (topic + key) of a topic, or a process (participant). Each stored
 // sample keeps its commit time (when the store received it; strictly increasing per object, a
@@ -102,7 +102,7 @@ struct Incoming
 
 enum class ObjectKind { instance, process };
 
-/// The info block of an object (DESIGN.md §4).
+/// The info block of an object (docs/design.md).
 struct ObjectInfo
 {
     Oid oid = kNoOid;

@@ -25,7 +25,7 @@ struct Gate
     int left = 0, right = 0;
 };
 
-/// The 2-D world the simulated cars drive in: walls, markers and gates (DESIGN.md §6, §7).
+/// The 2-D world the simulated cars drive in: walls, markers and gates (format: scenarios/README.md).
 class World
 {
 public:
