@@ -40,8 +40,10 @@ const char* const kVehicleSimHelp =
     "--camera-rate Hz (default 30) from its true pose; run aruco_node to turn the frames into\n"
     "arucoMarkers. All cars run in one firmware_sim and one vehicle_bridge process (each car still\n"
     "behind its own pty, line and loop); --process-per-car starts a pair of processes per car\n"
-    "instead (more isolation, fewer cars per machine). Runs until Ctrl-C, then prints each car's\n"
-    "statistics (JSON lines).\n";
+    "instead (more isolation, fewer cars per machine). With --simulated_time the cars follow the\n"
+    "lab's simulated clock (not with --camera): it prints the timers to name to `cpm lab clock\n"
+    "--simulated --nodes`, and ends when that clock stops them. Runs until Ctrl-C, then prints\n"
+    "each car's statistics (JSON lines).\n";
 
 std::string pose_text(double x, double y, double yaw)
 {
@@ -66,6 +68,10 @@ int vehicle_sim(const std::vector<std::string>& args)
         throw cpm::cli::UsageError("cpm vehicle sim: --camera needs --map (the world whose markers the camera sees)");
     }
     if (parsed.has("--camera")) cpm::aruco::Camera::load(parsed.get("--camera"));  // a wrong file fails here, not in a child
+    const bool simulated = std::find(parsed.init_args.begin(), parsed.init_args.end(), "--simulated_time") != parsed.init_args.end();
+    if (simulated && parsed.has("--camera")) {
+        throw cpm::cli::UsageError("cpm vehicle sim: --camera runs in real time only; leave out --camera or --simulated_time");
+    }
     const std::string camera_rate = parsed.get("--camera-rate", "30");
     cpm::cli::parse_number("--camera-rate", camera_rate, 0.1, 1000);
     auto start = cpm::vehicle::parse_pose("--start", parsed.get("--start", "0,0,0"));
@@ -129,6 +135,7 @@ int vehicle_sim(const std::vector<std::string>& args)
     // Every car in one simulator and one bridge process (a machine carries many more cars so),
     // or with --process-per-car a simulator and a bridge for each (one car's crash is its own).
     const bool per_car = parsed.has("--process-per-car");
+    std::string timers;  // the simulated-time node ids, for cpm lab clock
     auto join = [](const std::vector<std::string>& items, const char* separator) {
         std::string text;
         for (const auto& item : items) text += (text.empty() ? "" : separator) + item;
@@ -147,6 +154,8 @@ int vehicle_sim(const std::vector<std::string>& args)
             if (parsed.has(flag)) sim_argv.insert(sim_argv.end(), {flag, parsed.get(flag)});
         }
         cpm::ChildProcess& sim = launch("firmware_sim " + name, sim_argv, true);
+        timers += (timers.empty() ? "" : ",") + cpm::vehicle::FirmwareSimNode::timer_name(uint8_t(std::stoi(ids[0]))) + "," +
+                  cpm::vehicle::BridgeNode::timer_name(uint8_t(std::stoi(ids[0])));
         std::vector<std::string> devices;
         for (const auto& id : ids) {
             // "device: PATH" for one car, "device ID: PATH" for each of several
@@ -180,11 +189,8 @@ int vehicle_sim(const std::vector<std::string>& args)
         });
     }
 
-    if (std::find(parsed.init_args.begin(), parsed.init_args.end(), "--simulated_time") != parsed.init_args.end()) {
-        std::printf("simulated time: drive the cars with cpm lab clock --simulated --nodes %s,%s[,your nodes]\n",
-                    cpm::vehicle::FirmwareSimNode::timer_name(uint8_t(first)).c_str(),
-                    cpm::vehicle::BridgeNode::timer_name(uint8_t(first)).c_str());
-        if (per_car) std::printf("(with --process-per-car every car's two timers: firmware_sim_ID,vehicle_bridge_ID)\n");
+    if (simulated) {
+        std::printf("simulated time: drive the cars with cpm lab clock --simulated --nodes %s[,your nodes]\n", timers.c_str());
         std::fflush(stdout);
     }
     int exit_code = 0;
