@@ -287,7 +287,18 @@ TEST_F(VehicleEndToEnd, DirectCommandOverridesATrajectoryUntilItIsStale)
     Watcher watch(participant);
     Car car;
     ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
-    // A trajectory that turns left on a circle of radius 1 m at 0.4 m/s for 10 s ...
+    // A direct command that holds the car with its wheels hard right, in force first (its
+    // writer may take a while to be discovered on a loaded machine) ...
+    VehicleCommandDirect direct;
+    direct.motor_throttle(0.0);
+    direct.steering_servo(-1.0);
+    auto override_ = std::make_unique<Repeater<VehicleCommandDirect>>(participant, "vehicleCommandDirect", direct);
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        auto s = watch.states();
+        return !s.empty() && s.back().steering_servo() == -1.0;
+    }, 5s));
+    // ... then a trajectory that turns left on a circle of radius 1 m at 0.4 m/s for 10 s; the
+    // direct command still wins.
     uint64_t now = cpm::get_time_ns();
     VehicleCommandTrajectory trajectory;
     std::vector<TrajectoryPoint> points;
@@ -303,11 +314,6 @@ TEST_F(VehicleEndToEnd, DirectCommandOverridesATrajectoryUntilItIsStale)
     }
     trajectory.trajectory_points(points);
     auto follow = std::make_unique<Repeater<VehicleCommandTrajectory>>(participant, "vehicleCommandTrajectory", trajectory);
-    // ... and a direct command that holds the car with its wheels hard right, which wins.
-    VehicleCommandDirect direct;
-    direct.motor_throttle(0.0);
-    direct.steering_servo(-1.0);
-    auto override_ = std::make_unique<Repeater<VehicleCommandDirect>>(participant, "vehicleCommandDirect", direct);
     std::this_thread::sleep_for(2s);
     auto states = watch.states();
     ASSERT_FALSE(states.empty());
