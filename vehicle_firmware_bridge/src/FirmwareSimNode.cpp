@@ -105,6 +105,7 @@ struct FirmwareSimNode::Impl
     void see_each_other();
     void report_collisions(Car& car);
     void publish_loop();
+    void await_published();
 
     FirmwareSimNodeOptions options;
     std::vector<std::unique_ptr<Car>> cars;
@@ -121,7 +122,8 @@ struct FirmwareSimNode::Impl
     // process killed while holding its shared-memory port), and the microcontrollers' clock,
     // commands and watchdogs must not wait for it. Only the newest observation per car is kept.
     std::mutex publish_mutex;
-    std::condition_variable publish_ready;
+    std::condition_variable publish_ready, published;
+    bool writing = false;  ///< the publisher is writing a batch
     std::map<uint8_t, VehicleObservation> to_publish;
     bool publishing = true;
     std::thread publisher;  // started once the lines are open (the constructor may throw before)
@@ -136,9 +138,22 @@ void FirmwareSimNode::Impl::publish_loop()
             publish_ready.wait(lock, [&] { return !to_publish.empty() || !publishing; });
             if (to_publish.empty()) return;
             batch.swap(to_publish);
+            writing = true;
         }
         for (const auto& [id, o] : batch) (void)observations.write(o);
+        std::lock_guard<std::mutex> lock(publish_mutex);
+        writing = false;
+        published.notify_all();
     }
+}
+
+void FirmwareSimNode::Impl::await_published()
+{
+    // Simulated time runs faster than real time: without this wait a loaded machine would let
+    // the next tick's poses replace ones not yet written. Bounded, as a stalled write must not
+    // hold the lab's clock for ever.
+    std::unique_lock<std::mutex> lock(publish_mutex);
+    published.wait_for(lock, std::chrono::milliseconds(100), [&] { return to_publish.empty() && !writing; });
 }
 
 void FirmwareSimNode::Impl::trace(Car& car, uint64_t now)
@@ -268,6 +283,7 @@ void FirmwareSimNode::Impl::tick(uint64_t t_nominal)
             publish(*car, t_nominal);
         }
         see_each_other();
+        if (simulated) await_published();
     }
     for (auto& car : cars) trace(*car, get_time_ns());
 }
