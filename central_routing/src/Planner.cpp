@@ -13,6 +13,9 @@ namespace {
 constexpr double kFollowTolerance = 0.10;  // m between a car's measured and planned position
 constexpr double kSpeedTolerance = 0.25;   // m/s between its measured and planned speed
 constexpr double kMoving = 0.05;           // m/s: a car faster than this drives
+constexpr double kForkLook = 1.5;          // m: a standing car may change its way at a fork this near
+constexpr double kGoing = 1.0;             // m planned ahead: a car at a fork with this keeps its way
+constexpr double kBetter = 0.2;            // m more planned ahead: another way at a fork is better
 
 }  // namespace
 
@@ -195,6 +198,7 @@ struct Planner::Impl
     void prepare(Car& c, double t, const CarState* m);
     void mark_blocked(const Car& c, const std::vector<const Car*>& before, const std::vector<const Car*>& after);
     void plan_cooperative(Car& c);
+    void try_other_ways(Car& c, const std::vector<const Car*>& before, const std::vector<const Car*>& after);
     void plan_cpm_lab(Car& c);
     /// Standing at s from `step` to the end of the horizon meets no one.
     bool standing_free(const Car& c, size_t step, double s) const
@@ -394,7 +398,7 @@ void Planner::Impl::plan_cooperative(Car& c)
         bool braking = way == Way::Brake;
         for (size_t m = k; m <= steps; ++m) {
             if (v == 0 && braking) return may_stand(s) && standing_free(c, m, s);
-            if (blocked_at(c, m, s)) return false;
+            if (blocked_at(c, m, s) || m == steps) return false;  // met someone, or still moving at the horizon's end
             if (!braking) {
                 // Brake for the first place past the zone where it may stand and no one comes.
                 const double stop = s + v * v / (2 * a);
@@ -406,7 +410,7 @@ void Planner::Impl::plan_cooperative(Car& c)
             s += (v + v1) / 2 * dt;
             v = v1;
         }
-        return v < 1e-9 && may_stand(s);
+        return false;
     };
     std::vector<double> ps{c.fs[0]}, pv{c.fv[0]};
     bool on_fallback = true;
@@ -436,6 +440,51 @@ void Planner::Impl::plan_cooperative(Car& c)
     }
     c.ps = std::move(ps);
     c.pv = std::move(pv);
+}
+
+void Planner::Impl::try_other_ways(Car& c, const std::vector<const Car*>& before, const std::vector<const Car*>& after)
+{
+    // A car standing at a fork whose drawn way is blocked (a queue on it, or no place to stand
+    // past the zone it leads into) takes another way on if that lets it drive: joining the queue
+    // it could close a ring of waiting cars that no one leaves. Only while it stands and its
+    // previous plan kept it standing, so that what the others planned around it still holds.
+    if (c.finite_route || c.fv[0] >= 0.01) return;
+    const double s = c.fs[0];
+    if (*std::max_element(c.fs.begin(), c.fs.end()) > s + 1e-6) return;
+    if (c.ps.back() - s >= kGoing) return;
+    size_t fork = 0;
+    for (size_t i = 1; i < c.route.size() && fork == 0; ++i) {
+        if (c.route_s0[i] < s - table.options().spacing) continue;  // passed (a car at the fork has not chosen)
+        if (c.route_s0[i] > s + kForkLook) return;
+        if (graph.successors[c.route[i - 1]].size() > 1) fork = i;
+    }
+    if (fork == 0) return;
+    const double reach = o.v_max * o.horizon + o.footprint.length + 1.0;
+    struct Choice { std::vector<size_t> route; std::vector<double> route_s0, ws, ps, pv; std::vector<uint32_t> wsample; };
+    auto keep = [&] { return Choice{c.route, c.route_s0, c.ws, c.ps, c.pv, c.wsample}; };
+    Choice best = keep();
+    double best_ahead = c.ps.back() - s;
+    const size_t drawn = c.route[fork];
+    for (size_t e : graph.successors[c.route[fork - 1]]) {
+        if (e == drawn) continue;
+        c.route.resize(fork + 1);
+        c.route_s0.resize(fork + 1);
+        c.route[fork] = e;
+        extend_route(c, s + reach + 1.0);
+        build_window(c, s, reach);
+        mark_blocked(c, before, after);
+        plan_cooperative(c);
+        if (c.ps.back() - s > best_ahead + kBetter) {
+            best = keep();
+            best_ahead = c.ps.back() - s;
+        }
+    }
+    c.route = std::move(best.route);
+    c.route_s0 = std::move(best.route_s0);
+    c.ws = std::move(best.ws);
+    c.wsample = std::move(best.wsample);
+    c.ps = std::move(best.ps);
+    c.pv = std::move(best.pv);
 }
 
 void Planner::Impl::plan_cpm_lab(Car& c)
@@ -525,6 +574,7 @@ void Planner::Impl::plan_cycle(double t, const std::vector<CarState>& measured)
         mark_blocked(c, before, after);
         if (o.mode == Mode::Cooperative) {
             plan_cooperative(c);
+            try_other_ways(c, before, after);
         } else {
             plan_cpm_lab(c);
         }

@@ -121,6 +121,7 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
             for (size_t k = 1; k < points.size(); ++k) {
                 out.max_point_spacing = std::max(out.max_point_spacing, std::hypot(points[k].x - points[k - 1].x, points[k].y - points[k - 1].y));
             }
+            out.max_end_speed = std::max(out.max_end_speed, planner.sample(id, planner.plan_end()).speed);
             const double reach = points.empty() ? 0 : points.back().t - t_cycle;
             out.min_reach_s = cycle == 0 && id == ids.front() ? reach : std::min(out.min_reach_s, reach);
         }

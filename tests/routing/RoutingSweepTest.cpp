@@ -1,6 +1,6 @@
 // The planner on the lab map for N = 1..20 cars and five seeds, 60 simulated seconds each,
 // against ideal cars: what it sends stays within the limits and no two bodies come closer than
-// the margin at any 20 ms sample.
+// the margin at any 20 ms sample; every plan ends standing; every car drives on.
 #include <cpm/routing/Simulate.hpp>
 
 #include <gtest/gtest.h>
@@ -29,14 +29,11 @@ TEST_P(RoutingSweep, SixtySecondsWithinTheMarginAndTheLimitsForFiveSeeds)
         EXPECT_LE(s.max_acceleration, options.planner.a_max + 1e-6);
         EXPECT_LE(s.max_point_spacing, options.planner.v_max * 0.1 + 1e-6);  // points 0.1 s apart
         EXPECT_GE(s.min_reach_s, 1.0);  // every trajectory sent covers at least a second ahead
-        // And the cars do drive. Up to 15 cars on this 41 m map; with more, some seeds lock up
-        // after a while (a loop whose every place to wait is taken, each car waiting for the
-        // next): safe, but stuck. bench/routing measures how often; it is not hidden here.
-        double total = 0;
-        for (double d : s.distance_m) total += d;
-        if (options.vehicles <= 15) {
-            EXPECT_GT(total / double(options.vehicles), 10.0);
-        }
+        EXPECT_LT(s.max_end_speed, 1e-9);  // every plan ends standing, so the next one is always feasible
+        // And every car drives: none is locked in a ring of waiting cars (each standing behind
+        // the next, around a loop of the map). In 60 s at 1 m/s a free car covers 60 m; 10 m
+        // is a car that stood most of the minute.
+        for (size_t i = 0; i < s.distance_m.size(); ++i) EXPECT_GT(s.distance_m[i], 10.0) << "car " << i + 1;
     }
 }
 

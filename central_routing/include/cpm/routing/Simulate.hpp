@@ -42,6 +42,7 @@ struct SimulationSummary
     double max_speed = 0, max_acceleration = 0;  ///< over every car's plan at every sample
     double max_point_spacing = 0;  ///< m between the trajectory points sent (0.1 s apart)
     double min_reach_s = 0;        ///< the least time ahead a sent trajectory covered
+    double max_end_speed = 0;      ///< m/s: the fastest any plan was at its horizon's end (every plan ends standing: 0)
     double mean_delay = 0;        ///< time taken over free-flow time at v_max, less one, mean over cars
     size_t busiest_zone = 0;
     std::vector<size_t> zone_entries;  ///< cars into each conflict zone (ConflictTable::zones order)
