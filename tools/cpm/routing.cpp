@@ -153,8 +153,10 @@ int routing_simulate(const std::vector<std::string>& args)
     std::printf("throughput          %.1f cars/min through the busiest conflict zone\n", summary.throughput_per_min);
     std::printf("planning            p50 %.2f ms, p99 %.2f ms per cycle\n", summary.plan_ms_p50, summary.plan_ms_p99);
     if (summary.stalled && options.planner.mode == cpm::routing::Mode::Cooperative) {
-        std::printf("stalled: a car stood still for over 10 s. Many cars on a small map can lock each other\n"
-                    "in a ring of queues (gridlock: no one collides, no one moves); try fewer cars.\n");
+        const double least = *std::min_element(summary.distance_m.begin(), summary.distance_m.end());
+        std::printf("stalled: a car stood still for over 10 s. On a small map with many cars a car can wait\n"
+                    "long for a zone the others' plans keep claiming; the car that drove least drove %.1f m\n"
+                    "(near 0: locked in). Try fewer cars.\n", least);
         if (!parsed.has("--picture")) std::printf("--picture OUT.png shows where they stood.\n");
     }
     if (parsed.has("--picture")) std::printf("the cars where they ended: %s\n", parsed.get("--picture").c_str());
