@@ -162,10 +162,22 @@ TEST(ArucoEndToEnd, AFrameThatDisagreesWithTheCameraFileIsCountedAndTheNodeGoesO
     node.kill(SIGINT);
     ASSERT_EQ(node.wait(10s), 0) << node.errors();
     auto stats = last_json_line(node.output());
-    EXPECT_EQ(stats["bad_frames"].get<int>(), 3) << node.output();
+    // Each bad frame is counted as bad, or, when it piled up behind another while the node was
+    // busy (a loaded machine), as dropped: the node takes the newest frame of a batch.
+    const int dropped = stats["dropped"].get<int>();
+    EXPECT_LE(dropped, 2) << node.output();  // the last good frame was answered
+    EXPECT_GE(stats["bad_frames"].get<int>(), 1) << node.output();
+    EXPECT_EQ(stats["bad_frames"].get<int>() + dropped, 3) << node.output();
     EXPECT_GE(stats["frames"].get<int>(), int(got.size()));  // one ArucoMarkers per good frame (best effort: some may not arrive)
-    // Logged (at most once a second), naming what was wrong.
-    EXPECT_NE(node.errors().find("320×240 px, the camera file says 640×480"), std::string::npos) << node.errors();
+    // Logged (at most once a second), naming what was wrong: the first bad frame that was not
+    // dropped (the wrong size, unless it piled up).
+    const std::string errors = node.errors();
+    const size_t size = errors.find("320×240 px, the camera file says 640×480"), encoding = errors.find("encoding 'yuv422'"),
+                 bytes = errors.find("100 bytes");
+    EXPECT_TRUE(size != std::string::npos || encoding != std::string::npos || bytes != std::string::npos) << errors;
+    if (dropped == 0) {
+        EXPECT_NE(size, std::string::npos) << errors;
+    }
 }
 
 TEST(ArucoEndToEnd, BadInputAtStartIsNamedWithANonZeroExit)
