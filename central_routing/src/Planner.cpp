@@ -167,6 +167,14 @@ struct Planner::Impl
         }
     }
 
+    /// The route long enough for this cycle from s, and the window over it.
+    void route_and_window(Car& c, double s)
+    {
+        const double reach = o.v_max * o.horizon + o.footprint.length + 1.0;
+        extend_route(c, s + reach + 1.0);
+        build_window(c, s, reach);
+    }
+
     size_t window_index(const Car& c, double s) const
     {
         size_t i = size_t(std::lower_bound(c.ws.begin(), c.ws.end(), s) - c.ws.begin());
@@ -277,9 +285,7 @@ void Planner::Impl::prepare(Car& c, double t, const CarState* m)
         }
     }
     drop_passed_edges(c, s);
-    const double reach = o.v_max * o.horizon + o.footprint.length + 1.0;
-    extend_route(c, s + reach + 1.0);
-    build_window(c, s, reach);
+    route_and_window(c, s);
     c.ps = c.fs;
     c.pv = c.fv;
     record_steps(c);
@@ -448,7 +454,7 @@ void Planner::Impl::try_other_ways(Car& c, const std::vector<const Car*>& before
     // past the zone it leads into) takes another way on if that lets it drive: joining the queue
     // it could close a ring of waiting cars that no one leaves. Only while it stands and its
     // previous plan kept it standing, so that what the others planned around it still holds.
-    if (c.finite_route || c.fv[0] >= 0.01) return;
+    if (c.finite_route || std::isnan(c.standing_since)) return;
     const double s = c.fs[0];
     if (*std::max_element(c.fs.begin(), c.fs.end()) > s + 1e-6) return;
     if (c.ps.back() - s >= kGoing) return;
@@ -459,7 +465,6 @@ void Planner::Impl::try_other_ways(Car& c, const std::vector<const Car*>& before
         if (graph.successors[c.route[i - 1]].size() > 1) fork = i;
     }
     if (fork == 0) return;
-    const double reach = o.v_max * o.horizon + o.footprint.length + 1.0;
     struct Choice { std::vector<size_t> route; std::vector<double> route_s0, ws, ps, pv; std::vector<uint32_t> wsample; };
     auto keep = [&] { return Choice{c.route, c.route_s0, c.ws, c.ps, c.pv, c.wsample}; };
     Choice best = keep();
@@ -470,8 +475,7 @@ void Planner::Impl::try_other_ways(Car& c, const std::vector<const Car*>& before
         c.route.resize(fork + 1);
         c.route_s0.resize(fork + 1);
         c.route[fork] = e;
-        extend_route(c, s + reach + 1.0);
-        build_window(c, s, reach);
+        route_and_window(c, s);
         mark_blocked(c, before, after);
         plan_cooperative(c);
         if (c.ps.back() - s > best_ahead + kBetter) {
