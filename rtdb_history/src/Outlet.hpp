@@ -27,8 +27,8 @@ public:
     }
     void commit(Oid oid, const Incoming& sample, uint64_t now)
     {
-        store_.commit(oid, sample, now);
-        each([&](IngestSink& s) { s.sample_committed(oid, sample, now); });
+        const uint64_t commit_ns = store_.commit(oid, sample, now);  // a tie moves on by 1 ns
+        each([&](IngestSink& s) { s.sample_committed(oid, sample, commit_ns); });
     }
     void deleted(Oid oid, uint64_t now)
     {

@@ -530,7 +530,8 @@ TEST_F(HistoryService, AfterAFreezeLongerThanTheLeaseItRecordsEverythingAgainIts
             rq.kind("search");
             rq.name_regex("^" + topic + (key.empty() ? "$" : "/" + key + "$"));
             uint64_t t = 0;
-            for (const auto& o : client.request(rq).objects()) t = std::max(t, o.newest_commit_ns());
+            const HistoryReply reply = client.request(rq);  // a named reply: a temporary would die before the loop
+            for (const auto& o : reply.objects()) t = std::max(t, o.newest_commit_ns());
             return t;
         } catch (const std::exception&) {
             return 0;
