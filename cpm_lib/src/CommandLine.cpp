@@ -10,6 +10,7 @@
 #include <ctime>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
 #include <sstream>
 
 namespace cpm::cli {
@@ -237,6 +238,18 @@ std::vector<std::string> split_list(const std::string& flag, const std::string& 
     }
     if (items.empty()) throw UsageError(flag + ": nothing given");
     return items;
+}
+
+std::string glob_regex(const std::string& glob)
+{
+    std::string re;
+    for (char c : glob) {
+        if (c == '*') re += ".*";
+        else if (c == '?') re += '.';
+        else if (std::strchr("\\^$.|+()[]{}", c)) re += std::string("\\") + c;
+        else re += c;
+    }
+    return re;
 }
 
 namespace {

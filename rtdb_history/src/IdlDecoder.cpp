@@ -3,15 +3,19 @@
 #include <cpm/read_text_file.hpp>
 
 #include <algorithm>
+#include <cerrno>
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <sys/stat.h>
 #include <dirent.h>
 #include <regex>
 #include <sstream>
 #include <stdexcept>
+#include <type_traits>
 
 namespace cpm::rtdb {
 
@@ -55,6 +59,172 @@ private:
     size_t at_ = 4;
 };
 
+/// Writes XCDR1 little endian after a 4-byte encapsulation header; alignment counts from after it.
+class CdrWriter
+{
+public:
+    CdrWriter() : b_{0x00, 0x01, 0x00, 0x00} {}
+    template <typename T>
+    void put(T v)
+    {
+        while ((b_.size() - 4) % sizeof(T)) b_.push_back(0);
+        uint8_t raw[sizeof(T)];
+        std::memcpy(raw, &v, sizeof(T));  // little endian host (x86, ARM)
+        b_.insert(b_.end(), raw, raw + sizeof(T));
+    }
+    void string(const std::string& s)
+    {
+        put<uint32_t>(uint32_t(s.size() + 1));
+        b_.insert(b_.end(), s.begin(), s.end());
+        b_.push_back(0);
+    }
+    std::vector<uint8_t> bytes() { return std::move(b_); }
+
+private:
+    std::vector<uint8_t> b_;
+};
+
+namespace {
+
+/// A JSON scalar as a number of type T: numbers as they are, text parsed ("0.5", "nan", "-inf",
+/// "true"); anything else, or out of T's range, throws naming the path.
+template <typename T>
+T number_of(const nlohmann::json& v, const std::string& path)
+{
+    auto bad = [&](const std::string& why) {
+        return std::invalid_argument(path + ": " + (v.is_string() ? "'" + v.get<std::string>() + "'" : v.dump()) + " " + why);
+    };
+    long double x = 0;
+    if (v.is_null()) return T{};
+    if (v.is_boolean()) x = v.get<bool>() ? 1 : 0;
+    else if (v.is_number_unsigned()) x = (long double)v.get<uint64_t>();
+    else if (v.is_number_integer()) x = (long double)v.get<int64_t>();
+    else if (v.is_number_float()) x = v.get<double>();
+    else if (v.is_string()) {
+        const std::string t = v.get<std::string>();
+        if (t == "true") return T(1);
+        if (t == "false") return T(0);
+        if constexpr (std::is_integral_v<T>) {
+            errno = 0;
+            char* end = nullptr;
+            if (std::is_signed_v<T>) {
+                const long long n = std::strtoll(t.c_str(), &end, 10);
+                if (t.empty() || *end || errno) throw bad("is not a whole number");
+                x = (long double)n;
+            } else {
+                if (!t.empty() && t[0] == '-') throw bad("is negative");
+                const unsigned long long n = std::strtoull(t.c_str(), &end, 10);
+                if (t.empty() || *end || errno) throw bad("is not a whole number");
+                if (n > std::numeric_limits<T>::max()) throw bad("is out of range");
+                return T(n);
+            }
+        } else {
+            char* end = nullptr;
+            x = std::strtold(t.c_str(), &end);
+            if (t.empty() || *end) throw bad("is not a number");
+        }
+    } else {
+        throw bad("is not a number");
+    }
+    if constexpr (std::is_integral_v<T>) {
+        if (x != std::floor(x)) throw bad("is not a whole number");
+        if (x < (long double)std::numeric_limits<T>::min() || x > (long double)std::numeric_limits<T>::max()) throw bad("is out of range");
+        if (v.is_number_unsigned()) return T(v.get<uint64_t>());  // exact for 64-bit values
+        if (v.is_number_integer()) return T(v.get<int64_t>());
+    }
+    return T(x);
+}
+
+}  // namespace
+
+void IdlDecoder::write(const std::string& type, const nlohmann::json& v, CdrWriter& w, const std::string& path) const
+{
+    if (type == "boolean") return w.put<uint8_t>(number_of<uint8_t>(v, path) != 0);
+    if (type == "octet" || type == "char") return w.put<uint8_t>(number_of<uint8_t>(v, path));
+    if (type == "short") return w.put<int16_t>(number_of<int16_t>(v, path));
+    if (type == "unsigned short") return w.put<uint16_t>(number_of<uint16_t>(v, path));
+    if (type == "long") return w.put<int32_t>(number_of<int32_t>(v, path));
+    if (type == "unsigned long") return w.put<uint32_t>(number_of<uint32_t>(v, path));
+    if (type == "long long") return w.put<int64_t>(number_of<int64_t>(v, path));
+    if (type == "unsigned long long") return w.put<uint64_t>(number_of<uint64_t>(v, path));
+    if (type == "float") return w.put<float>(number_of<float>(v, path));
+    if (type == "double") return w.put<double>(number_of<double>(v, path));
+    if (type == "string") return w.string(v.is_null() ? "" : v.is_string() ? v.get<std::string>() : v.dump());
+    if (type.rfind("sequence", 0) == 0) {
+        std::smatch m;
+        static const std::regex seq(R"(sequence\s*<\s*([^,>]+?)\s*(?:,\s*(\d+)\s*)?>)");
+        if (!std::regex_match(type, m, seq)) throw std::invalid_argument(path + ": cannot write type " + type);
+        nlohmann::json items = v.is_null() ? nlohmann::json::array() : v;
+        if (items.is_string()) {
+            try {
+                items = nlohmann::json::parse(items.get<std::string>());
+            } catch (const std::exception&) {
+                throw std::invalid_argument(path + ": '" + v.get<std::string>() + "' is not a JSON array");
+            }
+        }
+        if (!items.is_array()) throw std::invalid_argument(path + ": " + v.dump() + " is not an array");
+        if (m[2].matched && items.size() > std::stoull(m[2])) throw std::invalid_argument(path + ": " + std::to_string(items.size()) + " items, at most " + m[2].str());
+        w.put<uint32_t>(uint32_t(items.size()));
+        for (size_t i = 0; i < items.size(); ++i) write(m[1], items[i], w, path + "[" + std::to_string(i) + "]");
+        return;
+    }
+    if (auto e = enums_.find(type); e != enums_.end()) {
+        if (v.is_string()) {
+            auto it = std::find(e->second.begin(), e->second.end(), v.get<std::string>());
+            if (it != e->second.end()) return w.put<uint32_t>(uint32_t(it - e->second.begin()));
+        }
+        const uint32_t n = number_of<uint32_t>(v, path);
+        if (n >= e->second.size()) throw std::invalid_argument(path + ": " + v.dump() + " is no " + type);
+        return w.put<uint32_t>(n);
+    }
+    auto s = structs_.find(type);
+    if (s == structs_.end()) throw std::invalid_argument(path + ": unknown type " + type);
+    if (!v.is_null() && !v.is_object()) throw std::invalid_argument(path + ": " + v.dump() + " is not a " + type);
+    for (const auto& m : s->second) {
+        const std::string p = path.empty() ? m.name : path + "." + m.name;
+        const nlohmann::json& mv = v.is_object() && v.contains(m.name) ? v[m.name] : nlohmann::json();
+        if (m.array) {
+            nlohmann::json items = mv;
+            if (items.is_string()) {
+                try {
+                    items = nlohmann::json::parse(items.get<std::string>());
+                } catch (const std::exception&) {
+                    throw std::invalid_argument(p + ": '" + mv.get<std::string>() + "' is not a JSON array");
+                }
+            }
+            if (!items.is_null() && (!items.is_array() || items.size() != m.array))
+                throw std::invalid_argument(p + ": expected " + std::to_string(m.array) + " items, got " + items.dump());
+            for (size_t i = 0; i < m.array; ++i) write(m.type, items.is_null() ? nlohmann::json() : items[i], w, p + "[" + std::to_string(i) + "]");
+        } else {
+            write(m.type, mv, w, p);
+        }
+    }
+}
+
+std::vector<std::string> IdlDecoder::field_paths(const std::string& type_name) const
+{
+    std::vector<std::string> out;
+    auto s = structs_.find(type_name);
+    if (s == structs_.end()) return out;
+    for (const auto& m : s->second) {
+        const bool nested = !m.array && structs_.count(m.type);
+        if (!nested) {
+            out.push_back(m.name);
+            continue;
+        }
+        for (const auto& p : field_paths(m.type)) out.push_back(m.name + "." + p);
+    }
+    return out;
+}
+
+std::vector<uint8_t> IdlDecoder::encode(const std::string& type_name, const nlohmann::json& sample) const
+{
+    if (!knows(type_name)) throw std::invalid_argument("unknown type " + type_name);
+    CdrWriter w;
+    write(type_name, sample, w, "");
+    return w.bytes();
+}
+
 IdlDecoder::IdlDecoder(const std::string& dir)
 {
     DIR* d = ::opendir(dir.c_str());
@@ -65,7 +235,17 @@ IdlDecoder::IdlDecoder(const std::string& dir)
         if (name.size() > 4 && name.substr(name.size() - 4) == ".idl") files.push_back(dir + "/" + name);
     }
     ::closedir(d);
-    for (const auto& f : files) parse(read_text_file(f, "IDL file"), f);
+    for (const auto& f : files) {
+        std::string text = read_text_file(f, "IDL file");
+        parse(text, f);
+        sources_[f.substr(dir.size() + 1)] = std::move(text);
+    }
+}
+
+IdlDecoder::IdlDecoder(const std::map<std::string, std::string>& sources)
+{
+    for (const auto& [file, text] : sources) parse(text, file);
+    sources_ = sources;
 }
 
 void IdlDecoder::parse(const std::string& text, const std::string& file)

@@ -492,6 +492,39 @@ Oid Store::add_object(ObjectInfo info)
     return oid;
 }
 
+Oid Store::restore_object(ObjectInfo info)
+{
+    const uint32_t n = uint32_t(info.oid);
+    const uint32_t generation = uint32_t(info.oid >> 32);
+    const uint64_t interval = info.history_interval_ns, created = info.created_ts;
+    {
+        std::unique_lock lock(registry_mutex_);
+        // Slots up to n are made free ones, so that the object lands in its own.
+        while (n != 0 && n >= slots_used_.load(std::memory_order_relaxed) && (n >> kBlockBits) < kBlocks) {
+            const uint32_t m = slots_used_.load(std::memory_order_relaxed);
+            Object**& block = blocks_[m >> kBlockBits];
+            if (!block) block = new Object*[size_t(1) << kBlockBits]();
+            block[m & kBlockMask] = new Object;
+            free_slots_.push_back(m);
+            slots_used_.store(m + 1, std::memory_order_release);
+        }
+        auto free = std::find(free_slots_.begin(), free_slots_.end(), n);
+        if (n != 0 && free != free_slots_.end()) {
+            // Taken next by add_object, at the generation the oid names.
+            std::iter_swap(free, free_slots_.end() - 1);
+            std::unique_lock ol(slot(n)->mutex);
+            slot(n)->generation = generation;
+        }
+    }
+    Oid oid = add_object(std::move(info));
+    std::unique_lock lock(registry_mutex_);
+    Object* o = live(oid);
+    std::unique_lock ol(o->mutex);
+    o->info.history_interval_ns = interval;
+    o->info.created_ts = created;
+    return oid;
+}
+
 template <typename F>
 auto Store::read(Oid oid, F&& f) const
 {

@@ -1,8 +1,10 @@
 // cpm history ... and cpm dump: the history service's answers on the command line.
 #include "Command.hpp"
 
+#include <cpm/rtdb/Csv.hpp>
 #include <cpm/rtdb/HistoryJson.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
+#include <cpm/rtdb/Recording.hpp>
 
 #include <cpm/CommandLine.hpp>
 #include <cpm/HistoryClient.hpp>
@@ -15,6 +17,7 @@
 #include <cstdio>
 #include <ctime>
 #include <memory>
+#include <regex>
 #include <set>
 #include <sys/stat.h>
 
@@ -22,10 +25,14 @@ namespace cpm::tools {
 namespace {
 
 const char* const kHistoryHelp =
-    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot\n"
+    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot|export\n"
     "                   [flags] [--json]\n"
     "\n"
-    "Asks the history service (cpm_history, on this domain) about the recent past.\n"
+    "                   [--file recording.db]\n"
+    "\n"
+    "Asks the history service (cpm_history, on this domain) about the recent past, or, with\n"
+    "--file, a recording of a finished run (cpm_history --record, cpm record, cpm lab run): the\n"
+    "same verbs, flags and JSON; there \"now\" (for -2s, ages and rates) is the run's end.\n"
     "  list                                 every object held (alive and deleted-but-held)\n"
     "  search [--name REGEX] [--type T] [--parent OID] [--creator NAME|GUID] [--alive-at T]\n"
     "  wait-object [search flags] [--timeout 10s]   the first object matching, once one exists\n"
@@ -37,6 +44,10 @@ const char* const kHistoryHelp =
     "  wait --topic NAME [--key K] [--time T] [--timeout 10s]   newest committed after T (default now)\n"
     "  successor --topic NAME [--key K] --time T [--timeout 10s]  exactly the next one, or 'gap'\n"
     "  snapshot --objects TOPIC[/KEY],... --time T [--by commit|data]   one consistent cut\n"
+    "  export --topic NAME [--key K] [--from T] [--to T] --csv\n"
+    "                                       every sample (of every key without --key) as CSV, in\n"
+    "                                       commit order: commit_ns, data_ns, valid_after_ns, key, then\n"
+    "                                       the fields by IDL path (pose.x); cpm record import reads it\n"
     "--key: a vehicle id, or the key as `cpm history list` prints it. Times: nanoseconds,\n"
     "ISO-8601 UTC (2026-11-23T14:05:00.25Z) or relative to now (-2s). --by commit (default):\n"
     "when the service received it; data: the sample's create_stamp.\n"
@@ -46,7 +57,7 @@ const char* const kHistoryHelp =
     "gap) or the service's error on stderr; 2 on a usage error.\n";
 
 const char* const kDumpHelp =
-    "usage: cpm dump [--alive] [--all] [--json] [--dds_domain N]\n"
+    "usage: cpm dump [--alive] [--all] [--json] [--file recording.db] [--dds_domain N]\n"
     "\n"
     "One table of every object the history service holds (like kogmo_rtdb_dump -a), oldest first:\n"
     "oid, name, type, creator, created and deleted (UTC), samples held, samples lost, rate, age of\n"
@@ -57,17 +68,56 @@ const char* const kDumpHelp =
 
 using cpm::cli::UsageError;
 
-/// A time flag's value (see cpm::cli::parse_time) against the lab's clock now.
-uint64_t parse_time(const std::string& flag, const std::string& text)
+/// The command's participant: UDP loopback only. A short-lived process that reuses the
+/// shared-memory port of one that just exited is not reached by the service's replies
+/// (Fast DDS 2.9 keeps sending to the old port for a while).
+cpm::Participant& client_participant()
 {
-    return cpm::cli::parse_time(flag, text, cpm::get_time_ns());
+    static cpm::Participant p = [] {
+        auto o = cpm::ParticipantOptions::from_init();
+        o.shared_memory = false;
+        return cpm::Participant(o);
+    }();
+    return p;
 }
 
-const cpm::rtdb::IdlDecoder& decoder()
+/// Where the answers come from: the live history service, or a recording (--file FILE), whose
+/// "now" (for relative times, ages and rates) is the end of the recorded run and whose types are
+/// the IDL it carries.
+struct Source
 {
-    const auto* types = cpm::rtdb::IdlDecoder::lab_types();
-    if (!types) throw std::runtime_error("cannot find the lab's IDL files (set CPM_IDL_DIR)");
-    return *types;
+    std::unique_ptr<cpm::HistoryClient> client;
+    uint64_t now = 0;
+    std::shared_ptr<const cpm::rtdb::LoadedRecording> recording;
+
+    /// A time flag's value (see cpm::cli::parse_time) against this source's now.
+    uint64_t time(const std::string& flag, const std::string& text) const { return cpm::cli::parse_time(flag, text, now); }
+    const cpm::rtdb::IdlDecoder& decoder() const
+    {
+        if (recording && recording->types) return *recording->types;
+        const auto* types = cpm::rtdb::IdlDecoder::lab_types();
+        if (!types) throw std::runtime_error("cannot find the lab's IDL files (set CPM_IDL_DIR)");
+        return *types;
+    }
+};
+
+Source open_source(const std::string& file, const std::string& command)
+{
+    Source s;
+    if (file.empty()) {
+        s.client = std::make_unique<cpm::HistoryClient>(client_participant());
+        s.now = cpm::get_time_ns();
+        return s;
+    }
+    try {
+        s.recording = std::make_shared<cpm::rtdb::LoadedRecording>(cpm::rtdb::load_recording(file));
+    } catch (const std::runtime_error& e) {
+        throw cpm::Error(command + ": --file: " + e.what());
+    }
+    if (!s.recording->warning.empty()) std::fprintf(stderr, "%s: %s\n", command.c_str(), s.recording->warning.c_str());
+    s.client = std::make_unique<cpm::HistoryClient>(cpm::rtdb::recording_backend(s.recording));
+    s.now = s.recording->ended_ns;
+    return s;
 }
 
 std::string age_text(double s)
@@ -91,9 +141,8 @@ bool own_tool(const HistoryObject& o)
     return o.is_process() && (o.name() == "cpm" || o.name().rfind("cpm_topic_probe", 0) == 0);
 }
 
-void print_objects(const HistoryReply& reply, bool json, bool show_all = true)
+void print_objects(const HistoryReply& reply, bool json, uint64_t now, bool show_all = true)
 {
-    const uint64_t now = cpm::get_time_ns();
     std::vector<HistoryObject> rows;
     for (const auto& o : reply.objects()) {
         if (show_all || !own_tool(o)) rows.push_back(o);
@@ -118,7 +167,7 @@ void print_objects(const HistoryReply& reply, bool json, bool show_all = true)
 }
 
 /// `history changes`: one row per creation or deletion after `since`, in time order.
-void print_changes(const HistoryReply& reply, bool json, uint64_t since)
+void print_changes(const HistoryReply& reply, bool json, uint64_t since, uint64_t now)
 {
     struct Event
     {
@@ -134,7 +183,6 @@ void print_changes(const HistoryReply& reply, bool json, uint64_t since)
         if (o.deleted_ts() > since) events.push_back({o.deleted_ts(), "deleted", &o});
     }
     std::stable_sort(events.begin(), events.end(), [](const Event& a, const Event& b) { return a.t < b.t; });
-    const uint64_t now = cpm::get_time_ns();
     if (!json) std::printf("%-24s %-8s %-6s %-28s %-22s %s\n", "time (UTC)", "event", "oid", "name", "type", "creator");
     for (const auto& e : events) {
         if (json) {
@@ -191,7 +239,7 @@ void print_fields(const nlohmann::json& data, const std::string& prefix)
     }
 }
 
-void print_samples(const HistoryReply& reply, bool json)
+void print_samples(const HistoryReply& reply, bool json, const cpm::rtdb::IdlDecoder& types)
 {
     for (size_t i = 0; i < reply.samples().size(); ++i) {
         const auto& s = reply.samples()[i];
@@ -199,7 +247,7 @@ void print_samples(const HistoryReply& reply, bool json)
         const HistoryObject* o = reply.objects().size() == reply.samples().size() ? &reply.objects()[i]
                                  : reply.objects().empty()                        ? nullptr
                                                                                   : &reply.objects()[0];
-        auto j = cpm::rtdb::sample_json(s, o, &decoder());
+        auto j = cpm::rtdb::sample_json(s, o, &types);
         if (json) {
             std::printf("%s\n", j.dump().c_str());
             continue;
@@ -218,21 +266,7 @@ void print_samples(const HistoryReply& reply, bool json)
     }
 }
 
-/// The command's participant: UDP loopback only. A short-lived process that reuses the
-/// shared-memory port of one that just exited is not reached by the service's replies
-/// (Fast DDS 2.9 keeps sending to the old port for a while).
-cpm::Participant& client_participant()
-{
-    static cpm::Participant p = [] {
-        auto o = cpm::ParticipantOptions::from_init();
-        o.shared_memory = false;
-        return cpm::Participant(o);
-    }();
-    return p;
-}
-
-
-int history_command(const std::string& verb, const std::vector<std::string>& args)
+int history_command(const std::string& verb, const std::vector<std::string>& args, const std::string& file)
 {
     const std::string command = "cpm history " + verb;
     auto parsed = cpm::cli::parse_flags(args,
@@ -254,6 +288,8 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
                                         {"--since", true},
                                         {"--json", false}},
                                        command);
+    const Source source = open_source(file, command);
+    auto parse_time = [&](const std::string& flag, const std::string& text) { return source.time(flag, text); };
     // The verbs are the request kinds, but for two spelled as a person types them.
     const std::string kind_name = verb == "wait" ? "wait_next" : verb == "wait-object" ? "wait_object" : verb;
     const auto kind = cpm::history::kind_from(kind_name);
@@ -276,7 +312,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
         rq.t1(parse_time("--to", parsed.get("--to")));
         if (rq.t1() < rq.t0()) throw UsageError(command + ": --to is before --from");
     }
-    if (verb == "wait" || verb == "successor") rq.t0(parsed.has("--time") ? parse_time("--time", parsed.get("--time")) : cpm::get_time_ns());
+    if (verb == "wait" || verb == "successor") rq.t0(parsed.has("--time") ? parse_time("--time", parsed.get("--time")) : source.now);
     if (verb == "changes") {
         if (!parsed.has("--since")) throw UsageError(command + ": --since T is required");
         rq.t0(parse_time("--since", parsed.get("--since")));
@@ -294,8 +330,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     rq.creator(parsed.get("--creator"));
     if (parsed.has("--alive-at")) rq.alive_at(parse_time("--alive-at", parsed.get("--alive-at")));
 
-    cpm::HistoryClient client(client_participant());
-    const HistoryReply reply = client.request(rq);
+    const HistoryReply reply = source.client->request(rq);
     const bool json = parsed.has("--json");
     const auto status = cpm::history::status_from(reply.status()).value_or(cpm::history::Status::error);
     if (status == cpm::history::Status::error || status == cpm::history::Status::unknown_object) {
@@ -303,9 +338,9 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
                      status == cpm::history::Status::error ? "the service refused the request: " : "", reply.error().c_str());
         return 1;
     }
-    if (verb == "changes") print_changes(reply, json, rq.t0());
-    else if (about_objects) print_objects(reply, json);
-    else print_samples(reply, json);
+    if (verb == "changes") print_changes(reply, json, rq.t0(), source.now);
+    else if (about_objects) print_objects(reply, json, source.now);
+    else print_samples(reply, json, source.decoder());
     if (reply.truncated()) std::fprintf(stderr, "cpm history %s: more samples matched than --limit; the oldest are shown\n", verb.c_str());
     if (reply.lost() > 0)
         std::fprintf(stderr, "cpm history %s: %llu samples between the first and the last shown never reached the service\n",
@@ -325,24 +360,117 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
 
 int dump_command(const std::vector<std::string>& args)
 {
-    auto parsed = cpm::cli::parse_flags(args, {{"--json", false}, {"--alive", false}, {"--all", false}}, "cpm dump");
-    cpm::HistoryClient client(client_participant());
+    auto parsed = cpm::cli::parse_flags(args, {{"--json", false}, {"--alive", false}, {"--all", false}, {"--file", true}}, "cpm dump");
+    const Source source = open_source(parsed.get("--file"), "cpm dump");
     const bool alive = parsed.has("--alive");
     HistoryRequest rq = cpm::HistoryClient::make(alive ? cpm::history::Kind::search : cpm::history::Kind::list, "", "");
-    if (alive) rq.alive_at(cpm::get_time_ns());
-    const HistoryReply reply = client.request(rq);
+    if (alive) rq.alive_at(source.now);
+    const HistoryReply reply = source.client->request(rq);
     if (reply.status() != "ok") {
         std::fprintf(stderr, "cpm dump: %s: %s\n", reply.status().c_str(), reply.error().c_str());
         return 1;
     }
-    print_objects(reply, parsed.has("--json"), parsed.has("--all"));
+    print_objects(reply, parsed.has("--json"), source.now, parsed.has("--all"));
     return 0;
 }
 
-int history_verb(const std::vector<std::string>& args)
+/// `cpm history export --topic T [--key K] --csv`: every sample of the object (or of every key
+/// of the topic), in commit order, as CSV (cpm::rtdb::csv).
+int export_command(const std::vector<std::string>& args, const std::string& file)
 {
+    const std::string command = "cpm history export";
+    auto parsed = cpm::cli::parse_flags(args, {{"--topic", true}, {"--key", true}, {"--from", true}, {"--to", true}, {"--csv", false}}, command);
+    if (!parsed.has("--topic")) throw UsageError(command + ": --topic NAME is required");
+    if (!parsed.has("--csv")) throw UsageError(command + ": --csv is required (the one format export writes)");
+    const Source source = open_source(file, command);
+    const uint64_t from = parsed.has("--from") ? source.time("--from", parsed.get("--from")) : 0;
+    const uint64_t to = parsed.has("--to") ? source.time("--to", parsed.get("--to")) : uint64_t(INT64_MAX);
+    if (to < from) throw UsageError(command + ": --to is before --from");
+    const std::string topic = parsed.get("--topic");
+    // The objects: the one named, or every instance of the topic.
+    std::vector<std::string> keys;
+    if (parsed.has("--key")) {
+        keys.push_back(parsed.get("--key"));
+    } else {
+        HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
+        rq.name_regex("^" + std::regex_replace(topic, std::regex(R"([.^$|()\[\]{}*+?\\])"), R"(\$&)") + "(/|$)");
+        const HistoryReply found = source.client->request(rq);
+        for (const auto& o : found.objects()) {
+            if (!o.is_process() && o.topic() == topic) keys.push_back(o.key());
+        }
+        if (keys.empty()) {
+            std::fprintf(stderr, "%s: no object of topic '%s'%s\n", command.c_str(), topic.c_str(), file.empty() ? "" : (" in " + file).c_str());
+            return 1;
+        }
+    }
+    struct Row
+    {
+        uint64_t commit;
+        std::vector<std::string> cells;
+    };
+    std::vector<Row> rows;
+    std::vector<std::string> columns;
+    for (const auto& key : keys) {
+        for (uint64_t t0 = from;;) {  // a page of range at a time
+            HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::range, topic, key, 0, cpm::history::By::commit);
+            rq.t0(t0);
+            rq.t1(to);
+            rq.limit(100000);
+            const HistoryReply reply = source.client->request(rq);
+            if (reply.status() != "ok" && reply.status() != "not_found" && reply.status() != "not_yet" && reply.status() != "evicted") {
+                std::fprintf(stderr, "%s: %s%s%s: %s %s\n", command.c_str(), topic.c_str(), key.empty() ? "" : "/", key.c_str(), reply.status().c_str(),
+                             reply.error().c_str());
+                return 1;
+            }
+            const HistoryObject* o = reply.objects().empty() ? nullptr : &reply.objects()[0];
+            for (const auto& s : reply.samples()) {
+                const auto j = cpm::rtdb::sample_json(s, o, &source.decoder());
+                if (!j.contains("data")) {
+                    std::fprintf(stderr, "%s: %s is of type %s, which cpm cannot decode: no fields to export\n", command.c_str(), topic.c_str(),
+                                 o ? o->type_name().c_str() : "?");
+                    return 1;
+                }
+                std::vector<std::string> cells{std::to_string(s.commit_ns()), std::to_string(s.data_ns()), std::to_string(s.valid_after_ns()), key};
+                const auto fields = cpm::rtdb::csv::flatten(j["data"], source.decoder().field_paths(o->type_name()));
+                if (columns.empty()) {
+                    columns = cpm::rtdb::csv::time_columns();
+                    for (const auto& f : fields) columns.push_back(f.first);
+                }
+                for (const auto& f : fields) cells.push_back(f.second);
+                rows.push_back({s.commit_ns(), std::move(cells)});
+            }
+            if (!reply.truncated() || reply.samples().empty()) break;
+            t0 = reply.samples().back().commit_ns() + 1;
+        }
+    }
+    std::stable_sort(rows.begin(), rows.end(), [](const Row& a, const Row& b) { return a.commit < b.commit; });
+    if (columns.empty()) {
+        std::fprintf(stderr, "%s: no samples of %s in the span asked for\n", command.c_str(), topic.c_str());
+        return 1;
+    }
+    std::fputs(cpm::rtdb::csv::line(columns).c_str(), stdout);
+    for (const auto& r : rows) std::fputs(cpm::rtdb::csv::line(r.cells).c_str(), stdout);
+    return 0;
+}
+
+int history_verb(const std::vector<std::string>& all)
+{
+    // --file FILE may come before the verb or among its flags.
+    std::vector<std::string> args;
+    std::string file;
+    for (size_t i = 0; i < all.size(); ++i) {
+        if (all[i] == "--file" || all[i].rfind("--file=", 0) == 0) {
+            if (!file.empty()) throw UsageError("cpm history: --file given twice");
+            if (all[i] == "--file" && i + 1 >= all.size()) throw UsageError("cpm history: --file needs a value (a recording.db)");
+            file = all[i] == "--file" ? all[++i] : all[i].substr(7);
+            if (file.empty()) throw UsageError("cpm history: --file needs a value (a recording.db)");
+        } else {
+            args.push_back(all[i]);
+        }
+    }
     if (args.empty() || args[0].rfind("--", 0) == 0) throw UsageError("cpm history: which query? (see cpm history --help)");
-    return history_command(args[0], std::vector<std::string>(args.begin() + 1, args.end()));
+    if (args[0] == "export") return export_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
+    return history_command(args[0], std::vector<std::string>(args.begin() + 1, args.end()), file);
 }
 
 }  // namespace

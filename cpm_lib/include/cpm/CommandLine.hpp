@@ -79,6 +79,10 @@ long long parse_integer(const std::string& flag, const std::string& text, long l
 /// "a,b,c" → {"a", "b", "c"}; an empty item is an error.
 std::vector<std::string> split_list(const std::string& flag, const std::string& text);
 
+/// A topic pattern as people write it (`*` any text, `?` one character, all else literal) as
+/// the full-match ECMAScript regex the history service takes: "vehicle*" → "vehicle.*".
+std::string glob_regex(const std::string& glob);
+
 /// From now on SIGINT and SIGTERM only set the flag stop_requested() reads (the program then
 /// ends its loop and cleans up: DDS shared memory is only freed by a normal exit).
 void stop_on_signals();

@@ -71,6 +71,11 @@ public:
                            std::chrono::milliseconds reply_timeout = std::chrono::milliseconds(3000));
     /// Asks another backend.
     explicit HistoryClient(std::unique_ptr<HistoryBackend> backend);
+    /// Answers from a finished run's recording (recording.db) the calls the live service
+    /// answers, read into memory once. Defined in the cpm::rtdb library (link it). Throws
+    /// cpm::Error naming the file when it is not a recording; a damaged one answers up to the
+    /// damage.
+    static HistoryClient open_recording(const std::string& path);
     ~HistoryClient();
     HistoryClient(HistoryClient&&) noexcept;
     HistoryClient& operator=(HistoryClient&&) noexcept;

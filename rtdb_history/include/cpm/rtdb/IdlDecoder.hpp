@@ -18,14 +18,26 @@ public:
     /// Reads every *.idl in `dir`; throws std::runtime_error naming file and line on a
     /// construct it cannot read.
     explicit IdlDecoder(const std::string& dir);
+    /// From IDL texts (file name → text), as a recording carries them.
+    explicit IdlDecoder(const std::map<std::string, std::string>& sources);
     /// The lab's own types: the IDL folder named by CPM_IDL_DIR, else the source tree's, else
     /// the installed one; nullptr when none can be read. Built once, then shared (read-only).
     static const IdlDecoder* lab_types();
+
+    /// The IDL texts read, by file name (without the folder).
+    const std::map<std::string, std::string>& sources() const { return sources_; }
 
     bool knows(const std::string& type_name) const { return structs_.count(type_name) != 0; }
     /// The sample as JSON; nullopt when the bytes do not decode as the type.
     std::optional<nlohmann::json> decode(const std::string& type_name, const std::vector<uint8_t>& payload) const;
     std::optional<nlohmann::json> decode(const std::string& type_name, const uint8_t* data, size_t size) const;
+    /// The reverse of decode(): the sample as a writer puts it on the wire (XCDR1 little endian,
+    /// encapsulation header included) from JSON shaped as decode() gives it. Lenient where text
+    /// comes in: a number given as a string ("0.5", "nan", "inf"), an enum by name or number, a
+    /// missing member as its zero. Throws std::invalid_argument naming the member path (e.g.
+    /// "pose.x") and the value for anything that does not fit the type.
+    std::vector<uint8_t> encode(const std::string& type_name, const nlohmann::json& sample) const;
+
     /// Whether the type begins with `Header header` (create_stamp, valid_after_stamp); false
     /// for a type it does not know.
     bool has_header(const std::string& type_name) const;
@@ -34,6 +46,10 @@ public:
     /// A sample for people and scripts: {"data": {…fields…}} when the type is known and the bytes
     /// decode, else {"payload_base64": "…"}.
     nlohmann::json describe(const std::string& type_name, const std::vector<uint8_t>& payload) const;
+
+    /// The type's fields by path in IDL member order ("header.create_stamp.nanoseconds",
+    /// "pose.x"): nested structs opened, an array or sequence one path. Empty for an unknown type.
+    std::vector<std::string> field_paths(const std::string& type_name) const;
 
     /// The IDL type of a struct's member ("octet", "string", "sequence<double>", …); "" if none.
     std::string member_type(const std::string& type_name, const std::string& member) const;
@@ -62,9 +78,11 @@ private:
     };
     void parse(const std::string& text, const std::string& file);
     nlohmann::json read(const std::string& type, class CdrCursor& c) const;
+    void write(const std::string& type, const nlohmann::json& v, class CdrWriter& w, const std::string& path) const;
 
     std::map<std::string, std::vector<Member>> structs_;
     std::map<std::string, std::vector<std::string>> enums_;
+    std::map<std::string, std::string> sources_;
 };
 
 /// describe() with the lab's IDL when there is one (`types` may be null: then the bytes).

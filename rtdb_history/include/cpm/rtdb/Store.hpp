@@ -181,6 +181,12 @@ public:
     /// Registers an object; info.oid, created_ts (if 0: now) and history_interval are filled
     /// in. Returns the new oid.
     Oid add_object(ObjectInfo info);
+    /// Puts an object back under the oid it had (a recording being loaded): info.oid,
+    /// created_ts and history_interval_ns are kept as given, while the store keeps its samples
+    /// by its own retention. Returns the oid it got: the one given, or a new one when that
+    /// oid's slot holds another object already (the live store had purged the older one and
+    /// given its slot to this one).
+    Oid restore_object(ObjectInfo info);
     /// Stores a sample; returns its commit time (max(now_ns, previous + 1)).
     uint64_t commit(Oid oid, const Incoming& in, uint64_t now_ns);
     /// Marks an object deleted at t: it stays readable for its history_interval, then expire()

@@ -1,0 +1,126 @@
+#pragma once
+// A recording: everything a history service ingests, kept on disk in one SQLite file
+// (recording.db), and read back into a Store that answers the same questions as the live one.
+//
+// Writing: a RecordingWriter is an IngestSink (ServiceOptions::sinks). The ingest only copies
+// each sample into a queue; a writer thread puts the queue into the file in batched
+// transactions (WAL), so the ingest never waits on the disk. The file holds every object's info
+// block, every sample (commit, data, valid_after and source times, the samples lost before it,
+// the payload as received) and the IDL text of every type cpm knows, so it is read without the
+// build that made it. When the disk is full (or --record-max-bytes is reached) the recording
+// stops with an error naming the file; what was written stays, the live service goes on.
+//
+// Reading: load_recording() puts the file back into a Store under the oids and commit times it
+// had, keeping everything (no window). A damaged or truncated file loads up to the damage and
+// says where it stopped.
+#include <cpm/HistoryClient.hpp>
+#include <cpm/rtdb/IngestSink.hpp>
+#include <cpm/rtdb/Store.hpp>
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <utility>
+
+struct sqlite3;
+
+namespace cpm::rtdb {
+
+class IdlDecoder;
+
+struct RecordingOptions
+{
+    std::string name;  ///< the run's name, kept in the file's meta table
+    /// The file stops growing here: the recording ends with an error, as on a full disk. 0: no
+    /// limit but the disk's.
+    uint64_t max_bytes = 0;
+    /// The ingest drops samples (counted, and said) once this much payload waits for the disk.
+    uint64_t max_queued_bytes = 256ull << 20;
+    /// A batch is written at least this often.
+    uint64_t flush_period_ns = 100'000'000ull;
+};
+
+struct RecordingCounters
+{
+    uint64_t queued = 0;   ///< samples handed to the recording
+    uint64_t written = 0;  ///< samples committed to the file
+    uint64_t dropped = 0;  ///< samples that never reached the file (queue full, or after a failure)
+    bool failed = false;
+    std::string error;     ///< why the recording stopped, naming the file
+};
+
+class RecordingWriter final : public IngestSink
+{
+public:
+    /// Creates the file (it must not exist: a recording is never overwritten) and starts the
+    /// writer thread. Throws std::runtime_error naming the file when it cannot be made.
+    explicit RecordingWriter(std::string path, RecordingOptions options = {});
+    /// close().
+    ~RecordingWriter() override;
+    RecordingWriter(const RecordingWriter&) = delete;
+    RecordingWriter& operator=(const RecordingWriter&) = delete;
+
+    void object_added(const ObjectInfo& info) override;
+    void sample_committed(Oid oid, const Incoming& sample, uint64_t commit_ns) override;
+    void object_deleted(Oid oid, uint64_t deleted_ns) override;
+
+    /// Writes what is queued, the end time and an index, and closes the file as one
+    /// self-contained file. Idempotent.
+    void close();
+    RecordingCounters counters() const;
+    const std::string& path() const { return path_; }
+
+private:
+    struct Event;
+    void run();
+    bool write(std::deque<Event>& batch);
+    void fail(const std::string& why);
+
+    std::string path_;
+    RecordingOptions options_;
+    sqlite3* db_ = nullptr;
+    mutable std::mutex mutex_;
+    std::condition_variable cv_;
+    std::deque<Event> queue_;
+    uint64_t queued_bytes_ = 0;
+    bool closing_ = false, failed_ = false;
+    RecordingCounters counters_;
+    uint64_t started_ns_ = 0;
+    std::thread thread_;
+};
+
+/// A recording read back.
+struct LoadedRecording
+{
+    std::unique_ptr<Store> store;
+    std::string name;
+    uint64_t started_ns = 0;
+    uint64_t ended_ns = 0;   ///< the clean end, else the newest commit time in the file
+    bool complete = false;   ///< closed cleanly and read to the end
+    uint64_t samples = 0;    ///< samples loaded
+    std::string warning;     ///< why the load stopped early or the file was not closed ("" if neither)
+    /// The recording's own types (the IDL text it carries); null when it holds none.
+    std::shared_ptr<const IdlDecoder> types;
+    std::map<std::string, std::string> idl;  ///< IDL file name → text
+};
+
+/// Reads a recording. Throws std::runtime_error naming the file when it is not one (missing, not
+/// SQLite, no cpm tables); a file damaged part way loads up to the damage (see warning).
+LoadedRecording load_recording(const std::string& path);
+
+/// A recording's start and end (of one never closed: its newest commit) without loading it.
+/// Throws as load_recording.
+std::pair<uint64_t, uint64_t> recording_span(const std::string& path);
+
+/// A HistoryClient's backend answering from a loaded recording as the live service answers
+/// (the kinds that wait answer at once: nothing new comes to a finished run).
+/// HistoryClient::open_recording(path) is load_recording and this in one.
+std::unique_ptr<cpm::HistoryBackend> recording_backend(std::shared_ptr<const LoadedRecording> recording);
+
+}  // namespace cpm::rtdb

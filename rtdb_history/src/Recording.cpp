@@ -1,0 +1,464 @@
+#include <cpm/rtdb/Recording.hpp>
+
+#include <cpm/Logging.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/rtdb/IdlDecoder.hpp>
+#include <cpm/rtdb/Requests.hpp>
+#include <cpm/Error.hpp>
+#include <cpm/HistoryClient.hpp>
+
+#include "Sqlite.hpp"
+
+#include <limits>
+#include <stdexcept>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <variant>
+
+namespace cpm::rtdb {
+
+namespace {
+
+using sqlite::Statement;
+using sqlite::exec;
+using sqlite::file_exists;
+using sqlite::sqlite_error;
+
+constexpr const char* kFormat = "cpm-recording";
+constexpr const char* kVersion = "1";
+
+const char* const kSchema =
+    "CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);"
+    "CREATE TABLE types(file TEXT PRIMARY KEY, idl TEXT NOT NULL);"
+    "CREATE TABLE objects(oid INTEGER PRIMARY KEY, kind TEXT NOT NULL, name TEXT NOT NULL, topic TEXT NOT NULL,"
+    " key TEXT NOT NULL, type_name TEXT NOT NULL, parent INTEGER NOT NULL, creator TEXT NOT NULL,"
+    " creator_guid TEXT NOT NULL, created_ns INTEGER NOT NULL, deleted_ns INTEGER NOT NULL,"
+    " history_interval_ns INTEGER NOT NULL, data_time TEXT NOT NULL);"
+    "CREATE TABLE samples(oid INTEGER NOT NULL, commit_ns INTEGER NOT NULL, data_ns INTEGER NOT NULL,"
+    " valid_after_ns INTEGER NOT NULL, source_ns INTEGER NOT NULL, lost_before INTEGER NOT NULL, payload BLOB NOT NULL);";
+
+}  // namespace
+
+sqlite3* open_recording_file(const std::string& path, std::map<std::string, std::string>& meta)
+{
+    if (!file_exists(path)) throw std::runtime_error("recording " + path + ": no such file");
+    sqlite3* db = nullptr;
+    // Read-write when it may (a recording left with its WAL beside it is then read whole), else
+    // read-only; nothing is changed either way.
+    int rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr);
+    if (rc != SQLITE_OK) {
+        sqlite3_close(db);
+        rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
+    }
+    std::unique_ptr<sqlite3, int (*)(sqlite3*)> owner(db, sqlite3_close);
+    auto fail = [&](const std::string& what) { return std::runtime_error("recording " + path + ": " + what); };
+    if (rc != SQLITE_OK) throw fail("cannot open it: " + sqlite_error(db, rc));
+    auto read_meta = [&] {
+        meta.clear();
+        Statement m(db, "SELECT key, value FROM meta");
+        while ((rc = m.step()) == SQLITE_ROW) meta[m.text(0)] = m.text(1);
+        if (rc != SQLITE_DONE) throw std::runtime_error(sqlite_error(db, rc));
+    };
+    try {
+        read_meta();
+    } catch (const std::runtime_error& e) {
+        // A truncated file loses the index written last at the close, and SQLite then refuses
+        // the whole schema; with writable_schema it reads the tables that are there (and this
+        // reader writes nothing).
+        try {
+            exec(db, "PRAGMA writable_schema=ON");
+            read_meta();
+        } catch (const std::runtime_error&) {
+            throw fail(std::string("not a cpm recording (") + e.what() + ")");
+        }
+    }
+    if (meta["format"] != kFormat) throw fail("not a cpm recording (its meta table names no format '" + std::string(kFormat) + "')");
+    if (meta["version"] != kVersion) throw fail("recording format version " + meta["version"] + ", this cpm reads version " + kVersion);
+    return owner.release();
+}
+
+// ---- writing -------------------------------------------------------------------------------
+
+struct RecordingWriter::Event
+{
+    enum Kind { added, sample, deleted } kind;
+    Oid oid = kNoOid;
+    uint64_t t0 = 0, t1 = 0, t2 = 0, t3 = 0, lost = 0;  // sample: commit, data, valid_after, source; deleted: t0
+    ObjectInfo info;                                    // added
+    std::vector<uint8_t> payload;                       // sample
+};
+
+RecordingWriter::RecordingWriter(std::string path, RecordingOptions options) : path_(std::move(path)), options_(std::move(options))
+{
+    if (file_exists(path_)) throw std::runtime_error("recording " + path_ + ": the file exists already (a recording is never overwritten)");
+    int rc = sqlite3_open_v2(path_.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX, nullptr);
+    auto give_up = [&](const std::string& what) {
+        const std::string e = "recording " + path_ + ": " + what + ": " + sqlite_error(db_, rc);
+        sqlite3_close(db_);
+        db_ = nullptr;
+        ::unlink(path_.c_str());
+        throw std::runtime_error(e);
+    };
+    if (rc != SQLITE_OK) give_up("cannot create it");
+    if ((rc = exec(db_, "PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL;")) != SQLITE_OK) give_up("cannot set WAL mode");
+    if (options_.max_bytes) {
+        Statement size(db_, "PRAGMA page_size");
+        const uint64_t page = size.step() == SQLITE_ROW ? std::max<uint64_t>(size.u64(0), 512) : 4096;
+        exec(db_, "PRAGMA max_page_count=" + std::to_string(std::max<uint64_t>(options_.max_bytes / page, 16)) + ";");
+    }
+    if ((rc = exec(db_, std::string("BEGIN;") + kSchema)) != SQLITE_OK) give_up("cannot make its tables");
+    started_ns_ = cpm::get_time_ns();
+    try {
+        Statement meta(db_, "INSERT INTO meta VALUES(?, ?)");
+        char host[256] = {};
+        ::gethostname(host, sizeof host - 1);
+        for (const auto& [k, v] : std::map<std::string, std::string>{{"format", kFormat},
+                                                                    {"version", kVersion},
+                                                                    {"name", options_.name},
+                                                                    {"host", host},
+                                                                    {"started_ns", std::to_string(started_ns_)}}) {
+            if ((rc = meta.bind(1, k).bind(2, v).run()) != SQLITE_OK) give_up("cannot write its meta table");
+        }
+        Statement type(db_, "INSERT INTO types VALUES(?, ?)");
+        if (const IdlDecoder* lab = IdlDecoder::lab_types()) {
+            for (const auto& [file, text] : lab->sources()) {
+                if ((rc = type.bind(1, file).bind(2, text).run()) != SQLITE_OK) give_up("cannot write the IDL");
+            }
+        }
+    } catch (const std::runtime_error& e) {
+        rc = SQLITE_ERROR;
+        give_up(e.what());
+    }
+    if ((rc = exec(db_, "COMMIT;")) != SQLITE_OK) give_up("cannot write it");
+    thread_ = std::thread([this] { run(); });
+}
+
+RecordingWriter::~RecordingWriter() { close(); }
+
+void RecordingWriter::object_added(const ObjectInfo& info)
+{
+    std::lock_guard lock(mutex_);
+    if (closing_ || failed_) return;
+    Event e{Event::added};
+    e.oid = info.oid;
+    e.info = info;
+    queue_.push_back(std::move(e));
+}
+
+void RecordingWriter::sample_committed(Oid oid, const Incoming& s, uint64_t commit_ns)
+{
+    std::lock_guard lock(mutex_);
+    ++counters_.queued;
+    if (closing_ || failed_ || queued_bytes_ + s.size > options_.max_queued_bytes) {
+        if (!failed_ && !closing_ && counters_.dropped == 0) {
+            CPM_LOG_ERROR("recording %s: the disk falls behind; samples are dropped from the recording (the live history keeps them)",
+                          path_.c_str());
+        }
+        ++counters_.dropped;
+        return;
+    }
+    Event e{Event::sample};
+    e.oid = oid;
+    e.t0 = commit_ns;
+    e.t1 = s.data_ns;
+    e.t2 = s.valid_after_ns;
+    e.t3 = s.source_ns;
+    e.lost = s.lost_before;
+    e.payload.assign(s.data, s.data + s.size);
+    queued_bytes_ += s.size;
+    queue_.push_back(std::move(e));
+    if (queue_.size() >= 4096) cv_.notify_one();
+}
+
+void RecordingWriter::object_deleted(Oid oid, uint64_t deleted_ns)
+{
+    std::lock_guard lock(mutex_);
+    if (closing_ || failed_) return;
+    Event e{Event::deleted};
+    e.oid = oid;
+    e.t0 = deleted_ns;
+    queue_.push_back(std::move(e));
+}
+
+void RecordingWriter::run()
+{
+    std::unique_lock lock(mutex_);
+    for (;;) {
+        cv_.wait_for(lock, std::chrono::nanoseconds(options_.flush_period_ns), [&] { return closing_ || queue_.size() >= 4096; });
+        const bool last = closing_;
+        std::deque<Event> batch;
+        batch.swap(queue_);
+        queued_bytes_ = 0;
+        lock.unlock();
+        const bool ok = batch.empty() || write(batch);
+        lock.lock();
+        if (!ok) {
+            counters_.dropped += queue_.size();
+            queue_.clear();
+        }
+        if (last || failed_) return;
+    }
+}
+
+bool RecordingWriter::write(std::deque<Event>& batch)
+{
+    int rc = exec(db_, "BEGIN");
+    uint64_t samples = 0;
+    try {
+        Statement add(db_, "INSERT OR REPLACE INTO objects VALUES(?,?,?,?,?,?,?,?,?,?,?,?,?)");
+        Statement sample(db_, "INSERT INTO samples VALUES(?,?,?,?,?,?,?)");
+        Statement del(db_, "UPDATE objects SET deleted_ns = ? WHERE oid = ?");
+        for (const Event& e : batch) {
+            if (rc != SQLITE_OK) break;
+            switch (e.kind) {
+                case Event::added: {
+                    const ObjectInfo& i = e.info;
+                    rc = add.bind(1, i.oid)
+                             .bind(2, std::string(i.kind == ObjectKind::process ? "process" : "instance"))
+                             .bind(3, i.name)
+                             .bind(4, i.topic)
+                             .bind(5, i.key)
+                             .bind(6, i.type_name)
+                             .bind(7, i.parent)
+                             .bind(8, i.creator)
+                             .bind(9, i.creator_guid)
+                             .bind(10, i.created_ts)
+                             .bind(11, i.deleted_ts)
+                             .bind(12, i.history_interval_ns)
+                             .bind(13, i.data_time)
+                             .run();
+                    break;
+                }
+                case Event::sample:
+                    rc = sample.bind(1, e.oid)
+                             .bind(2, e.t0)
+                             .bind(3, e.t1)
+                             .bind(4, e.t2)
+                             .bind(5, e.t3)
+                             .bind(6, e.lost)
+                             .bind_blob(7, e.payload.data(), e.payload.size())
+                             .run();
+                    ++samples;
+                    break;
+                case Event::deleted: rc = del.bind(1, e.t0).bind(2, e.oid).run(); break;
+            }
+        }
+    } catch (const std::runtime_error& e) {
+        fail(std::string("cannot write to it: ") + e.what());
+        rc = SQLITE_ERROR;
+    }
+    if (rc == SQLITE_OK) rc = exec(db_, "COMMIT");
+    if (rc != SQLITE_OK) {
+        const std::string why = sqlite_error(db_, rc);
+        exec(db_, "ROLLBACK");
+        uint64_t lost = 0;
+        for (const Event& e : batch) lost += e.kind == Event::sample;
+        {
+            std::lock_guard lock(mutex_);
+            counters_.dropped += lost;
+        }
+        fail((rc == SQLITE_FULL ? "the disk is full (or the recording reached its size limit): " : "cannot write to it: ") + why);
+        return false;
+    }
+    std::lock_guard lock(mutex_);
+    counters_.written += samples;
+    return !failed_;
+}
+
+void RecordingWriter::fail(const std::string& why)
+{
+    std::lock_guard lock(mutex_);
+    if (failed_) return;
+    failed_ = true;
+    counters_.failed = true;
+    counters_.error = "recording " + path_ + ": " + why + "; the recording stopped after " + std::to_string(counters_.written) +
+                      " samples, which stay readable";
+    CPM_LOG_ERROR("%s", counters_.error.c_str());
+}
+
+void RecordingWriter::close()
+{
+    {
+        std::lock_guard lock(mutex_);
+        if (!db_) return;
+        closing_ = true;
+    }
+    cv_.notify_one();
+    if (thread_.joinable()) thread_.join();
+    // The end, an index for people who open the file with sqlite3, and one file again (no WAL).
+    // After a failure these may fail too: what was committed is kept either way.
+    const uint64_t end = cpm::get_time_ns();
+    exec(db_, "INSERT OR REPLACE INTO meta VALUES('ended_ns', '" + std::to_string(end) + "');"
+              "INSERT OR REPLACE INTO meta VALUES('samples', '" + std::to_string(counters().written) + "');"
+              "INSERT OR REPLACE INTO meta VALUES('dropped', '" + std::to_string(counters().dropped) + "');");
+    exec(db_, "CREATE INDEX IF NOT EXISTS samples_by_object ON samples(oid, commit_ns)");
+    exec(db_, "PRAGMA wal_checkpoint(TRUNCATE); PRAGMA journal_mode=DELETE;");
+    sqlite3_close(db_);
+    std::lock_guard lock(mutex_);
+    db_ = nullptr;
+}
+
+RecordingCounters RecordingWriter::counters() const
+{
+    std::lock_guard lock(mutex_);
+    return counters_;
+}
+
+// ---- reading -------------------------------------------------------------------------------
+
+LoadedRecording load_recording(const std::string& path)
+{
+    std::map<std::string, std::string> meta;
+    sqlite3* db = open_recording_file(path, meta);
+    std::unique_ptr<sqlite3, int (*)(sqlite3*)> owner(db, sqlite3_close);
+    auto fail = [&](const std::string& what) -> std::runtime_error { return std::runtime_error("recording " + path + ": " + what); };
+    int rc = SQLITE_OK;
+
+    LoadedRecording out;
+    StoreOptions keep_all;
+    keep_all.default_retention.window_ns = uint64_t(1) << 62;
+    keep_all.default_retention.max_bytes_per_topic = std::numeric_limits<uint64_t>::max() / 4;
+    keep_all.max_bytes_total = std::numeric_limits<uint64_t>::max() / 4;
+    out.store = std::make_unique<Store>(keep_all);
+    out.name = meta["name"];
+    out.started_ns = std::strtoull(meta["started_ns"].c_str(), nullptr, 10);
+    out.complete = meta.count("ended_ns") != 0;  // written by a clean close
+    out.ended_ns = std::strtoull(meta["ended_ns"].c_str(), nullptr, 10);
+    std::vector<std::string> damage;
+    try {
+        Statement t(db, "SELECT file, idl FROM types");
+        while ((rc = t.step()) == SQLITE_ROW) out.idl[t.text(0)] = t.text(1);
+        if (rc != SQLITE_DONE) damage.push_back("its types table is damaged: " + sqlite_error(db, rc));
+        if (!out.idl.empty()) out.types = std::make_shared<IdlDecoder>(out.idl);
+    } catch (const std::runtime_error& e) {
+        damage.push_back(std::string("its IDL does not read: ") + e.what());
+    }
+
+    std::map<Oid, Oid> oids;  // as recorded → as loaded (differs only where the live store reused a slot)
+    auto loaded = [&](Oid recorded) {
+        auto it = oids.find(recorded);
+        return it == oids.end() ? kNoOid : it->second;
+    };
+    std::vector<std::pair<Oid, uint64_t>> deletions;
+    uint64_t newest = 0;
+    try {
+        Statement objects(db, "SELECT oid, kind, name, topic, key, type_name, parent, creator, creator_guid, created_ns, deleted_ns,"
+                              " history_interval_ns, data_time FROM objects ORDER BY created_ns, oid");
+        std::vector<std::pair<ObjectInfo, uint64_t>> rows;  // info, deleted_ns
+        while ((rc = objects.step()) == SQLITE_ROW) {
+            ObjectInfo i;
+            i.oid = objects.u64(0);
+            i.kind = objects.text(1) == "process" ? ObjectKind::process : ObjectKind::instance;
+            i.name = objects.text(2);
+            i.topic = objects.text(3);
+            i.key = objects.text(4);
+            i.type_name = objects.text(5);
+            i.parent = objects.u64(6);
+            i.creator = objects.text(7);
+            i.creator_guid = objects.text(8);
+            i.created_ts = objects.u64(9);
+            i.history_interval_ns = objects.u64(11);
+            i.data_time = objects.text(12);
+            rows.emplace_back(std::move(i), objects.u64(10));
+        }
+        if (rc != SQLITE_DONE) damage.push_back("its objects table is damaged after " + std::to_string(rows.size()) + " objects: " + sqlite_error(db, rc));
+        // Where the live store gave a purged object's slot to a later one, the later one keeps its
+        // oid (the one the live store answered with last) and the earlier moves past every slot.
+        std::map<uint32_t, uint32_t> newest_generation;
+        for (const auto& [i, deleted] : rows) {
+            auto& g = newest_generation[uint32_t(i.oid)];
+            g = std::max(g, uint32_t(i.oid >> 32));
+        }
+        uint32_t next_slot = newest_generation.empty() ? 1 : newest_generation.rbegin()->first + 1;
+        for (const auto& [i, deleted] : rows) oids[i.oid] = uint32_t(i.oid >> 32) == newest_generation[uint32_t(i.oid)] ? i.oid : next_slot++;
+        for (auto& [i, deleted] : rows) {
+            const Oid wanted = oids[i.oid];
+            i.oid = wanted;
+            i.parent = loaded(i.parent);
+            const Oid got = out.store->restore_object(std::move(i));
+            if (deleted) deletions.emplace_back(got, deleted);
+            if (got != wanted) {
+                for (auto& [recorded, now] : oids) now = now == wanted ? got : now;
+            }
+        }
+
+        Statement samples(db, "SELECT oid, commit_ns, data_ns, valid_after_ns, source_ns, lost_before, payload FROM samples ORDER BY rowid");
+        while ((rc = samples.step()) == SQLITE_ROW) {
+            const Oid oid = loaded(samples.u64(0));
+            Incoming in;
+            in.data_ns = samples.u64(2);
+            in.valid_after_ns = samples.u64(3);
+            in.source_ns = samples.u64(4);
+            in.lost_before = samples.u64(5);
+            in.data = samples.blob(6);
+            in.size = samples.bytes(6);
+            const uint64_t commit = samples.u64(1);
+            if (oid != kNoOid) out.store->commit(oid, in, commit);
+            newest = std::max(newest, commit);
+            ++out.samples;
+        }
+        if (rc != SQLITE_DONE) {
+            damage.push_back("it is damaged after " + std::to_string(out.samples) + " samples (" + sqlite_error(db, rc) +
+                             "); the samples before the damage answer");
+        }
+    } catch (const std::runtime_error& e) {
+        if (oids.empty()) throw fail(std::string("its tables do not read: ") + e.what());
+        damage.push_back(std::string("it is damaged: ") + e.what());
+    }
+    for (const auto& [oid, t] : deletions) out.store->mark_deleted(oid, t);
+    if (!out.complete) {
+        damage.push_back("it was not closed (the recording process ended without closing it); it ends at its newest sample");
+        out.ended_ns = newest;
+    }
+    out.complete = out.complete && damage.size() == 0;
+    for (const auto& d : damage) out.warning += (out.warning.empty() ? "recording " + path + ": " : "; ") + d;
+    return out;
+}
+
+std::pair<uint64_t, uint64_t> recording_span(const std::string& path)
+{
+    std::map<std::string, std::string> meta;
+    std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_recording_file(path, meta), sqlite3_close);
+    const uint64_t start = std::strtoull(meta["started_ns"].c_str(), nullptr, 10);
+    if (meta.count("ended_ns")) return {start, std::strtoull(meta["ended_ns"].c_str(), nullptr, 10)};
+    Statement newest(db.get(), "SELECT max(commit_ns) FROM samples");
+    return {start, newest.step() == SQLITE_ROW ? newest.u64(0) : start};
+}
+
+namespace {
+
+class RecordingBackend final : public cpm::HistoryBackend
+{
+public:
+    explicit RecordingBackend(std::shared_ptr<const LoadedRecording> r) : recording_(std::move(r)) {}
+    HistoryReply request(const HistoryRequest& rq) override
+    {
+        if (!may_wait(rq)) return answer(*recording_->store, rq);
+        HistoryRequest now = rq;
+        now.timeout_ns(0);
+        return answer(*recording_->store, now);
+    }
+
+private:
+    std::shared_ptr<const LoadedRecording> recording_;
+};
+
+}  // namespace
+
+std::unique_ptr<cpm::HistoryBackend> recording_backend(std::shared_ptr<const LoadedRecording> recording)
+{
+    return std::make_unique<RecordingBackend>(std::move(recording));
+}
+
+}  // namespace cpm::rtdb
+
+cpm::HistoryClient cpm::HistoryClient::open_recording(const std::string& path)
+{
+    try {
+        return HistoryClient(cpm::rtdb::recording_backend(std::make_shared<cpm::rtdb::LoadedRecording>(cpm::rtdb::load_recording(path))));
+    } catch (const cpm::Error&) {
+        throw;
+    } catch (const std::exception& e) {
+        throw cpm::Error(e.what());
+    }
+}

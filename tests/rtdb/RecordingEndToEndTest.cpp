@@ -1,0 +1,359 @@
+// cpm_history --record as a real process: the recording of a run answers `cpm history --file`
+// byte for byte as the live service answered the same questions; a recording survives Ctrl-C
+// and kill -9; a full disk ends the recording with an error naming the file while the live
+// history goes on serving; cpm record writes the same file.
+#include <cpm/HistoryClient.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm/rtdb/Recording.hpp>
+
+#include <cpm_test/Dds.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+
+#include <VehicleState.h>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <tuple>
+#include <sstream>
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+using cpm_test::Process;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr uint64_t kBase = 1'700'000'000'000'000'000ull;  // history_writer's first data time; then 1 ms apart
+constexpr uint64_t kMs = 1'000'000;
+
+struct TempDir
+{
+    fs::path path;
+    TempDir()
+    {
+        char tmpl[] = "/tmp/cpm_recording_e2e.XXXXXX";
+        path = ::mkdtemp(tmpl);
+    }
+    ~TempDir() { fs::remove_all(path); }
+    std::string file(const std::string& name) const { return (path / name).string(); }
+};
+
+cpm::ParticipantOptions udp_only()
+{
+    auto o = cpm_test::isolated_options();
+    o.shared_memory = false;
+    return o;
+}
+
+Process writer(std::vector<std::string> args)
+{
+    args.insert(args.begin(), built_program("history_writer"));
+    return Process(args);
+}
+
+struct Answer
+{
+    int code;
+    std::string out, err;
+};
+
+/// `cpm history ARGS` (with --file FILE when given).
+Answer ask(std::vector<std::string> args, const std::string& file = "")
+{
+    args.insert(args.begin(), {built_program("cpm"), "history"});
+    if (!file.empty()) args.insert(args.end(), {"--file", file});
+    Process p(args);
+    const int code = p.wait(30s);
+    return {code, p.output(), p.errors()};
+}
+
+/// Objects as JSON lines without the two fields that depend on when they are asked.
+std::string without_now(const std::string& lines)
+{
+    std::istringstream in(lines);
+    std::string out;
+    for (std::string line; std::getline(in, line);) {
+        auto j = nlohmann::json::parse(line);
+        j.erase("rate_hz");
+        j.erase("newest_age_s");
+        out += j.dump() + "\n";
+    }
+    return out;
+}
+
+bool wait_for_samples(cpm::HistoryClient& client, const std::string& topic, const std::string& key, uint64_t n)
+{
+    return cpm_test::wait_until([&] {
+        try {
+            auto r = client.latest(topic, key);
+            return !r.objects().empty() && r.objects()[0].samples_held() >= n;
+        } catch (const std::exception&) {
+            return false;
+        }
+    }, 30s, 20ms);
+}
+
+}  // namespace
+
+TEST(RecordingEndToEnd, ARecordedRunAnswersEveryVerbAsTheLiveServiceDid)
+{
+    TempDir dir;
+    const std::string file = dir.file("recording.db");
+    cpm::Participant participant{udp_only()};
+    cpm::HistoryClient client{participant};
+    Process service({built_program("cpm_history"), "--window", "60s", "--record", file, "--record-name", "e2e"});
+    Process cars = writer({"--type", "vehicle", "--vehicle", "3", "--count", "80"});
+    Process things = writer({"--type", "lab_only", "--topic", "labThing", "--vehicle", "2", "--count", "40"});  // a type cpm lacks
+    Process gone = writer({"--type", "vehicle", "--vehicle", "4", "--count", "20", "--dispose"});
+    ASSERT_EQ(cars.wait(30s), 0) << cars.errors();
+    ASSERT_EQ(things.wait(30s), 0) << things.errors();
+    ASSERT_EQ(gone.wait(30s), 0) << gone.errors();
+    ASSERT_TRUE(wait_for_samples(client, "vehicleState", "3", 80)) << service.errors();
+    ASSERT_TRUE(wait_for_samples(client, "labThing", "2", 40)) << service.errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        auto r = client.latest("vehicleState", "4");
+        return !r.objects().empty() && r.objects()[0].deleted_ts() != 0;
+    }, 30s, 20ms)) << "the disposed instance is marked deleted";
+
+    // Commit times as the service gave them, to ask by commit time too.
+    const Answer all = ask({"range", "--topic", "vehicleState", "--key", "3", "--from", "0", "--to", std::to_string(UINT64_MAX / 2), "--json"});
+    ASSERT_EQ(all.code, 0) << all.err;
+    std::vector<uint64_t> commits;
+    std::istringstream lines(all.out);
+    for (std::string line; std::getline(lines, line);) commits.push_back(nlohmann::json::parse(line)["commit_ns"].get<uint64_t>());
+    ASSERT_EQ(commits.size(), 80u);
+    const auto t = [](uint64_t v) { return std::to_string(v); };
+    const std::vector<std::vector<std::string>> questions = {
+        {"latest", "--topic", "vehicleState", "--key", "3", "--json"},
+        {"latest", "--topic", "labThing", "--key", "2", "--json"},
+        {"latest", "--topic", "vehicleState", "--key", "4", "--json"},
+        {"at", "--topic", "vehicleState", "--key", "3", "--time", t(commits[40]), "--json"},
+        {"at", "--topic", "vehicleState", "--key", "3", "--time", t(commits[40] - 1)},
+        {"older", "--topic", "vehicleState", "--key", "3", "--time", t(commits[10]), "--json"},
+        {"younger", "--topic", "vehicleState", "--key", "3", "--time", t(commits[79]), "--json"},  // not_yet
+        {"at", "--topic", "vehicleState", "--key", "3", "--time", t(kBase + 33 * kMs + 1), "--by", "data", "--json"},
+        {"at", "--topic", "vehicleState", "--key", "3", "--time", t(kBase - 1), "--by", "data", "--json"},  // not_found
+        {"older", "--topic", "labThing", "--key", "2", "--time", t(kBase + 20 * kMs), "--by", "data", "--json"},
+        {"younger", "--topic", "labThing", "--key", "2", "--time", t(kBase + 20 * kMs), "--by", "data"},
+        {"range", "--topic", "vehicleState", "--key", "3", "--from", t(kBase + 5 * kMs), "--to", t(kBase + 25 * kMs), "--by", "data", "--json"},
+        {"range", "--topic", "labThing", "--key", "2", "--from", t(commits[0]), "--to", t(commits[79]), "--limit", "7", "--json"},
+        {"successor", "--topic", "vehicleState", "--key", "3", "--time", t(commits[50]), "--json"},
+        {"snapshot", "--objects", "vehicleState/3,labThing/2,vehicleState/4", "--time", t(commits[60]), "--json"},
+        {"snapshot", "--objects", "vehicleState/3,labThing/2", "--time", t(commits[60])},
+    };
+    std::vector<Answer> live;
+    for (const auto& q : questions) live.push_back(ask(q));
+    const Answer live_search = ask({"search", "--name", "vehicleState|labThing", "--json"});
+    ASSERT_EQ(live_search.code, 0) << live_search.err;
+
+    service.kill(SIGINT);  // Ctrl-C: the recording is closed
+    ASSERT_EQ(service.wait(30s), 0) << service.errors();
+    const auto counts = nlohmann::json::parse(service.output());
+    EXPECT_GE(counts["recording"]["written"].get<uint64_t>(), 140u) << service.output();
+    EXPECT_EQ(counts["recording"]["dropped"], 0) << service.output();
+    EXPECT_TRUE(fs::exists(file));
+    EXPECT_FALSE(fs::exists(file + "-wal")) << "a closed recording is one file";
+
+    for (size_t i = 0; i < questions.size(); ++i) {
+        const Answer recorded = ask(questions[i], file);
+        std::string q;
+        for (const auto& a : questions[i]) q += a + " ";
+        EXPECT_EQ(recorded.code, live[i].code) << q << recorded.err;
+        EXPECT_EQ(recorded.out, live[i].out) << q;
+        EXPECT_FALSE(recorded.out.empty() && recorded.code == 0) << q;
+    }
+    const Answer recorded_search = ask({"search", "--name", "vehicleState|labThing", "--json"}, file);
+    ASSERT_EQ(recorded_search.code, 0) << recorded_search.err;
+    EXPECT_EQ(without_now(recorded_search.out), without_now(live_search.out));
+
+    // CSV out, in and out again: every field of every sample (both keys) as it was.
+    const Answer csv = ask({"export", "--topic", "vehicleState", "--csv"}, file);
+    ASSERT_EQ(csv.code, 0) << csv.err;
+    EXPECT_EQ(std::count(csv.out.begin(), csv.out.end(), '\n'), 1 + 80 + 20) << "a header and every sample";
+    EXPECT_EQ(csv.out.rfind("commit_ns,data_ns,valid_after_ns,key,header.create_stamp.nanoseconds,", 0), 0u) << csv.out.substr(0, 200);
+    std::ofstream(dir.file("vehicleState.csv")) << csv.out;
+    Process import({built_program("cpm"), "record", "import", dir.file("vehicleState.csv"), "--topic", "vehicleState", "--type",
+                    "VehicleState", "--out", dir.file("imported.db")});
+    ASSERT_EQ(import.wait(30s), 0) << import.errors();
+    const Answer round_trip = ask({"export", "--topic", "vehicleState", "--csv"}, dir.file("imported.db"));
+    ASSERT_EQ(round_trip.code, 0) << round_trip.err;
+    EXPECT_EQ(round_trip.out, csv.out);
+    const Answer undecodable = ask({"export", "--topic", "labThing", "--csv"}, file);
+    EXPECT_EQ(undecodable.code, 1);
+    EXPECT_NE(undecodable.err.find("LabOnlyThing"), std::string::npos) << undecodable.err;
+
+    // The recording keeps its run's creators and the types it knew; a program opens it too.
+    auto recording = cpm::HistoryClient::open_recording(file);
+    auto r = recording.at<VehicleState>("vehicleState", 3, kBase + 70 * kMs, cpm::HistoryBy::data);
+    ASSERT_TRUE(r.ok()) << r.status;
+    EXPECT_EQ(r.sample.pose().x(), 70);
+    // Relative times count back from the run's end.
+    const Answer relative = ask({"at", "--topic", "vehicleState", "--key", "3", "--time", "now", "--json"}, file);
+    EXPECT_EQ(relative.code, 0) << relative.err;
+    EXPECT_EQ(nlohmann::json::parse(relative.out)["commit_ns"], commits[79]);
+}
+
+TEST(RecordingEndToEnd, ARecordingKilledMidRunStillAnswersUpToItsLastBatch)
+{
+    TempDir dir;
+    const std::string file = dir.file("killed.db");
+    cpm::Participant participant{udp_only()};
+    cpm::HistoryClient client{participant};
+    Process service({built_program("cpm_history"), "--record", file});
+    Process cars = writer({"--type", "vehicle", "--vehicle", "3", "--count", "60"});
+    ASSERT_EQ(cars.wait(30s), 0) << cars.errors();
+    ASSERT_TRUE(wait_for_samples(client, "vehicleState", "3", 60)) << service.errors();
+    std::this_thread::sleep_for(500ms);  // past the writer thread's batch period (100 ms): the batch is on disk
+    service.kill(SIGKILL);
+    service.wait(10s);
+    const Answer latest = ask({"latest", "--topic", "vehicleState", "--key", "3", "--json"}, file);
+    ASSERT_EQ(latest.code, 0) << latest.err;
+    EXPECT_EQ(nlohmann::json::parse(latest.out)["data"]["pose"]["x"], 59);
+    EXPECT_NE(latest.err.find("was not closed"), std::string::npos) << latest.err;
+    EXPECT_NE(latest.err.find(file), std::string::npos) << latest.err;
+}
+
+TEST(RecordingEndToEnd, AFullDiskEndsTheRecordingWithAnErrorAndTheLiveHistoryGoesOn)
+{
+    TempDir dir;
+    const std::string file = dir.file("small.db");
+    cpm::Participant participant{udp_only()};
+    cpm::HistoryClient client{participant};
+    Process service({built_program("cpm_history"), "--record", file, "--record-max-bytes", "65536"});
+    Process cars = writer({"--type", "vehicle", "--vehicle", "3", "--count", "1500"});
+    ASSERT_EQ(cars.wait(60s), 0) << cars.errors();
+    ASSERT_TRUE(wait_for_samples(client, "vehicleState", "3", 1500)) << service.errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] { return service.errors().find("the recording stopped") != std::string::npos; }, 20s, 20ms))
+        << service.errors();
+    EXPECT_NE(service.errors().find(file), std::string::npos) << service.errors();
+    EXPECT_NE(service.errors().find("full"), std::string::npos) << service.errors();
+    // Still serving, with everything.
+    auto newest = client.latest<VehicleState>("vehicleState", 3);
+    ASSERT_TRUE(newest.ok()) << newest.status;
+    EXPECT_EQ(newest.sample.pose().x(), 1499);
+    service.kill(SIGINT);
+    EXPECT_EQ(service.wait(30s), 1) << "a failed recording is a failed run\n" << service.output() << service.errors();
+    // What was written reads.
+    const Answer first = ask({"at", "--topic", "vehicleState", "--key", "3", "--by", "data", "--time", std::to_string(kBase), "--json"}, file);
+    ASSERT_EQ(first.code, 0) << first.err;
+    EXPECT_EQ(nlohmann::json::parse(first.out)["data"]["pose"]["x"], 0);
+}
+
+TEST(RecordingEndToEnd, CpmRecordWritesTheSameFileAndRefusesToOverwriteOne)
+{
+    TempDir dir;
+    const std::string file = dir.file("cpm_record.db");
+    Process record({built_program("cpm"), "record", file, "--topics", "vehicle*", "--duration", "20s"});
+    Process cars = writer({"--type", "vehicle", "--vehicle", "7", "--count", "30"});
+    ASSERT_EQ(cars.wait(30s), 0) << cars.errors();
+    record.kill(SIGINT);
+    ASSERT_EQ(record.wait(30s), 0) << record.errors();
+    const auto counts = nlohmann::json::parse(record.output());
+    EXPECT_EQ(counts["written"], 30) << record.output();
+    const Answer range = ask({"range", "--topic", "vehicleState", "--key", "7", "--by", "data", "--from", std::to_string(kBase), "--to",
+                              std::to_string(kBase + 30 * kMs), "--json"}, file);
+    ASSERT_EQ(range.code, 0) << range.err;
+    EXPECT_EQ(std::count(range.out.begin(), range.out.end(), '\n'), 30);
+    // --topics vehicle* leaves the rest out (cpm's own log, parameter and status topics).
+    const Answer list = ask({"list", "--json"}, file);
+    ASSERT_EQ(list.code, 0) << list.err;
+    std::istringstream objects(list.out);
+    int instances = 0;
+    for (std::string line; std::getline(objects, line);) {
+        const auto o = nlohmann::json::parse(line);
+        if (o["kind"] != "instance") continue;
+        ++instances;
+        EXPECT_EQ(o["topic"].get<std::string>().rfind("vehicle", 0), 0u) << line;
+    }
+    EXPECT_EQ(instances, 1) << list.out;
+
+    Process again({built_program("cpm"), "record", file});
+    EXPECT_EQ(again.wait(20s), 2);
+    EXPECT_NE(again.errors().find(file + ": the file exists already"), std::string::npos) << again.errors();
+    Process not_one({built_program("cpm"), "history", "list", "--file", dir.file("none.db")});
+    EXPECT_EQ(not_one.wait(20s), 1);
+    EXPECT_NE(not_one.errors().find(dir.file("none.db") + ": no such file"), std::string::npos) << not_one.errors();
+}
+
+namespace {
+
+/// Every sample of a topic in a recording, all keys, in commit order: key and payload.
+std::vector<std::pair<std::string, std::vector<uint8_t>>> topic_samples(const cpm::rtdb::LoadedRecording& rec, const std::string& topic)
+{
+    std::vector<std::tuple<uint64_t, std::string, std::vector<uint8_t>>> all;
+    for (const auto& o : rec.store->search({.name_regex = "^" + topic + "(/|$)", .kind = cpm::rtdb::ObjectKind::instance})) {
+        for (auto& s : rec.store->range(o.oid, 0, UINT64_MAX, cpm::rtdb::By::commit, 1'000'000).samples) all.emplace_back(s.commit_ns, o.key, s.payload);
+    }
+    std::sort(all.begin(), all.end());
+    std::vector<std::pair<std::string, std::vector<uint8_t>>> out;
+    for (auto& [c, key, payload] : all) out.emplace_back(key, std::move(payload));
+    return out;
+}
+
+}  // namespace
+
+TEST(RecordingEndToEnd, AReplayedRunRecordedAgainHoldsTheSameSamplesInTheSameOrder)
+{
+    TempDir dir;
+    const std::string first = dir.file("first.db"), second = dir.file("second.db");
+    cpm::Participant participant{udp_only()};
+    cpm::HistoryClient client{participant};
+    {
+        Process service({built_program("cpm_history"), "--record", first});
+        Process cars = writer({"--type", "vehicle", "--vehicle", "3", "--count", "60"});
+        Process more = writer({"--type", "vehicle", "--vehicle", "5", "--count", "40"});
+        Process things = writer({"--type", "lab_only", "--topic", "labThing", "--vehicle", "2", "--count", "30"});
+        ASSERT_EQ(cars.wait(30s), 0) << cars.errors();
+        ASSERT_EQ(more.wait(30s), 0) << more.errors();
+        ASSERT_EQ(things.wait(30s), 0) << things.errors();
+        ASSERT_TRUE(wait_for_samples(client, "labThing", "2", 30)) << service.errors();
+        ASSERT_TRUE(wait_for_samples(client, "vehicleState", "5", 40)) << service.errors();
+        service.kill(SIGINT);
+        ASSERT_EQ(service.wait(30s), 0) << service.errors();
+    }
+    Process again({built_program("cpm_history"), "--record", second});
+    // The new service must know the topics before the replay starts: cpm play waits for a
+    // reader of each, and the service subscribes once it discovers the player's writers.
+    Process play({built_program("cpm"), "play", first, "--topics", "vehicleState,labThing", "--rate", "4", "--wait-for-readers", "20s"});
+    ASSERT_EQ(play.wait(60s), 0) << play.errors();
+    const auto stats = nlohmann::json::parse(play.output());
+    EXPECT_EQ(stats["published"], 130) << play.output();
+    EXPECT_EQ(play.errors().find("no reader"), std::string::npos) << play.errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        auto r = client.latest("labThing", "2");
+        return !r.objects().empty() && r.objects()[0].samples_total() >= 30;
+    }, 20s, 20ms)) << again.errors();
+    again.kill(SIGINT);
+    ASSERT_EQ(again.wait(30s), 0) << again.errors();
+
+    const auto a = cpm::rtdb::load_recording(first), b = cpm::rtdb::load_recording(second);
+    for (const std::string topic : {"vehicleState", "labThing"}) {
+        const auto before = topic_samples(a, topic), after = topic_samples(b, topic);
+        ASSERT_EQ(after.size(), before.size()) << topic;
+        for (size_t i = 0; i < before.size(); ++i) {
+            EXPECT_EQ(after[i].first, before[i].first) << topic << " sample " << i;
+            EXPECT_EQ(after[i].second, before[i].second) << topic << " sample " << i;
+        }
+    }
+}
+
+TEST(RecordingEndToEnd, PlayNamesWhatIsWrong)
+{
+    TempDir dir;
+    std::ofstream(dir.file("junk.db")) << "not a recording";
+    Process junk({built_program("cpm"), "play", dir.file("junk.db")});
+    EXPECT_EQ(junk.wait(20s), 1);
+    EXPECT_NE(junk.errors().find(dir.file("junk.db")), std::string::npos) << junk.errors();
+    Process rate({built_program("cpm"), "play", dir.file("junk.db"), "--rate", "0"});
+    EXPECT_EQ(rate.wait(20s), 2);
+    EXPECT_NE(rate.errors().find("--rate"), std::string::npos) << rate.errors();
+    Process none({built_program("cpm"), "play"});
+    EXPECT_EQ(none.wait(20s), 2);
+    EXPECT_NE(none.errors().find("FILE"), std::string::npos) << none.errors();
+}
