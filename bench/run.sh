@@ -25,6 +25,9 @@ echo
 echo "== bench_history_service (cpm_history: ingest without loss, query round trip vs plain ping-pong, memory)"
 "$bin/bench_history_service"
 echo
+echo "== bench_recording (recordings: ingest with --record on vs off, at from a recording vs live vs SQLite, size, replay timing)"
+"$bin/bench_recording"
+echo
 echo "== bench_aruco (perception: aruco_node vs plain OpenCV and AprilTag 3; detection, pose, latency, CameraFrame over DDS)"
 "$bin/bench_aruco"
 echo

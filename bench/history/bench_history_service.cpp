@@ -11,6 +11,7 @@
 //
 //   bench_history_service [--domain 212] [--seconds 3]
 #include "bench_common.hpp"
+#include "history_load.hpp"
 
 #include <cpm/AsyncReader.hpp>
 #include <cpm/HistoryClient.hpp>
@@ -93,37 +94,6 @@ long rss_kb(int pid)
     return -1;
 }
 
-/// Writes `rate` samples/s spread over 100 vehicles for `seconds`; returns the number written.
-uint64_t write_at(cpm::Writer<VehicleState>& w, double rate, double seconds, double& tag)
-{
-    const auto start = Clock::now();
-    uint64_t written = 0;
-    VehicleState s;
-    while (true) {
-        const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-        if (elapsed >= seconds) break;
-        const uint64_t due = uint64_t(elapsed * rate);
-        for (; written < due; ++written) {
-            s.vehicle_id(uint8_t(written % 100));
-            cpm::stamp_message(s, cpm::get_time_ns(), 0);
-            s.pose().x(tag++);
-            (void)w.write(s);
-        }
-        std::this_thread::sleep_for(std::chrono::microseconds(200));
-    }
-    return written;
-}
-
-/// What the service committed on vehicleState so far (all vehicles).
-uint64_t committed(cpm::HistoryClient& client)
-{
-    HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
-    rq.name_regex("^vehicleState/");
-    uint64_t total = 0;
-    for (const auto& o : client.request(rq).objects()) total += o.samples_total();
-    return total;
-}
-
 std::vector<double> round_trips(cpm::HistoryClient& client, int n)
 {
     std::vector<double> us;
@@ -182,7 +152,8 @@ int main(int argc, char** argv)
         HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
         rq.name_regex("^vehicleState/");
         Held h;
-        for (const auto& o : client.request(rq).objects()) {
+        const HistoryReply reply = client.request(rq);  // a named reply: a temporary would die before the loop
+        for (const auto& o : reply.objects()) {
             h.samples += o.samples_held();
             h.bytes += o.bytes_held();
         }
@@ -197,10 +168,10 @@ int main(int argc, char** argv)
     double best_clean = 0;
     uint64_t base = before;
     for (double rate : {10'000.0, 20'000.0, 40'000.0, 60'000.0, 80'000.0}) {
-        const uint64_t w = write_at(writer, rate, seconds, tag);
+        const uint64_t w = bench::write_at(writer, rate, seconds, tag);
         writer.wait_for_acknowledgments(std::chrono::milliseconds(5000));
         std::this_thread::sleep_for(std::chrono::milliseconds(300));
-        const uint64_t c = committed(client) - base;
+        const uint64_t c = bench::committed(client) - base;
         base += c;
         written_total += w;
         const double achieved = double(c) / seconds;
