@@ -11,7 +11,9 @@
 
 #include <limits>
 #include <stdexcept>
+#include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 #include <variant>
 
@@ -182,6 +184,9 @@ void RecordingWriter::object_deleted(Oid oid, uint64_t deleted_ns)
 
 void RecordingWriter::run()
 {
+    // The disk writes yield to the ingest and the DDS threads: on a busy machine the queue takes
+    // up the slack (bounded by max_queued_bytes) and the file catches up when it can.
+    ::setpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)), 10);
     std::unique_lock lock(mutex_);
     for (;;) {
         cv_.wait_for(lock, std::chrono::nanoseconds(options_.flush_period_ns), [&] { return closing_ || queue_.size() >= 4096; });
