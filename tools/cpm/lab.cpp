@@ -1,7 +1,9 @@
-// cpm lab …: the lab's clock.
+// cpm lab …: the lab's clock, and lab scenarios checked.
 #include "Command.hpp"
 
+#include <cpm/ChildProcess.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/lab/Scenario.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/get_time_ns.hpp>
 
@@ -61,12 +63,57 @@ int lab_clock(const std::vector<std::string>& args)
     return 0;
 }
 
+const char* kCheckHelp =
+    "usage: cpm lab check FILE [--dds_domain N]\n"
+    "\n"
+    "Reads a lab scenario (scenarios/labs/*.yaml: name, domain, time, duration, world, lanes,\n"
+    "vehicles with id, start, camera, fsm and restart, routing, qos, record, monitor) and checks\n"
+    "it: every error at once, each with its line and YAML path (an unknown key, a file that does\n"
+    "not exist, a vehicle id given twice, a bad duration, a combination a run cannot do), exit 1.\n"
+    "When it is right, prints the processes a run of it starts, with their command lines.\n";
+
+int lab_check(const std::vector<std::string>& args)
+{
+    const std::string command = "cpm lab check";
+    const std::string file = only_positional(parse_args(args, {}, command), command, "scenario file");
+    cpm::lab::Scenario s;
+    try {
+        s = cpm::lab::load_scenario(file);
+    } catch (const cpm::lab::ScenarioError& e) {
+        std::fprintf(stderr, "%s: %zu error(s):\n%s\n", command.c_str(), e.errors().size(), e.what());
+        return 1;
+    }
+    cpm::lab::RunSettings settings;
+    settings.bin_dir = cpm::executable_dir();
+    settings.run_dir = "runs/" + s.name + "-<UTC time>";
+    settings.domain = s.domain.value_or(cpm::ParticipantOptions::from_init().domain_id);
+    settings.duration_ns = s.duration_ns;
+    settings.time = s.time;
+    std::vector<cpm::lab::ProcessPlan> plan;
+    try {
+        plan = cpm::lab::plan_run(s, settings);
+    } catch (const cpm::lab::ScenarioError& e) {
+        std::fprintf(stderr, "%s: %s\n", command.c_str(), e.what());
+        return 1;
+    }
+    std::printf("%s: ok: %s, %zu car(s), %s time, %.1f s on domain %d; a run starts %zu processes:\n", file.c_str(), s.name.c_str(),
+                s.vehicles.size(), s.time == cpm::lab::TimeMode::simulated ? "simulated" : "real", double(s.duration_ns) * 1e-9,
+                settings.domain, plan.size());
+    for (const auto& p : plan) {
+        std::string line;
+        for (const auto& a : p.argv) line += (line.empty() ? "" : " ") + a;
+        std::printf("  %-16s %s%s\n", p.name.c_str(), line.c_str(), p.restart ? "   (restarted when it dies)" : "");
+    }
+    return 0;
+}
+
 }  // namespace
 
 std::vector<Command> lab_commands()
 {
     return {{"lab", "clock", "drive the lab's timers: a synchronised real-time start and stop, or a simulated clock", kClockHelp,
-             lab_clock}};
+             lab_clock},
+            {"lab", "check", "check a lab scenario file and show the processes a run of it starts", kCheckHelp, lab_check}};
 }
 
 }  // namespace cpm::tools

@@ -1,0 +1,122 @@
+#pragma once
+// cpm::lab — a lab scenario (scenarios/labs/*.yaml) read and checked, and the processes a run of
+// it starts. The file's shape:
+//
+//   name: corridor-demo
+//   domain: 7                       # optional; default from CPM_DOMAIN_ID or 0
+//   time: real                      # real | simulated
+//   duration: 30s
+//   world: ../maps/corridor.json    # paths relative to this file
+//   lanes: ../lanes/intersection.json
+//   vehicles:
+//     - id: 5
+//       start: [0.0, -0.1, 0.0]     # x, y, yaw
+//       camera: ../cameras/sim_640x480.yaml   # synthetic camera + aruco_node
+//       fsm: ../fsm/corridor.json             # fsm_node for this car
+//       restart: false              # restart its processes when they die (default: the run stops)
+//   routing: {enabled: false, seed: 1, period: 400ms, restart: false}
+//   qos: {vehicleState: {reliable: false, history_depth: 1}}
+//   record: {topics: ["*"], exclude: ["cameraFrame"]}
+//   monitor: 8080
+//
+// load_scenario reports every error at once, each with the file, line and YAML path
+// ("corridor.yaml:12: vehicles[1].id: 5 is given twice (also vehicles[0])").
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace cpm::lab {
+
+enum class TimeMode { real, simulated };
+
+struct VehicleSpec
+{
+    int id = 0;
+    double x = 0, y = 0, yaw = 0;
+    std::string camera;  ///< absolute path, or empty
+    std::string fsm;     ///< absolute path, or empty
+    bool restart = false;
+};
+
+struct RoutingSpec
+{
+    bool enabled = false;
+    uint64_t seed = 1;
+    uint64_t period_ns = 400'000'000ull;
+    bool restart = false;
+};
+
+/// Per-topic QoS a run applies to every node (unset: each node's own choice).
+struct QosOverride
+{
+    std::optional<bool> reliable;
+    std::optional<bool> transient_local;
+    std::optional<int> history_depth;
+};
+
+struct RecordSpec
+{
+    std::vector<std::string> topics{"*"};  ///< `*` and `?` patterns
+    std::vector<std::string> exclude;
+};
+
+struct Scenario
+{
+    std::string file;  ///< as given
+    std::string dir;   ///< the folder relative paths in it start from
+    std::string name;
+    std::optional<int> domain;
+    TimeMode time = TimeMode::real;
+    uint64_t duration_ns = 0;
+    std::string world;  ///< absolute path
+    std::string lanes;  ///< absolute path, or empty
+    std::vector<VehicleSpec> vehicles;
+    RoutingSpec routing;
+    std::map<std::string, QosOverride> qos;
+    RecordSpec record;
+    std::optional<int> monitor_port;
+};
+
+/// Every error of a scenario file, one "FILE:LINE: PATH: message" each.
+class ScenarioError : public std::runtime_error
+{
+public:
+    explicit ScenarioError(std::vector<std::string> errors);
+    const std::vector<std::string>& errors() const { return errors_; }
+
+private:
+    std::vector<std::string> errors_;
+};
+
+/// Reads and checks a scenario: unknown keys, wrong types and values, files that do not exist,
+/// vehicle ids given twice, combinations a run cannot do. Throws ScenarioError with all of them.
+Scenario load_scenario(const std::string& path);
+
+/// One process a run starts.
+struct ProcessPlan
+{
+    std::string name;               ///< unique in the run; its log is <name>.log
+    std::vector<std::string> argv;  ///< argv[0]: the program's path
+    bool restart = false;
+    int stop_order = 0;             ///< stopped in rising order at the end (cars' controllers first)
+    std::string timer;              ///< the node id of its timer for the lab clock, if it has one
+};
+
+struct RunSettings
+{
+    std::string bin_dir;      ///< where cpm's programs are
+    std::string run_dir;      ///< the run's folder (recording.db goes there)
+    int domain = 0;
+    uint64_t duration_ns = 0; ///< the scenario's unless overridden
+    TimeMode time = TimeMode::real;
+};
+
+/// The processes of a run, in the order they start: the history recording first, then the cars
+/// (simulator and bridge), their cameras and aruco_nodes, routing, the fsm_nodes. Throws
+/// ScenarioError naming every program that is missing from bin_dir.
+std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& settings);
+
+}  // namespace cpm::lab

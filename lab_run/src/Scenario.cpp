@@ -1,0 +1,384 @@
+#include <cpm/lab/Scenario.hpp>
+
+#include <cpm/CommandLine.hpp>
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <set>
+#include <tuple>
+#include <unistd.h>
+
+namespace cpm::lab {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string join(const std::vector<std::string>& errors)
+{
+    std::string out;
+    for (const auto& e : errors) out += (out.empty() ? "" : "\n") + e;
+    return out;
+}
+
+/// Collects a file's errors with their line and YAML path.
+class Checker
+{
+public:
+    explicit Checker(std::string file) : file_(std::move(file)) {}
+
+    void error(const YAML::Node& at, const std::string& path, const std::string& message)
+    {
+        const int line = at.IsDefined() ? at.Mark().line + 1 : 0;
+        errors_.push_back(file_ + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " + (path.empty() ? "" : path + ": ") + message);
+    }
+    /// Every key of a map must be one of `known`; says which one was meant when it is close.
+    void keys(const YAML::Node& map, const std::string& path, const std::vector<std::string>& known)
+    {
+        for (const auto& kv : map) {
+            const std::string key = kv.first.as<std::string>("");
+            if (std::find(known.begin(), known.end(), key) != known.end()) continue;
+            std::string hint;
+            for (const auto& k : known) {
+                if (close(key, k)) hint = " (did you mean '" + k + "'?)";
+            }
+            std::string all;
+            for (const auto& k : known) all += (all.empty() ? "" : ", ") + k;
+            error(kv.first, path.empty() ? key : path + "." + key, "unknown key" + hint + "; known: " + all);
+        }
+    }
+    std::optional<std::string> text(const YAML::Node& n, const std::string& path)
+    {
+        if (!n.IsScalar()) {
+            error(n, path, "expected a text");
+            return std::nullopt;
+        }
+        return n.as<std::string>();
+    }
+    std::optional<double> number(const YAML::Node& n, const std::string& path)
+    {
+        double v = 0;
+        if (!n.IsScalar() || !YAML::convert<double>::decode(n, v) || !std::isfinite(v)) {
+            error(n, path, "'" + (n.IsScalar() ? n.as<std::string>() : std::string("…")) + "' is not a finite number");
+            return std::nullopt;
+        }
+        return v;
+    }
+    std::optional<long long> integer(const YAML::Node& n, const std::string& path, long long min, long long max)
+    {
+        long long v = 0;
+        if (!n.IsScalar() || !YAML::convert<long long>::decode(n, v)) {
+            error(n, path, "'" + (n.IsScalar() ? n.as<std::string>() : std::string("…")) + "' is not a whole number");
+            return std::nullopt;
+        }
+        if (v < min || v > max) {
+            error(n, path, std::to_string(v) + " is out of range (" + std::to_string(min) + " to " + std::to_string(max) + ")");
+            return std::nullopt;
+        }
+        return v;
+    }
+    std::optional<bool> boolean(const YAML::Node& n, const std::string& path)
+    {
+        bool v = false;
+        if (!n.IsScalar() || !YAML::convert<bool>::decode(n, v)) {
+            error(n, path, "expected true or false");
+            return std::nullopt;
+        }
+        return v;
+    }
+    std::optional<uint64_t> duration(const YAML::Node& n, const std::string& path)
+    {
+        const auto t = text(n, path);
+        if (!t) return std::nullopt;
+        try {
+            const uint64_t d = cpm::cli::parse_duration(path, *t);
+            if (d == 0) {
+                error(n, path, "must be longer than 0");
+                return std::nullopt;
+            }
+            return d;
+        } catch (const std::exception&) {
+            error(n, path, "'" + *t + "' is not a duration (a number with ns, us, ms, s, m or h: 30s, 400ms)");
+            return std::nullopt;
+        }
+    }
+    /// A file named relative to the scenario's folder, which must exist.
+    std::string file(const YAML::Node& n, const std::string& path, const std::string& dir, const std::string& what)
+    {
+        const auto t = text(n, path);
+        if (!t) return "";
+        const fs::path p = fs::path(*t).is_absolute() ? fs::path(*t) : fs::path(dir) / *t;
+        std::error_code ec;
+        if (!fs::is_regular_file(p, ec)) {
+            error(n, path, what + " '" + *t + "' does not exist (looked for " + p.lexically_normal().string() + ")");
+            return "";
+        }
+        return fs::weakly_canonical(p).string();
+    }
+    std::vector<std::string> patterns(const YAML::Node& n, const std::string& path)
+    {
+        std::vector<std::string> out;
+        if (!n.IsSequence()) {
+            error(n, path, "expected a list of topic patterns, e.g. [\"*\"]");
+            return out;
+        }
+        for (size_t i = 0; i < n.size(); ++i) {
+            if (auto t = text(n[i], path + "[" + std::to_string(i) + "]")) out.push_back(*t);
+        }
+        return out;
+    }
+    const std::vector<std::string>& errors() const { return errors_; }
+
+private:
+    /// One edit apart (a letter wrong, missing, extra or two swapped).
+    static bool close(const std::string& a, const std::string& b)
+    {
+        if (a == b) return false;
+        const size_t n = a.size(), m = b.size();
+        std::vector<std::vector<size_t>> d(n + 1, std::vector<size_t>(m + 1));
+        for (size_t i = 0; i <= n; ++i) d[i][0] = i;
+        for (size_t j = 0; j <= m; ++j) d[0][j] = j;
+        for (size_t i = 1; i <= n; ++i) {
+            for (size_t j = 1; j <= m; ++j) {
+                d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1])});
+                if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1]) d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+            }
+        }
+        return d[n][m] <= (std::max(n, m) > 4 ? 2u : 1u);
+    }
+
+    std::string file_;
+    std::vector<std::string> errors_;
+};
+
+}  // namespace
+
+ScenarioError::ScenarioError(std::vector<std::string> errors) : std::runtime_error(join(errors)), errors_(std::move(errors)) {}
+
+Scenario load_scenario(const std::string& path)
+{
+    Scenario s;
+    s.file = path;
+    s.dir = fs::path(path).parent_path().string();
+    if (s.dir.empty()) s.dir = ".";
+    YAML::Node root;
+    try {
+        root = YAML::LoadFile(path);
+    } catch (const YAML::BadFile&) {
+        throw ScenarioError({path + ": cannot read the file"});
+    } catch (const YAML::Exception& e) {
+        throw ScenarioError({path + ":" + std::to_string(e.mark.line + 1) + ": not YAML: " + e.msg});
+    }
+    Checker c(path);
+    if (!root.IsMap()) throw ScenarioError({path + ": expected a map of keys (name, time, duration, world, vehicles, ...)"});
+    c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor"});
+
+    if (!root["name"]) c.error(root, "name", "missing (the run's name; its folder is runs/<name>-<UTC time>)");
+    else if (auto n = c.text(root["name"], "name")) {
+        if (n->empty() || n->find_first_of("/\\ ") != std::string::npos) c.error(root["name"], "name", "'" + *n + "': use letters, digits, - and _ only");
+        else s.name = *n;
+    }
+    if (root["domain"]) {
+        if (auto d = c.integer(root["domain"], "domain", 0, 232)) s.domain = int(*d);
+    }
+    if (root["time"]) {
+        const auto t = c.text(root["time"], "time");
+        if (t && *t == "simulated") s.time = TimeMode::simulated;
+        else if (t && *t != "real") c.error(root["time"], "time", "'" + *t + "': expected real or simulated");
+    }
+    if (!root["duration"]) c.error(root, "duration", "missing (how long the run lasts, e.g. 30s)");
+    else if (auto d = c.duration(root["duration"], "duration")) s.duration_ns = *d;
+    if (root["world"]) s.world = c.file(root["world"], "world", s.dir, "world file");
+    if (root["lanes"]) s.lanes = c.file(root["lanes"], "lanes", s.dir, "lane graph");
+
+    const YAML::Node vehicles = root["vehicles"];
+    if (!vehicles) c.error(root, "vehicles", "missing (a list of cars, each with an id)");
+    else if (!vehicles.IsSequence() || vehicles.size() == 0) c.error(vehicles, "vehicles", "expected a list of at least one car");
+    else {
+        std::map<int, size_t> seen;
+        for (size_t i = 0; i < vehicles.size(); ++i) {
+            const YAML::Node v = vehicles[i];
+            const std::string p = "vehicles[" + std::to_string(i) + "]";
+            if (!v.IsMap()) {
+                c.error(v, p, "expected a map (id, start, camera, fsm, restart)");
+                continue;
+            }
+            c.keys(v, p, {"id", "start", "camera", "fsm", "restart"});
+            VehicleSpec spec;
+            if (!v["id"]) c.error(v, p + ".id", "missing");
+            else if (auto id = c.integer(v["id"], p + ".id", 1, 255)) {
+                spec.id = int(*id);
+                auto [it, fresh] = seen.emplace(spec.id, i);
+                if (!fresh) c.error(v["id"], p + ".id", std::to_string(spec.id) + " is given twice (also vehicles[" + std::to_string(it->second) + "])");
+            }
+            if (v["start"]) {
+                const YAML::Node st = v["start"];
+                if (!st.IsSequence() || st.size() != 3) c.error(st, p + ".start", "expected [x, y, yaw] in metres and radians");
+                else {
+                    const auto x = c.number(st[0], p + ".start[0]"), y = c.number(st[1], p + ".start[1]"), yaw = c.number(st[2], p + ".start[2]");
+                    if (x && y && yaw) std::tie(spec.x, spec.y, spec.yaw) = std::tuple(*x, *y, *yaw);
+                }
+            }
+            if (v["camera"]) spec.camera = c.file(v["camera"], p + ".camera", s.dir, "camera file");
+            if (v["fsm"]) spec.fsm = c.file(v["fsm"], p + ".fsm", s.dir, "state machine");
+            if (v["restart"]) spec.restart = c.boolean(v["restart"], p + ".restart").value_or(false);
+            if (v["camera"] && !root["world"]) c.error(v["camera"], p + ".camera", "a camera needs the world's markers: give world");
+            if (s.time == TimeMode::simulated && v["camera"]) {
+                c.error(v["camera"], p + ".camera", "the synthetic camera and aruco_node run in real time only; use time: real");
+            }
+            if (s.time == TimeMode::simulated && v["fsm"]) c.error(v["fsm"], p + ".fsm", "fsm_node runs in real time only; use time: real");
+            s.vehicles.push_back(spec);
+        }
+    }
+
+    if (const YAML::Node r = root["routing"]) {
+        if (!r.IsMap()) c.error(r, "routing", "expected a map (enabled, seed, period, restart)");
+        else {
+            c.keys(r, "routing", {"enabled", "seed", "period", "restart"});
+            if (r["enabled"]) s.routing.enabled = c.boolean(r["enabled"], "routing.enabled").value_or(false);
+            if (r["seed"]) s.routing.seed = uint64_t(c.integer(r["seed"], "routing.seed", 0, 1ll << 53).value_or(1));
+            if (r["period"]) {
+                if (auto d = c.duration(r["period"], "routing.period")) {
+                    if (*d % 50'000'000ull) c.error(r["period"], "routing.period", "must be a multiple of 50ms");
+                    else s.routing.period_ns = *d;
+                }
+            }
+            if (r["restart"]) s.routing.restart = c.boolean(r["restart"], "routing.restart").value_or(false);
+            if (s.routing.enabled) {
+                if (!root["lanes"]) c.error(r, "routing.enabled", "central routing needs a lane graph: give lanes");
+                for (size_t i = 0; vehicles.IsSequence() && i < vehicles.size(); ++i) {
+                    const std::string p = "vehicles[" + std::to_string(i) + "]";
+                    if (vehicles[i]["fsm"]) c.error(vehicles[i]["fsm"], p + ".fsm", "a car either follows its fsm or central routing, not both");
+                    if (vehicles[i]["start"]) c.error(vehicles[i]["start"], p + ".start", "with routing the cars are spread over the lanes; leave start out");
+                }
+                std::vector<int> ids;
+                for (const auto& v : s.vehicles) ids.push_back(v.id);
+                std::sort(ids.begin(), ids.end());
+                const bool valid = !ids.empty() && ids.front() > 0 && std::adjacent_find(ids.begin(), ids.end()) == ids.end();  // else said above
+                if (valid && ids.back() - ids.front() + 1 != int(ids.size())) {
+                    c.error(vehicles, "vehicles", "with routing the cars run in one simulator and need consecutive ids (e.g. 1, 2, 3)");
+                }
+            }
+        }
+    }
+    if (!s.routing.enabled && !root["world"]) c.error(root, "world", "missing (the map the cars drive in)");
+
+    if (const YAML::Node q = root["qos"]) {
+        if (!q.IsMap()) c.error(q, "qos", "expected a map of topic: {reliable, transient_local, history_depth}");
+        else {
+            for (const auto& kv : q) {
+                const std::string topic = kv.first.as<std::string>("");
+                const std::string p = "qos." + topic;
+                if (!kv.second.IsMap()) {
+                    c.error(kv.second, p, "expected a map (reliable, transient_local, history_depth)");
+                    continue;
+                }
+                c.keys(kv.second, p, {"reliable", "transient_local", "history_depth"});
+                QosOverride o;
+                if (kv.second["reliable"]) o.reliable = c.boolean(kv.second["reliable"], p + ".reliable");
+                if (kv.second["transient_local"]) o.transient_local = c.boolean(kv.second["transient_local"], p + ".transient_local");
+                if (kv.second["history_depth"]) {
+                    if (auto d = c.integer(kv.second["history_depth"], p + ".history_depth", 1, 100000)) o.history_depth = int(*d);
+                }
+                s.qos[topic] = o;
+            }
+        }
+    }
+    if (const YAML::Node r = root["record"]) {
+        if (!r.IsMap()) c.error(r, "record", "expected a map (topics, exclude)");
+        else {
+            c.keys(r, "record", {"topics", "exclude"});
+            if (r["topics"]) s.record.topics = c.patterns(r["topics"], "record.topics");
+            if (r["exclude"]) s.record.exclude = c.patterns(r["exclude"], "record.exclude");
+        }
+    }
+    if (root["monitor"]) {
+        if (auto port = c.integer(root["monitor"], "monitor", 1, 65535)) s.monitor_port = int(*port);
+    }
+    if (!c.errors().empty()) throw ScenarioError(c.errors());
+    return s;
+}
+
+std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
+{
+    std::vector<std::string> missing;
+    auto program = [&](const std::string& name) {
+        const std::string p = (fs::path(r.bin_dir) / name).string();
+        if (::access(p.c_str(), X_OK) != 0 && std::find(missing.begin(), missing.end(), p) == missing.end()) missing.push_back(p);
+        return p;
+    };
+    const std::string domain = std::to_string(r.domain);
+    const bool simulated = r.time == TimeMode::simulated;
+    auto with_common = [&](std::vector<std::string> argv) {
+        argv.insert(argv.end(), {"--dds_domain", domain});
+        if (simulated) argv.push_back("--simulated_time");
+        return argv;
+    };
+    auto number = [](double v) {
+        char b[32];
+        std::snprintf(b, sizeof b, "%.6g", v);
+        return std::string(b);
+    };
+    std::vector<ProcessPlan> plan;
+
+    // The history, recording every sample of the run.
+    std::vector<std::string> history{program("cpm_history"), "--window", "60s", "--record", (fs::path(r.run_dir) / "recording.db").string(),
+                                     "--record-name", s.name, "--dds_domain", domain};
+    for (const auto& t : s.record.topics) {
+        if (t != "*") history.insert(history.end(), {"--include", cpm::cli::glob_regex(t)});
+    }
+    for (const auto& t : s.record.exclude) history.insert(history.end(), {"--exclude", cpm::cli::glob_regex(t)});
+    plan.push_back({"cpm_history", history, false, 9, ""});
+
+    // The cars: with routing all in one simulator spread over the lanes, else one each.
+    if (s.routing.enabled) {
+        int first = 255;
+        for (const auto& v : s.vehicles) first = std::min(first, v.id);
+        bool restart = false;
+        for (const auto& v : s.vehicles) restart = restart || v.restart;
+        plan.push_back({"cars",
+                        with_common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count", std::to_string(s.vehicles.size()),
+                                     "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed)}),
+                        restart, 5, "firmware_sim_" + std::to_string(first) + ",vehicle_bridge_" + std::to_string(first)});
+    } else {
+        for (const auto& v : s.vehicles) {
+            const std::string id = std::to_string(v.id);
+            std::vector<std::string> argv{program("cpm"), "vehicle", "sim", "--id", id, "--map", s.world, "--start",
+                                          number(v.x) + "," + number(v.y) + "," + number(v.yaw)};
+            if (!v.camera.empty()) argv.insert(argv.end(), {"--camera", v.camera});
+            plan.push_back({"car_" + id, with_common(argv), v.restart, 5, "firmware_sim_" + id + ",vehicle_bridge_" + id});
+        }
+    }
+    for (const auto& v : s.vehicles) {
+        if (v.camera.empty()) continue;
+        const std::string id = std::to_string(v.id);
+        plan.push_back({"aruco_" + id,
+                        {program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world, "--dds_domain", domain},
+                        v.restart, 3, ""});
+    }
+    if (s.routing.enabled) {
+        std::string ids;
+        for (const auto& v : s.vehicles) ids += (ids.empty() ? "" : ",") + std::to_string(v.id);
+        plan.push_back({"central_routing",
+                        with_common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed),
+                                     "--period", std::to_string(s.routing.period_ns / 1'000'000) + "ms"}),
+                        s.routing.restart, 1, "central_routing"});
+    }
+    for (const auto& v : s.vehicles) {
+        if (v.fsm.empty()) continue;
+        const std::string id = std::to_string(v.id);
+        plan.push_back({"fsm_" + id, {program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report", "--dds_domain", domain}, v.restart, 1, ""});
+    }
+    if (!missing.empty()) {
+        std::vector<std::string> errors;
+        for (const auto& m : missing) errors.push_back(s.file + ": the run needs " + m + ", which does not exist (build it: ./lab build)");
+        throw ScenarioError(errors);
+    }
+    return plan;
+}
+
+}  // namespace cpm::lab

@@ -1,0 +1,187 @@
+// Lab scenarios read and checked: the shipped ones load and plan the processes a run needs; a
+// wrong file gives every error at once, each with its line and YAML path.
+#include <cpm/lab/Scenario.hpp>
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace fs = std::filesystem;
+using namespace cpm::lab;
+
+namespace {
+
+struct TempDir
+{
+    fs::path path;
+    TempDir()
+    {
+        char tmpl[] = "/tmp/cpm_scenario_test.XXXXXX";
+        path = ::mkdtemp(tmpl);
+    }
+    ~TempDir() { fs::remove_all(path); }
+    std::string write(const std::string& name, const std::string& text) const
+    {
+        std::ofstream(path / name) << text;
+        return (path / name).string();
+    }
+};
+
+std::string labs(const std::string& name) { return std::string(CPM_SOURCE_DIR) + "/scenarios/labs/" + name; }
+
+std::vector<std::string> errors_of(const std::string& file)
+{
+    try {
+        (void)load_scenario(file);
+    } catch (const ScenarioError& e) {
+        return e.errors();
+    }
+    return {};
+}
+
+/// A fake bin folder holding the programs a run needs (empty executables).
+std::string fake_bin(const TempDir& dir, const std::vector<std::string>& programs)
+{
+    fs::create_directories(dir.path / "bin");
+    for (const auto& p : programs) {
+        std::ofstream(dir.path / "bin" / p) << "";
+        fs::permissions(dir.path / "bin" / p, fs::perms::owner_all);
+    }
+    return (dir.path / "bin").string();
+}
+
+}  // namespace
+
+TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
+{
+    TempDir dir;
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "fsm_node", "aruco_node", "central_routing"});
+    const Scenario corridor = load_scenario(labs("corridor.yaml"));
+    EXPECT_EQ(corridor.name, "corridor");
+    EXPECT_EQ(corridor.time, TimeMode::real);
+    EXPECT_EQ(corridor.duration_ns, 60'000'000'000ull);
+    ASSERT_EQ(corridor.vehicles.size(), 1u);
+    EXPECT_EQ(corridor.vehicles[0].id, 5);
+    EXPECT_DOUBLE_EQ(corridor.vehicles[0].y, -0.01);
+    EXPECT_EQ(corridor.world, fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string());
+    auto plan = plan_run(corridor, {.bin_dir = bin, .run_dir = "/runs/x", .domain = 7});
+    ASSERT_EQ(plan.size(), 3u);
+    EXPECT_EQ(plan[0].name, "cpm_history");
+    EXPECT_EQ(plan[1].name, "car_5");
+    EXPECT_EQ(plan[2].name, "fsm_5");
+    EXPECT_NE(std::find(plan[0].argv.begin(), plan[0].argv.end(), "/runs/x/recording.db"), plan[0].argv.end());
+    for (const auto& p : plan) {
+        auto d = std::find(p.argv.begin(), p.argv.end(), "--dds_domain");
+        ASSERT_NE(d, p.argv.end()) << p.name;
+        EXPECT_EQ(*(d + 1), "7") << p.name;
+    }
+
+    const Scenario gates = load_scenario(labs("gates.yaml"));
+    plan = plan_run(gates, {.bin_dir = bin, .run_dir = "/runs/g"});
+    ASSERT_EQ(plan.size(), 4u);
+    EXPECT_EQ(plan[2].name, "aruco_6");
+    EXPECT_EQ(gates.record.exclude, std::vector<std::string>{"cameraFrame"});
+
+    const Scenario crossing = load_scenario(labs("intersection.yaml"));
+    EXPECT_EQ(crossing.time, TimeMode::simulated);
+    EXPECT_TRUE(crossing.routing.enabled);
+    plan = plan_run(crossing, {.bin_dir = bin, .run_dir = "/runs/i", .time = TimeMode::simulated});
+    ASSERT_EQ(plan.size(), 3u);
+    EXPECT_EQ(plan[1].name, "cars");
+    EXPECT_EQ(plan[1].timer, "firmware_sim_1,vehicle_bridge_1");
+    EXPECT_EQ(plan[2].name, "central_routing");
+    EXPECT_EQ(plan[2].argv.back(), "--simulated_time");
+}
+
+TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    const std::string file = dir.write("bad.yaml",
+                                       "name: bad run\n"                     // 1
+                                       "time: sometimes\n"                   // 2
+                                       "duraton: 30s\n"                      // 3
+                                       "world: map.json\n"                   // 4
+                                       "vehicles:\n"                         // 5
+                                       "  - id: 5\n"                         // 6
+                                       "    start: [0, 1]\n"                 // 7
+                                       "    fsm: missing.json\n"             // 8
+                                       "  - id: 5\n"                         // 9
+                                       "    start: [0, nan, 0]\n"            // 10
+                                       "  - id: 300\n"                       // 11
+                                       "    camra: cam.yaml\n"               // 12
+                                       "routing: {enabled: true, period: 30ms}\n"  // 13
+                                       "qos: {vehicleState: {reliable: maybe}}\n"); // 14
+    const auto errors = errors_of(file);
+    const std::vector<std::string> expected = {
+        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor",
+        file + ":1: name: 'bad run': use letters, digits, - and _ only",
+        file + ":2: time: 'sometimes': expected real or simulated",
+        file + ":1: duration: missing (how long the run lasts, e.g. 30s)",
+        file + ":7: vehicles[0].start: expected [x, y, yaw] in metres and radians",
+        file + ":8: vehicles[0].fsm: state machine 'missing.json' does not exist (looked for " + (dir.path / "missing.json").string() + ")",
+        file + ":9: vehicles[1].id: 5 is given twice (also vehicles[0])",
+        file + ":10: vehicles[1].start[1]: 'nan' is not a finite number",
+        file + ":12: vehicles[2].camra: unknown key (did you mean 'camera'?); known: id, start, camera, fsm, restart",
+        file + ":11: vehicles[2].id: 300 is out of range (1 to 255)",
+        file + ":13: routing.period: must be a multiple of 50ms",
+        file + ":13: routing.enabled: central routing needs a lane graph: give lanes",
+        file + ":8: vehicles[0].fsm: a car either follows its fsm or central routing, not both",
+        file + ":7: vehicles[0].start: with routing the cars are spread over the lanes; leave start out",
+        file + ":10: vehicles[1].start: with routing the cars are spread over the lanes; leave start out",
+        file + ":14: qos.vehicleState.reliable: expected true or false",
+    };
+    EXPECT_EQ(errors, expected);
+}
+
+TEST(Scenario, SimulatedTimeRefusesWhatRunsInRealTimeOnly)
+{
+    TempDir dir;
+    dir.write("map.json", "{}");
+    dir.write("m.json", "{}");
+    dir.write("cam.yaml", "%YAML:1.0\n");
+    const std::string file = dir.write("sim.yaml", "name: sim\ntime: simulated\nduration: 10s\nworld: map.json\n"
+                                                   "vehicles:\n  - {id: 1, fsm: m.json, camera: cam.yaml}\n");
+    const auto errors = errors_of(file);
+    ASSERT_EQ(errors.size(), 2u);
+    EXPECT_EQ(errors[0], file + ":6: vehicles[0].camera: the synthetic camera and aruco_node run in real time only; use time: real");
+    EXPECT_EQ(errors[1], file + ":6: vehicles[0].fsm: fsm_node runs in real time only; use time: real");
+}
+
+TEST(Scenario, AFileThatIsNotYamlOrNotThereIsNamed)
+{
+    TempDir dir;
+    const std::string broken = dir.write("broken.yaml", "name: x\nvehicles: [\n");
+    auto errors = errors_of(broken);
+    ASSERT_EQ(errors.size(), 1u);
+    EXPECT_EQ(errors[0].rfind(broken + ":3: not YAML", 0), 0u) << errors[0];
+    errors = errors_of(dir.path / "none.yaml");
+    ASSERT_EQ(errors.size(), 1u);
+    EXPECT_EQ(errors[0], (dir.path / "none.yaml").string() + ": cannot read the file");
+}
+
+TEST(Scenario, AMissingProgramIsNamedBeforeAnythingStarts)
+{
+    TempDir dir;
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history"});
+    const Scenario s = load_scenario(labs("gates.yaml"));
+    try {
+        (void)plan_run(s, {.bin_dir = bin, .run_dir = "/r"});
+        FAIL() << "planned without fsm_node and aruco_node";
+    } catch (const ScenarioError& e) {
+        ASSERT_EQ(e.errors().size(), 2u) << e.what();
+        EXPECT_NE(e.errors()[0].find(bin + "/aruco_node, which does not exist"), std::string::npos) << e.what();
+        EXPECT_NE(e.errors()[1].find(bin + "/fsm_node, which does not exist"), std::string::npos) << e.what();
+    }
+}
+
+TEST(Scenario, RoutingNeedsConsecutiveIdsForItsOneSimulator)
+{
+    TempDir dir;
+    dir.write("lanes.json", "{}");
+    const std::string file = dir.write("r.yaml", "name: r\nduration: 10s\nlanes: lanes.json\nrouting: {enabled: true}\n"
+                                                 "vehicles:\n  - {id: 1}\n  - {id: 3}\n");
+    EXPECT_EQ(errors_of(file), std::vector<std::string>{file + ":6: vehicles: with routing the cars run in one simulator and need "
+                                                               "consecutive ids (e.g. 1, 2, 3)"});
+}
