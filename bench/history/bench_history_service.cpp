@@ -35,14 +35,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-cpm::ParticipantOptions options_for(int domain, bool shm)
-{
-    cpm::ParticipantOptions o;
-    o.domain_id = domain;
-    o.name = "bench_history";
-    o.shared_memory = shm;
-    return o;
-}
+cpm::ParticipantOptions options_for(int domain, bool shm) { return bench::history_bench_options(domain, shm, "bench_history"); }
 
 /// The echo: answers every HistoryRequest with a HistoryReply holding one sample of the
 /// service's size (150-byte payload) and one object info, as the service's `at` does.
@@ -128,10 +121,7 @@ int main(int argc, char** argv)
     // the writer, like a vehicle, uses shared memory.
     cpm::Participant client_participant(options_for(domain, false));
     cpm::Participant writer_participant(options_for(domain, true));
-    cpm::WriterOptions wo;
-    wo.reliable = true;
-    wo.history_depth = 100;
-    cpm::Writer<VehicleState> writer(writer_participant, "vehicleState", wo);
+    auto writer = bench::vehicle_state_writer(writer_participant);
     auto client_owner = std::make_unique<cpm::HistoryClient>(client_participant, std::chrono::milliseconds(10000));
     cpm::HistoryClient& client = *client_owner;
     if (!writer.wait_for_matched(1, std::chrono::milliseconds(10000))) {

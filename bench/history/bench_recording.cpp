@@ -37,14 +37,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
 
-cpm::ParticipantOptions options_for(int domain, bool shm)
-{
-    cpm::ParticipantOptions o;
-    o.domain_id = domain;
-    o.name = "bench_recording";
-    o.shared_memory = shm;
-    return o;
-}
+cpm::ParticipantOptions options_for(int domain, bool shm) { return bench::history_bench_options(domain, shm, "bench_recording"); }
 
 struct Ramp
 {
@@ -64,10 +57,7 @@ Ramp ramp(int domain, double seconds, const std::vector<std::string>& extra, con
     {
         cpm::Participant client_participant(options_for(domain, false));
         cpm::Participant writer_participant(options_for(domain, true));
-        cpm::WriterOptions wo;
-        wo.reliable = true;
-        wo.history_depth = 100;
-        cpm::Writer<VehicleState> writer(writer_participant, "vehicleState", wo);
+        auto writer = bench::vehicle_state_writer(writer_participant);
         cpm::HistoryClient client(client_participant, std::chrono::milliseconds(10000));
         if (!writer.wait_for_matched(1, std::chrono::milliseconds(10000))) std::fprintf(stderr, "bench_recording: the service did not subscribe\n");
         std::this_thread::sleep_for(std::chrono::milliseconds(500));

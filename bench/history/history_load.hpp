@@ -2,6 +2,7 @@
 // The history benchmarks' load: VehicleState of 100 vehicles at a given rate, and what the
 // service committed of it.
 #include <cpm/HistoryClient.hpp>
+#include <cpm/Participant.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
@@ -12,6 +13,25 @@
 #include <thread>
 
 namespace bench {
+
+/// The history benchmarks' participants: on `domain`, shared memory or UDP loopback only.
+inline cpm::ParticipantOptions history_bench_options(int domain, bool shm, const std::string& name)
+{
+    cpm::ParticipantOptions o;
+    o.domain_id = domain;
+    o.name = name;
+    o.shared_memory = shm;
+    return o;
+}
+
+/// The load's writer, reliable with a depth of 100 per vehicle, like a car's.
+inline cpm::Writer<VehicleState> vehicle_state_writer(cpm::Participant& p)
+{
+    cpm::WriterOptions wo;
+    wo.reliable = true;
+    wo.history_depth = 100;
+    return cpm::Writer<VehicleState>(p, "vehicleState", wo);
+}
 
 /// Writes `rate` samples/s spread over 100 vehicles for `seconds`; returns the number written.
 inline uint64_t write_at(cpm::Writer<VehicleState>& w, double rate, double seconds, double& tag)

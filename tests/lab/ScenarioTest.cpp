@@ -2,6 +2,8 @@
 // wrong file gives every error at once, each with its line and YAML path.
 #include <cpm/lab/Scenario.hpp>
 
+#include <cpm_test/TempDir.hpp>
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -10,23 +12,10 @@
 namespace fs = std::filesystem;
 using namespace cpm::lab;
 
+using cpm_test::TempDir;
+
 namespace {
 
-struct TempDir
-{
-    fs::path path;
-    TempDir()
-    {
-        char tmpl[] = "/tmp/cpm_scenario_test.XXXXXX";
-        path = ::mkdtemp(tmpl);
-    }
-    ~TempDir() { fs::remove_all(path); }
-    std::string write(const std::string& name, const std::string& text) const
-    {
-        std::ofstream(path / name) << text;
-        return (path / name).string();
-    }
-};
 
 std::string labs(const std::string& name) { return std::string(CPM_SOURCE_DIR) + "/scenarios/labs/" + name; }
 

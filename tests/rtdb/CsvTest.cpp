@@ -11,6 +11,8 @@
 #include <VehicleCommandTrajectoryPubSubTypes.h>
 #include <VehicleStatePubSubTypes.h>
 
+#include <cpm_test/TempDir.hpp>
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -22,6 +24,8 @@
 
 using namespace cpm::rtdb;
 namespace fs = std::filesystem;
+
+using cpm_test::TempDir;
 
 namespace {
 
@@ -48,17 +52,6 @@ VehicleState a_state(double x)
     return s;
 }
 
-struct TempDir
-{
-    fs::path path;
-    TempDir()
-    {
-        char tmpl[] = "/tmp/cpm_csv_test.XXXXXX";
-        path = ::mkdtemp(tmpl);
-    }
-    ~TempDir() { fs::remove_all(path); }
-    std::string file(const std::string& name) const { return (path / name).string(); }
-};
 
 }  // namespace
 

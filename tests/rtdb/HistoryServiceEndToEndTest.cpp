@@ -19,6 +19,8 @@
 #include <LabOnlyThingPubSubTypes.h>
 #include <VehicleState.h>
 
+#include "history_e2e.hpp"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -38,17 +40,7 @@ using cpm_test::Process;
 
 namespace {
 
-constexpr uint64_t kBase = 1'700'000'000'000'000'000ull;  // history_writer's first data time; then 1 ms apart
-constexpr uint64_t kMs = 1'000'000;
 
-/// UDP loopback only: every test starts a new cpm_history, which reuses the previous one's
-/// shared-memory port, and Fast DDS 2.9 in a long-lived process keeps sending to the old port.
-cpm::ParticipantOptions udp_only()
-{
-    auto o = cpm_test::isolated_options();
-    o.shared_memory = false;
-    return o;
-}
 
 class HistoryService : public ::testing::Test
 {
@@ -60,14 +52,7 @@ protected:
     /// The object's info once it holds n samples (polls `latest`).
     bool wait_for_samples(const std::string& topic, const std::string& key, uint64_t n)
     {
-        return cpm_test::wait_until([&] {
-            try {
-                auto r = client.latest(topic, key);
-                return !r.objects().empty() && r.objects()[0].samples_held() >= n;
-            } catch (const std::exception&) {
-                return false;
-            }
-        }, 20s, 20ms);
+        return ::wait_for_samples(client, topic, key, n, 20s);
     }
     Process writer(std::vector<std::string> args)
     {

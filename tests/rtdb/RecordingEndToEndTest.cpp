@@ -12,6 +12,10 @@
 
 #include <VehicleState.h>
 
+#include "history_e2e.hpp"
+
+#include <cpm_test/TempDir.hpp>
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -27,29 +31,12 @@ using cpm_test::built_program;
 using cpm_test::Process;
 namespace fs = std::filesystem;
 
+using cpm_test::TempDir;
+
 namespace {
 
-constexpr uint64_t kBase = 1'700'000'000'000'000'000ull;  // history_writer's first data time; then 1 ms apart
-constexpr uint64_t kMs = 1'000'000;
 
-struct TempDir
-{
-    fs::path path;
-    TempDir()
-    {
-        char tmpl[] = "/tmp/cpm_recording_e2e.XXXXXX";
-        path = ::mkdtemp(tmpl);
-    }
-    ~TempDir() { fs::remove_all(path); }
-    std::string file(const std::string& name) const { return (path / name).string(); }
-};
 
-cpm::ParticipantOptions udp_only()
-{
-    auto o = cpm_test::isolated_options();
-    o.shared_memory = false;
-    return o;
-}
 
 Process writer(std::vector<std::string> args)
 {
@@ -85,18 +72,6 @@ std::string without_now(const std::string& lines)
         out += j.dump() + "\n";
     }
     return out;
-}
-
-bool wait_for_samples(cpm::HistoryClient& client, const std::string& topic, const std::string& key, uint64_t n)
-{
-    return cpm_test::wait_until([&] {
-        try {
-            auto r = client.latest(topic, key);
-            return !r.objects().empty() && r.objects()[0].samples_held() >= n;
-        } catch (const std::exception&) {
-            return false;
-        }
-    }, 30s, 20ms);
 }
 
 }  // namespace

@@ -5,6 +5,8 @@
 #include <cpm/rtdb/Recording.hpp>
 #include <cpm/rtdb/Requests.hpp>
 
+#include <cpm_test/TempDir.hpp>
+
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -16,19 +18,10 @@
 using namespace cpm::rtdb;
 namespace fs = std::filesystem;
 
+using cpm_test::TempDir;
+
 namespace {
 
-struct TempDir
-{
-    fs::path path;
-    TempDir()
-    {
-        char tmpl[] = "/tmp/cpm_recording_test.XXXXXX";
-        path = ::mkdtemp(tmpl);
-    }
-    ~TempDir() { fs::remove_all(path); }
-    std::string file(const std::string& name) const { return (path / name).string(); }
-};
 
 /// A store and a recording fed the same way the service's outlet feeds them.
 struct Lab

@@ -1,0 +1,31 @@
+#pragma once
+// A fresh folder under /tmp for one test, removed with everything in it at the end.
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace cpm_test {
+
+struct TempDir
+{
+    std::filesystem::path path;
+    TempDir()
+    {
+        char tmpl[] = "/tmp/cpm_test.XXXXXX";
+        path = ::mkdtemp(tmpl);
+    }
+    ~TempDir() { std::filesystem::remove_all(path); }
+    TempDir(const TempDir&) = delete;
+    TempDir& operator=(const TempDir&) = delete;
+    /// The path of `name` in the folder (not made).
+    std::string file(const std::string& name) const { return (path / name).string(); }
+    /// Writes `text` to `name` in the folder; its path.
+    std::string write(const std::string& name, const std::string& text) const
+    {
+        std::ofstream(path / name) << text;
+        return file(name);
+    }
+};
+
+}  // namespace cpm_test
