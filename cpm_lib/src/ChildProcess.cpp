@@ -28,9 +28,9 @@ ExitStatus status_of(int raw)
     return s;
 }
 
-int open_output(const std::string& path)
+int open_output(const std::string& path, bool append)
 {
-    const int fd = ::open(path.c_str(), O_CREAT | O_TRUNC | O_WRONLY | O_CLOEXEC, 0644);
+    const int fd = ::open(path.c_str(), O_CREAT | (append ? O_APPEND : O_TRUNC) | O_WRONLY | O_CLOEXEC, 0644);
     if (fd < 0) throw Error("cannot write " + path + ": " + std::strerror(errno));
     return fd;
 }
@@ -60,10 +60,12 @@ ChildProcess::ChildProcess(ProcessOptions o) : program_(o.argv.empty() ? "" : o.
     args.push_back(nullptr);
     for (auto& e : envs) envp.push_back(e.data());
     envp.push_back(nullptr);
-    const int out_file = o.stdout_path.empty() ? -1 : open_output(o.stdout_path);
+    const int out_file = o.stdout_path.empty() ? -1 : open_output(o.stdout_path, o.append_output);
     int err_file = -1;
     try {
-        err_file = o.stderr_path.empty() ? -1 : open_output(o.stderr_path);
+        // One file for both: one open file (one offset), so neither overwrites the other.
+        if (!o.stderr_path.empty() && o.stderr_path == o.stdout_path) err_file = ::fcntl(out_file, F_DUPFD_CLOEXEC, 0);
+        else err_file = o.stderr_path.empty() ? -1 : open_output(o.stderr_path, o.append_output);
     } catch (...) {
         if (out_file >= 0) ::close(out_file);
         throw;

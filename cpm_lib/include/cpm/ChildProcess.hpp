@@ -23,7 +23,8 @@ struct ProcessOptions
     std::vector<std::string> argv;  ///< argv[0]: the program's path (see sibling_executable)
     std::vector<std::string> env;   ///< added to this process's environment, "NAME=value"
     std::string stdout_path;        ///< "": this process's stdout (unless captured)
-    std::string stderr_path;        ///< "": this process's stderr
+    std::string stderr_path;        ///< "": this process's stderr; the same path as stdout_path: one file for both
+    bool append_output = false;     ///< append to the output files instead of starting them afresh
     bool capture_stdout = false;    ///< read it with read_line()
     bool own_process_group = false; ///< signals then reach the programs it starts too
     bool die_with_parent = false;   ///< SIGTERM when this process dies, even by SIGKILL

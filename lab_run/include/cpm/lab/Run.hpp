@@ -1,0 +1,54 @@
+#pragma once
+// cpm::lab::run_lab — a scenario run as one thing: its processes started and supervised, the
+// lab clock driven, everything recorded, and everything stopped in order at the end.
+//
+// The run's folder (runs/<name>-<UTC time>/ or the one given) gets one <process>.log per
+// process (its stdout and stderr), the recording (recording.db) and summary.json.
+#include <cpm/lab/Scenario.hpp>
+
+#include <cstdint>
+#include <cstdio>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace cpm::lab {
+
+struct RunOptions
+{
+    std::string out_dir;                      ///< "": runs/<name>-<UTC time> under the working folder
+    std::optional<uint64_t> duration_ns;      ///< overrides the scenario's
+    std::optional<TimeMode> time;             ///< overrides the scenario's
+    std::optional<int> domain;                ///< overrides the scenario's (and CPM_DOMAIN_ID)
+    std::string bin_dir;                      ///< where cpm's programs are
+    std::FILE* progress = nullptr;            ///< the progress line; a terminal gets one line redrawn
+    std::function<bool()> stop = [] { return false; };  ///< Ctrl-C: ends the run cleanly
+};
+
+/// How one process ended.
+struct ProcessEnd
+{
+    std::string name;
+    std::string how;        ///< "exited with code 0", "killed by SIGSEGV"
+    bool failed = false;    ///< it died during the run, or ended badly when stopped
+    int restarts = 0;
+    std::string last_lines; ///< the end of its log when it failed
+};
+
+struct RunResult
+{
+    std::string dir;
+    bool ok = false;
+    bool interrupted = false;           ///< stopped by RunOptions::stop
+    uint64_t lab_time_ns = 0;           ///< how far the lab clock got
+    double real_seconds = 0;
+    std::vector<ProcessEnd> processes;
+    std::string error;                  ///< why the run ended early ("" when it ran its time)
+};
+
+/// Runs the scenario. Throws ScenarioError for a missing program and std::runtime_error when
+/// the run's folder cannot be made (before anything starts).
+RunResult run_lab(const Scenario& scenario, const RunOptions& options);
+
+}  // namespace cpm::lab

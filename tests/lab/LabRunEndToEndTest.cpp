@@ -1,0 +1,137 @@
+// cpm lab run with real processes: a short corridor run gives its folder (a log per process, a
+// recording that answers, summary.json); a node killed mid-run is named with the end of its log
+// and the run fails; Ctrl-C stops everything and leaves a readable recording; a wrong scenario
+// starts nothing.
+#include <cpm/rtdb/Recording.hpp>
+
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+#include <cpm_test/TempDir.hpp>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+using cpm_test::Process;
+using cpm_test::TempDir;
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kCorridor = std::string(CPM_SOURCE_DIR) + "/scenarios/labs/corridor.yaml";
+
+nlohmann::json summary_of(const std::string& dir)
+{
+    std::ifstream in(dir + "/summary.json");
+    return nlohmann::json::parse(in);
+}
+
+/// The pid of the process whose command line holds `needle` (from /proc), or 0.
+int pid_with(const std::string& needle)
+{
+    for (const auto& e : fs::directory_iterator("/proc")) {
+        const std::string name = e.path().filename();
+        if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+        std::ifstream in(e.path() / "cmdline");
+        std::string cmd((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        std::replace(cmd.begin(), cmd.end(), '\0', ' ');
+        if (cmd.find(needle) != std::string::npos) return std::stoi(name);
+    }
+    return 0;
+}
+
+}  // namespace
+
+TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
+{
+    TempDir dir;
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "8s", "--out", out});
+    ASSERT_EQ(run.wait(90s), 0) << run.output() << run.errors();
+    EXPECT_NE(run.output().find("corridor ran: 8.0 s of lab time"), std::string::npos) << run.output();
+    for (const char* f : {"cpm_history.log", "car_5.log", "fsm_5.log", "recording.db", "summary.json", "scenario.yaml"}) {
+        EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f;
+    }
+    const auto summary = summary_of(out);
+    EXPECT_EQ(summary["ok"], true) << summary.dump(2);
+    EXPECT_EQ(summary["name"], "corridor");
+    ASSERT_EQ(summary["processes"].size(), 3u);
+    for (const auto& p : summary["processes"]) EXPECT_EQ(p["failed"], false) << p.dump();
+    EXPECT_EQ(summary["recording"]["dropped"], 0) << summary.dump(2);
+
+    // The car drove and its state machine ran, and the recording says so through the same
+    // questions the live history answers.
+    const auto rec = cpm::rtdb::load_recording(out + "/recording.db");
+    EXPECT_TRUE(rec.complete) << rec.warning;
+    const auto car = rec.store->find("vehicleState", "5");
+    ASSERT_TRUE(car) << "the car's states are recorded";
+    const auto info = rec.store->info(*car);
+    EXPECT_GT(info->samples_total, 300u) << "50 Hz for most of 8 s";
+    const auto first = rec.store->range(*car, 0, UINT64_MAX, cpm::rtdb::By::commit, 1).samples;
+    const auto last = rec.store->latest(*car);
+    ASSERT_FALSE(first.empty());
+    ASSERT_TRUE(last.ok());
+    EXPECT_GT(double(last.sample.commit_ns - first[0].commit_ns) * 1e-9, 6.0);
+    EXPECT_TRUE(rec.store->find("fsmStatus", "5")) << "the state machine's status is recorded";
+    std::ifstream fsm_log(out + "/fsm_5.log");
+    std::string fsm_text((std::istreambuf_iterator<char>(fsm_log)), std::istreambuf_iterator<char>());
+    EXPECT_NE(fsm_text.find("report: driven"), std::string::npos) << "fsm_node was stopped cleanly and printed its report\n" << fsm_text;
+}
+
+TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
+{
+    TempDir dir;
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "60s", "--out", out});
+    const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json").string();
+    int pid = 0;
+    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args)) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
+    std::this_thread::sleep_for(2s);  // driving
+    ::kill(pid, SIGKILL);
+    EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
+    EXPECT_NE(run.errors().find("fsm_5 killed by SIGKILL during the run"), std::string::npos) << run.errors();
+    EXPECT_NE(run.errors().find("fsm_node: vehicle 5"), std::string::npos) << "the end of its log is shown\n" << run.errors();
+    const auto summary = summary_of(out);
+    EXPECT_EQ(summary["ok"], false);
+    EXPECT_NE(summary["error"].get<std::string>().find("fsm_5"), std::string::npos);
+    EXPECT_EQ(pid_with(out + "/recording.db"), 0) << "every process of the run is stopped";
+    EXPECT_EQ(pid_with("--map " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string() + " --start"), 0);
+}
+
+TEST(LabRun, CtrlCStopsEverythingAndLeavesAReadableRecording)
+{
+    TempDir dir;
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "60s", "--out", out});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("processes on domain") != std::string::npos; }, 30s)) << run.errors();
+    std::this_thread::sleep_for(4s);
+    run.kill(SIGINT);
+    EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
+    EXPECT_NE(run.output().find("corridor was stopped"), std::string::npos) << run.output();
+    const auto rec = cpm::rtdb::load_recording(out + "/recording.db");
+    EXPECT_TRUE(rec.complete) << rec.warning;
+    const auto car = rec.store->find("vehicleState", "5");
+    ASSERT_TRUE(car);
+    EXPECT_GT(rec.store->info(*car)->samples_total, 100u);
+    EXPECT_EQ(summary_of(out)["interrupted"], true);
+}
+
+TEST(LabRun, AWrongScenarioStartsNothing)
+{
+    TempDir dir;
+    const std::string bad = dir.write("bad.yaml", "name: bad\nduration: forever\nworld: nowhere.json\nvehicles: [{id: 1}, {id: 1}]\n");
+    Process run({built_program("cpm"), "lab", "run", bad, "--out", dir.file("run")});
+    EXPECT_EQ(run.wait(30s), 1);
+    EXPECT_NE(run.errors().find("3 error(s), nothing started"), std::string::npos) << run.errors();
+    EXPECT_NE(run.errors().find(bad + ":2: duration: 'forever' is not a duration"), std::string::npos) << run.errors();
+    EXPECT_NE(run.errors().find("vehicles[1].id: 1 is given twice"), std::string::npos) << run.errors();
+    EXPECT_FALSE(fs::exists(dir.file("run"))) << "no run folder";
+    Process flag({built_program("cpm"), "lab", "run", kCorridor, "--time", "sometimes"});
+    EXPECT_EQ(flag.wait(30s), 2);
+    EXPECT_NE(flag.errors().find("--time 'sometimes'"), std::string::npos) << flag.errors();
+}
