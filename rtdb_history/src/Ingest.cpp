@@ -323,7 +323,9 @@ struct Ingest::Impl : public dds::DomainParticipantListener
             ++t.received;
             ++self.received_;
             const auto& b = raw.bytes;
-            if (b.size() < 4 + 16) {  // encapsulation + Header
+            // Encapsulation + Header; a type whose IDL has no Header (SystemTrigger) only needs
+            // its encapsulation.
+            if (b.size() < (t.has_header.value_or(true) ? 4 + 16 : 4)) {
                 if (++self.dropped_ <= 10) {
                     ++skipped.count;
                     skipped.size = b.size();

@@ -78,6 +78,14 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     ASSERT_TRUE(last.ok());
     EXPECT_GT(double(last.sample.commit_ns - first[0].commit_ns) * 1e-9, 6.0);
     EXPECT_TRUE(rec.store->find("fsmStatus", "5")) << "the state machine's status is recorded";
+    // The lab clock's stop (a SystemTrigger, a type without a Header) is recorded, not skipped.
+    const auto trigger = rec.store->find("systemTrigger", "");
+    ASSERT_TRUE(trigger) << "the timers' stop is recorded";
+    EXPECT_GE(rec.store->info(*trigger)->samples_total, 1u);
+    EXPECT_EQ(rec.store->info(*trigger)->data_time, "source_timestamp");
+    std::ifstream history_log(out + "/cpm_history.log");
+    const std::string history_text((std::istreambuf_iterator<char>(history_log)), std::istreambuf_iterator<char>());
+    EXPECT_EQ(history_text.find("too short"), std::string::npos) << history_text;
     std::ifstream fsm_log(out + "/fsm_5.log");
     std::string fsm_text((std::istreambuf_iterator<char>(fsm_log)), std::istreambuf_iterator<char>());
     EXPECT_NE(fsm_text.find("report: driven"), std::string::npos) << "fsm_node was stopped cleanly and printed its report\n" << fsm_text;
