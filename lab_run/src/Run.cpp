@@ -193,7 +193,9 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
         for (auto& n : nodes) {
             if (!n.child || n.end || n.child->running()) continue;
             n.end = n.child->ended();
-            if (n.end && n.end->ok() && n.plan.name.rfind("fsm_", 0) == 0) continue;  // its machine reached a stop state
+            // Exit code 0 is a node that is done: an fsm_node whose machine reached a stop state,
+            // the nodes the simulated clock stopped at its end.
+            if (n.end && n.end->ok()) continue;
             if (n.plan.restart) {
                 ++n.restarts;
                 say("cpm lab run: " + n.plan.name + " " + n.end->describe() + "; restarting it (restart: true)");
@@ -271,6 +273,8 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
                            {"interrupted", result.interrupted},
                            {"error", result.error},
                            {"vehicles", s.vehicles.size()},
+                           {"world", s.world},
+                           {"lanes", s.lanes},
                            {"processes", processes},
                            {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()}};
     std::ofstream(dir / "summary.json") << summary.dump(2) << "\n";

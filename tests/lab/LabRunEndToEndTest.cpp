@@ -31,6 +31,18 @@ nlohmann::json summary_of(const std::string& dir)
     return nlohmann::json::parse(in);
 }
 
+/// The page as headless Chromium (Debian's) leaves it after loading, scripts run; no request
+/// can leave the host (every name unresolvable, every proxy dead).
+std::string rendered_dom(const std::string& file)
+{
+    Process chromium({"/usr/bin/chromium", "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking",
+                      "--disable-component-update", "--disable-sync", "--disable-default-apps", "--disable-extensions",
+                      "--host-resolver-rules=MAP * ~NOTFOUND", "--proxy-server=127.0.0.1:9", "--virtual-time-budget=5000", "--dump-dom",
+                      "file://" + file});
+    EXPECT_EQ(chromium.wait(60s), 0) << chromium.errors();
+    return chromium.output();
+}
+
 /// The pid of the process whose command line holds `needle` (from /proc), or 0.
 int pid_with(const std::string& needle)
 {
@@ -89,6 +101,29 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     std::ifstream fsm_log(out + "/fsm_5.log");
     std::string fsm_text((std::istreambuf_iterator<char>(fsm_log)), std::istreambuf_iterator<char>());
     EXPECT_NE(fsm_text.find("report: driven"), std::string::npos) << "fsm_node was stopped cleanly and printed its report\n" << fsm_text;
+
+    // The report: every plot there and loaded in a real browser, the figures in the summary.
+    EXPECT_NE(run.output().find("report: " + out + "/report.html"), std::string::npos) << run.output();
+    for (const char* plot : {"map.png", "speed.png", "steering.png", "fsm.png", "clearance.png", "topics.png"}) {
+        EXPECT_GT(fs::file_size(fs::path(out) / "plots" / plot), 1000u) << plot;
+    }
+    const std::string dom = rendered_dom(out + "/report.html");
+    EXPECT_NE(dom.find("<body data-images=\"6\" data-images-loaded=\"6\""), std::string::npos) << dom.substr(0, 2000);
+    EXPECT_NE(dom.find("<h1>Run corridor</h1>"), std::string::npos);
+    EXPECT_NE(dom.find("vehicleState"), std::string::npos) << "the topics table";
+    const auto figures = summary_of(out)["report"];
+    EXPECT_GT(figures["cars"]["5"]["driven_m"].get<double>(), 1.0) << figures.dump(2);
+    EXPECT_GT(figures["cars"]["5"]["min_clearance_m"].get<double>(), 0.2) << figures.dump(2);
+    EXPECT_NEAR(figures["topics"]["vehicleState"]["rate_hz"].get<double>(), 50, 5) << figures.dump(2);
+
+    // Drawn again from the folder alone.
+    fs::remove_all(fs::path(out) / "plots");
+    Process again({built_program("cpm"), "lab", "report", out});
+    ASSERT_EQ(again.wait(60s), 0) << again.errors();
+    EXPECT_TRUE(fs::exists(fs::path(out) / "plots" / "map.png"));
+    Process nothing({built_program("cpm"), "lab", "report", dir.file("none")});
+    EXPECT_EQ(nothing.wait(30s), 1);
+    EXPECT_NE(nothing.errors().find("no run folder " + dir.file("none")), std::string::npos) << nothing.errors();
 }
 
 TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)

@@ -3,6 +3,7 @@
 
 #include <cpm/ChildProcess.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/lab/Report.hpp>
 #include <cpm/lab/Run.hpp>
 #include <cpm/lab/Scenario.hpp>
 #include <cpm/TimeMaster.hpp>
@@ -121,7 +122,8 @@ const char* kRunHelp =
     "timers stopped, the processes stopped in order, the history last (the recording closed).\n"
     "The run's folder (--out, default runs/<name>-<UTC time>) holds <process>.log for each\n"
     "process, recording.db (ask it with cpm history --file, replay it with cpm play),\n"
-    "scenario.yaml and summary.json. Exit 0 when every process ran its time; 1 otherwise.\n"
+    "scenario.yaml, summary.json and the report (report.html with its plots, see cpm lab report).\n"
+    "Exit 0 when every process ran its time and the report was drawn; 1 otherwise.\n"
     "--dds_domain (or the scenario's domain: key, else CPM_DOMAIN_ID) picks the domain.\n";
 
 int lab_run(const std::vector<std::string>& args)
@@ -166,6 +168,14 @@ int lab_run(const std::vector<std::string>& args)
         std::fprintf(stderr, "%s: nothing started:\n%s\n", command.c_str(), e.what());
         return 1;
     }
+    int status = r.ok ? 0 : 1;
+    std::string report;
+    try {
+        report = cpm::lab::make_report(r.dir).html;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "%s: the report could not be drawn: %s\n", command.c_str(), e.what());
+        status = 1;
+    }
     for (const auto& p : r.processes) {
         if (p.failed) std::fprintf(stderr, "%s: %s %s%s\n%s", command.c_str(), p.name.c_str(), p.how.c_str(),
                                    p.restarts ? (" (restarted " + std::to_string(p.restarts) + " times)").c_str() : "", p.last_lines.c_str());
@@ -173,7 +183,30 @@ int lab_run(const std::vector<std::string>& args)
     if (!r.error.empty()) std::fprintf(stderr, "%s: the run ended early: %s\n", command.c_str(), r.error.c_str());
     std::printf("%s %s: %.1f s of lab time in %.1f s; %s (summary.json, recording.db, a .log per process)\n", s.name.c_str(),
                 r.ok ? "ran" : r.interrupted ? "was stopped" : "FAILED", double(r.lab_time_ns) * 1e-9, r.real_seconds, r.dir.c_str());
-    return r.ok ? 0 : 1;
+    if (!report.empty()) std::printf("report: %s\n", report.c_str());
+    return status;
+}
+
+const char* kReportHelp =
+    "usage: cpm lab report DIR\n"
+    "\n"
+    "Draws a run's report again from its folder (recording.db, summary.json): report.html with\n"
+    "its plots (made with gnuplot) in DIR/plots: each car's path on the map, speed, steering, the\n"
+    "state machines' states, clearance to walls, the smallest distance between cars, per-topic\n"
+    "rates and delays, the run's warnings and errors; the same figures go into summary.json.\n";
+
+int lab_report(const std::vector<std::string>& args)
+{
+    const std::string command = "cpm lab report";
+    const std::string dir = only_positional(parse_args(args, {}, command), command, "run folder");
+    try {
+        const auto r = cpm::lab::make_report(dir);
+        std::printf("%s (%zu plots)\n", r.html.c_str(), r.images.size());
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "%s: %s\n", command.c_str(), e.what());
+        return 1;
+    }
+    return 0;
 }
 
 }  // namespace
@@ -183,7 +216,8 @@ std::vector<Command> lab_commands()
     return {{"lab", "clock", "drive the lab's timers: a synchronised real-time start and stop, or a simulated clock", kClockHelp,
              lab_clock},
             {"lab", "check", "check a lab scenario file and show the processes a run of it starts", kCheckHelp, lab_check},
-            {"lab", "run", "run a lab scenario: every process started, supervised, recorded and stopped in order", kRunHelp, lab_run}};
+            {"lab", "run", "run a lab scenario: every process started, supervised, recorded and stopped in order", kRunHelp, lab_run},
+            {"lab", "report", "draw a run's report (report.html with plots, summary.json) from its folder", kReportHelp, lab_report}};
 }
 
 }  // namespace cpm::tools
