@@ -97,7 +97,8 @@ TEST(CpmParamServe, ServesAFileToClientsUntilStopped)
 
     EXPECT_EQ(cpm::parameter_double("max_speed", 10000ms), 1.5);
     EXPECT_EQ(cpm::parameter_ints("vehicles"), (std::vector<int32_t>{1, 3, 7}));
-    EXPECT_THAT(sut.output(), HasSubstr("serving 2 parameters"));
+    // The server answers as soon as it has loaded the file, a moment before it says so.
+    EXPECT_TRUE(cpm_test::wait_until([&] { return sut.output().find("serving 2 parameters") != std::string::npos; }, std::chrono::seconds(10))) << sut.output();
     sut.kill(SIGTERM);
     EXPECT_EQ(sut.wait(5000ms), 0);
     std::remove(file.c_str());

@@ -22,12 +22,12 @@ int param_serve(const std::vector<std::string>& args)
 {
     const std::string file = only_positional(parse_args(args, {}, "cpm param serve"), "cpm param serve",
                                              "parameter file");
+    cpm::cli::stop_on_signals();  // before it serves: a stop that comes at once still ends it cleanly
     cpm::Participant participant;
     cpm::ParameterServer server(participant);
     const size_t n = server.load_file(file);
     std::printf("serving %zu parameters from %s\n", n, file.c_str());
     std::fflush(stdout);
-    cpm::cli::stop_on_signals();
     while (!cpm::cli::stop_requested()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
     return 0;
 }
