@@ -16,6 +16,7 @@
 #include <condition_variable>
 #include <mutex>
 #include <thread>
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 
@@ -41,6 +42,20 @@ std::shared_ptr<Timer> Timer::create(Participant& participant, const std::string
 {
     const bool simulated = init_settings().simulated_time && options.simulated_time_allowed;
     return std::make_shared<detail::LabTimer>(participant, node_id, period_ns, offset_ns, options.wait_for_start, simulated);
+}
+
+std::optional<std::pair<std::string, uint64_t>> timer_missed_ticks(const std::string& message)
+{
+    static const std::string head = "timer '", tail = " ticks missed in all";
+    if (message.rfind(head, 0) != 0) return std::nullopt;
+    const size_t id_end = message.find("': ", head.size());
+    const size_t count_end = message.rfind(tail);
+    if (id_end == std::string::npos || count_end == std::string::npos || count_end <= id_end) return std::nullopt;
+    size_t count_begin = count_end;
+    while (count_begin > id_end && std::isdigit(static_cast<unsigned char>(message[count_begin - 1]))) --count_begin;
+    if (count_begin == count_end || count_end - count_begin > 19) return std::nullopt;  // not a count a timer says
+    return std::pair<std::string, uint64_t>(message.substr(head.size(), id_end - head.size()),
+                                            std::stoull(message.substr(count_begin, count_end - count_begin)));
 }
 
 void Timer::run_until(const std::function<bool()>& stop_requested, Callback callback)
@@ -210,6 +225,10 @@ void LabTimer::run(const Callback& callback, const std::function<void()>& on_sto
     } else {
         run_real_time(callback);
     }
+    // The warnings come at most once a second: the last count is said when the timer ends.
+    if (missed_ > missed_reported_) {
+        CPM_LOG_WARN("timer '%s': stopped; %llu ticks missed in all", node_id_.c_str(), (unsigned long long)missed_.load());
+    }
     if (on_stop) on_stop();
 }
 
@@ -231,13 +250,17 @@ void LabTimer::run_simulated(const Callback& callback)
         const uint64_t now = next_start_;
         if (now < next) continue;  // another node's tick; ours is still ahead
         if (now > next) {
-            // The master passed our tick: it must have missed our announcement.
+            // The master passed our tick: it missed our announcement, or the lab's clock was
+            // already ahead when this timer joined (a node restarted during a run).
             const uint64_t skipped = (now - next + period_ns_ - 1) / period_ns_;
             missed_ += skipped;
-            log_error("timer '" + node_id_ + "': simulated clock jumped to " + std::to_string(now) +
-                      " past our tick at " + std::to_string(next) + "; skipped " + std::to_string(skipped));
+            log_error("timer '" + node_id_ + "': simulated clock jumped to " + std::to_string(now) + " past our tick at " +
+                      std::to_string(next) + "; skipped " + std::to_string(skipped) + "; " + std::to_string(missed_.load()) +
+                      " ticks missed in all");
+            missed_reported_ = missed_;
             next += skipped * period_ns_;
-            continue;
+            if (next > now) continue;  // our next tick is still ahead
+            // else our tick is the lab's current time: it runs now, or the clock waits for it forever
         }
         // Only a ticking timer moves the process's clock: one whose tick is still ahead may
         // see an older trigger late, and must not wind the clock back under a running tick.
@@ -247,6 +270,12 @@ void LabTimer::run_simulated(const Callback& callback)
         lock.lock();
         next += period_ns_;
     }
+    lock.unlock();
+    // A timer that ends before the lab does (its node is done, or was told to stop) must not
+    // hold the simulated clock: it announces that it has no tick left, and the master goes on
+    // with the others. Sent before the process can exit with it unsent.
+    announce(kStopTrigger);
+    (void)ready_writer_->wait_for_acknowledgments(std::chrono::seconds(1));
 }
 
 void LabTimer::run_real_time(const Callback& callback)
@@ -275,6 +304,7 @@ void LabTimer::run_real_time(const Callback& callback)
                                  node_id_.c_str(), (unsigned long long)(deadline - period_ns_),
                                  double(now - (deadline - period_ns_)) * 1e-6, (unsigned long long)skipped,
                                  (unsigned long long)held, (unsigned long long)missed_.load());
+                    missed_reported_ = missed_;
                 }
                 deadline += skipped * period_ns_;
             }

@@ -59,6 +59,7 @@ private:
     std::atomic<uint64_t> start_time_{0};
     std::atomic<uint64_t> missed_{0};
     LogThrottle overrun_log_;  ///< the timer's thread only
+    uint64_t missed_reported_ = 0;  ///< the count the last warning said (the timer's thread only)
 
     std::mutex trigger_mutex_;
     std::condition_variable trigger_changed_;

@@ -11,6 +11,7 @@
 #include <SystemTrigger.h>
 
 #include <algorithm>
+#include <atomic>
 #include <map>
 
 namespace cpm {
@@ -56,6 +57,7 @@ struct TimeMaster::Impl
     ReaderAbstract<ReadyStatus> live_ready;  ///< every announcement since, volatile writers' too
     Writer<SystemTrigger> trigger;
     std::map<std::string, uint64_t> announced;
+    std::atomic<uint64_t> simulated_now{0};
 };
 
 namespace {
@@ -101,6 +103,7 @@ uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uin
             }
             impl_->send(next);
             now = next;
+            impl_->simulated_now = now;
             started = true;
             ++steps;
             deadline = std::chrono::steady_clock::now() + step_timeout;
@@ -134,6 +137,8 @@ uint64_t TimeMaster::start_real_time(const std::vector<std::string>& node_ids, s
     impl_->send(start);
     return start;
 }
+
+uint64_t TimeMaster::simulated_now() const { return impl_->simulated_now; }
 
 void TimeMaster::stop_all()
 {

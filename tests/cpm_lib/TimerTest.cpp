@@ -136,24 +136,48 @@ TEST_F(TimerTest, ATimerThatOverrunsEveryTickWarnsOnceASecondWithACount)
     const std::string log = "/tmp/cpm_timer_overrun_" + std::to_string(::getpid()) + ".csv";
     cpm::Logging::instance().set_file(log);
     auto sut = cpm::Timer::create(node, "always_late", 10 * kMs, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
-    sut->start_async(recorder([](size_t) { std::this_thread::sleep_for(25ms); }));
+    std::atomic<bool> ended{false};
+    sut->start_async(recorder([](size_t) { std::this_thread::sleep_for(25ms); }), [&] { ended = true; });
     ASSERT_TRUE(cpm_test::wait_until([&] { return sut->missed_deadlines() >= 100; }, 20s));
     sut->stop();
+    ASSERT_TRUE(cpm_test::wait_until([&] { return ended.load(); }, 5s)) << "the timer's thread ended";
     cpm::Logging::instance().set_file("");
     std::ifstream in(log);
     size_t warnings = 0;
-    std::string first;
+    std::string first, last;
     for (std::string line; std::getline(in, line);) {
         if (line.find("timer 'always_late'") == std::string::npos) continue;
         if (warnings++ == 0) first = line;
+        last = line.substr(line.find("timer 'always_late'"));
     }
     std::remove(log.c_str());
+    // The last word, said when it stopped, is the whole count, readable by cpm lab run.
+    const auto said = cpm::timer_missed_ticks(last);
+    ASSERT_TRUE(said) << last;
+    EXPECT_EQ(said->first, "always_late");
+    EXPECT_EQ(said->second, sut->missed_deadlines()) << last;
     // 100 and more missed ticks took at least 1.5 s (a tick and two skipped per 30 ms): not 50
     // warnings, one or two a second.
     EXPECT_GE(warnings, 1u);
     EXPECT_LE(warnings, 6u) << warnings << " warnings for " << sut->missed_deadlines() << " missed ticks";
     EXPECT_THAT(first, HasSubstr("skipped"));
     EXPECT_THAT(first, HasSubstr(",warn,"));  // through the logger (CSV: time, node, level, message)
+}
+
+TEST(TimerMissedTicks, ReadsTheNodeAndCountFromATimersWarningOnly)
+{
+    auto said = cpm::timer_missed_ticks("timer 'fsm_node_5': stopped; 17 ticks missed in all");
+    ASSERT_TRUE(said);
+    EXPECT_EQ(said->first, "fsm_node_5");
+    EXPECT_EQ(said->second, 17u);
+    said = cpm::timer_missed_ticks("timer 'a b': the tick at 5 ns ended 3.0 ms after ...; skipped 2 tick(s); 0 more overrun(s) "
+                                   "since the last report, 1234 ticks missed in all");
+    ASSERT_TRUE(said);
+    EXPECT_EQ(said->first, "a b");
+    EXPECT_EQ(said->second, 1234u);
+    EXPECT_FALSE(cpm::timer_missed_ticks("vehicle 5: no VehicleState; braking until fresh input arrives"));
+    EXPECT_FALSE(cpm::timer_missed_ticks("timer 'x': ticks missed in all"));
+    EXPECT_FALSE(cpm::timer_missed_ticks("the timer 'x': 3 ticks missed in all"));
 }
 
 TEST_F(TimerTest, StopBeforeStartMeansNoCallbackEver)
@@ -366,6 +390,30 @@ TEST_F(TimerTest, SimulatedTimeRunsThreeNodesExactlyInOrderAndRepeatably)
     EXPECT_EQ(first, second);
     EXPECT_LT(first_seconds, 10.0) << "10 simulated seconds took longer than 10 real seconds";
     std::printf("10 simulated seconds took %.3f s and %.3f s of real time\n", first_seconds, second_seconds);
+}
+
+TEST_F(TimerTest, ATimerThatEndsEarlyDoesNotHoldTheSimulatedClock)
+{
+    const char* argv[] = {"timer_test", "--simulated_time"};
+    cpm::init(2, const_cast<char**>(argv));
+    // "done" stops itself in its fifth tick (a node whose work is over, e.g. a state machine in
+    // its final state); "car" must still get every tick up to the end.
+    auto done = cpm::Timer::create(node, "done", 20 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = true});
+    auto car = cpm::Timer::create(node, "car", 20 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = true});
+    std::atomic<int> done_ticks{0}, car_ticks{0};
+    std::atomic<uint64_t> car_last{0};
+    done->start_async([&](uint64_t) {
+        if (++done_ticks == 5) done->stop();
+    });
+    car->start_async([&](uint64_t t) {
+        ++car_ticks;
+        car_last = t;
+    });
+    cpm::TimeMaster master(lab);
+    EXPECT_NO_THROW(master.run_simulated({"done", "car"}, 1000 * kMs, 3000ms));
+    EXPECT_EQ(done_ticks.load(), 5);
+    EXPECT_EQ(car_ticks.load(), 50);  // 0, 20, ..., 980 ms
+    EXPECT_EQ(car_last.load(), 980 * kMs);
 }
 
 TEST_F(TimerTest, TimeMasterNamesTheNodesThatNeverAnnounce)

@@ -15,7 +15,8 @@ namespace cpm {
 /// `ReadyStatus.next_start_stamp`; the master advances the lab clock to the smallest announced
 /// time, but only once every node has announced a time later than the current one (so all
 /// ticks at t finish before anything at t' > t runs). Runs are therefore repeatable and run as
-/// fast as the nodes compute. Real time: one synchronised start, later a stop.
+/// fast as the nodes compute. A timer that ends early announces UINT64_MAX (no tick left); the
+/// clock goes on with the others. Real time: one synchronised start, later a stop.
 class TimeMaster
 {
 public:
@@ -29,6 +30,9 @@ public:
     /// Returns the number of steps (distinct tick times) it triggered.
     uint64_t run_simulated(const std::vector<std::string>& node_ids, uint64_t end_ns,
                            std::chrono::milliseconds step_timeout = std::chrono::seconds(10));
+
+    /// The simulated time run_simulated last triggered (0 before); safe from any thread.
+    uint64_t simulated_now() const;
 
     /// Real time: waits until the named nodes are ready (or `ready_timeout`; throws naming the
     /// missing ones), then sends the start `start_delay` from now. Returns the start time.

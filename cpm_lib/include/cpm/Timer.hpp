@@ -2,7 +2,9 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
+#include <utility>
 
 #include <cpm/Participant.hpp>
 
@@ -80,5 +82,11 @@ public:
     virtual uint64_t period_ns() const = 0;
     virtual uint64_t offset_ns() const = 0;
 };
+
+/// A timer says its missed ticks in the log (at most once a second while it overruns, and once
+/// more when it stops): "timer '<node_id>': ...; <N> ticks missed in all". Reads the node id and
+/// N back from such a message (cpm lab run counts the lab's missed deadlines this way); nullopt
+/// for any other message.
+std::optional<std::pair<std::string, uint64_t>> timer_missed_ticks(const std::string& message);
 
 }  // namespace cpm
