@@ -1,6 +1,7 @@
 #include "QosFromOptions.hpp"
 
 #include <cpm/Error.hpp>
+#include <cpm/QosOverrides.hpp>
 
 namespace cpm::detail {
 
@@ -51,8 +52,9 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
 
 }  // namespace
 
-dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& topic, bool keyed, uint32_t max_sample_bytes)
+dds::DataWriterQos writer_qos(const WriterOptions& given, const std::string& topic, bool keyed, uint32_t max_sample_bytes)
 {
+    const WriterOptions options = overridden(given, topic, qos_overrides());
     dds::DataWriterQos qos = dds::DATAWRITER_QOS_DEFAULT;
     if (options.keep_all && options.max_unacknowledged < 1) {
         throw Error("Writer on topic '" + topic + "': max_unacknowledged = " +
@@ -68,8 +70,9 @@ dds::DataWriterQos writer_qos(const WriterOptions& options, const std::string& t
     return qos;
 }
 
-dds::DataReaderQos reader_qos(const ReaderOptions& options, const std::string& topic, uint32_t max_sample_bytes)
+dds::DataReaderQos reader_qos(const ReaderOptions& given, const std::string& topic, uint32_t max_sample_bytes)
 {
+    const ReaderOptions options = overridden(given, topic, qos_overrides());
     dds::DataReaderQos qos = dds::DATAREADER_QOS_DEFAULT;
     // A keep-all reader keeps what was not taken yet, without limit.
     apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth, 0,

@@ -9,7 +9,8 @@
 
 namespace cpm::detail {
 
-/// The DDS QoS for cpm's options. Throws cpm::Error naming the topic and the bad value.
+/// The DDS QoS for cpm's options, with the process's QoS overrides for the topic applied
+/// (CPM_QOS_OVERRIDES, cpm/QosOverrides.hpp). Throws cpm::Error naming the topic and the bad value.
 /// `keyed`: the type has a key (instances), which decides how keep_all's window is bounded.
 /// `max_sample_bytes`: the type's largest serialized size; above kLargeSampleBytes the histories
 /// allocate each sample at its real size instead of preallocating the largest (a CameraFrame

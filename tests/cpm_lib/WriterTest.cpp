@@ -1,4 +1,5 @@
 #include <cpm/Error.hpp>
+#include <cpm/QosOverrides.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm_test/Dds.hpp>
@@ -11,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <csignal>
+#include <cstdlib>
 #include <memory>
 
 using namespace std::chrono_literals;
@@ -46,6 +48,37 @@ TEST(Writer, ReliableReaderDoesNotMatchABestEffortWriter)
     ASSERT_TRUE(sut.wait_for_matched(1, 5000ms));
     EXPECT_FALSE(sut.wait_for_matched(2, 300ms));
     EXPECT_EQ(reliable.matched_publications(), 0u);
+}
+
+TEST(Writer, TheLabsQosOverridesChangeBothSidesOfATopicSoTheyStillMatch)
+{
+    // Without the override this pair never matches (the test above); with the topic made
+    // reliable for the whole process, the best-effort writer becomes reliable and delivers.
+    cpm::Participant participant(cpm_test::isolated_options());
+    const std::string topic = cpm_test::unique_topic("vehicleState");
+    ::setenv(cpm::kQosOverridesVariable, ("{\"" + topic + "\": {\"reliable\": true, \"history_depth\": 3}}").c_str(), 1);
+    cpm::Writer<VehicleState> sut(participant, topic, {.reliable = false});
+    cpm::ReaderAbstract<VehicleState> reliable(participant, topic, {.reliable = true});
+    ::unsetenv(cpm::kQosOverridesVariable);
+    ASSERT_TRUE(sut.wait_for_matched(1, 5000ms));
+    VehicleState s;
+    s.vehicle_id(3);
+    EXPECT_TRUE(sut.write(s));
+    std::vector<VehicleState> got;
+    EXPECT_TRUE(cpm_test::wait_until([&] {
+        for (auto& x : reliable.take()) got.push_back(x);
+        return !got.empty();
+    }));
+
+    // A malformed override is an error naming the variable, never silently ignored.
+    ::setenv(cpm::kQosOverridesVariable, ("{\"" + topic + "\": {\"reliable\": \"yes\"}}").c_str(), 1);
+    try {
+        cpm::Writer<VehicleState> bad(participant, topic);
+        FAIL() << "no error";
+    } catch (const cpm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("CPM_QOS_OVERRIDES: " + topic + ".reliable: \"yes\" is not true or false"));
+    }
+    ::unsetenv(cpm::kQosOverridesVariable);
 }
 
 TEST(Writer, BadOptionsAreErrorsNamingTopicAndValue)
