@@ -212,7 +212,7 @@ FsmNode::~FsmNode() = default;
 void FsmNode::run(const std::function<bool()>& stop_requested)
 {
     const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
-    auto timer = Timer::create("fsm_node_" + std::to_string(impl_->options.vehicle_id), period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
+    auto timer = Timer::create("fsm_node_" + std::to_string(impl_->options.vehicle_id), period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) {
         if (!impl_->tick()) timer->stop();
     });

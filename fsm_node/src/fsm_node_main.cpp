@@ -13,6 +13,7 @@ namespace {
 
 const char* kHelp =
     "usage: fsm_node --vehicle_id N --fsm FILE.json|FILE.uxf [--rate 80] [--max-age 200ms] [--report] [--dds_domain N]\n"
+    "                [--simulated_time]\n"
     "\n"
     "Loads and checks the state machine (all errors at once, exit 1), then looks at --rate Hz\n"
     "(cpm::Timer) for a new RangeSensors sample of vehicle N and ticks the machine once per\n"
@@ -22,6 +23,8 @@ const char* kHelp =
     "on every state change and prints each transition. Stop states and missing or stale input\n"
     "(older than --max-age) brake the car with a StopRequest; the reason is logged.\n"
     "Ends on SIGINT/SIGTERM (braking the car) or when the machine stops in a final Stop state.\n"
+    "--simulated_time: tick on the lab's simulated clock (timer fsm_node_N; cpm lab run, cpm lab\n"
+    "clock --simulated), ages and times in lab time; a machine that stops frees the clock.\n"
     "--report: at the end, print the distance driven, the heading change and, for each wall\n"
     "following state, the followed range's mean and deviation from its clearance.\n";
 
