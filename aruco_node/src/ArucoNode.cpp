@@ -173,6 +173,11 @@ void ArucoNode::run(const std::function<bool()>& stop_requested)
         frames.stop();
         return;
     }
+    // A replay has no clock to keep: it waits (up to 3 s) for its first reader, so that the
+    // first frames do not go out to nobody (the topic is best effort, as every sensor's).
+    if (d.options.source == FrameSourceKind::video || d.options.source == FrameSourceKind::images) {
+        (void)d.writer.wait_for_matched(1, std::chrono::seconds(3));
+    }
     while (!stop_requested()) {
         cv::Mat gray = d.source->next();
         if (gray.empty()) break;  // the end of a video or folder

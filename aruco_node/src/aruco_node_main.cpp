@@ -20,7 +20,8 @@ const std::string kHelp = std::string(
     "y left) through the camera's mounting. Frames that arrive while one is processed are\n"
     "dropped and counted. Frames come from the 'cameraFrame' topic (default: the synthetic\n"
     "camera, camera_sim), a V4L2 device, a video file or a folder of images (replayed in name\n"
-    "order at --fps). On SIGINT/SIGTERM, or at the end of a video or folder, it prints one JSON\n"
+    "order at --fps; a replay first waits up to 3 s for a reader of arucoMarkers, so that its first\n"
+    "frames do not go out to nobody). On SIGINT/SIGTERM, or at the end of a video or folder, it prints one JSON\n"
     "line of statistics and exits 0.\n"
     "\n") + cpm::aruco::kDetectorFlagsHelp;
 
