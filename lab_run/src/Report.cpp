@@ -1,6 +1,11 @@
 #include <cpm/lab/Report.hpp>
 
 #include <cpm/ChildProcess.hpp>
+#include <cpm/aruco/GateCourse.hpp>
+#include <cpm/vehicle/VehicleModel.hpp>
+#include <cpm/vehicle/World.hpp>
+#include <cpm/Timer.hpp>
+#include <cpm/percentile.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 #include <cpm/rtdb/Recording.hpp>
 
@@ -11,6 +16,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <tuple>
 #include <unistd.h>
@@ -21,9 +27,13 @@ namespace fs = std::filesystem;
 
 namespace {
 
+/// A stamp at or after 2001-09-09 is on the real clock (ns since 1970); the lab's simulated
+/// clock counts from 0 at the run's start.
+constexpr uint64_t kRealClockSince = 1'000'000'000'000'000'000ull;
+
 struct Point
 {
-    double t, x, y;
+    double t, x, y, yaw;
 };
 
 struct Car
@@ -78,13 +88,6 @@ std::string fixed(double v, int decimals)
     return s.str();
 }
 
-double percentile(std::vector<double> v, double p)
-{
-    if (v.empty()) return 0;
-    std::sort(v.begin(), v.end());
-    return v[std::min(v.size() - 1, size_t(p * double(v.size())))];
-}
-
 /// A gnuplot string literal.
 std::string quoted(const std::string& s)
 {
@@ -114,7 +117,13 @@ Report make_report(const std::string& run_dir)
     std::vector<Segment> walls;
     std::vector<std::array<double, 3>> markers;  // x, y, id
     std::vector<std::vector<std::pair<double, double>>> lanes;
-    if (summary.contains("world") && summary["world"].is_string()) {
+    std::optional<vehicle::World> gates;  // the world, for judging its gates
+    if (summary.contains("world") && summary["world"].is_string() && !summary["world"].get<std::string>().empty()) {
+        try {
+            gates = vehicle::World::load(summary["world"]);
+        } catch (const std::exception&) {
+            // drawn without gates; the walls below say nothing either when it cannot be read
+        }
         const auto world = read_json(summary["world"]);
         if (world.is_object()) {
             for (const auto& w : world.value("walls", nlohmann::json::array())) walls.push_back({w[0], w[1], w[2], w[3]});
@@ -134,25 +143,31 @@ Report make_report(const std::string& run_dir)
 
     // Every sample of the topics the plots need, by data time from the run's first one.
     std::map<int, Car> cars;
+    // In simulated time the stamps are lab time and the commits the history's real clock: a
+    // stamped topic's rate is per lab second there, and create -> commit means nothing.
+    const bool simulated = summary.value("time", std::string()) == "simulated";
     struct TopicFigures
     {
         uint64_t samples = 0, first = std::numeric_limits<uint64_t>::max(), last = 0;
         std::vector<double> delay_ms;
         bool stamped = true;
+        double rate_hz() const { return last > first ? double(samples - 1) / (double(last - first) * 1e-9) : 0.0; }
     };
     std::map<std::string, TopicFigures> topics;
     std::vector<std::tuple<double, std::string, std::string, std::string>> log_lines;  // t, level, node, text
+    std::map<std::string, uint64_t> missed_by_timer;  // the nodes' timers' own counts, from the log
     uint64_t t0 = std::numeric_limits<uint64_t>::max();
     std::vector<std::pair<rtdb::ObjectInfo, std::vector<rtdb::StoredSample>>> all;
     for (const auto& o : rec.store->search({.kind = rtdb::ObjectKind::instance})) {
         auto samples = rec.store->range(o.oid, 0, UINT64_MAX, rtdb::By::commit, 100'000'000).samples;
         auto& f = topics[o.topic];
         f.stamped = o.data_time == "create_stamp";
+        const bool lab_clock = simulated && f.stamped;
         for (const auto& s : samples) {
             ++f.samples;
-            f.first = std::min(f.first, s.commit_ns);
-            f.last = std::max(f.last, s.commit_ns);
-            if (f.stamped && s.commit_ns >= s.data_ns) f.delay_ms.push_back(double(s.commit_ns - s.data_ns) * 1e-6);
+            f.first = std::min(f.first, lab_clock ? s.data_ns : s.commit_ns);
+            f.last = std::max(f.last, lab_clock ? s.data_ns : s.commit_ns);
+            if (f.stamped && !simulated && s.commit_ns >= s.data_ns) f.delay_ms.push_back(double(s.commit_ns - s.data_ns) * 1e-6);
             if (o.topic == "vehicleObservation" || o.topic == "vehicleState") t0 = std::min(t0, s.data_ns);
         }
         all.emplace_back(o, std::move(samples));
@@ -170,11 +185,18 @@ Report make_report(const std::string& run_dir)
             const double t = seconds(s.data_ns);
             if (o.topic == "log") {
                 const int level = j->value("log_level", 3);
-                if (level <= 2) log_lines.emplace_back(seconds(s.commit_ns), level == 1 ? "error" : "warn", j->value("id", ""), j->value("content", ""));
+                // Simulated: a node on the lab clock stamps lab time; one on the real clock (the
+                // history) cannot be placed on the lab's time axis.
+                const uint64_t stamp = j->value(nlohmann::json::json_pointer("/stamp/nanoseconds"), uint64_t{0});
+                const double when = !simulated ? seconds(s.commit_ns) : stamp < kRealClockSince ? seconds(stamp) : std::nan("");
+                if (level <= 2) log_lines.emplace_back(when, level == 1 ? "error" : "warn", j->value("id", ""), j->value("content", ""));
+                if (const auto missed = timer_missed_ticks(j->value("content", ""))) {
+                    missed_by_timer[missed->first] = std::max(missed_by_timer[missed->first], missed->second);
+                }
                 continue;
             }
             Car& car = cars[j->value("vehicle_id", 0)];
-            if (path_topic) car.path.push_back({t, j->at("pose").value("x", 0.0), j->at("pose").value("y", 0.0)});
+            if (path_topic) car.path.push_back({t, j->at("pose").value("x", 0.0), j->at("pose").value("y", 0.0), j->at("pose").value("yaw", 0.0)});
             if (o.topic == "vehicleState") {
                 car.speed.emplace_back(t, j->value("speed", 0.0));
                 car.steering.emplace_back(t, j->value("steering_servo", 0.0));
@@ -298,14 +320,15 @@ Report make_report(const std::string& run_dir)
     {
         std::ofstream out(plots / "rates.dat");
         int i = 0;
-        for (const auto& [name, f] : topics) {
-            const double span = f.last > f.first ? double(f.last - f.first) * 1e-9 : 0;
-            out << i++ << ' ' << quoted(name) << ' ' << (span > 0 ? double(f.samples - 1) / span : 0.0) << '\n';
-        }
+        for (const auto& [name, f] : topics) out << i++ << ' ' << quoted(name) << ' ' << f.rate_hz() << '\n';
         image("topics.png");
-        gp << "set title 'samples per second, by topic'\nset xlabel ''\nset ylabel 'Hz'\nset style fill solid 0.6\nset boxwidth 0.7\n"
+        // A log scale: the lab clock's topics in simulated time run thousands a second beside
+        // the cars' 50 Hz.
+        gp << "set title '" << (simulated ? "samples per second by topic (stamped topics per lab second, the others per real second)"
+                                           : "samples per second, by topic")
+           << "'\nset xlabel ''\nset ylabel 'Hz (log scale)'\nset logscale y\nset yrange [0.1:*]\nset style fill solid 0.6\nset boxwidth 0.7\n"
               "set xtics rotate by -40\nplot " << quoted((plots / "rates.dat").string()) << " using 1:3:xtic(2) with boxes notitle\n"
-              "set xtics norotate\n";
+              "set xtics norotate\nunset logscale y\nset yrange [*:*]\n";
     }
     const std::string script = (plots / "plots.gp").string();
     std::ofstream(script) << gp.str();
@@ -328,22 +351,38 @@ Report make_report(const std::string& run_dir)
         nlohmann::json c{{"driven_m", driven}, {"max_speed_mps", v_max}, {"states_entered", car.states.size()}};
         c["min_clearance_m"] = std::isfinite(clear_min) ? nlohmann::json(clear_min) : nlohmann::json(nullptr);
         if (!car.states.empty()) c["last_state"] = car.states.back().second;
+        if (gates && !gates->gates().empty()) {
+            // Each gate of the world judged on the car's path (the path of its reference point).
+            std::vector<aruco::PathPoint> path;
+            for (const auto& p : car.path) path.push_back({p.t, {p.x, p.y, p.yaw}});
+            nlohmann::json list = nlohmann::json::array();
+            int passed = 0;
+            for (const auto& g : aruco::gate_passages(*gates, path, vehicle::VehicleParameters{}.width)) {
+                passed += g.passed;
+                list.push_back(g.passed ? nlohmann::json{{"gate", g.gate + 1}, {"passed", true}, {"t_s", g.t}, {"offset_m", g.offset}, {"clearance_m", g.clearance}}
+                                        : nlohmann::json{{"gate", g.gate + 1}, {"passed", false}});
+            }
+            c["gates"] = list;
+            c["gates_passed"] = passed;
+        }
         figures["cars"][std::to_string(id)] = c;
     }
     double closest_min = std::numeric_limits<double>::infinity();
     for (const auto& [t, d] : closest) closest_min = std::min(closest_min, d);
     figures["min_distance_between_cars_m"] = std::isfinite(closest_min) ? nlohmann::json(closest_min) : nlohmann::json(nullptr);
     for (const auto& [name, f] : topics) {
-        const double span = f.last > f.first ? double(f.last - f.first) * 1e-9 : 0;
-        nlohmann::json t{{"samples", f.samples}, {"rate_hz", span > 0 ? double(f.samples - 1) / span : 0.0}};
+        nlohmann::json t{{"samples", f.samples}, {"rate_hz", f.rate_hz()}, {"rate_per", simulated && f.stamped ? "lab second" : "real second"}};
         if (!f.delay_ms.empty()) t.update({{"delay_ms_p50", percentile(f.delay_ms, 0.5)}, {"delay_ms_p99", percentile(f.delay_ms, 0.99)}});
         figures["topics"][name] = t;
     }
     size_t errors = 0, warnings = 0;
     for (const auto& l : log_lines) (std::get<1>(l) == "error" ? errors : warnings)++;
+    uint64_t missed = 0;
+    for (const auto& [timer, n] : missed_by_timer) missed += n;
+    figures["missed_deadlines"] = missed;
+    figures["missed_deadlines_by_timer"] = missed_by_timer;
     figures["log_errors"] = errors;
     figures["log_warnings"] = warnings;
-    figures["missed_deadlines"] = nullptr;  // not reported by the nodes yet
     report.figures = figures;
 
     // The page: the images beside it, nothing fetched from elsewhere; a script counts the images
@@ -361,29 +400,45 @@ Report make_report(const std::string& run_dir)
       << (summary.value("ok", false) ? "every process ran its time" : "<span class=\"bad\">the run did not end well: " +
                                                                              html_escape(summary.value("error", std::string("see summary.json"))) + "</span>")
       << ". Recording: <code>recording.db</code> (" << rec.samples << " samples; ask it with <code>cpm history --file</code>).</p>\n";
-    h << "<h2>Cars</h2>\n<table><tr><th>car</th><th>driven (m)</th><th>top speed (m/s)</th><th>least clearance to a wall (m)</th><th>last state</th></tr>\n";
+    const bool with_gates = gates && !gates->gates().empty();
+    h << "<h2>Cars</h2>\n<table><tr><th>car</th><th>driven (m)</th><th>top speed (m/s)</th><th>least clearance to a wall (m)</th><th>last state</th>"
+      << (with_gates ? "<th>gates passed</th>" : "") << "</tr>\n";
     for (const auto& [id, c] : figures["cars"].items()) {
         h << "<tr><td>" << id << "</td><td>" << fixed(c["driven_m"], 2) << "</td><td>" << fixed(c["max_speed_mps"], 2) << "</td><td>"
           << (c["min_clearance_m"].is_null() ? "-" : fixed(c["min_clearance_m"], 3)) << "</td><td>"
-          << html_escape(c.value("last_state", std::string("-"))) << "</td></tr>\n";
+          << html_escape(c.value("last_state", std::string("-"))) << "</td>";
+        if (with_gates) {
+            const int passed = c.value("gates_passed", 0);
+            h << "<td" << (passed < int(gates->gates().size()) ? " class=\"bad\"" : "") << ">" << passed << " of " << gates->gates().size() << "</td>";
+        }
+        h << "</tr>\n";
     }
     h << "</table>\n";
     for (const auto& img : report.images) {
         const std::string file = fs::path(img).filename().string();
         h << "<div><img src=\"plots/" << file << "\" alt=\"" << file << "\"></div>\n";
     }
-    h << "<h2>Topics</h2>\n<table><tr><th>topic</th><th>samples</th><th>rate (Hz)</th><th>delay create → commit p50 (ms)</th><th>p99 (ms)</th></tr>\n";
+    h << "<h2>Topics</h2>\n";
+    if (simulated) h << "<p>Simulated time: rates of stamped topics per second of lab time; their delay create → commit is not measured (two clocks).</p>\n";
+    h << "<table><tr><th>topic</th><th>samples</th><th>rate (Hz)</th><th>delay create → commit p50 (ms)</th><th>p99 (ms)</th></tr>\n";
     for (const auto& [t, f] : figures["topics"].items()) {
         h << "<tr><td>" << html_escape(t) << "</td><td>" << f["samples"] << "</td><td>" << fixed(f["rate_hz"], 1) << "</td><td>"
           << (f.contains("delay_ms_p50") ? fixed(f["delay_ms_p50"], 2) : "-") << "</td><td>"
           << (f.contains("delay_ms_p99") ? fixed(f["delay_ms_p99"], 2) : "-") << "</td></tr>\n";
     }
-    h << "</table>\n<p>Missed deadlines: not reported by the nodes yet.</p>\n<h2>Warnings and errors (" << log_lines.size() << ")</h2>\n";
+    h << "</table>\n<h2>Missed deadlines (" << missed << ")</h2>\n<p>Ticks the nodes' timers skipped because a tick ended after the next "
+         "one was due, as the timers said in the log.</p>\n";
+    if (!missed_by_timer.empty()) {
+        h << "<table><tr><th>timer</th><th>ticks missed</th></tr>\n";
+        for (const auto& [timer, n] : missed_by_timer) h << "<tr><td>" << html_escape(timer) << "</td><td>" << n << "</td></tr>\n";
+        h << "</table>\n";
+    }
+    h << "<h2>Warnings and errors (" << log_lines.size() << ")</h2>\n";
     if (log_lines.empty()) h << "<p>None.</p>\n";
     else {
         h << "<table><tr><th>time (s)</th><th>level</th><th>node</th><th>message</th></tr>\n";
         for (const auto& [t, level, node, text] : log_lines) {
-            h << "<tr><td>" << fixed(t, 3) << "</td><td" << (level == "error" ? " class=\"bad\"" : "") << ">" << level << "</td><td>"
+            h << "<tr><td>" << (std::isfinite(t) ? fixed(t, 3) : "-") << "</td><td" << (level == "error" ? " class=\"bad\"" : "") << ">" << level << "</td><td>"
               << html_escape(node) << "</td><td style=\"text-align:left\">" << html_escape(text) << "</td></tr>\n";
         }
         h << "</table>\n";

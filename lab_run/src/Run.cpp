@@ -1,16 +1,22 @@
 #include <cpm/lab/Run.hpp>
 
+#include <cpm/AsyncReader.hpp>
 #include <cpm/ChildProcess.hpp>
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/TimeMaster.hpp>
+#include <cpm/Timer.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
 #include <cpm/topics.hpp>
 
+#include <HistoryStatus.h>
+#include <Log.h>
 #include <StopRequest.h>
 #include <cpm_topic_types.hpp>
+
+#include <cpm/rtdb/TopicProbe.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -18,11 +24,16 @@
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <cstdlib>
 #include <ctime>
 #include <deque>
+#include <fcntl.h>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <mutex>
 #include <sstream>
+#include <sys/file.h>
 #include <thread>
 #include <unistd.h>
 
@@ -82,11 +93,93 @@ struct Node
     bool died = false;  ///< ended badly while the run went on
 };
 
-void start(Node& n, int domain, bool append)
+/// The domain, claimed for the run: no other cpm lab run on this host has it (a lock file held
+/// while the run lasts), and discovery sees nobody on it. Throws std::runtime_error naming who
+/// is there.
+class DomainClaim
+{
+public:
+    DomainClaim(int domain, const ParticipantOptions& options)
+    {
+        const std::string lock = "/tmp/cpm_lab_run_domain_" + std::to_string(domain) + ".lock";
+        fd_ = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+        if (fd_ >= 0 && ::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+            ::close(fd_);
+            throw std::runtime_error("domain " + std::to_string(domain) + " is taken by another cpm lab run on this host (" + lock +
+                                     " is locked); give this one another domain (domain: in the scenario, or --dds_domain)");
+        }
+        rtdb::TopicProbe probe(options);
+        std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // discovery over loopback and shared memory
+        const auto others = probe.participants();
+        if (!others.empty()) {
+            std::string names;
+            for (const auto& n : others) names += (names.empty() ? "" : ", ") + n;
+            if (fd_ >= 0) ::close(fd_);
+            throw std::runtime_error("domain " + std::to_string(domain) + " is in use by " + std::to_string(others.size()) +
+                                     " participant(s): " + names + "; stop them or give this run another domain (domain: in the scenario, "
+                                     "or --dds_domain)");
+        }
+    }
+    ~DomainClaim()
+    {
+        if (fd_ >= 0) ::close(fd_);
+    }
+    DomainClaim(const DomainClaim&) = delete;
+    DomainClaim& operator=(const DomainClaim&) = delete;
+
+private:
+    int fd_ = -1;
+};
+
+/// What the lab says while it runs: the history's counts and the timers' missed ticks.
+class RunWatch
+{
+public:
+    explicit RunWatch(Participant& p)
+        : status_([this](std::vector<HistoryStatus>& s) { on_status(s); }, p, topics::history_status.name, topics::history_status.reader),
+          log_([this](std::vector<Log>& l) { on_log(l); }, p, topics::log.name, topics::log.reader)
+    {
+    }
+    uint64_t recorded() const { return recorded_; }
+    uint64_t missed() const
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        uint64_t n = 0;
+        for (const auto& [timer, count] : missed_) n += count;
+        return n;
+    }
+
+private:
+    void on_status(std::vector<HistoryStatus>& statuses)
+    {
+        for (const auto& s : statuses) {
+            uint64_t n = 0;
+            for (const auto& t : s.topics()) n += t.samples();
+            recorded_ = n;
+        }
+    }
+    void on_log(std::vector<Log>& lines)
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        for (const auto& l : lines) {
+            if (const auto said = timer_missed_ticks(l.content())) missed_[said->first] = std::max(missed_[said->first], said->second);
+        }
+    }
+
+    mutable std::mutex mutex_;
+    std::map<std::string, uint64_t> missed_;
+    std::atomic<uint64_t> recorded_{0};
+    AsyncReader<HistoryStatus> status_;
+    AsyncReader<Log> log_;
+};
+
+void start(Node& n, int domain, const std::string& qos, bool append)
 {
     if (append) std::ofstream(n.log, std::ios::app) << "\n--- restarted by cpm lab run ---\n";
+    std::vector<std::string> env{"CPM_DOMAIN_ID=" + std::to_string(domain)};
+    if (!qos.empty()) env.push_back(std::string(kQosOverridesVariable) + "=" + qos);
     n.child.emplace(ProcessOptions{.argv = n.plan.argv,
-                                   .env = {"CPM_DOMAIN_ID=" + std::to_string(domain)},
+                                   .env = env,
                                    .stdout_path = n.log,
                                    .stderr_path = n.log,
                                    .append_output = append,
@@ -107,10 +200,20 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     const fs::path dir = fs::absolute(o.out_dir.empty() ? fs::path("runs") / (s.name + "-" + utc_now_compact()) : fs::path(o.out_dir));
     std::error_code ec;
     if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) throw std::runtime_error("the run's folder " + dir.string() + " exists and is not empty");
-    fs::create_directories(dir, ec);
-    if (ec) throw std::runtime_error("cannot make the run's folder " + dir.string() + ": " + ec.message());
     settings.run_dir = dir.string();
     const auto plan = plan_run(s, settings);  // names a missing program before anything starts
+
+    // Every process, this one too, makes its readers and writers with the scenario's QoS.
+    const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
+    if (!qos.empty()) ::setenv(kQosOverridesVariable, qos.c_str(), 1);
+    ParticipantOptions po = ParticipantOptions::from_init();
+    po.domain_id = settings.domain;
+    po.name = "cpm_lab_run";
+    po.shared_memory = false;  // short-lived beside many processes: UDP loopback (see cpm history)
+    const DomainClaim claim(settings.domain, po);
+
+    fs::create_directories(dir, ec);
+    if (ec) throw std::runtime_error("cannot make the run's folder " + dir.string() + ": " + ec.message());
     fs::copy_file(s.file, dir / "scenario.yaml", fs::copy_options::overwrite_existing, ec);
 
     RunResult result;
@@ -121,19 +224,16 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     const bool tty = o.progress && ::isatty(::fileno(o.progress));
     const auto t0 = Clock::now();
 
-    ParticipantOptions po = ParticipantOptions::from_init();
-    po.domain_id = settings.domain;
-    po.name = "cpm_lab_run";
-    po.shared_memory = false;  // short-lived beside many processes: UDP loopback (see cpm history)
     Participant participant(po);
     Writer<StopRequest> stops(participant, topics::stop_request.name, topics::stop_request.writer);
     HistoryClient history(participant, std::chrono::milliseconds(2000));
+    RunWatch watch(participant);
 
     std::vector<Node> nodes;
     for (const auto& p : plan) nodes.push_back({p, (dir / (p.name + ".log")).string()});
 
     // The history first, so that the recording holds the run from its first sample.
-    start(nodes[0], settings.domain, false);
+    start(nodes[0], settings.domain, qos, false);
     bool history_up = false;
     const auto history_deadline = Clock::now() + std::chrono::seconds(15);
     while (!history_up && Clock::now() < history_deadline && !o.stop() && nodes[0].child->running()) {
@@ -145,7 +245,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     if (!history_up) {
         result.error = "the history service did not answer within 15 s; the end of its log:\n" + tail(nodes[0].log, 10);
     }
-    for (size_t i = 1; i < nodes.size() && result.error.empty(); ++i) start(nodes[i], settings.domain, false);
+    for (size_t i = 1; i < nodes.size() && result.error.empty(); ++i) start(nodes[i], settings.domain, qos, false);
     say("cpm lab run: " + s.name + ": " + std::to_string(nodes.size()) + " processes on domain " + std::to_string(settings.domain) +
         ", logs and recording in " + dir.string());
 
@@ -199,7 +299,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
             if (n.plan.restart) {
                 ++n.restarts;
                 say("cpm lab run: " + n.plan.name + " " + n.end->describe() + "; restarting it (restart: true)");
-                start(n, settings.domain, true);
+                start(n, settings.domain, qos, true);
                 continue;
             }
             n.died = true;
@@ -216,9 +316,12 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
         if (Clock::now() - last_progress >= std::chrono::seconds(tty ? 1 : 10) && o.progress) {
             last_progress = Clock::now();
             const double real = std::chrono::duration<double>(Clock::now() - t0).count();
-            char line[200];
-            if (simulated) std::snprintf(line, sizeof line, "%.0f s real, simulated clock running to %.1f s, %zu car(s)", real, double(settings.duration_ns) * 1e-9, s.vehicles.size());
-            else std::snprintf(line, sizeof line, "lab time %.1f / %.1f s, %zu car(s)", double(lab_now) * 1e-9, double(settings.duration_ns) * 1e-9, s.vehicles.size());
+            char line[240];
+            const uint64_t shown = simulated ? master.simulated_now() : lab_now;
+            std::snprintf(line, sizeof line, "lab time %.1f / %.1f s%s, %zu car(s), %llu missed deadline(s), %llu samples recorded",
+                          double(shown) * 1e-9, double(settings.duration_ns) * 1e-9,
+                          simulated ? (" (simulated, " + std::to_string(int(real)) + " s real)").c_str() : "", s.vehicles.size(),
+                          (unsigned long long)watch.missed(), (unsigned long long)watch.recorded());
             std::fprintf(o.progress, tty ? "\r%s   " : "%s\n", line);
             std::fflush(o.progress);
         }
@@ -276,6 +379,9 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
                            {"world", s.world},
                            {"lanes", s.lanes},
                            {"processes", processes},
+                           {"missed_deadlines", watch.missed()},
+                           {"samples_recorded", watch.recorded()},
+                           {"qos", qos.empty() ? nlohmann::json::object() : nlohmann::json::parse(qos)},
                            {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()}};
     std::ofstream(dir / "summary.json") << summary.dump(2) << "\n";
     return result;

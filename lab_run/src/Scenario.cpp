@@ -175,7 +175,8 @@ Scenario load_scenario(const std::string& path)
     }
     Checker c(path);
     if (!root.IsMap()) throw ScenarioError({path + ": expected a map of keys (name, time, duration, world, vehicles, ...)"});
-    c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor"});
+    c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor",
+                    "parameters"});
 
     if (!root["name"]) c.error(root, "name", "missing (the run's name; its folder is runs/<name>-<UTC time>)");
     else if (auto n = c.text(root["name"], "name")) {
@@ -194,6 +195,7 @@ Scenario load_scenario(const std::string& path)
     else if (auto d = c.duration(root["duration"], "duration")) s.duration_ns = *d;
     if (root["world"]) s.world = c.file(root["world"], "world", s.dir, "world file");
     if (root["lanes"]) s.lanes = c.file(root["lanes"], "lanes", s.dir, "lane graph");
+    if (root["parameters"]) s.parameters = c.file(root["parameters"], "parameters", s.dir, "parameter file");
 
     const YAML::Node vehicles = root["vehicles"];
     if (!vehicles) c.error(root, "vehicles", "missing (a list of cars, each with an id)");
@@ -230,7 +232,6 @@ Scenario load_scenario(const std::string& path)
             if (s.time == TimeMode::simulated && v["camera"]) {
                 c.error(v["camera"], p + ".camera", "the synthetic camera and aruco_node run in real time only; use time: real");
             }
-            if (s.time == TimeMode::simulated && v["fsm"]) c.error(v["fsm"], p + ".fsm", "fsm_node runs in real time only; use time: real");
             s.vehicles.push_back(spec);
         }
     }
@@ -333,6 +334,9 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
     }
     for (const auto& t : s.record.exclude) history.insert(history.end(), {"--exclude", cpm::cli::glob_regex(t)});
     plan.push_back({"cpm_history", history, false, 9, ""});
+    if (!s.parameters.empty()) {
+        plan.push_back({"parameters", {program("cpm"), "param", "serve", s.parameters, "--dds_domain", domain}, false, 8, ""});
+    }
 
     // The cars: with routing all in one simulator spread over the lanes, else one each.
     if (s.routing.enabled) {
@@ -371,7 +375,8 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
     for (const auto& v : s.vehicles) {
         if (v.fsm.empty()) continue;
         const std::string id = std::to_string(v.id);
-        plan.push_back({"fsm_" + id, {program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report", "--dds_domain", domain}, v.restart, 1, ""});
+        plan.push_back({"fsm_" + id, with_common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}), v.restart, 1,
+                        "fsm_node_" + id});
     }
     if (!missing.empty()) {
         std::vector<std::string> errors;

@@ -130,6 +130,17 @@ TopicProbe::~TopicProbe()
     p->set_listener(nullptr);
 }
 
+std::vector<std::string> TopicProbe::participants() const
+{
+    std::lock_guard lock(impl_->discovery_mutex);
+    const auto own = impl_->participant->native()->guid().guidPrefix;
+    std::vector<std::string> names;
+    for (const auto& [prefix, name] : impl_->participant_names) {
+        if (prefix != own) names.push_back(name.empty() ? "(unnamed)" : name);
+    }
+    return names;
+}
+
 std::vector<TopicInfo> TopicProbe::topics() const
 {
     std::lock_guard lock(impl_->discovery_mutex);

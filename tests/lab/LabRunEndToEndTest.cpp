@@ -88,7 +88,11 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     const auto last = rec.store->latest(*car);
     ASSERT_FALSE(first.empty());
     ASSERT_TRUE(last.ok());
-    EXPECT_GT(double(last.sample.commit_ns - first[0].commit_ns) * 1e-9, 6.0);
+    // Simulated time: the stamps are lab time from 0, and cover the run's 8 s.
+    EXPECT_EQ(summary["time"], "simulated");
+    EXPECT_LT(first[0].data_ns, 1'000'000'000u) << "lab time starts at 0";
+    EXPECT_GT(double(last.sample.data_ns - first[0].data_ns) * 1e-9, 7.0);
+    EXPECT_GT(summary["samples_recorded"].get<uint64_t>(), 300u) << "the history's own count, as the progress line shows it";
     EXPECT_TRUE(rec.store->find("fsmStatus", "5")) << "the state machine's status is recorded";
     // The lab clock's stop (a SystemTrigger, a type without a Header) is recorded, not skipped.
     const auto trigger = rec.store->find("systemTrigger", "");
@@ -115,6 +119,9 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     EXPECT_GT(figures["cars"]["5"]["driven_m"].get<double>(), 1.0) << figures.dump(2);
     EXPECT_GT(figures["cars"]["5"]["min_clearance_m"].get<double>(), 0.2) << figures.dump(2);
     EXPECT_NEAR(figures["topics"]["vehicleState"]["rate_hz"].get<double>(), 50, 5) << figures.dump(2);
+    EXPECT_EQ(figures["topics"]["vehicleState"]["rate_per"], "lab second");
+    EXPECT_FALSE(figures["topics"]["vehicleState"].contains("delay_ms_p50")) << "no delay across two clocks";
+    EXPECT_TRUE(figures["missed_deadlines"].is_number_unsigned()) << figures.dump(2);
 
     // Drawn again from the folder alone.
     fs::remove_all(fs::path(out) / "plots");
@@ -144,6 +151,69 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     EXPECT_NE(summary["error"].get<std::string>().find("fsm_5"), std::string::npos);
     EXPECT_EQ(pid_with(out + "/recording.db"), 0) << "every process of the run is stopped";
     EXPECT_EQ(pid_with("--map " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string() + " --start"), 0);
+}
+
+TEST(LabRun, ANodeWithRestartTrueIsStartedAgainAndEveryNodeGetsTheScenariosQos)
+{
+    TempDir dir;
+    const std::string out = dir.file("run");
+    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    // vehicleState is best effort unless a scenario says otherwise.
+    const std::string file = dir.write("restart.yaml", "name: restart\ntime: simulated\nduration: 30s\nworld: " + source +
+                                                           "maps/corridor.json\nvehicles:\n  - id: 5\n    start: [0.0, -0.01, 0.0]\n"
+                                                           "    fsm: " + source + "fsm/corridor.json\n    restart: true\n"
+                                                           "qos: {vehicleState: {reliable: true, history_depth: 2}}\n");
+    Process run({built_program("cpm"), "lab", "run", file, "--out", out});
+    const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(source + "fsm/corridor.json").string();
+    int pid = 0;
+    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args)) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
+
+    // Every writer and reader of vehicleState on the run's domain is reliable now.
+    Process info({built_program("cpm"), "topic", "info", "vehicleState", "--json"});
+    ASSERT_EQ(info.wait(30s), 0) << info.errors();
+    const auto topic = nlohmann::json::parse(info.output());
+    ASSERT_FALSE(topic["writers"].empty()) << topic.dump(2);
+    ASSERT_FALSE(topic["readers"].empty()) << topic.dump(2);
+    for (const auto* side : {"writers", "readers"}) {
+        for (const auto& e : topic[side]) {
+            if (e["participant"] == "cpm_history" || e["participant"] == "cpm_topic") continue;  // they take what the writers offer
+            EXPECT_EQ(e["reliability"], "reliable") << side << ": " << e.dump();
+        }
+    }
+
+    ::kill(pid, SIGKILL);
+    EXPECT_EQ(run.wait(120s), 0) << run.output() << run.errors();
+    EXPECT_NE(run.errors().find("fsm_5 killed by SIGKILL; restarting it (restart: true)"), std::string::npos) << run.errors();
+    std::ifstream log(out + "/fsm_5.log");
+    const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find("--- restarted by cpm lab run ---"), std::string::npos) << "the second life's output follows the first's";
+    const auto summary = summary_of(out);
+    EXPECT_EQ(summary["ok"], true) << summary.dump(2);
+    EXPECT_EQ(summary["qos"]["vehicleState"]["reliable"], true);
+    bool found = false;
+    for (const auto& p : summary["processes"]) {
+        if (p["name"] != "fsm_5") continue;
+        found = true;
+        EXPECT_EQ(p["restarts"], 1) << p.dump();
+        EXPECT_EQ(p["failed"], false) << p.dump();
+    }
+    EXPECT_TRUE(found);
+}
+
+TEST(LabRun, ADomainInUseIsRefusedBeforeAnythingStarts)
+{
+    TempDir dir;
+    // Somebody else on the run's domain: a parameter server (any participant would do).
+    dir.write("p.json", "{\"a\": 1}");
+    Process other({built_program("cpm"), "param", "serve", dir.file("p.json")});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return other.output().find("serving") != std::string::npos; }, 30s)) << other.errors();
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--out", dir.file("run")});
+    EXPECT_EQ(run.wait(60s), 1) << run.output();
+    EXPECT_NE(run.errors().find("nothing started"), std::string::npos) << run.errors();
+    EXPECT_NE(run.errors().find("is in use by 1 participant(s): cpm"), std::string::npos) << run.errors();
+    EXPECT_FALSE(fs::exists(dir.file("run"))) << "no run folder";
+    other.kill(SIGINT);
+    EXPECT_EQ(other.wait(30s), 0);
 }
 
 TEST(LabRun, CtrlCStopsEverythingAndLeavesAReadableRecording)

@@ -1,5 +1,6 @@
 // Lab scenarios read and checked: the shipped ones load and plan the processes a run needs; a
 // wrong file gives every error at once, each with its line and YAML path.
+#include <cpm/Error.hpp>
 #include <cpm/lab/Scenario.hpp>
 
 #include <cpm_test/TempDir.hpp>
@@ -48,17 +49,21 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
     const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "fsm_node", "aruco_node", "central_routing"});
     const Scenario corridor = load_scenario(labs("corridor.yaml"));
     EXPECT_EQ(corridor.name, "corridor");
-    EXPECT_EQ(corridor.time, TimeMode::real);
-    EXPECT_EQ(corridor.duration_ns, 60'000'000'000ull);
+    EXPECT_EQ(corridor.time, TimeMode::simulated);
+    EXPECT_EQ(corridor.duration_ns, 40'000'000'000ull);
     ASSERT_EQ(corridor.vehicles.size(), 1u);
     EXPECT_EQ(corridor.vehicles[0].id, 5);
     EXPECT_DOUBLE_EQ(corridor.vehicles[0].y, -0.01);
     EXPECT_EQ(corridor.world, fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string());
-    auto plan = plan_run(corridor, {.bin_dir = bin, .run_dir = "/runs/x", .domain = 7});
+    auto plan = plan_run(corridor, {.bin_dir = bin, .run_dir = "/runs/x", .domain = 7, .time = TimeMode::simulated});
     ASSERT_EQ(plan.size(), 3u);
     EXPECT_EQ(plan[0].name, "cpm_history");
     EXPECT_EQ(plan[1].name, "car_5");
     EXPECT_EQ(plan[2].name, "fsm_5");
+    // The state machine follows the simulated clock with the car: the clock waits for both.
+    EXPECT_EQ(plan[2].argv.back(), "--simulated_time");
+    EXPECT_EQ(plan[2].timer, "fsm_node_5");
+    EXPECT_EQ(plan[1].timer, "firmware_sim_5,vehicle_bridge_5");
     EXPECT_NE(std::find(plan[0].argv.begin(), plan[0].argv.end(), "/runs/x/recording.db"), plan[0].argv.end());
     for (const auto& p : plan) {
         auto d = std::find(p.argv.begin(), p.argv.end(), "--dds_domain");
@@ -83,6 +88,53 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
     EXPECT_EQ(plan[2].argv.back(), "--simulated_time");
 }
 
+TEST(Scenario, QosOverridesAndAParameterFileReachEveryNode)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    dir.write("lab.yaml", "speed: 0.5\n");
+    const std::string file = dir.write("q.yaml", "name: q\nduration: 5s\nworld: map.json\nparameters: lab.yaml\nvehicles: [{id: 2}]\n"
+                                                 "qos: {vehicleState: {reliable: true, history_depth: 4}, log: {transient_local: false}}\n");
+    const Scenario s = load_scenario(file);
+    EXPECT_EQ(s.parameters, fs::weakly_canonical(dir.path / "lab.yaml").string());
+    // What the run puts into CPM_QOS_OVERRIDES reads back as the file said.
+    const auto back = cpm::parse_qos_overrides(cpm::to_json(s.qos), "test");
+    ASSERT_EQ(back.size(), 2u);
+    EXPECT_EQ(back.at("vehicleState").reliable, std::optional<bool>(true));
+    EXPECT_EQ(back.at("vehicleState").history_depth, std::optional<int>(4));
+    EXPECT_FALSE(back.at("vehicleState").transient_local);
+    EXPECT_EQ(back.at("log").transient_local, std::optional<bool>(false));
+    const auto applied = cpm::overridden(cpm::WriterOptions{.reliable = false, .keep_all = true}, "vehicleState", back);
+    EXPECT_TRUE(applied.reliable);
+    EXPECT_FALSE(applied.keep_all) << "a history depth means keep the last N";
+    EXPECT_EQ(applied.history_depth, 4);
+    EXPECT_FALSE(cpm::overridden(cpm::ReaderOptions{}, "rangeSensors", back).reliable) << "other topics keep their own";
+
+    const auto plan = plan_run(s, {.bin_dir = fake_bin(dir, {"cpm_history", "cpm"}), .run_dir = "/runs/q", .domain = 3});
+    ASSERT_EQ(plan.size(), 3u);
+    EXPECT_EQ(plan[1].name, "parameters");
+    EXPECT_EQ(std::vector<std::string>(plan[1].argv.begin() + 1, plan[1].argv.end()),
+              (std::vector<std::string>{"param", "serve", s.parameters, "--dds_domain", "3"}));
+}
+
+TEST(QosOverrides, AWrongOverrideNamesItsPathAndValue)
+{
+    auto error_of = [](const std::string& json) {
+        try {
+            (void)cpm::parse_qos_overrides(json, "CPM_QOS_OVERRIDES");
+        } catch (const cpm::Error& e) {
+            return std::string(e.what());
+        }
+        return std::string();
+    };
+    EXPECT_EQ(error_of("{\"a\": {\"history_depth\": 0}}"), "CPM_QOS_OVERRIDES: a.history_depth: 0 is not a whole number from 1 to 100000");
+    EXPECT_EQ(error_of("{\"a\": {\"reliabel\": true}}"), "CPM_QOS_OVERRIDES: a.reliabel: unknown key; known: reliable, transient_local, history_depth");
+    EXPECT_EQ(error_of("{\"a\": 1}"), "CPM_QOS_OVERRIDES: a: expected an object (reliable, transient_local, history_depth)");
+    EXPECT_EQ(error_of("[1]"), "CPM_QOS_OVERRIDES: expected an object of topic: {reliable, transient_local, history_depth}");
+    EXPECT_EQ(error_of("{").rfind("CPM_QOS_OVERRIDES: not JSON: ", 0), 0u);
+    EXPECT_EQ(error_of("{}"), "");
+}
+
 TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
 {
     TempDir dir;
@@ -104,7 +156,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
                                        "qos: {vehicleState: {reliable: maybe}}\n"); // 14
     const auto errors = errors_of(file);
     const std::vector<std::string> expected = {
-        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor",
+        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters",
         file + ":1: name: 'bad run': use letters, digits, - and _ only",
         file + ":2: time: 'sometimes': expected real or simulated",
         file + ":1: duration: missing (how long the run lasts, e.g. 30s)",
@@ -133,9 +185,8 @@ TEST(Scenario, SimulatedTimeRefusesWhatRunsInRealTimeOnly)
     const std::string file = dir.write("sim.yaml", "name: sim\ntime: simulated\nduration: 10s\nworld: map.json\n"
                                                    "vehicles:\n  - {id: 1, fsm: m.json, camera: cam.yaml}\n");
     const auto errors = errors_of(file);
-    ASSERT_EQ(errors.size(), 2u);
+    ASSERT_EQ(errors.size(), 1u);  // fsm_node follows the simulated clock
     EXPECT_EQ(errors[0], file + ":6: vehicles[0].camera: the synthetic camera and aruco_node run in real time only; use time: real");
-    EXPECT_EQ(errors[1], file + ":6: vehicles[0].fsm: fsm_node runs in real time only; use time: real");
 }
 
 TEST(Scenario, AFileThatIsNotYamlOrNotThereIsNamed)

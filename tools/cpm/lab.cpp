@@ -113,11 +113,15 @@ int lab_check(const std::vector<std::string>& args)
 const char* kRunHelp =
     "usage: cpm lab run FILE [--out DIR] [--duration T] [--time simulated|real] [--dds_domain N]\n"
     "\n"
-    "Runs a lab scenario (see cpm lab check): checks it (every error at once, nothing started),\n"
-    "then starts cpm_history recording into the run's folder, the cars (cpm vehicle sim), their\n"
-    "cameras' aruco_nodes, central_routing and the fsm_nodes, and drives the lab clock: in real\n"
-    "time for --duration (routing starts together a second ahead), in simulated time as fast as\n"
-    "the slowest node computes. A process that dies ends the run with the end of its log (or is\n"
+    "Runs a lab scenario (see cpm lab check): checks it (every error at once, nothing started)\n"
+    "and claims its domain (refused when another run on this host has it or anybody is on it),\n"
+    "then starts cpm_history recording into the run's folder, the parameter server (parameters:),\n"
+    "the cars (cpm vehicle sim), their cameras' aruco_nodes, central_routing and the fsm_nodes,\n"
+    "every one with the scenario's qos: overrides, and drives the lab clock: in real time for\n"
+    "--duration (routing starts together a second ahead), in simulated time as fast as the\n"
+    "slowest node computes. The progress line (redrawn on a terminal, else every 10 s): lab time,\n"
+    "cars, deadlines the nodes' timers missed, samples recorded. A process that dies ends the run\n"
+    "with the end of its log (or is\n"
     "restarted, with restart: true). At the end, or on Ctrl-C: a StopRequest to every car, the\n"
     "timers stopped, the processes stopped in order, the history last (the recording closed).\n"
     "The run's folder (--out, default runs/<name>-<UTC time>) holds <process>.log for each\n"
@@ -152,11 +156,10 @@ int lab_run(const std::vector<std::string>& args)
     }
     if (options.time == cpm::lab::TimeMode::simulated && s.time != cpm::lab::TimeMode::simulated) {
         for (const auto& v : s.vehicles) {
-            if (!v.fsm.empty() || !v.camera.empty())
-                throw UsageError(command + ": --time simulated: vehicle " + std::to_string(v.id) + "'s fsm_node or camera runs in real time only");
+            if (!v.camera.empty())
+                throw UsageError(command + ": --time simulated: vehicle " + std::to_string(v.id) + "'s camera and aruco_node run in real time only");
         }
     }
-    if (!s.qos.empty()) std::fprintf(stderr, "%s: warning: qos overrides are read but not applied to the nodes yet\n", command.c_str());
     if (s.monitor_port) std::fprintf(stderr, "%s: warning: monitor: cpm monitor is not part of this cpm yet; the run goes on without it\n", command.c_str());
     cpm::cli::stop_on_signals();
     options.progress = stderr;
@@ -164,7 +167,7 @@ int lab_run(const std::vector<std::string>& args)
     cpm::lab::RunResult r;
     try {
         r = cpm::lab::run_lab(s, options);
-    } catch (const cpm::lab::ScenarioError& e) {
+    } catch (const std::runtime_error& e) {  // a missing program, a domain in use, a folder that cannot be made
         std::fprintf(stderr, "%s: nothing started:\n%s\n", command.c_str(), e.what());
         return 1;
     }

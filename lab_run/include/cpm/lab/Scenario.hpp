@@ -17,10 +17,13 @@
 //   routing: {enabled: false, seed: 1, period: 400ms, restart: false}
 //   qos: {vehicleState: {reliable: false, history_depth: 1}}
 //   record: {topics: ["*"], exclude: ["cameraFrame"]}
+//   parameters: ../params/lab.yaml  # served to every node (cpm param serve)
 //   monitor: 8080
 //
 // load_scenario reports every error at once, each with the file, line and YAML path
 // ("corridor.yaml:12: vehicles[1].id: 5 is given twice (also vehicles[0])").
+#include <cpm/QosOverrides.hpp>
+
 #include <cstdint>
 #include <map>
 #include <optional>
@@ -49,13 +52,9 @@ struct RoutingSpec
     bool restart = false;
 };
 
-/// Per-topic QoS a run applies to every node (unset: each node's own choice).
-struct QosOverride
-{
-    std::optional<bool> reliable;
-    std::optional<bool> transient_local;
-    std::optional<int> history_depth;
-};
+/// Per-topic QoS a run applies to every node (unset: each node's own choice); the run passes
+/// them on in CPM_QOS_OVERRIDES.
+using QosOverride = cpm::QosOverride;
 
 struct RecordSpec
 {
@@ -73,6 +72,7 @@ struct Scenario
     uint64_t duration_ns = 0;
     std::string world;  ///< absolute path
     std::string lanes;  ///< absolute path, or empty
+    std::string parameters;  ///< absolute path of a parameter file (`cpm param serve`), or empty
     std::vector<VehicleSpec> vehicles;
     RoutingSpec routing;
     std::map<std::string, QosOverride> qos;
@@ -114,7 +114,8 @@ struct RunSettings
     TimeMode time = TimeMode::real;
 };
 
-/// The processes of a run, in the order they start: the history recording first, then the cars
+/// The processes of a run, in the order they start: the history recording first, the parameter
+/// server, then the cars
 /// (simulator and bridge), their cameras and aruco_nodes, routing, the fsm_nodes. Throws
 /// ScenarioError naming every program that is missing from bin_dir.
 std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& settings);

@@ -49,6 +49,8 @@ public:
 
     /// The topics with at least one writer or reader (other than this probe's), by name.
     std::vector<TopicInfo> topics() const;
+    /// The names of the other participants discovered on the domain (and not gone since).
+    std::vector<std::string> participants() const;
     /// Waits up to `timeout` for a writer of `topic` and subscribes to it as that writer offers
     /// (as reliable and as durable), receiving raw payloads. False when no writer appeared.
     /// Throws cpm::Error when the reader cannot be created.
