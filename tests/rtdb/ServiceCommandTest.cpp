@@ -1,0 +1,61 @@
+// cpm_history's flags read into the service's options without a process: defaults, every
+// flag, and each wrong one named.
+#include <cpm/rtdb/ServiceCommand.hpp>
+
+#include <gtest/gtest.h>
+
+using namespace cpm::rtdb;
+
+namespace {
+
+ServiceCommand read(std::vector<std::string> args)
+{
+    return read_service_flags(cpm::cli::parse_flags(args, service_flags(), "cpm_history"));
+}
+
+std::string error_of(std::vector<std::string> args)
+{
+    try {
+        (void)read(std::move(args));
+    } catch (const cpm::cli::UsageError& e) {
+        return e.what();
+    }
+    return "";
+}
+
+}  // namespace
+
+TEST(ServiceCommand, DefaultsAndEveryFlagReachTheOptions)
+{
+    const auto plain = read({});
+    EXPECT_EQ(plain.options.window_ns, 10'000'000'000ull);
+    EXPECT_EQ(plain.options.max_bytes_total, 512ull << 20);
+    EXPECT_EQ(plain.options.max_bytes_per_topic, 128ull << 20);
+    EXPECT_TRUE(plain.record_path.empty());
+
+    const auto c = read({"--include", "vehicle.*", "--include", "log", "--exclude", "cameraFrame", "--window", "60s", "--topic-window",
+                         "vehicleState=2m", "--max-bytes", "4096", "--max-bytes-per-topic", "2048", "--status-period", "250ms", "--record",
+                         "/tmp/r.db", "--record-name", "run", "--record-max-bytes", "65536"});
+    EXPECT_EQ(c.options.include, (std::vector<std::string>{"vehicle.*", "log"}));
+    EXPECT_EQ(c.options.exclude, (std::vector<std::string>{"cameraFrame"}));
+    EXPECT_EQ(c.options.window_ns, 60'000'000'000ull);
+    EXPECT_EQ(c.options.topic_windows_ns.at("vehicleState"), 120'000'000'000ull);
+    EXPECT_EQ(c.options.max_bytes_total, 4096u);
+    EXPECT_EQ(c.options.max_bytes_per_topic, 2048u);
+    EXPECT_EQ(c.options.status_period_ns, 250'000'000ull);
+    EXPECT_EQ(c.record_path, "/tmp/r.db");
+    EXPECT_EQ(c.record.name, "run");
+    EXPECT_EQ(c.record.max_bytes, 65536u);
+}
+
+TEST(ServiceCommand, AWrongFlagIsNamedWithItsValue)
+{
+    EXPECT_EQ(error_of({"--include", "("}).rfind("--include '(' is not a regular expression", 0), 0u);
+    EXPECT_EQ(error_of({"--window", "0s"}), "--window must be longer than 0");
+    EXPECT_EQ(error_of({"--topic-window", "vehicleState"}),
+              "cpm_history: --topic-window 'vehicleState': expected TOPIC=DURATION (e.g. vehicleState=60s)");
+    EXPECT_EQ(error_of({"--max-bytes", "4096", "--max-bytes-total", "4096"}),
+              "cpm_history: --max-bytes is the older name of --max-bytes-total; give one");
+    EXPECT_EQ(error_of({"--record-name", "x"}), "cpm_history: --record-max-bytes and --record-name go with --record FILE");
+    EXPECT_NE(error_of({"--max-bytes-per-topic", "12"}).find("--max-bytes-per-topic"), std::string::npos);
+}
