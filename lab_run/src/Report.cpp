@@ -117,18 +117,17 @@ Report make_report(const std::string& run_dir)
     std::vector<Segment> walls;
     std::vector<std::array<double, 3>> markers;  // x, y, id
     std::vector<std::vector<std::pair<double, double>>> lanes;
-    std::optional<vehicle::World> gates;  // the world, for judging its gates
+    std::optional<vehicle::World> world;  // read and checked once: its walls, markers and gates
     if (summary.contains("world") && summary["world"].is_string() && !summary["world"].get<std::string>().empty()) {
         try {
-            gates = vehicle::World::load(summary["world"]);
+            world = vehicle::World::load(summary["world"]);
         } catch (const std::exception&) {
-            // drawn without gates; the walls below say nothing either when it cannot be read
+            // a world that cannot be read: the report is drawn without the map
         }
-        const auto world = read_json(summary["world"]);
-        if (world.is_object()) {
-            for (const auto& w : world.value("walls", nlohmann::json::array())) walls.push_back({w[0], w[1], w[2], w[3]});
-            for (const auto& m : world.value("markers", nlohmann::json::array())) markers.push_back({m["x"], m["y"], m["id"]});
-        }
+    }
+    if (world) {
+        for (const auto& w : world->walls()) walls.push_back({w.x1, w.y1, w.x2, w.y2});
+        for (const auto& m : world->markers()) markers.push_back({m.x, m.y, double(m.id)});
     }
     if (summary.contains("lanes") && summary["lanes"].is_string()) {
         const auto graph = read_json(summary["lanes"]);
@@ -351,13 +350,13 @@ Report make_report(const std::string& run_dir)
         nlohmann::json c{{"driven_m", driven}, {"max_speed_mps", v_max}, {"states_entered", car.states.size()}};
         c["min_clearance_m"] = std::isfinite(clear_min) ? nlohmann::json(clear_min) : nlohmann::json(nullptr);
         if (!car.states.empty()) c["last_state"] = car.states.back().second;
-        if (gates && !gates->gates().empty()) {
+        if (world && !world->gates().empty()) {
             // Each gate of the world judged on the car's path (the path of its reference point).
             std::vector<aruco::PathPoint> path;
             for (const auto& p : car.path) path.push_back({p.t, {p.x, p.y, p.yaw}});
             nlohmann::json list = nlohmann::json::array();
             int passed = 0;
-            for (const auto& g : aruco::gate_passages(*gates, path, vehicle::VehicleParameters{}.width)) {
+            for (const auto& g : aruco::gate_passages(*world, path, vehicle::VehicleParameters{}.width)) {
                 passed += g.passed;
                 list.push_back(g.passed ? nlohmann::json{{"gate", g.gate + 1}, {"passed", true}, {"t_s", g.t}, {"offset_m", g.offset}, {"clearance_m", g.clearance}}
                                         : nlohmann::json{{"gate", g.gate + 1}, {"passed", false}});
@@ -400,7 +399,7 @@ Report make_report(const std::string& run_dir)
       << (summary.value("ok", false) ? "every process ran its time" : "<span class=\"bad\">the run did not end well: " +
                                                                              html_escape(summary.value("error", std::string("see summary.json"))) + "</span>")
       << ". Recording: <code>recording.db</code> (" << rec.samples << " samples; ask it with <code>cpm history --file</code>).</p>\n";
-    const bool with_gates = gates && !gates->gates().empty();
+    const bool with_gates = world && !world->gates().empty();
     h << "<h2>Cars</h2>\n<table><tr><th>car</th><th>driven (m)</th><th>top speed (m/s)</th><th>least clearance to a wall (m)</th><th>last state</th>"
       << (with_gates ? "<th>gates passed</th>" : "") << "</tr>\n";
     for (const auto& [id, c] : figures["cars"].items()) {
@@ -409,7 +408,7 @@ Report make_report(const std::string& run_dir)
           << html_escape(c.value("last_state", std::string("-"))) << "</td>";
         if (with_gates) {
             const int passed = c.value("gates_passed", 0);
-            h << "<td" << (passed < int(gates->gates().size()) ? " class=\"bad\"" : "") << ">" << passed << " of " << gates->gates().size() << "</td>";
+            h << "<td" << (passed < int(world->gates().size()) ? " class=\"bad\"" : "") << ">" << passed << " of " << world->gates().size() << "</td>";
         }
         h << "</tr>\n";
     }
