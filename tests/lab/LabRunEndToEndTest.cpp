@@ -137,7 +137,8 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
 {
     TempDir dir;
     const std::string out = dir.file("run");
-    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "60s", "--out", out});
+    // Real time: in simulated time the corridor's 60 s pass in about 4 s, before the test acts.
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out});
     const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json").string();
     int pid = 0;
     ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args)) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
@@ -220,7 +221,8 @@ TEST(LabRun, CtrlCStopsEverythingAndLeavesAReadableRecording)
 {
     TempDir dir;
     const std::string out = dir.file("run");
-    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "60s", "--out", out});
+    // Real time: in simulated time the corridor's 60 s pass in about 4 s, before the test acts.
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out});
     ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("processes on domain") != std::string::npos; }, 30s)) << run.errors();
     std::this_thread::sleep_for(4s);
     run.kill(SIGINT);
