@@ -46,15 +46,6 @@ struct Car
 
 using Segment = std::array<double, 4>;
 
-double distance_to_segment(double x, double y, const Segment& s)
-{
-    const double dx = s[2] - s[0], dy = s[3] - s[1];
-    const double len2 = dx * dx + dy * dy;
-    double u = len2 > 0 ? ((x - s[0]) * dx + (y - s[1]) * dy) / len2 : 0;
-    u = std::clamp(u, 0.0, 1.0);
-    return std::hypot(x - (s[0] + u * dx), y - (s[1] + u * dy));
-}
-
 nlohmann::json read_json(const std::string& path)
 {
     std::ifstream in(path);
@@ -206,11 +197,7 @@ Report make_report(const std::string& run_dir)
     for (auto& [id, car] : cars) {
         std::sort(car.path.begin(), car.path.end(), [](const Point& a, const Point& b) { return a.t < b.t; });
         if (walls.empty()) continue;
-        for (const auto& p : car.path) {
-            double d = std::numeric_limits<double>::infinity();
-            for (const auto& w : walls) d = std::min(d, distance_to_segment(p.x, p.y, w));
-            car.clearance.emplace_back(p.t, d);
-        }
+        for (const auto& p : car.path) car.clearance.emplace_back(p.t, world->nearest_wall(p.x, p.y));
     }
     // The smallest distance between two cars' reference points, every 0.1 s of the run.
     std::vector<std::pair<double, double>> closest;

@@ -6,7 +6,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <initializer_list>
 
 namespace cpm::vehicle {
@@ -207,6 +209,21 @@ const Segment* World::wall_hit(const std::vector<Segment>& outline) const
         }
     }
     return nullptr;
+}
+
+double point_segment_distance(double x, double y, const Segment& s)
+{
+    const double dx = s.x2 - s.x1, dy = s.y2 - s.y1;
+    const double len2 = dx * dx + dy * dy;
+    const double u = len2 > 0 ? std::clamp(((x - s.x1) * dx + (y - s.y1) * dy) / len2, 0.0, 1.0) : 0.0;
+    return std::hypot(x - (s.x1 + u * dx), y - (s.y1 + u * dy));
+}
+
+double World::nearest_wall(double x, double y) const
+{
+    double d = std::numeric_limits<double>::infinity();
+    for (const auto& w : walls_) d = std::min(d, point_segment_distance(x, y, w));
+    return d;
 }
 
 }  // namespace cpm::vehicle

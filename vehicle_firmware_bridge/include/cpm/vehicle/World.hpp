@@ -54,6 +54,9 @@ public:
     /// The first wall that crosses or touches one of `outline`'s segments, if any. O(walls × outline).
     const Segment* wall_hit(const std::vector<Segment>& outline) const;
 
+    /// Metres from (x, y) to the nearest wall; infinity in a world without walls.
+    double nearest_wall(double x, double y) const;
+
 private:
     std::vector<Segment> walls_;
     std::vector<Marker> markers_;
@@ -63,6 +66,9 @@ private:
 /// Distance along the ray from (x, y) in direction (dx, dy) (unit vector) to the segment,
 /// or a negative value when it misses.
 double ray_segment_distance(double x, double y, double dx, double dy, const Segment& s);
+
+/// Metres from (x, y) to the nearest point of the segment.
+double point_segment_distance(double x, double y, const Segment& s);
 
 /// True when the two segments cross or touch.
 bool segments_intersect(const Segment& a, const Segment& b);
