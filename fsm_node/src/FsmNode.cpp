@@ -1,5 +1,6 @@
 #include <cpm/fsm/FsmNode.hpp>
 
+#include <cpm/AsyncReader.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/Reader.hpp>
 #include <cpm/Timer.hpp>
@@ -15,8 +16,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <deque>
+#include <mutex>
 
 namespace cpm::fsm {
 
@@ -108,8 +113,26 @@ struct FsmNode::Impl
         StopRequest s;
         s.vehicle_id(options.vehicle_id);
         stamp_message(s, now, 0);
+        {
+            std::lock_guard lock(own_stops_mutex);
+            own_stops.push_back(now);
+            if (own_stops.size() > 16) own_stops.pop_front();
+        }
         (void)stops.write(s);
         last_stop_sent = now;
+    }
+    /// A StopRequest for this car or for all that this node did not send itself (a person at the
+    /// monitor, the lab's end): the machine halts and the car stays braked until the node restarts.
+    void on_stop_requests(std::vector<StopRequest>& requests)
+    {
+        std::lock_guard lock(own_stops_mutex);
+        for (const auto& r : requests) {
+            if (r.vehicle_id() != 0 && r.vehicle_id() != options.vehicle_id) continue;
+            const uint64_t stamp = r.header().create_stamp().nanoseconds();
+            if (std::find(own_stops.begin(), own_stops.end(), stamp) != own_stops.end()) continue;
+            if (stamp < started_ns) continue;  // from before this node ran (a transient sample)
+            stopped_by_request = stamp;
+        }
     }
     void publish_status(uint64_t now)
     {
@@ -143,6 +166,13 @@ struct FsmNode::Impl
     Writer<VehicleCommandDirect> commands;
     Writer<StopRequest> stops;
     Writer<FsmStatus> status;
+    const uint64_t started_ns = get_time_ns();
+    std::mutex own_stops_mutex;
+    std::deque<uint64_t> own_stops;  ///< create_stamps of this node's own StopRequests
+    std::atomic<uint64_t> stopped_by_request{0};
+    bool halted = false;
+    AsyncReader<StopRequest> stop_requests{[this](std::vector<StopRequest>& r) { on_stop_requests(r); }, topics::stop_request.name,
+                                           topics::stop_request.reader};
     std::string stale_reason;
     uint64_t last_range_stamp = 0, last_stop_sent = 0;
     int last_state = -1;
@@ -152,6 +182,23 @@ bool FsmNode::Impl::tick()
 {
     const unsigned id = options.vehicle_id;
     const uint64_t now = get_time_ns();
+    if (stopped_by_request) {
+        if (!halted) {
+            CPM_LOG_WARN("vehicle %u: stopped by a StopRequest; the machine halts in state %d (%s) and the car stays braked until fsm_node "
+                         "is started again", id, machine->active().id(), machine->active().type().c_str());
+            halted = true;
+            FsmStatus s;
+            s.vehicle_id(options.vehicle_id);
+            stamp_message(s, now, 0);
+            s.state_id(-1);
+            s.state_type("StoppedByRequest");
+            s.entered_ns(now);
+            s.last_transition_id(-1);
+            (void)status.write(s);
+        }
+        brake(now);
+        return true;
+    }
     auto state = states.get_sample(now);
     auto range = ranges.get_sample(now);
     const std::string reason = stale(state, range);
