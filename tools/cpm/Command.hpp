@@ -36,6 +36,7 @@ std::vector<Command> history_commands();
 std::vector<Command> aruco_commands();
 std::vector<Command> routing_commands();
 std::vector<Command> record_commands();
+std::vector<Command> monitor_commands();
 
 /// The single positional argument a command takes (`what` names it in the error).
 std::string only_positional(const cpm::cli::ParsedArgs& parsed, const std::string& command, const std::string& what);

@@ -6,6 +6,7 @@
 #include <cpm/Error.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
 #include <cpm/rtdb/Csv.hpp>
 #include <cpm/rtdb/HistoryService.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
@@ -193,9 +194,15 @@ int play_command(const std::vector<std::string>& args)
     if (options.to_ns < options.from_ns) throw UsageError(command + ": --to is before --from");
 
     cpm::cli::stop_on_signals();
+    std::unique_ptr<cpm::Participant> participant;
     std::unique_ptr<cpm::rtdb::Player> player;
     try {
-        player = std::make_unique<cpm::rtdb::Player>(cpm::Participant::default_participant(), file, options);
+        // Named cpm_play (unless --node_id names it), so that watchers such as cpm monitor can
+        // tell a replay from a live lab.
+        cpm::ParticipantOptions named = cpm::ParticipantOptions::from_init();
+        if (cpm::init_settings().node_id == "cpm") named.name = "cpm_play";
+        participant = std::make_unique<cpm::Participant>(named);
+        player = std::make_unique<cpm::rtdb::Player>(*participant, file, options);
     } catch (const std::runtime_error& e) {
         throw cpm::Error(command + ": " + e.what());
     }

@@ -1,0 +1,257 @@
+// cpm monitor in a real browser (Debian's chromium, headless, driven over the DevTools protocol):
+// a lab run of four simulated cars with fsm_nodes starts its monitor (monitor: in the scenario);
+// the page draws four cars where vehicleObservation says they are, /api/state carries the DDS
+// samples, the stop buttons stop a car and then every car; a monitor without --allow-stop
+// refuses; during `cpm play` of the recording the page says it is a replay.
+#include <cpm/AsyncReader.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm/topics.hpp>
+
+#include <cpm_test/Browser.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+#include <cpm_test/TempDir.hpp>
+
+#include <gtest/gtest.h>
+#include <httplib.h>
+
+#include <arpa/inet.h>
+#include <csignal>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <netinet/in.h>
+#include <regex>
+#include <sys/socket.h>
+#include <unistd.h>
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+using cpm_test::Process;
+using cpm_test::TempDir;
+using cpm_test::wait_until;
+namespace fs = std::filesystem;
+namespace t = cpm::topics;
+
+namespace {
+
+/// A port nobody listens on now (the system's choice for port 0).
+int free_port()
+{
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    socklen_t len = sizeof a;
+    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+    ::close(fd);
+    return ntohs(a.sin_port);
+}
+
+/// What the test itself reads off the domain: every car's samples of the last seconds, by stamp.
+struct LabView
+{
+    std::mutex mutex;
+    std::map<int, std::map<uint64_t, VehicleState>> states;
+    std::map<int, std::map<uint64_t, VehicleObservation>> seen;
+    cpm::Participant participant{cpm::ParticipantOptions::from_init()};
+    cpm::AsyncReader<VehicleState> state_reader{[this](std::vector<VehicleState>& b) { keep(states, b); }, participant, t::vehicle_state.name,
+                                                t::vehicle_state.reader};
+    cpm::AsyncReader<VehicleObservation> seen_reader{[this](std::vector<VehicleObservation>& b) { keep(seen, b); }, participant,
+                                                     t::vehicle_observation.name, t::vehicle_observation.reader};
+
+    template <class T>
+    void keep(std::map<int, std::map<uint64_t, T>>& by_car, std::vector<T>& batch)
+    {
+        std::lock_guard lock(mutex);
+        for (auto& s : batch) {
+            auto& mine = by_car[s.vehicle_id()];
+            mine[s.header().create_stamp().nanoseconds()] = s;
+            while (mine.size() > 500) mine.erase(mine.begin());
+        }
+    }
+    double speed(int id)
+    {
+        std::lock_guard lock(mutex);
+        return states[id].empty() ? -1 : states[id].rbegin()->second.speed();
+    }
+};
+
+nlohmann::json api_state(int port)
+{
+    httplib::Client http("127.0.0.1", port);
+    auto r = http.Get("/api/state");
+    return r && r->status == 200 ? nlohmann::json::parse(r->body) : nlohmann::json();
+}
+
+/// The cars as the page drew them: the screen point of each car's reference point, turned back
+/// into world metres through the map's own transform.
+const char* kDrawnCars = R"(
+  [...document.querySelectorAll('#cars .car')].map(g => {
+    const screen = new DOMPoint(0, 0).matrixTransform(g.getScreenCTM());
+    const world = screen.matrixTransform(document.getElementById('world').getScreenCTM().inverse());
+    const map = document.getElementById('map').getBoundingClientRect();
+    return {id: +g.dataset.id, x: world.x, y: world.y,
+            visible: screen.x >= map.left && screen.x <= map.right && screen.y >= map.top && screen.y <= map.bottom};
+  }))";
+
+const char* kScenario = R"(name: four
+time: real
+duration: 90s
+world: WORLD
+vehicles:
+  - {id: 1, start: [0.0, -0.01, 0.0], fsm: FSM}
+  - {id: 2, start: [1.6, -0.01, 0.0], fsm: FSM}
+  - {id: 3, start: [3.6, -0.01, 0.0], fsm: FSM}
+  - {id: 4, start: [7.2, 1.5, 1.5708], fsm: FSM}
+record: {topics: ["*"]}
+monitor: {port: PORT, allow_stop: true}
+)";
+
+}  // namespace
+
+TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStopThem)
+{
+    cpm_test::test_domain_id();
+    TempDir dir;
+    const int port = free_port();
+    std::string yaml = kScenario;
+    yaml = std::regex_replace(yaml, std::regex("WORLD"), std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json");
+    yaml = std::regex_replace(yaml, std::regex("FSM"), std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json");
+    yaml = std::regex_replace(yaml, std::regex("PORT"), std::to_string(port));
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", dir.write("four.yaml", yaml), "--out", out});
+    ASSERT_TRUE(wait_until([&] { return api_state(port)["vehicles"].size() == 4 || run.errors().find("nothing started") != std::string::npos; }, 60s,
+                           200ms));
+    ASSERT_EQ(api_state(port)["vehicles"].size(), 4u) << "the lab run's monitor shows four cars\n" << run.errors();
+    // The test's own reader joins once the run has claimed its domain (a run refuses a domain
+    // with others on it).
+    LabView lab;
+    ASSERT_TRUE(wait_until(
+        [&] {
+            std::lock_guard lock(lab.mutex);
+            return lab.states.size() == 4 && lab.seen.size() == 4;
+        },
+        10s, 50ms));
+    EXPECT_NE(run.errors().find("watch it live at http://127.0.0.1:" + std::to_string(port) + "/"), std::string::npos) << run.errors();
+
+    // /api/state carries the samples on the domain: each car's speed is that of the VehicleState
+    // with the stamp the monitor names, its position that of the VehicleObservation it names.
+    {
+        const auto state = api_state(port);
+        std::this_thread::sleep_for(300ms);  // the test's reader has the same samples by now
+        std::lock_guard lock(lab.mutex);
+        for (const auto& v : state["vehicles"]) {
+            const int id = v["id"];
+            auto s = lab.states[id].find(v["state_stamp_ns"].get<uint64_t>());
+            ASSERT_NE(s, lab.states[id].end()) << "car " << id << ": the test saw the VehicleState the monitor shows";
+            EXPECT_DOUBLE_EQ(v["speed"], s->second.speed());
+            EXPECT_DOUBLE_EQ(v["battery_voltage"], s->second.battery_voltage());
+            ASSERT_EQ(v["pose_from"], "vehicleObservation");
+            auto o = lab.seen[id].find(v["pose_stamp_ns"].get<uint64_t>());
+            ASSERT_NE(o, lab.seen[id].end()) << "car " << id;
+            EXPECT_DOUBLE_EQ(v["x"], o->second.pose().x());
+            EXPECT_DOUBLE_EQ(v["y"], o->second.pose().y());
+            EXPECT_FALSE(v["fsm_state"].is_null()) << "car " << id << "'s state machine";
+        }
+    }
+
+    cpm_test::Browser browser;
+    browser.open("http://127.0.0.1:" + std::to_string(port) + "/");
+    ASSERT_TRUE(browser.wait_for("window.cpmMonitor.updates > 5 && document.querySelectorAll('#cars .car').length === 4", 30s))
+        << browser.eval("JSON.stringify(window.cpmMonitor)").dump();
+
+    // Stop one car that is driving, with its own button (early: the corridor's machines stop
+    // their cars by themselves within about 20 s).
+    int target = 0;
+    ASSERT_TRUE(wait_until(
+        [&] {
+            const auto state = api_state(port);
+            for (const auto& v : state["vehicles"]) {
+                if (v["speed"].is_number() && v["speed"].get<double>() > 0.2 && v["fsm_state"] != "Stop") target = v["id"];
+            }
+            return target != 0;
+        },
+        20s, 100ms))
+        << "a car is driving";
+    browser.eval("document.querySelector('.panel[data-id=\"" + std::to_string(target) + "\"] button.stop').click()");
+    EXPECT_TRUE(wait_until([&] { return std::abs(lab.speed(target)) < 0.02; }, 5s, 20ms)) << "car " << target << " stopped";
+    EXPECT_TRUE(cpm_test::holds_for([&] { return std::abs(lab.speed(target)) < 0.05; }, 1s, 20ms)) << "and stays stopped";
+    EXPECT_TRUE(browser.wait_for("document.getElementById('stop-result').textContent.includes('car " + std::to_string(target) + "')", 5s));
+    EXPECT_TRUE(wait_until(
+        [&] {
+            const auto state = api_state(port);
+            for (const auto& v : state["vehicles"]) {
+                if (v["id"] == target) return v["fsm_state"] == "StoppedByRequest";
+            }
+            return false;
+        },
+        5s, 100ms))
+        << "its state machine says why";
+
+    EXPECT_EQ(browser.eval("document.getElementById('source').textContent"), "live");
+    const int before = browser.eval("window.cpmMonitor.received");
+    std::this_thread::sleep_for(2s);
+    const int after = browser.eval("window.cpmMonitor.received");
+    EXPECT_GE(after - before, 40) << "at least 20 updates a second";
+    EXPECT_EQ(browser.eval("document.querySelectorAll('#walls line').length"), 10) << "the corridor's ten walls";
+    EXPECT_EQ(browser.eval("document.querySelectorAll('.panel').length"), 4) << "a panel per car";
+
+    // Stop every car, then compare where the page draws them with where they are.
+    browser.eval("document.getElementById('stop-all').click()");
+    EXPECT_TRUE(wait_until(
+        [&] {
+            for (int id = 1; id <= 4; ++id) {
+                if (std::abs(lab.speed(id)) > 0.01) return false;
+            }
+            return true;
+        },
+        8s, 50ms))
+        << "every car stopped";
+    std::this_thread::sleep_for(500ms);
+    const auto drawn = browser.eval(kDrawnCars);
+    ASSERT_EQ(drawn.size(), 4u) << drawn.dump();
+    for (const auto& car : drawn) {
+        const int id = car["id"];
+        std::lock_guard lock(lab.mutex);
+        ASSERT_FALSE(lab.seen[id].empty());
+        const auto& pose = lab.seen[id].rbegin()->second.pose();
+        EXPECT_NEAR(car["x"].get<double>(), pose.x(), 0.05) << "car " << id << " drawn at " << car.dump();
+        EXPECT_NEAR(car["y"].get<double>(), pose.y(), 0.05) << "car " << id << " drawn at " << car.dump();
+        EXPECT_EQ(car["visible"], true) << "car " << id << " is inside the map";
+    }
+    const std::string shot = (fs::current_path() / "monitor_e2e.png").string();  // kept beside the test, to look at
+    browser.screenshot(shot);
+    EXPECT_GT(fs::file_size(shot), 20000u);
+
+    run.kill(SIGINT);
+    EXPECT_EQ(run.wait(60s), 1) << "stopped by Ctrl-C: not a full run\n" << run.errors();
+    ASSERT_TRUE(fs::exists(out + "/recording.db"));
+
+    // The same recording played back to a monitor without --allow-stop: a replay, and no stops.
+    Process watch({built_program("cpm"), "monitor", "--port", "0", "--world", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json"});
+    std::smatch m;
+    ASSERT_TRUE(wait_until(
+        [&] {
+            const std::string o = watch.output();
+            return std::regex_search(o, m, std::regex("at (http://127\\.0\\.0\\.1:([0-9]+)/)"));
+        },
+        20s, 50ms))
+        << watch.output() << watch.errors();
+    const std::string url = m[1];
+    const int watch_port = std::stoi(m[2]);
+    Process play({built_program("cpm"), "play", out + "/recording.db"});
+    browser.open(url);
+    EXPECT_TRUE(browser.wait_for("document.getElementById('source').textContent === 'replay (cpm play)'", 20s))
+        << browser.eval("document.getElementById('source').textContent").dump();
+    EXPECT_TRUE(browser.wait_for("document.querySelectorAll('#cars .car').length === 4", 20s));
+    EXPECT_EQ(browser.eval("document.getElementById('stop-all').disabled"), true);
+    EXPECT_EQ(browser.eval("[...document.querySelectorAll('.panel button.stop')].every(b => b.disabled)"), true);
+    EXPECT_EQ(browser.eval("fetch('/api/stop', {method: 'POST', body: '{\"vehicle_id\": 1}'}).then(r => r.status)"), 403);
+    EXPECT_EQ(api_state(watch_port)["source"], "replay");
+    play.kill(SIGINT);
+    play.wait(20s);
+    watch.kill(SIGINT);
+    EXPECT_EQ(watch.wait(20s), 0) << watch.errors();
+}
