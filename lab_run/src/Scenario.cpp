@@ -297,8 +297,15 @@ Scenario load_scenario(const std::string& path)
             if (r["exclude"]) s.record.exclude = c.patterns(r["exclude"], "record.exclude");
         }
     }
-    if (root["monitor"]) {
-        if (auto port = c.integer(root["monitor"], "monitor", 1, 65535)) s.monitor_port = int(*port);
+    if (const YAML::Node m = root["monitor"]) {
+        if (m.IsMap()) {
+            c.keys(m, "monitor", {"port", "allow_stop"});
+            if (!m["port"]) c.error(m, "monitor", "port is missing");
+            else if (auto port = c.integer(m["port"], "monitor.port", 1, 65535)) s.monitor_port = int(*port);
+            if (m["allow_stop"]) s.monitor_allow_stop = c.boolean(m["allow_stop"], "monitor.allow_stop").value_or(false);
+        } else if (auto port = c.integer(m, "monitor", 1, 65535)) {
+            s.monitor_port = int(*port);
+        }
     }
     if (!c.errors().empty()) throw ScenarioError(c.errors());
     return s;
@@ -336,6 +343,14 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
     plan.push_back({"cpm_history", history, false, 9, ""});
     if (!s.parameters.empty()) {
         plan.push_back({"parameters", {program("cpm"), "param", "serve", s.parameters, "--dds_domain", domain}, false, 8, ""});
+    }
+    if (s.monitor_port) {
+        std::vector<std::string> argv{program("cpm"), "monitor", "--port", std::to_string(*s.monitor_port)};
+        if (!s.world.empty()) argv.insert(argv.end(), {"--world", s.world});
+        if (!s.lanes.empty()) argv.insert(argv.end(), {"--lanes", s.lanes});
+        if (s.monitor_allow_stop) argv.push_back("--allow-stop");
+        argv.insert(argv.end(), {"--dds_domain", domain});
+        plan.push_back({"monitor", argv, false, 8, ""});
     }
 
     // The cars: with routing all in one simulator spread over the lanes, else one each.

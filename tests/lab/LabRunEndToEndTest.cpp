@@ -63,7 +63,7 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
 {
     TempDir dir;
     const std::string out = dir.file("run");
-    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "8s", "--out", out});
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "8s", "--out", out, "--monitor", "off"});
     ASSERT_EQ(run.wait(90s), 0) << run.output() << run.errors();
     EXPECT_NE(run.output().find("corridor ran: 8.0 s of lab time"), std::string::npos) << run.output();
     for (const char* f : {"cpm_history.log", "car_5.log", "fsm_5.log", "recording.db", "summary.json", "scenario.yaml"}) {
@@ -138,7 +138,7 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     TempDir dir;
     const std::string out = dir.file("run");
     // Real time: in simulated time the corridor's 60 s pass in about 4 s, before the test acts.
-    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out});
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out, "--monitor", "off"});
     const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json").string();
     int pid = 0;
     ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args)) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
@@ -164,7 +164,7 @@ TEST(LabRun, ANodeWithRestartTrueIsStartedAgainAndEveryNodeGetsTheScenariosQos)
                                                            "maps/corridor.json\nvehicles:\n  - id: 5\n    start: [0.0, -0.01, 0.0]\n"
                                                            "    fsm: " + source + "fsm/corridor.json\n    restart: true\n"
                                                            "qos: {vehicleState: {reliable: true, history_depth: 2}}\n");
-    Process run({built_program("cpm"), "lab", "run", file, "--out", out});
+    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"});
     const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(source + "fsm/corridor.json").string();
     int pid = 0;
     ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args)) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
@@ -208,7 +208,7 @@ TEST(LabRun, ADomainInUseIsRefusedBeforeAnythingStarts)
     dir.write("p.json", "{\"a\": 1}");
     Process other({built_program("cpm"), "param", "serve", dir.file("p.json")});
     ASSERT_TRUE(cpm_test::wait_until([&] { return other.output().find("serving") != std::string::npos; }, 30s)) << other.errors();
-    Process run({built_program("cpm"), "lab", "run", kCorridor, "--out", dir.file("run")});
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--out", dir.file("run"), "--monitor", "off"});
     EXPECT_EQ(run.wait(60s), 1) << run.output();
     EXPECT_NE(run.errors().find("nothing started"), std::string::npos) << run.errors();
     EXPECT_NE(run.errors().find("is in use by 1 participant(s): cpm"), std::string::npos) << run.errors();
@@ -222,7 +222,7 @@ TEST(LabRun, CtrlCStopsEverythingAndLeavesAReadableRecording)
     TempDir dir;
     const std::string out = dir.file("run");
     // Real time: in simulated time the corridor's 60 s pass in about 4 s, before the test acts.
-    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out});
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out, "--monitor", "off"});
     ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("processes on domain") != std::string::npos; }, 30s)) << run.errors();
     std::this_thread::sleep_for(4s);
     run.kill(SIGINT);
@@ -240,7 +240,7 @@ TEST(LabRun, AWrongScenarioStartsNothing)
 {
     TempDir dir;
     const std::string bad = dir.write("bad.yaml", "name: bad\nduration: forever\nworld: nowhere.json\nvehicles: [{id: 1}, {id: 1}]\n");
-    Process run({built_program("cpm"), "lab", "run", bad, "--out", dir.file("run")});
+    Process run({built_program("cpm"), "lab", "run", bad, "--out", dir.file("run"), "--monitor", "off"});
     EXPECT_EQ(run.wait(30s), 1);
     EXPECT_NE(run.errors().find("3 error(s), nothing started"), std::string::npos) << run.errors();
     EXPECT_NE(run.errors().find(bad + ":2: duration: 'forever' is not a duration"), std::string::npos) << run.errors();

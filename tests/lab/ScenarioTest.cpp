@@ -56,14 +56,18 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
     EXPECT_DOUBLE_EQ(corridor.vehicles[0].y, -0.01);
     EXPECT_EQ(corridor.world, fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string());
     auto plan = plan_run(corridor, {.bin_dir = bin, .run_dir = "/runs/x", .domain = 7, .time = TimeMode::simulated});
-    ASSERT_EQ(plan.size(), 3u);
+    ASSERT_EQ(plan.size(), 4u);
     EXPECT_EQ(plan[0].name, "cpm_history");
-    EXPECT_EQ(plan[1].name, "car_5");
-    EXPECT_EQ(plan[2].name, "fsm_5");
+    // The monitor (monitor: 8080) comes before the cars, so that it shows the run from its start.
+    EXPECT_EQ(plan[1].name, "monitor");
+    EXPECT_EQ(std::vector<std::string>(plan[1].argv.begin() + 1, plan[1].argv.end()),
+              (std::vector<std::string>{"monitor", "--port", "8080", "--world", corridor.world, "--dds_domain", "7"}));
+    EXPECT_EQ(plan[2].name, "car_5");
+    EXPECT_EQ(plan[3].name, "fsm_5");
     // The state machine follows the simulated clock with the car: the clock waits for both.
-    EXPECT_EQ(plan[2].argv.back(), "--simulated_time");
-    EXPECT_EQ(plan[2].timer, "fsm_node_5");
-    EXPECT_EQ(plan[1].timer, "firmware_sim_5,vehicle_bridge_5");
+    EXPECT_EQ(plan[3].argv.back(), "--simulated_time");
+    EXPECT_EQ(plan[3].timer, "fsm_node_5");
+    EXPECT_EQ(plan[2].timer, "firmware_sim_5,vehicle_bridge_5");
     EXPECT_NE(std::find(plan[0].argv.begin(), plan[0].argv.end(), "/runs/x/recording.db"), plan[0].argv.end());
     for (const auto& p : plan) {
         auto d = std::find(p.argv.begin(), p.argv.end(), "--dds_domain");
@@ -73,19 +77,45 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
 
     const Scenario gates = load_scenario(labs("gates.yaml"));
     plan = plan_run(gates, {.bin_dir = bin, .run_dir = "/runs/g"});
-    ASSERT_EQ(plan.size(), 4u);
-    EXPECT_EQ(plan[2].name, "aruco_6");
+    ASSERT_EQ(plan.size(), 5u);
+    EXPECT_EQ(plan[3].name, "aruco_6");
     EXPECT_EQ(gates.record.exclude, std::vector<std::string>{"cameraFrame"});
 
     const Scenario crossing = load_scenario(labs("intersection.yaml"));
     EXPECT_EQ(crossing.time, TimeMode::simulated);
     EXPECT_TRUE(crossing.routing.enabled);
     plan = plan_run(crossing, {.bin_dir = bin, .run_dir = "/runs/i", .time = TimeMode::simulated});
-    ASSERT_EQ(plan.size(), 3u);
-    EXPECT_EQ(plan[1].name, "cars");
-    EXPECT_EQ(plan[1].timer, "firmware_sim_1,vehicle_bridge_1");
-    EXPECT_EQ(plan[2].name, "central_routing");
-    EXPECT_EQ(plan[2].argv.back(), "--simulated_time");
+    ASSERT_EQ(plan.size(), 4u);
+    EXPECT_EQ(plan[1].name, "monitor");
+    EXPECT_NE(std::find(plan[1].argv.begin(), plan[1].argv.end(), "--lanes"), plan[1].argv.end()) << "the monitor draws the lanes";
+    EXPECT_EQ(plan[2].name, "cars");
+    EXPECT_EQ(plan[2].timer, "firmware_sim_1,vehicle_bridge_1");
+    EXPECT_EQ(plan[3].name, "central_routing");
+    EXPECT_EQ(plan[3].argv.back(), "--simulated_time");
+}
+
+TEST(Scenario, AMonitorIsAPortOrAPortWithItsStopButtons)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    const std::string bin = fake_bin(dir, {"cpm_history", "cpm"});
+    Scenario s = load_scenario(dir.write("m.yaml", "name: m\nduration: 5s\nworld: map.json\nvehicles: [{id: 2}]\n"
+                                                   "monitor: {port: 9000, allow_stop: true}\n"));
+    EXPECT_EQ(s.monitor_port, std::optional<int>(9000));
+    EXPECT_TRUE(s.monitor_allow_stop);
+    const auto plan = plan_run(s, {.bin_dir = bin, .run_dir = "/runs/m", .domain = 3});
+    ASSERT_EQ(plan[1].name, "monitor");
+    EXPECT_NE(std::find(plan[1].argv.begin(), plan[1].argv.end(), "--allow-stop"), plan[1].argv.end());
+    const std::string bad = dir.write("b.yaml", "name: b\nduration: 5s\nworld: map.json\nvehicles: [{id: 2}]\n"
+                                                "monitor: {port: 70000, stop: yes}\n");
+    try {
+        load_scenario(bad);
+        FAIL() << "a wrong monitor must be refused";
+    } catch (const cpm::lab::ScenarioError& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find(bad + ":5: monitor.port: "), std::string::npos) << what;
+        EXPECT_NE(what.find("monitor.stop: unknown key"), std::string::npos) << what;
+    }
 }
 
 TEST(Scenario, QosOverridesAndAParameterFileReachEveryNode)

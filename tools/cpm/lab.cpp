@@ -6,6 +6,7 @@
 #include <cpm/lab/Report.hpp>
 #include <cpm/lab/Run.hpp>
 #include <cpm/lab/Scenario.hpp>
+#include <cpm/monitor/Monitor.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/get_time_ns.hpp>
 
@@ -111,11 +112,13 @@ int lab_check(const std::vector<std::string>& args)
 }
 
 const char* kRunHelp =
-    "usage: cpm lab run FILE [--out DIR] [--duration T] [--time simulated|real] [--dds_domain N]\n"
+    "usage: cpm lab run FILE [--out DIR] [--duration T] [--time simulated|real] [--monitor PORT|off]\n"
+    "                   [--dds_domain N]\n"
     "\n"
     "Runs a lab scenario (see cpm lab check): checks it (every error at once, nothing started)\n"
     "and claims its domain (refused when another run on this host has it or anybody is on it),\n"
     "then starts cpm_history recording into the run's folder, the parameter server (parameters:),\n"
+    "cpm monitor (monitor: PORT, or --monitor PORT; its address is printed; --monitor off: none),\n"
     "the cars (cpm vehicle sim), their cameras' aruco_nodes, central_routing and the fsm_nodes,\n"
     "every one with the scenario's qos: overrides, and drives the lab clock: in real time for\n"
     "--duration (routing starts together a second ahead), in simulated time as fast as the\n"
@@ -133,7 +136,7 @@ const char* kRunHelp =
 int lab_run(const std::vector<std::string>& args)
 {
     const std::string command = "cpm lab run";
-    const auto parsed = parse_args(args, {{"--out", true}, {"--duration", true}, {"--time", true}}, command);
+    const auto parsed = parse_args(args, {{"--out", true}, {"--duration", true}, {"--time", true}, {"--monitor", true}}, command);
     const std::string file = only_positional(parsed, command, "scenario file");
     cpm::lab::RunOptions options;
     if (parsed.has("--duration")) {
@@ -160,7 +163,30 @@ int lab_run(const std::vector<std::string>& args)
                 throw UsageError(command + ": --time simulated: vehicle " + std::to_string(v.id) + "'s camera and aruco_node run in real time only");
         }
     }
-    if (s.monitor_port) std::fprintf(stderr, "%s: warning: monitor: cpm monitor is not part of this cpm yet; the run goes on without it\n", command.c_str());
+    if (parsed.has("--monitor")) {
+        const std::string m = parsed.get("--monitor");
+        if (m == "off") {
+            s.monitor_port.reset();
+        } else {
+            size_t used = 0;
+            int port = 0;
+            try {
+                port = std::stoi(m, &used);
+            } catch (const std::exception&) {
+            }
+            if (used != m.size() || port < 1 || port > 65535) throw UsageError(command + ": --monitor '" + m + "': expected a port (1..65535) or off");
+            s.monitor_port = port;
+        }
+    }
+    if (s.monitor_port) {
+        const std::string problem = cpm::monitor::listen_problem("127.0.0.1", *s.monitor_port);
+        if (!problem.empty()) {
+            std::fprintf(stderr, "%s: nothing started: monitor: cannot serve on 127.0.0.1:%d: %s (another port: --monitor N, none: --monitor off)\n",
+                         command.c_str(), *s.monitor_port, problem.c_str());
+            return 1;
+        }
+        std::fprintf(stderr, "%s: watch it live at http://127.0.0.1:%d/ (cpm monitor, while the run lasts)\n", command.c_str(), *s.monitor_port);
+    }
     cpm::cli::stop_on_signals();
     options.progress = stderr;
     options.stop = [] { return cpm::cli::stop_requested(); };

@@ -18,7 +18,8 @@
 //   qos: {vehicleState: {reliable: false, history_depth: 1}}
 //   record: {topics: ["*"], exclude: ["cameraFrame"]}
 //   parameters: ../params/lab.yaml  # served to every node (cpm param serve)
-//   monitor: 8080
+//   monitor: 8080                   # cpm monitor on this port while the run lasts, or
+//                                   # {port: 8080, allow_stop: true} for its stop buttons
 //
 // load_scenario reports every error at once, each with the file, line and YAML path
 // ("corridor.yaml:12: vehicles[1].id: 5 is given twice (also vehicles[0])").
@@ -77,7 +78,8 @@ struct Scenario
     RoutingSpec routing;
     std::map<std::string, QosOverride> qos;
     RecordSpec record;
-    std::optional<int> monitor_port;
+    std::optional<int> monitor_port;  ///< cpm monitor on 127.0.0.1 at this port during the run
+    bool monitor_allow_stop = false;
 };
 
 /// Every error of a scenario file, one "FILE:LINE: PATH: message" each.
@@ -115,7 +117,7 @@ struct RunSettings
 };
 
 /// The processes of a run, in the order they start: the history recording first, the parameter
-/// server, then the cars
+/// server, the monitor, then the cars
 /// (simulator and bridge), their cameras and aruco_nodes, routing, the fsm_nodes. Throws
 /// ScenarioError naming every program that is missing from bin_dir.
 std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& settings);
