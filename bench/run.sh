@@ -33,3 +33,6 @@ echo "== bench_aruco (perception: aruco_node vs plain OpenCV and AprilTag 3; det
 echo
 echo "== bench_routing (central routing: planning time per cycle, start-up, intersection throughput vs cpm_lab's scheme)"
 "$bin/bench_routing"
+echo
+echo "== bench_monitor (cpm monitor: create_stamp to a watcher's snapshot with 1 and 10 watchers, its CPU with 20 cars at 50 Hz)"
+"$bin/bench_monitor"
