@@ -1,7 +1,9 @@
 // What cpm monitor shows, from samples given by hand: where each car is drawn, when it is stale,
 // how long its FSM has been in its state, its distance to the nearest wall or car, the markers
-// it sees, the rates of topics, the newest log lines, and numbers JSON cannot carry.
+// it sees, the rates of topics, the newest log lines, and numbers JSON cannot carry; and the
+// warning for listening beyond this host.
 #include <cpm/monitor/LiveState.hpp>
+#include <cpm/monitor/Monitor.hpp>
 
 #include <gtest/gtest.h>
 
@@ -238,4 +240,16 @@ TEST(LiveState, TheVersionRisesWithEverySampleSoServersSendOnlyNews)
     live.set_source("replay");
     EXPECT_GT(live.version(), v1);
     EXPECT_EQ(live.snapshot(kT0)["source"], "replay");
+}
+
+TEST(MonitorBind, ListeningBeyondThisHostIsWarnedAbout)
+{
+    EXPECT_EQ(cpm::monitor::bind_warning("127.0.0.1", true), "");
+    EXPECT_EQ(cpm::monitor::bind_warning("localhost", false), "");
+    const std::string open = cpm::monitor::bind_warning("0.0.0.0", false);
+    EXPECT_NE(open.find("anyone"), std::string::npos) << open;
+    EXPECT_EQ(open.find("stop"), std::string::npos) << "no stop buttons, no word of them: " << open;
+    const std::string with_stop = cpm::monitor::bind_warning("192.168.1.10", true);
+    EXPECT_NE(with_stop.find("192.168.1.10"), std::string::npos) << with_stop;
+    EXPECT_NE(with_stop.find("stop its cars"), std::string::npos) << with_stop;
 }

@@ -81,6 +81,23 @@ const nlohmann::json* find_car(const nlohmann::json& state, int id)
     return nullptr;
 }
 
+/// A TCP connection to the monitor with `text` sent on it (and a receive buffer of `receive_buffer`
+/// bytes when given), or -1.
+int send_raw(int port, const std::string& text, int receive_buffer = 0)
+{
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    if (receive_buffer > 0) ::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &receive_buffer, sizeof receive_buffer);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(uint16_t(port));
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 || ::write(fd, text.data(), text.size()) != ssize_t(text.size())) {
+        ::close(fd);
+        return -1;
+    }
+    return fd;
+}
+
 /// Resident memory of this process, in bytes.
 size_t rss_bytes()
 {
@@ -177,14 +194,8 @@ TEST_F(MonitorServer, BadRequestsAreAnsweredWithWhatIsWrong)
     EXPECT_EQ(monitor->stats().stops_sent, 0u);
 
     // Not HTTP at all: a 400, and the server goes on serving.
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_port = htons(uint16_t(monitor->port()));
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-    const std::string garbage = "HELLO THERE\r\n\r\n";
-    ASSERT_EQ(::write(fd, garbage.data(), garbage.size()), ssize_t(garbage.size()));
+    const int fd = send_raw(monitor->port(), "HELLO THERE\r\n\r\n");
+    ASSERT_GE(fd, 0);
     char reply[256] = {};
     ASSERT_GT(::read(fd, reply, sizeof reply - 1), 0);
     ::close(fd);
@@ -276,16 +287,8 @@ TEST_F(MonitorServer, AWatcherThatStopsReadingIsDroppedWithoutSlowingTheOthers)
     auto monitor = start(o);
     cpm::Writer<VehicleState> states(participant(), t::vehicle_state.name, t::vehicle_state.writer);
     // The stuck watcher: asks for the stream with a tiny receive buffer and never reads.
-    const int stuck = ::socket(AF_INET, SOCK_STREAM, 0);
-    const int small = 2048;
-    ::setsockopt(stuck, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_port = htons(uint16_t(monitor->port()));
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ASSERT_EQ(::connect(stuck, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-    const std::string ask = "GET /api/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
-    ASSERT_EQ(::write(stuck, ask.data(), ask.size()), ssize_t(ask.size()));
+    const int stuck = send_raw(monitor->port(), "GET /api/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n", 2048);
+    ASSERT_GE(stuck, 0);
     std::atomic<bool> done{false};
     std::atomic<int> events{0};
     std::thread reader([&] {

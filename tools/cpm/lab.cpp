@@ -168,14 +168,7 @@ int lab_run(const std::vector<std::string>& args)
         if (m == "off") {
             s.monitor_port.reset();
         } else {
-            size_t used = 0;
-            int port = 0;
-            try {
-                port = std::stoi(m, &used);
-            } catch (const std::exception&) {
-            }
-            if (used != m.size() || port < 1 || port > 65535) throw UsageError(command + ": --monitor '" + m + "': expected a port (1..65535) or off");
-            s.monitor_port = port;
+            s.monitor_port = int(cpm::cli::parse_integer(command + ": --monitor (a port, or off)", m, 1, 65535));
         }
     }
     if (s.monitor_port) {

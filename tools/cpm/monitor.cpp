@@ -7,7 +7,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <stdexcept>
 #include <thread>
 
 namespace cpm::tools {
@@ -40,17 +39,7 @@ int monitor(const std::vector<std::string>& args)
                                     {{"--port", true}, {"--bind", true}, {"--world", true}, {"--lanes", true}, {"--allow-stop", false}},
                                     command);
     cpm::monitor::MonitorOptions options;
-    if (parsed.has("--port")) {
-        const std::string text = parsed.get("--port");
-        size_t used = 0;
-        int port = -1;
-        try {
-            port = std::stoi(text, &used);
-        } catch (const std::exception&) {
-        }
-        if (used != text.size() || port < 0 || port > 65535) throw UsageError(command + ": --port: '" + text + "' is not a port (0..65535)");
-        options.port = port;
-    }
+    if (parsed.has("--port")) options.port = int(cpm::cli::parse_integer(command + ": --port", parsed.get("--port"), 0, 65535));
     options.bind = parsed.get("--bind", options.bind);
     options.world = parsed.get("--world");
     options.lanes = parsed.get("--lanes");

@@ -53,6 +53,7 @@ Browser::Browser(int width, int height)
     pid_ = ::fork();
     if (pid_ < 0) throw std::runtime_error("Browser: fork failed");
     if (pid_ == 0) {
+        ::setpgid(0, 0);    // its own group: the renderers and helpers end with it
         ::dup2(in[0], 3);   // chromium reads commands from fd 3
         ::dup2(out[1], 4);  // and writes replies to fd 4
         const int null = ::open("/dev/null", O_WRONLY);
@@ -80,12 +81,11 @@ Browser::~Browser()
     if (to_browser_ >= 0) ::close(to_browser_);
     if (from_browser_ >= 0) ::close(from_browser_);
     if (pid_ > 0) {
-        ::kill(pid_, SIGTERM);
-        for (int i = 0; i < 100 && ::waitpid(pid_, nullptr, WNOHANG) == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
-        if (::waitpid(pid_, nullptr, WNOHANG) == 0) {
-            ::kill(pid_, SIGKILL);
-            ::waitpid(pid_, nullptr, 0);
-        }
+        ::kill(-pid_, SIGTERM);
+        bool ended = false;
+        for (int i = 0; i < 100 && !(ended = ::waitpid(pid_, nullptr, WNOHANG) == pid_); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        ::kill(-pid_, SIGKILL);  // whatever of the group is left
+        if (!ended) ::waitpid(pid_, nullptr, 0);
     }
     std::error_code ec;
     std::filesystem::remove_all(profile_, ec);
