@@ -14,6 +14,16 @@ void SampleSelector::add(uint64_t create_ns, uint64_t valid_after_ns, std::share
         ++overflow_count_;
     }
     entries_.push_back(Entry{create_ns, valid_after_ns, std::move(sample)});
+    ++arrivals_;
+    arrived_.notify_all();
+}
+
+bool SampleSelector::wait_for_arrival(std::chrono::nanoseconds timeout)
+{
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (!arrived_.wait_for(lock, timeout, [&] { return arrivals_ != arrivals_seen_; })) return false;
+    arrivals_seen_ = arrivals_;
+    return true;
 }
 
 SampleSelector::Pick SampleSelector::select(uint64_t t_now_ns)

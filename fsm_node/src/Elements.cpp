@@ -63,16 +63,22 @@ public:
         esum_ = 0;
         eold_.reset();
     }
-    Output tick(const Inputs& in, double) override { return control(measured(in)); }
+    Output tick(const Inputs& in, double dt) override { return control(measured(in), dt); }
 
 protected:
     virtual double measured(const Inputs& in) { return side_range(in, side_); }
-    Output control(double range)
+    /// The original's PID_S is the fixed tick period. Here each tick integrates and
+    /// differentiates over the time since the previous measurement (dt, from the samples'
+    /// stamps), so that a lost sample (one tick for two periods) or an irregular sensor keeps
+    /// the gains per second; at the nominal period it is the original formula exactly. A gap
+    /// over 4 periods counts as 4 (input that old brakes the car anyway).
+    Output control(double range, double dt)
     {
+        const double h = dt > 0 ? std::min(dt, 4 * pid_s_) : pid_s_;
         double e = range - clearance_;
         if (!eold_) eold_ = e;
-        esum_ += e;
-        double y = p_ * e + esum_ * i_ * pid_s_ + d_ * (e - *eold_) / pid_s_;
+        esum_ += e * h / pid_s_;
+        double y = p_ * e + esum_ * i_ * pid_s_ + d_ * (e - *eold_) / h;
         eold_ = e;
         return {clamp1(throttle_), clamp1(side_sign(side_) * y)};
     }
@@ -124,13 +130,13 @@ public:
         target_clearance_ = configured_clearance_;  // a target, if any, comes after entry
         distance_ = configured_distance_;
     }
-    Output tick(const Inputs& in, double) override
+    Output tick(const Inputs& in, double dt) override
     {
         double s = distance_since_entry(in);
         done_ = s >= distance_;
         double f = distance_ > 0 ? std::clamp(s / distance_, 0.0, 1.0) : 1.0;
         clearance_ = start_clearance_ + (target_clearance_ - start_clearance_) * f;
-        return control(side_range(in, side_));
+        return control(side_range(in, side_), dt);
     }
     bool can_finish() const override { return true; }
     bool finished() const override { return done_; }

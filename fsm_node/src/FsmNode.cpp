@@ -259,6 +259,16 @@ FsmNode::~FsmNode() = default;
 void FsmNode::run(const std::function<bool()>& stop_requested)
 {
     const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
+    if (impl_->options.tick_on_sample) {
+        // Each new range sample ticks at once; a period without one ticks anyway, so that
+        // missing or stale input brakes the car as in timer mode.
+        while (!stop_requested()) {
+            (void)impl_->ranges.wait_for_new_sample(std::chrono::nanoseconds(period_ns));
+            if (!impl_->tick()) break;
+        }
+        impl_->brake(get_time_ns(), true);
+        return;
+    }
     auto timer = Timer::create("fsm_node_" + std::to_string(impl_->options.vehicle_id), period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) {
         if (!impl_->tick()) timer->stop();

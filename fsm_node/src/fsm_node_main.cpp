@@ -7,13 +7,14 @@
 #include <cpm/init.hpp>
 
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 
 namespace {
 
 const char* kHelp =
     "usage: fsm_node --vehicle_id N --fsm FILE.json|FILE.uxf [--rate 80] [--max-age 200ms] [--report] [--dds_domain N]\n"
-    "                [--simulated_time]\n"
+    "                [--tick timer|on-sample] [--simulated_time]\n"
     "\n"
     "Loads and checks the state machine (all errors at once, exit 1), then looks at --rate Hz\n"
     "(cpm::Timer) for a new RangeSensors sample of vehicle N and ticks the machine once per\n"
@@ -25,6 +26,9 @@ const char* kHelp =
     "for this car (or for all) from anyone else (cpm monitor's stop button, a lab run's end) halts\n"
     "the machine: FsmStatus says StoppedByRequest and the car stays braked until fsm_node restarts.\n"
     "Ends on SIGINT/SIGTERM (braking the car) or when the machine stops in a final Stop state.\n"
+    "--tick on-sample: tick as soon as a new RangeSensors sample arrives (0.4 ms from the sample to\n"
+    "the command at the median here, as fast as a plain relay, instead of waiting for the timer's\n"
+    "next look); --rate is then the watchdog that brakes on missing input. Real time only.\n"
     "--simulated_time: tick on the lab's simulated clock (timer fsm_node_N; cpm lab run, cpm lab\n"
     "clock --simulated), ages and times in lab time; a machine that stops frees the clock.\n"
     "--report: at the end, print the distance driven, the heading change and, for each wall\n"
@@ -33,13 +37,21 @@ const char* kHelp =
 int run(int argc, char** argv)
 {
     auto parsed = cpm::cli::parse_flags(
-        argc, argv, {{"--vehicle_id", true}, {"--fsm", true}, {"--rate", true}, {"--max-age", true}, {"--report", false}}, "fsm_node");
+        argc, argv, {{"--vehicle_id", true}, {"--fsm", true}, {"--rate", true}, {"--max-age", true}, {"--report", false}, {"--tick", true}},
+        "fsm_node");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("fsm_node: --vehicle_id is required");
     if (!parsed.has("--fsm")) throw cpm::cli::UsageError("fsm_node: --fsm is required (a machine's JSON file)");
     cpm::fsm::FsmNodeOptions options;
     options.vehicle_id = static_cast<uint8_t>(cpm::cli::parse_integer("--vehicle_id", parsed.get("--vehicle_id"), 1, 255));
     options.rate_hz = cpm::cli::parse_number("--rate", parsed.get("--rate", "80"), 1, 1000);
     options.max_age_ns = cpm::cli::parse_duration("--max-age", parsed.get("--max-age", "200ms"));
+    const std::string tick = parsed.get("--tick", "timer");
+    if (tick != "timer" && tick != "on-sample") throw cpm::cli::UsageError("fsm_node: --tick '" + tick + "': expected timer or on-sample");
+    options.tick_on_sample = tick == "on-sample";
+    if (options.tick_on_sample && cpm::parse_init_settings(argc, argv, std::getenv("CPM_DOMAIN_ID")).simulated_time) {
+        throw cpm::cli::UsageError("fsm_node: --tick on-sample and --simulated_time: the simulated clock steps the node's timer; "
+                                   "tick on the timer (the default) in simulated time");
+    }
 
     auto loaded = cpm::fsm::load_file(parsed.get("--fsm"));
     for (const auto& w : loaded.warnings) std::fprintf(stderr, "fsm_node: warning: %s\n", w.text().c_str());

@@ -210,3 +210,26 @@ TEST_F(ReaderTest, TopicWithAnotherTypeIsAnErrorNamingBothTypes)
         EXPECT_THAT(e.what(), HasSubstr("VehicleObservation"));
     }
 }
+
+TEST_F(ReaderTest, WaitForNewSampleWakesOnEachArrivalOfItsVehicleOnly)
+{
+    cpm::Writer<VehicleState> writer(writer_side, topic, kReliable);
+    cpm::ReaderOptions mine = kReliableReader;
+    mine.vehicle_id = 3;
+    cpm::Reader<VehicleState> sut(reader_side, topic, mine);
+    connect(writer, sut);
+    EXPECT_FALSE(sut.wait_for_new_sample(50ms)) << "nothing has arrived";
+
+    ASSERT_TRUE(writer.write(vehicle_state(4, kT0, kT0, 1)));
+    delivered(writer);
+    EXPECT_FALSE(sut.wait_for_new_sample(100ms)) << "another vehicle's sample does not wake it";
+
+    std::atomic<bool> woke{false};
+    std::thread waiter([&] { woke = sut.wait_for_new_sample(5s); });
+    std::this_thread::sleep_for(20ms);
+    ASSERT_TRUE(writer.write(vehicle_state(3, kT0, kT0, 2)));
+    waiter.join();
+    EXPECT_TRUE(woke) << "its own vehicle's sample does";
+    EXPECT_TRUE(sut.get_sample(kT0 + kMs).valid);
+    EXPECT_FALSE(sut.wait_for_new_sample(50ms)) << "each arrival wakes one wait";
+}

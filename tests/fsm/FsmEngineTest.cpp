@@ -72,6 +72,23 @@ TEST(FsmEngine, BasicFollowWallIsTheOriginalPidLaw)
     EXPECT_NEAR(out.steering, -std::clamp(y, -1.0, 1.0), 1e-12);
 }
 
+TEST(FsmEngine, AWallFollowerKeepsItsGainsPerSecondWhenASampleIsLost)
+{
+    auto sut = machine(R"({"root": 0, "tick_period": 0.0125,
+        "states": [{"id": 0, "type": "BasicFollowWall", "side": "right", "clearance": 0.4, "p": 2, "i": 1, "d": 0.5}],
+        "transitions": []})");
+    sut->tick(at(0, 0, 0.40), 0.0125);                    // e = 0
+    auto out = sut->tick(at(0.025, 0.02, 0.45), 0.025);   // one sample lost: this tick covers two periods
+    // The error held for two periods counts twice in the sum; its change is spread over both.
+    const double y = 2 * 0.05 + (2 * 0.05) * 1 * 0.0125 + 0.5 * 0.05 / 0.025;
+    EXPECT_NEAR(out.steering, -std::min(y, 1.0), 1e-12);
+    // A long gap counts as at most four periods.
+    sut->tick(at(1.0, 0.5, 0.45), 1.0);
+    out = sut->tick(at(2.0, 0.6, 0.50), 1.0);
+    const double capped = 2 * 0.10 + (2 * 0.05 + 4 * 0.05 + 4 * 0.10) * 1 * 0.0125 + 0.5 * 0.05 / 0.05;
+    EXPECT_NEAR(out.steering, -std::clamp(capped, -1.0, 1.0), 1e-12);
+}
+
 TEST(FsmEngine, FollowWallIgnoresRangeJumpsOverTwoCentimetres)
 {
     const char* json = R"({"root": 0, "states": [{"id": 0, "type": "%s", "side": "right", "clearance": 0.4, "p": 2, "d": 0}], "transitions": []})";

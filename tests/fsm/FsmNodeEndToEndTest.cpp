@@ -52,7 +52,7 @@ struct Drive
     }
 };
 
-Drive drive(const std::string& machine)
+Drive drive(const std::string& machine, const std::string& tick = "timer")
 {
     cpm::Participant participant(cpm_test::isolated_options());
     cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
@@ -62,7 +62,7 @@ Drive drive(const std::string& machine)
     const std::string root = CPM_SOURCE_DIR;
     Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", root + "/scenarios/maps/corridor.json",
                  "--start", "0,-0.01,0"});
-    Process sut({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", root + "/scenarios/fsm/" + machine, "--report"});
+    Process sut({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", root + "/scenarios/fsm/" + machine, "--report", "--tick", tick});
     Drive run;
     auto collect = [&] {
         for (auto& o : observations.take()) run.track.push_back(o);
@@ -84,9 +84,17 @@ Drive drive(const std::string& machine)
 
 }  // namespace
 
-TEST(FsmNodeEndToEnd, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCornerAndStops)
+/// The same drive with the machine ticked by the timer (the default) and on each new sample.
+class FsmNodeTicking : public ::testing::TestWithParam<std::string>
 {
-    const Drive run = drive("corridor.json");
+};
+
+INSTANTIATE_TEST_SUITE_P(FsmNodeEndToEnd, FsmNodeTicking, ::testing::Values("timer", "on-sample"),
+                         [](const auto& info) { return info.param == "timer" ? std::string("OnTheTimer") : std::string("OnEachSample"); });
+
+TEST_P(FsmNodeTicking, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCornerAndStops)
+{
+    const Drive run = drive("corridor.json", GetParam());
     EXPECT_EQ(run.states, (std::vector<int>{0, 1, 2, 3})) << run.output;
     EXPECT_NE(run.output.find("ended in state 3 (Stop)"), std::string::npos) << run.output;
     // --report: the distance, the turn, and each wall-following state's measured deviation from

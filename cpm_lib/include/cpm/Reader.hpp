@@ -62,6 +62,11 @@ public:
         }
     }
 
+    /// Waits until a sample (of options.vehicle_id, when set) arrives after the last call that
+    /// returned true, or the timeout: for code that acts on each new sample, then calls
+    /// get_sample. One thread should wait per reader. True when a sample arrived.
+    bool wait_for_new_sample(std::chrono::nanoseconds timeout) { return selector_.wait_for_arrival(timeout); }
+
     size_t matched_publications() const { return core_.matched_publications(); }
     [[nodiscard]] bool wait_for_matched(size_t n, std::chrono::milliseconds timeout) const
     {

@@ -1,4 +1,6 @@
 #pragma once
+#include <chrono>
+#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
@@ -30,6 +32,9 @@ public:
     size_t size() const;
     /// Samples dropped because the buffer was full.
     uint64_t overflow_count() const;
+    /// Waits until a sample is added after the last call returned true (or, the first time,
+    /// after construction), or the timeout; true when one was.
+    bool wait_for_arrival(std::chrono::nanoseconds timeout);
 
 private:
     struct Entry
@@ -42,6 +47,8 @@ private:
     std::deque<Entry> entries_;  // arrival order
     size_t capacity_;
     uint64_t overflow_count_ = 0;
+    uint64_t arrivals_ = 0, arrivals_seen_ = 0;
+    std::condition_variable arrived_;
 };
 
 }  // namespace cpm::detail

@@ -44,6 +44,10 @@ struct FsmNodeOptions
     uint8_t vehicle_id = 0;
     double rate_hz = 80;                  ///< how often it looks for a new RangeSensors sample
     uint64_t max_age_ns = 200'000'000;    ///< older input brakes the car
+    /// Tick as soon as a new RangeSensors sample arrives instead of at the timer's next look;
+    /// then the timer period (1 / rate_hz) is only the watchdog for missing input. Real time
+    /// only (the simulated clock steps timers).
+    bool tick_on_sample = false;
 };
 
 /// Runs a loaded machine against vehicle N: a cpm::Timer looks for a new RangeSensors sample
