@@ -310,7 +310,8 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
         }
         if (!result.error.empty()) break;
         const bool simulated = settings.time == TimeMode::simulated;
-        const uint64_t lab_now = simulated ? 0 : cpm::get_time_ns() - std::min(cpm::get_time_ns(), real_start);
+        const uint64_t now = cpm::get_time_ns();  // once: two reads in one expression may come in either order
+        const uint64_t lab_now = simulated ? 0 : now - std::min(now, real_start);
         if (simulated && clock_done) {
             if (!clock_error.empty()) result.error = "the simulated clock stopped: " + clock_error;
             break;
@@ -330,8 +331,9 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
         }
     }
     if (tty) std::fprintf(o.progress, "\n");
+    const uint64_t end_ns = cpm::get_time_ns();
     result.lab_time_ns = settings.time == TimeMode::simulated ? simulated_until.load()
-                                                              : std::min(settings.duration_ns, cpm::get_time_ns() - std::min(cpm::get_time_ns(), real_start));
+                                                              : std::min(settings.duration_ns, end_ns - std::min(end_ns, real_start));
 
     // The end, in order: every car told to stop, the timers stopped, then the processes that
     // command the cars, the cars, and the history last (it closes the recording).
