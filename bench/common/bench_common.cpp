@@ -1,5 +1,7 @@
 #include "bench_common.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -100,6 +102,33 @@ std::string arg(int argc, char** argv, const std::string& name, const std::strin
         if (argv[i] == name) return argv[i + 1];
     }
     return fallback;
+}
+
+void record(const Figure& f)
+{
+    const char* path = std::getenv("CPM_BENCH_JSON");
+    if (!path || !*path) return;
+    nlohmann::json j{{"bench", f.bench}, {"case", f.what}, {"unit", f.unit}, {"cpm", f.cpm}};
+    j["peer"] = f.peer.empty() ? nlohmann::json(nullptr) : nlohmann::json(f.peer);
+    j["peer_value"] = f.peer.empty() ? nlohmann::json(nullptr) : nlohmann::json(f.peer_value);
+    j["ratio"] = f.peer.empty() || f.peer_value == 0 ? nlohmann::json(nullptr) : nlohmann::json(f.cpm / f.peer_value);
+    j["target"] = f.target.empty() ? nlohmann::json(nullptr) : nlohmann::json(f.target);
+    j["met"] = f.met < 0 ? nlohmann::json(nullptr) : nlohmann::json(f.met == 1);
+    std::ofstream(path, std::ios::app) << j.dump() << '\n';
+}
+
+void record_latency(const std::string& bench, const std::string& what, const Stats& ours, const std::string& peer, const Stats& reference,
+                    double target_p50)
+{
+    Figure p50{bench, what + " p50", "µs", ours.p50, peer, reference.p50};
+    if (target_p50 > 0) {
+        char t[64];
+        std::snprintf(t, sizeof t, "p50 <= %.2fx peer", target_p50);
+        p50.target = t;
+        p50.met = ours.p50 <= target_p50 * reference.p50 ? 1 : 0;
+    }
+    record(p50);
+    record({bench, what + " p99", "µs", ours.p99, peer, reference.p99});
 }
 
 }  // namespace bench

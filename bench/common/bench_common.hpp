@@ -42,6 +42,28 @@ std::string cyclone_loopback_env();
 /// off by default, as in cpm.
 bool data_sharing();
 
+/// One measured figure beside its peer from the same run, for `./lab bench --json FILE` and the
+/// table `./lab bench` ends with. `met`: whether `target` (in words) is reached; unset when the
+/// figure has no target.
+struct Figure
+{
+    std::string bench;      ///< the program, e.g. "latency"
+    std::string what;       ///< the case, e.g. "100 B one-way p50"
+    std::string unit;       ///< e.g. "µs", "samples/s"
+    double cpm = 0;
+    std::string peer;       ///< e.g. "raw Fast DDS (listener pong)"; empty: no peer
+    double peer_value = 0;
+    std::string target;     ///< e.g. "<= 1.05x peer"; empty: none
+    int met = -1;           ///< 1 met, 0 not met, -1 no target
+};
+/// Appends the figure as one JSON line ({"bench", "case", "unit", "cpm", "peer", "peer_value",
+/// "ratio", "target", "met"}) to the file $CPM_BENCH_JSON names; nothing when it is unset.
+void record(const Figure& f);
+/// Records the p50 and p99 of `ours` against `reference` (µs); `target_p50` is the largest p50
+/// ratio that meets the target (0: no target).
+void record_latency(const std::string& bench, const std::string& what, const Stats& ours, const std::string& peer, const Stats& reference,
+                    double target_p50 = 0);
+
 /// The value of "--name value" in argv, or fallback.
 std::string arg(int argc, char** argv, const std::string& name, const std::string& fallback);
 

@@ -358,11 +358,14 @@ int main(int argc, char** argv)
         bench::print_row("Cyclone DDS ddsperf ping/pong (" + std::to_string(seconds) + " s)", results["cyclone"]);
         // ddsperf prints a line a second; the first is warm-up. Fewer windows: an incomplete run.
         const bool cyclone_complete = windows + 2 >= size_t(seconds);
+        const std::string sized = std::to_string(size) + " B one-way";
         if (results.count("cpm") && results.count("raw_listener")) {
             bench::print_ratio("cpm / raw Fast DDS (listener pong)", results["cpm"], results["raw_listener"]);
+            bench::record_latency("latency", sized, results["cpm"], "raw Fast DDS (listener pong)", results["raw_listener"], 1.05);
         }
         if (results.count("cpm") && results.count("raw_waitset")) {
             bench::print_ratio("cpm / raw Fast DDS (wait-set pong)", results["cpm"], results["raw_waitset"]);
+            bench::record_latency("latency", sized, results["cpm"], "raw Fast DDS (wait-set pong)", results["raw_waitset"]);
         }
         if (!cyclone_complete) {
             std::printf("Cyclone DDS: %zu of %d one-second windows; incomplete, no ratio\n", windows, seconds - 1);
@@ -371,8 +374,10 @@ int main(int argc, char** argv)
             // Not the same estimator: ddsperf's figures are medians of its per-second percentiles,
             // and ddsperf runs on loopback UDP (its shared memory needs iceoryx); cpm's are
             // per-sample percentiles.
-            if (results.count("cpm"))
+            if (results.count("cpm")) {
                 bench::print_ratio("cpm / Cyclone (UDP; its per-second medians)", results["cpm"], results["cyclone"]);
+                bench::record_latency("latency", sized, results["cpm"], "Cyclone ddsperf (UDP, per-second medians)", results["cyclone"]);
+            }
             if (results.count("cpm_udp"))
                 bench::print_ratio("cpm UDP only / Cyclone (same transport)", results["cpm_udp"], results["cyclone"]);
         }

@@ -260,14 +260,26 @@ int main(int argc, char** argv)
         print_result("Cyclone DDS ddsperf pub/sub (median second)", cyclone);
     }
     // A ratio only from complete runs (every sample received, none lost, the whole time).
-    auto ratio = [](const char* label, const Result& a, const Result& b) {
-        if (a.ok && b.ok && b.rate > 0) std::printf("%-44s %.2f\n", label, a.rate / b.rate);
-        else if (a.rate > 0 || b.rate > 0) std::printf("%-44s (an incomplete run: no ratio)\n", label);
+    auto ratio = [&](const char* label, const Result& a, const Result& b, const std::string& peer, double target) {
+        if (a.ok && b.ok && b.rate > 0) {
+            std::printf("%-44s %.2f\n", label, a.rate / b.rate);
+            bench::Figure f{"throughput", std::to_string(size) + (&a == &cpm_udp ? " B reliable, cpm on UDP only" : " B reliable"), "samples/s", a.rate, peer,
+                            b.rate};
+            if (target > 0) {
+                char t[48];
+                std::snprintf(t, sizeof t, ">= %.2fx peer", target);
+                f.target = t;
+                f.met = a.rate >= target * b.rate ? 1 : 0;
+            }
+            bench::record(f);
+        } else if (a.rate > 0 || b.rate > 0) {
+            std::printf("%-44s (an incomplete run: no ratio)\n", label);
+        }
     };
-    ratio("cpm / raw Fast DDS (same QoS and transport)", cpm_result, raw_result);
+    ratio("cpm / raw Fast DDS (same QoS and transport)", cpm_result, raw_result, "raw Fast DDS (same QoS and transport)", 0.9);
     // Not the same work: ddsperf batches its writes, runs on loopback UDP and reports its
     // median second; cpm writes sample by sample and is timed from first to last sample.
-    ratio("cpm / Cyclone ddsperf (batched, UDP)", cpm_result, cyclone);
-    ratio("cpm UDP only / Cyclone ddsperf (batched)", cpm_udp, cyclone);
+    ratio("cpm / Cyclone ddsperf (batched, UDP)", cpm_result, cyclone, "Cyclone ddsperf (batched, UDP)", 0);
+    ratio("cpm UDP only / Cyclone ddsperf (batched)", cpm_udp, cyclone, "Cyclone ddsperf (batched; cpm on UDP only)", 0);
     return (only == "cyclone" || only == "raw" || (cpm_result.ok && cpm_udp.ok)) && (only == "cyclone" || only == "cpm" || raw_result.ok) ? 0 : 1;
 }
