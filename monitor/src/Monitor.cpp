@@ -112,10 +112,12 @@ struct Monitor::Impl
     mutable std::mutex mutex;
     std::condition_variable published;  ///< a new snapshot, or stopping
     std::condition_variable changed;    ///< a sample came in (wakes the snapshot thread)
+    std::condition_variable ended;      ///< stopping (wakes the housekeeping thread)
     std::shared_ptr<const std::string> latest;
     uint64_t sequence = 0;
     bool stopping = false;
-    bool dirty = false;
+    bool dirty = false;  ///< samples came in since the last snapshot
+    bool idle = false;   ///< the snapshot thread waits for samples (not out the gap)
 
     std::atomic<uint64_t> sent{0}, skipped{0}, stops_sent{0};
     std::atomic<size_t> watchers{0};
@@ -130,13 +132,17 @@ struct Monitor::Impl
     {
     }
 
+    /// A sample came in. Wakes the snapshot thread only when it is idle: while it waits out the
+    /// gap between two snapshots, a wake-up per sample would only cost a context switch.
     void touched()
     {
+        bool wake = false;
         {
             std::lock_guard lock(mutex);
             dirty = true;
+            wake = idle;
         }
-        changed.notify_one();
+        if (wake) changed.notify_one();
     }
 
     template <class T, class Feed>
@@ -161,7 +167,9 @@ struct Monitor::Impl
         auto last = Clock::now() - std::chrono::seconds(1);
         std::unique_lock lock(mutex);
         while (!stopping) {
+            idle = true;
             changed.wait_for(lock, std::chrono::milliseconds(250), [&] { return stopping || dirty; });
+            idle = false;
             if (stopping) break;
             const auto wait = last + std::chrono::duration_cast<Clock::duration>(min_gap) - Clock::now();
             if (wait > Clock::duration::zero()) {
@@ -195,7 +203,7 @@ struct Monitor::Impl
             }
             state.set_source(replay ? "replay" : "live");
             lock.lock();
-            published.wait_for(lock, std::chrono::seconds(1), [&] { return stopping; });
+            ended.wait_for(lock, std::chrono::seconds(1), [&] { return stopping; });
         }
     }
 
@@ -359,6 +367,7 @@ Monitor::~Monitor()
     }
     impl_->published.notify_all();
     impl_->changed.notify_all();
+    impl_->ended.notify_all();
     impl_->server.stop();
     for (auto* t : {&impl_->listener, &impl_->snapshots, &impl_->housekeeping}) {
         if (t->joinable()) t->join();
