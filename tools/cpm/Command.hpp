@@ -2,6 +2,7 @@
 // The `cpm` command's verb groups: each file (lab.cpp, topic.cpp, fsm.cpp, …) parses its verbs'
 // flags, calls the libraries and prints; nothing here is meant for programs linking cpm.
 #include <cpm/CommandLine.hpp>
+#include <cpm/Participant.hpp>
 
 #include <string>
 #include <vector>
@@ -37,6 +38,10 @@ std::vector<Command> aruco_commands();
 std::vector<Command> routing_commands();
 std::vector<Command> record_commands();
 std::vector<Command> monitor_commands();
+
+/// The participant options of cpm::init, named `name` unless --node_id named the process: a
+/// command whose role others tell by its name (cpm_play, cpm_monitor).
+cpm::ParticipantOptions named_participant(const std::string& name);
 
 /// The single positional argument a command takes (`what` names it in the error).
 std::string only_positional(const cpm::cli::ParsedArgs& parsed, const std::string& command, const std::string& what);

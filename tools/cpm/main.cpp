@@ -14,6 +14,17 @@
 #include <string>
 #include <vector>
 
+namespace cpm::tools {
+
+cpm::ParticipantOptions named_participant(const std::string& name)
+{
+    cpm::ParticipantOptions options = cpm::ParticipantOptions::from_init();
+    if (cpm::init_settings().node_id == "cpm") options.name = name;  // "cpm": no --node_id given
+    return options;
+}
+
+}  // namespace cpm::tools
+
 namespace {
 
 using cpm::cli::UsageError;

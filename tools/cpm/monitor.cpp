@@ -2,7 +2,6 @@
 #include "Command.hpp"
 
 #include <cpm/Participant.hpp>
-#include <cpm/init.hpp>
 #include <cpm/monitor/Monitor.hpp>
 
 #include <chrono>
@@ -49,9 +48,7 @@ int monitor(const std::vector<std::string>& args)
 
     cpm::cli::stop_on_signals();
     // Named cpm_monitor (unless --node_id names it): a lab run lets watchers stay on its domain.
-    cpm::ParticipantOptions named = cpm::ParticipantOptions::from_init();
-    if (cpm::init_settings().node_id == "cpm") named.name = "cpm_monitor";
-    cpm::Participant participant(named);
+    cpm::Participant participant(named_participant("cpm_monitor"));
     cpm::monitor::Monitor server(participant, options);
     std::printf("cpm monitor: serving the lab of domain %d at %s%s\n", participant.domain_id(), server.address().c_str(),
                 options.allow_stop ? " (stop buttons on)" : "");

@@ -6,7 +6,6 @@
 #include <cpm/Error.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/get_time_ns.hpp>
-#include <cpm/init.hpp>
 #include <cpm/rtdb/Csv.hpp>
 #include <cpm/rtdb/HistoryService.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
@@ -199,9 +198,7 @@ int play_command(const std::vector<std::string>& args)
     try {
         // Named cpm_play (unless --node_id names it), so that watchers such as cpm monitor can
         // tell a replay from a live lab.
-        cpm::ParticipantOptions named = cpm::ParticipantOptions::from_init();
-        if (cpm::init_settings().node_id == "cpm") named.name = "cpm_play";
-        participant = std::make_unique<cpm::Participant>(named);
+        participant = std::make_unique<cpm::Participant>(named_participant("cpm_play"));
         player = std::make_unique<cpm::rtdb::Player>(*participant, file, options);
     } catch (const std::runtime_error& e) {
         throw cpm::Error(command + ": " + e.what());
