@@ -1,11 +1,12 @@
 // cpm::LogThrottle: a repeated message goes through once per interval, with the count held back.
 #include <cpm/LogThrottle.hpp>
 
+#include <cpm_test/Dds.hpp>
 #include <gtest/gtest.h>
 
 namespace {
 
-constexpr uint64_t kMs = 1'000'000ull;
+using cpm_test::kMs;
 
 TEST(LogThrottle, LetsTheFirstThroughThenOncePerIntervalWithTheCountHeldBack)
 {

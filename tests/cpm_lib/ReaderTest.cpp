@@ -20,11 +20,10 @@ using ::testing::HasSubstr;
 
 namespace {
 
-constexpr uint64_t kMs = 1'000'000;
-constexpr uint64_t kT0 = 1'700'000'000'000'000'000ull;
-
-const cpm::WriterOptions kReliable{.reliable = true, .keep_all = false, .history_depth = 100};
-const cpm::ReaderOptions kReliableReader{.reliable = true, .keep_all = false, .history_depth = 100};
+using cpm_test::kMs;
+using cpm_test::kT0;
+using cpm_test::kReliable;
+using cpm_test::kReliableReader;
 
 class ReaderTest : public ::testing::Test
 {

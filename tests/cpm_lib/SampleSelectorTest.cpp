@@ -1,6 +1,7 @@
 // The selection rule behind Reader::get_sample, without DDS.
 #include <cpm/detail/SampleSelector.hpp>
 
+#include <cpm_test/Dds.hpp>
 #include <gtest/gtest.h>
 
 #include <memory>
@@ -10,7 +11,7 @@ using cpm::detail::SampleSelector;
 
 namespace {
 
-constexpr uint64_t kMs = 1'000'000;
+using cpm_test::kMs;
 
 void add(SampleSelector& sut, int tag, uint64_t create, uint64_t valid_after)
 {

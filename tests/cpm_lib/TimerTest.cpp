@@ -30,7 +30,7 @@ using ::testing::HasSubstr;
 
 namespace {
 
-constexpr uint64_t kMs = 1'000'000;
+using cpm_test::kMs;
 
 // The lab side of a synchronised start: sees ReadyStatus, sends SystemTrigger.
 class TimerTest : public ::testing::Test

@@ -36,8 +36,12 @@ TEST(Topics, NamesAreTheLabsAndEachIsListedOnce)
 TEST(Topics, EveryWriterAsTheTableSaysMatchesEveryReaderAsTheTableSays)
 {
     for (const auto* spec : cpm::topics::all) {
-        if (spec->reader.reliable) EXPECT_TRUE(spec->writer.reliable) << spec->name << ": a reliable reader needs a reliable writer";
-        if (spec->reader.transient_local) EXPECT_TRUE(spec->writer.transient_local) << spec->name;
+        if (spec->reader.reliable) {
+            EXPECT_TRUE(spec->writer.reliable) << spec->name << ": a reliable reader needs a reliable writer";
+        }
+        if (spec->reader.transient_local) {
+            EXPECT_TRUE(spec->writer.transient_local) << spec->name;
+        }
         EXPECT_GE(spec->writer.history_depth, 1) << spec->name;
     }
     const auto mine = cpm::topics::vehicle_state.reader_for(7);

@@ -14,11 +14,11 @@ using namespace cpm::rtdb;
 
 namespace {
 
-struct Fixture
+struct AskFixture
 {
     Store store;
     Oid oid = store.add_object({.topic = "vehicleState", .key = "3", .type_name = "VehicleState", .created_ts = 1});
-    Fixture()
+    AskFixture()
     {
         for (uint64_t c : {100, 200, 300}) {
             const uint8_t b[] = {uint8_t(c / 100)};
@@ -42,7 +42,7 @@ struct Fixture
 
 TEST(HistoryRequests, AnswersCarryTheRequestIdsTheObjectAndTheSamples)
 {
-    Fixture f;
+    AskFixture f;
     auto r = f.ask("at", 250);
     EXPECT_EQ(r.client_id(), "me");
     EXPECT_EQ(r.request_id(), 7u);
@@ -61,7 +61,7 @@ TEST(HistoryRequests, AnswersCarryTheRequestIdsTheObjectAndTheSamples)
 
 TEST(HistoryRequests, MalformedRequestsGetAnErrorNamingWhatIsWrong)
 {
-    Fixture f;
+    AskFixture f;
     auto bad_kind = f.ask("teleport");
     EXPECT_EQ(bad_kind.status(), "error");
     EXPECT_NE(bad_kind.error().find("unknown kind 'teleport'"), std::string::npos) << bad_kind.error();
@@ -106,7 +106,7 @@ TEST(HistoryRequests, MalformedRequestsGetAnErrorNamingWhatIsWrong)
 
 TEST(HistoryRequests, SnapshotAnswersEachObjectWithItsOwnStatus)
 {
-    Fixture f;
+    AskFixture f;
     f.store.add_object({.topic = "rangeSensors", .key = "3"});
     HistoryRequest rq;
     rq.kind("snapshot");

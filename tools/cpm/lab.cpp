@@ -67,7 +67,7 @@ int lab_clock(const std::vector<std::string>& args)
     return 0;
 }
 
-const char* kCheckHelp =
+const char* kLabCheckHelp =
     "usage: cpm lab check FILE [--dds_domain N]\n"
     "\n"
     "Reads a lab scenario (scenarios/labs/*.yaml: name, domain, time, duration, world, lanes,\n"
@@ -237,7 +237,7 @@ std::vector<Command> lab_commands()
 {
     return {{"lab", "clock", "drive the lab's timers: a synchronised real-time start and stop, or a simulated clock", kClockHelp,
              lab_clock},
-            {"lab", "check", "check a lab scenario file and show the processes a run of it starts", kCheckHelp, lab_check},
+            {"lab", "check", "check a lab scenario file and show the processes a run of it starts", kLabCheckHelp, lab_check},
             {"lab", "run", "run a lab scenario: every process started, supervised, recorded and stopped in order", kRunHelp, lab_run},
             {"lab", "report", "draw a run's report (report.html with plots, summary.json) from its folder", kReportHelp, lab_report}};
 }

@@ -18,7 +18,7 @@
 namespace cpm::tools {
 namespace {
 
-const char* kCheckHelp =
+const char* kRoutingCheckHelp =
     "usage: cpm routing check FILE.json\n"
     "\n"
     "Loads a lane graph as central_routing does and prints every error with its JSON path\n"
@@ -230,7 +230,7 @@ int routing_watch(const std::vector<std::string>& args)
 
 std::vector<Command> routing_commands()
 {
-    return {{"routing", "check", "check a lane graph file and count its conflict zones", kCheckHelp, routing_check},
+    return {{"routing", "check", "check a lane graph file and count its conflict zones", kRoutingCheckHelp, routing_check},
             {"routing", "render", "draw a lane graph with its conflict zones (SVG or PNG)", kRenderHelp, routing_render},
             {"routing", "simulate", "run the central planner against ideal cars and summarise", kSimulateHelp, routing_simulate},
             {"routing", "watch", "watch the cars' true poses: distance driven, standstills, closest bodies", kWatchHelp, routing_watch}};
