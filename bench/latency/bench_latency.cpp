@@ -1,5 +1,6 @@
 // Ping-pong latency between two processes: cpm Writer/AsyncReader versus raw Fast DDS with
-// the same QoS and transport, and Cyclone DDS's ddsperf, in one run.
+// the same QoS and transport, Cyclone DDS's ddsperf, and Cyclone doing this same work
+// (cyclone_bench from the same IDL), in one run.
 //
 //   bench_latency [--count 10000] [--warmup 1000] [--sizes 100,65536] [--domain 200]
 //
@@ -278,6 +279,24 @@ bench::Stats ddsperf_latency(int domain, size_t size, int seconds, size_t& windo
     return s;
 }
 
+// ---- Cyclone DDS doing this same work: cyclone_bench (same IDL, per-sample percentiles) ------
+
+/// One block of round trips from a fresh `cyclone_bench ping` against the pong on `domain`;
+/// appends its one-way latencies, false when the block did not complete.
+bool cyclone_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us)
+{
+    const std::string out = "/tmp/bench_cyclone_ping_" + std::to_string(getpid());
+    auto ping = bench::spawn({cpm::sibling_executable("cyclone_bench"), "ping", "--domain", std::to_string(domain), "--size",
+                              std::to_string(size), "--count", std::to_string(count), "--warmup", std::to_string(warmup)},
+                             {bench::cyclone_loopback_env()}, out);
+    const int code = bench::wait_child(ping, 60);
+    const size_t before = one_way_us.size();
+    std::ifstream in(out);
+    for (double v; in >> v;) one_way_us.push_back(v);
+    std::remove(out.c_str());
+    return code == 0 && one_way_us.size() - before == size_t(count);
+}
+
 }  // namespace
 
 int main(int argc, char** argv)
@@ -328,15 +347,22 @@ int main(int argc, char** argv)
                 pingers.push_back(std::make_unique<CpmPinger>(d, cases[k].impl == "cpm"));
             else pingers.push_back(std::make_unique<RawPinger>(d));
         }
+        // Cyclone doing the same work takes its turn in every block too (a new ping process each).
+        const int cyclone_domain = domain + int(cases.size()) + 1;
+        pongs.push_back(bench::spawn({cpm::sibling_executable("cyclone_bench"), "pong", "--domain", std::to_string(cyclone_domain)},
+                                     {bench::cyclone_loopback_env()}, ""));
         std::vector<std::vector<double>> samples(cases.size());
+        std::vector<double> cyclone_samples;
+        bool cyclone_ok = true;
         std::vector<bool> ok(cases.size(), true);
         for (size_t k = 0; k < cases.size(); ++k) ok[k] = pingers[k]->connected();
         for (int round = 0; round < rounds; ++round) {
+            const int block_warmup = round == 0 ? warmup : 50;
             for (size_t k = 0; k < cases.size(); ++k) {
                 if (!ok[k]) continue;
-                const int block_warmup = round == 0 ? warmup : 50;
                 ok[k] = pingers[k]->run(size, count / rounds, block_warmup, samples[k]);
             }
+            if (cyclone_ok) cyclone_ok = cyclone_block(cyclone_domain, size, count / rounds, block_warmup, cyclone_samples);
         }
         pingers.clear();
         for (auto& pong : pongs) pong.signal(SIGTERM);
@@ -351,6 +377,13 @@ int main(int argc, char** argv)
             }
             results[cases[k].impl] = bench::stats_of(samples[k]);
             bench::print_row(cases[k].label, results[cases[k].impl]);
+        }
+        if (cyclone_ok) {
+            results["cyclone_same"] = bench::stats_of(cyclone_samples);
+            bench::print_row("Cyclone, same work (wait-set pong, UDP)", results["cyclone_same"]);
+        } else {
+            std::printf("%-44s FAILED after %zu round trips\n", "Cyclone, same work (wait-set pong, UDP)", cyclone_samples.size());
+            exit_code = 1;
         }
         const int seconds = 5;
         size_t windows = 0;
@@ -380,6 +413,17 @@ int main(int argc, char** argv)
             }
             if (results.count("cpm_udp"))
                 bench::print_ratio("cpm UDP only / Cyclone (same transport)", results["cpm_udp"], results["cyclone"]);
+        }
+        // The same work and estimator: per-sample percentiles, a ping process waiting on a wait set.
+        if (results.count("cyclone_same")) {
+            if (results.count("cpm")) {
+                bench::print_ratio("cpm / Cyclone, same work", results["cpm"], results["cyclone_same"]);
+                bench::record_latency("latency", sized, results["cpm"], "Cyclone, same work (wait-set pong, UDP)", results["cyclone_same"]);
+            }
+            if (results.count("cpm_udp"))
+                bench::print_ratio("cpm UDP only / Cyclone, same work (same transport)", results["cpm_udp"], results["cyclone_same"]);
+            if (results.count("raw_listener"))
+                bench::print_ratio("raw Fast DDS listener / Cyclone, same work", results["raw_listener"], results["cyclone_same"]);
         }
     }
     return exit_code;

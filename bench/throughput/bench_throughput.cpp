@@ -1,6 +1,7 @@
 // Throughput of 1 KiB reliable samples from a publisher process to a subscriber process,
 // with none lost: cpm Writer/AsyncReader versus raw Fast DDS with the same QoS and
-// transport, and Cyclone DDS's ddsperf pub/sub, in one run.
+// transport, Cyclone DDS's ddsperf pub/sub, and Cyclone doing this same work (cyclone_bench,
+// sample by sample and batched), in one run.
 //
 //   bench_throughput [--seconds 5] [--size 1024] [--domain 201]
 //
@@ -219,6 +220,36 @@ Result run_ddsperf(int domain, size_t size, int seconds)
     return r;
 }
 
+// Cyclone DDS doing this same work: cyclone_bench (the same IDL through idlc; keep-all reliable;
+// loopback UDP), sample by sample or with its writes batched as ddsperf always does; taken on a
+// thread of its own from a wait set (as cpm's AsyncReader) or in the listener (as raw Fast DDS
+// and ddsperf).
+Result run_cyclone_bench(int domain, size_t size, int seconds, bool batch, bool listener)
+{
+    const std::string sub_out = "/tmp/bench_cyclone_sub_" + std::to_string(getpid());
+    const std::string pub_out = "/tmp/bench_cyclone_pub_" + std::to_string(getpid());
+    const std::vector<std::string> env{bench::cyclone_loopback_env()};
+    const std::string exe = cpm::sibling_executable("cyclone_bench");
+    std::vector<std::string> sub_argv{exe, "sub", "--domain", std::to_string(domain)};
+    if (listener) sub_argv.push_back("--listener");
+    auto sub = bench::spawn(sub_argv, env, sub_out);
+    std::vector<std::string> pub_argv{exe, "pub", "--domain", std::to_string(domain), "--size", std::to_string(size), "--seconds",
+                                      std::to_string(seconds)};
+    if (batch) pub_argv.push_back("--batch");
+    auto pub = bench::spawn(pub_argv, env, pub_out);
+    const int pub_code = bench::wait_child(pub, seconds + 60);
+    const int sub_code = bench::wait_child(sub, seconds + 90);
+    Result r;
+    std::string word;
+    int complete = 0;
+    std::ifstream(sub_out) >> word >> r.received >> word >> r.lost >> word >> r.rate >> word >> complete;
+    std::ifstream(pub_out) >> word >> r.written;
+    std::remove(sub_out.c_str());
+    std::remove(pub_out.c_str());
+    r.ok = pub_code == 0 && sub_code == 0 && complete == 1 && r.received == r.written && r.lost == 0;
+    return r;
+}
+
 void print_result(const std::string& label, const Result& r)
 {
     std::printf("%-44s %12.0f %12llu %8llu   %s\n", label.c_str(), r.rate, (unsigned long long)r.received,
@@ -244,7 +275,7 @@ int main(int argc, char** argv)
                          " s; publisher and subscriber in separate processes");
     std::printf("\nthroughput, %zu B samples\n%-44s %12s %12s %8s\n", size, "case", "samples/s", "received", "lost");
     const std::string only = bench::arg(argc, argv, "--only", "");  // cpm, raw or cyclone
-    Result cpm_result, cpm_udp, raw_result, cyclone;
+    Result cpm_result, cpm_udp, raw_result, cyclone, cyclone_same, cyclone_listener, cyclone_batched;
     if (only.empty() || only == "cpm") {
         cpm_result = run_fastdds("cpm", domain, size, seconds);
         print_result("cpm Writer/AsyncReader", cpm_result);
@@ -258,11 +289,19 @@ int main(int argc, char** argv)
     if (only.empty() || only == "cyclone") {
         cyclone = run_ddsperf(domain, size, seconds);
         print_result("Cyclone DDS ddsperf pub/sub (median second)", cyclone);
+        cyclone_same = run_cyclone_bench(domain, size, seconds, false, false);
+        print_result("Cyclone, same work: wait set (UDP)", cyclone_same);
+        cyclone_listener = run_cyclone_bench(domain, size, seconds, false, true);
+        print_result("Cyclone, same work: listener (UDP)", cyclone_listener);
+        cyclone_batched = run_cyclone_bench(domain, size, seconds, true, true);
+        print_result("Cyclone, batched writes, listener (UDP)", cyclone_batched);
     }
     // A ratio only from complete runs (every sample received, none lost, the whole time).
+    // peer: the name the figure is recorded under (empty: printed only, cpm is not one side).
     auto ratio = [&](const char* label, const Result& a, const Result& b, const std::string& peer, double target) {
         if (a.ok && b.ok && b.rate > 0) {
             std::printf("%-44s %.2f\n", label, a.rate / b.rate);
+            if (peer.empty()) return;
             bench::Figure f{"throughput", std::to_string(size) + (&a == &cpm_udp ? " B reliable, cpm on UDP only" : " B reliable"), "samples/s", a.rate, peer,
                             b.rate};
             if (target > 0) {
@@ -281,5 +320,10 @@ int main(int argc, char** argv)
     // median second; cpm writes sample by sample and is timed from first to last sample.
     ratio("cpm / Cyclone ddsperf (batched, UDP)", cpm_result, cyclone, "Cyclone ddsperf (batched, UDP)", 0);
     ratio("cpm UDP only / Cyclone ddsperf (batched)", cpm_udp, cyclone, "Cyclone ddsperf (batched; cpm on UDP only)", 0);
+    // The same work: sample by sample from first to last arrival, keep-all reliable, on UDP.
+    ratio("cpm / Cyclone wait set", cpm_result, cyclone_same, "Cyclone, same work: wait set (UDP)", 0);
+    ratio("cpm UDP only / Cyclone wait set", cpm_udp, cyclone_same, "Cyclone, same work: wait set (UDP; cpm on UDP only)", 0);
+    ratio("raw Fast DDS listener / Cyclone listener", raw_result, cyclone_listener, "", 0);
+    ratio("cpm / Cyclone batched + listener", cpm_result, cyclone_batched, "Cyclone, batched writes, listener (UDP)", 0);
     return (only == "cyclone" || only == "raw" || (cpm_result.ok && cpm_udp.ok)) && (only == "cyclone" || only == "cpm" || raw_result.ok) ? 0 : 1;
 }

@@ -1,0 +1,330 @@
+/* The work of bench_latency and bench_throughput done with Cyclone DDS's C API, from the same
+ * IDL (BenchPayload.idl through idlc), so that cpm can be set beside Cyclone doing the same
+ * work and not only beside ddsperf (which always batches its writes).
+ *
+ *   cyclone_bench pong   [--domain D]                      echoes bench_ping on bench_pong until SIGTERM
+ *   cyclone_bench ping   [--domain D] [--size B] [--count N] [--warmup W]
+ *                        prints one one-way latency (round trip / 2) in µs per line, after W warm-up
+ *   cyclone_bench sub    [--domain D] [--listener]         counts until the end marker, then prints
+ *                        "received N lost L rate R complete 1" (samples/s between first and last
+ *                        arrival); --listener takes samples in Cyclone's receive thread
+ *   cyclone_bench pub    [--domain D] [--size B] [--seconds S] [--batch]
+ *                        writes as fast as the writer accepts for S seconds, then the end marker;
+ *                        --batch packs writes into fewer messages (dds_write_set_batch), as ddsperf does
+ *
+ * QoS as in the cpm benchmarks: reliable; keep-last 1 for ping-pong, keep-all for throughput.
+ * Transports come from CYCLONEDDS_URI (the benchmarks pin Cyclone to loopback UDP). */
+#include "BenchPayload.h"
+
+#include <dds/dds.h>
+
+#include <signal.h>
+#include <stdatomic.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#define END_MARKER UINT64_MAX
+
+static volatile sig_atomic_t g_stop = 0;
+static void on_signal(int sig)
+{
+    (void)sig;
+    g_stop = 1;
+}
+
+static int64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static void check(dds_return_t rc, const char* what)
+{
+    if (rc < 0) {
+        fprintf(stderr, "cyclone_bench: %s: %s\n", what, dds_strretcode(rc));
+        exit(1);
+    }
+}
+
+static const char* arg(int argc, char** argv, const char* name, const char* fallback)
+{
+    for (int i = 1; i + 1 < argc; ++i)
+        if (strcmp(argv[i], name) == 0) return argv[i + 1];
+    return fallback;
+}
+
+static int flag(int argc, char** argv, const char* name)
+{
+    for (int i = 1; i < argc; ++i)
+        if (strcmp(argv[i], name) == 0) return 1;
+    return 0;
+}
+
+static dds_qos_t* qos_for(int keep_all)
+{
+    dds_qos_t* q = dds_create_qos();
+    dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_SECS(10));
+    if (keep_all)
+        dds_qset_history(q, DDS_HISTORY_KEEP_ALL, 0);
+    else
+        dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 1);
+    return q;
+}
+
+static dds_entity_t make_topic(dds_entity_t participant, const char* name)
+{
+    dds_entity_t t = dds_create_topic(participant, &BenchPayload_desc, name, NULL, NULL);
+    check(t, name);
+    return t;
+}
+
+/* Waits until the writer has `n` matched readers (or the stop flag). */
+static void wait_matched(dds_entity_t writer, uint32_t n)
+{
+    for (int i = 0; i < 20000 && !g_stop; ++i) {
+        dds_publication_matched_status_t st;
+        check(dds_get_publication_matched_status(writer, &st), "matched status");
+        if (st.current_count >= n) return;
+        dds_sleepfor(DDS_MSECS(1));
+    }
+    fprintf(stderr, "cyclone_bench: no reader matched within 20 s\n");
+    exit(1);
+}
+
+/* Waits for data on `reader` (up to timeout) and takes one sample as a loan: returns 1 with
+ * *sample set, 0 on timeout. The caller returns the loan. */
+static int take_one(dds_entity_t waitset, dds_entity_t reader, void** sample, dds_duration_t timeout)
+{
+    dds_sample_info_t info;
+    for (;;) {
+        sample[0] = NULL;
+        const dds_return_t n = dds_take(reader, sample, &info, 1, 1);
+        check(n, "take");
+        if (n == 1) {
+            if (info.valid_data) return 1;
+            dds_return_loan(reader, sample, 1);
+            continue;
+        }
+        const dds_return_t w = dds_waitset_wait(waitset, NULL, 0, timeout);
+        check(w, "wait");
+        if (w == 0) return 0;
+    }
+}
+
+static dds_entity_t waitset_on(dds_entity_t participant, dds_entity_t reader)
+{
+    const dds_entity_t ws = dds_create_waitset(participant);
+    const dds_entity_t cond = dds_create_readcondition(reader, DDS_ANY_STATE);
+    check(ws, "waitset");
+    check(cond, "read condition");
+    check(dds_waitset_attach(ws, cond, reader), "attach");
+    return ws;
+}
+
+static void fill(BenchPayload* msg, size_t size)
+{
+    memset(msg, 0, sizeof *msg);
+    msg->data._buffer = dds_alloc(size ? size : 1);
+    memset(msg->data._buffer, 0x5a, size);
+    msg->data._length = (uint32_t)size;
+    msg->data._maximum = (uint32_t)size;
+    msg->data._release = true;
+}
+
+static int pong(dds_entity_t participant)
+{
+    dds_qos_t* q = qos_for(0);
+    const dds_entity_t reader = dds_create_reader(participant, make_topic(participant, "bench_ping"), q, NULL);
+    const dds_entity_t writer = dds_create_writer(participant, make_topic(participant, "bench_pong"), q, NULL);
+    check(reader, "ping reader");
+    check(writer, "pong writer");
+    dds_delete_qos(q);
+    const dds_entity_t ws = waitset_on(participant, reader);
+    void* sample[1];
+    while (!g_stop) {
+        if (!take_one(ws, reader, sample, DDS_MSECS(100))) continue;
+        check(dds_write(writer, sample[0]), "write pong");
+        dds_return_loan(reader, sample, 1);
+    }
+    return 0;
+}
+
+static int ping(dds_entity_t participant, size_t size, long count, long warmup)
+{
+    dds_qos_t* q = qos_for(0);
+    const dds_entity_t writer = dds_create_writer(participant, make_topic(participant, "bench_ping"), q, NULL);
+    const dds_entity_t reader = dds_create_reader(participant, make_topic(participant, "bench_pong"), q, NULL);
+    check(writer, "ping writer");
+    check(reader, "pong reader");
+    dds_delete_qos(q);
+    const dds_entity_t ws = waitset_on(participant, reader);
+    wait_matched(writer, 1);
+    /* The pong's writer must see this reader too before the first ping counts. */
+    for (int i = 0; i < 20000; ++i) {
+        dds_subscription_matched_status_t st;
+        check(dds_get_subscription_matched_status(reader, &st), "subscription status");
+        if (st.current_count >= 1) break;
+        dds_sleepfor(DDS_MSECS(1));
+    }
+    BenchPayload msg;
+    fill(&msg, size);
+    void* sample[1];
+    for (long i = 0; i < warmup + count && !g_stop; ++i) {
+        msg.seq = (uint64_t)i;
+        const int64_t t0 = now_ns();
+        check(dds_write(writer, &msg), "write ping");
+        if (!take_one(ws, reader, sample, DDS_SECS(5))) {
+            fprintf(stderr, "cyclone_bench: no pong for ping %ld within 5 s\n", i);
+            return 1;
+        }
+        const int64_t t1 = now_ns();
+        const uint64_t seq = ((BenchPayload*)sample[0])->seq;
+        dds_return_loan(reader, sample, 1);
+        if (seq != (uint64_t)i) {
+            fprintf(stderr, "cyclone_bench: pong %llu for ping %ld\n", (unsigned long long)seq, i);
+            return 1;
+        }
+        if (i >= warmup) printf("%.3f\n", (double)(t1 - t0) / 2000.0);
+    }
+    BenchPayload_free(&msg, DDS_FREE_CONTENTS);
+    return 0;
+}
+
+/* What the subscriber counts; taken from the reader on a waiting thread or in the listener. */
+struct counter
+{
+    uint64_t received, lost, next_seq;
+    int64_t first, last;
+    atomic_int done;
+};
+
+static void take_all(dds_entity_t reader, struct counter* c)
+{
+    enum { kBatch = 256 };
+    void* samples[kBatch];
+    dds_sample_info_t infos[kBatch];
+    for (;;) {
+        samples[0] = NULL;
+        const dds_return_t n = dds_take(reader, samples, infos, kBatch, kBatch);
+        check(n, "take");
+        if (n == 0) return;
+        const int64_t t = now_ns();
+        for (dds_return_t i = 0; i < n; ++i) {
+            if (!infos[i].valid_data) continue;
+            const uint64_t seq = ((BenchPayload*)samples[i])->seq;
+            if (seq == END_MARKER) {
+                c->done = 1;
+                continue;
+            }
+            if (c->received == 0) c->first = t;
+            c->last = t;
+            if (seq > c->next_seq) c->lost += seq - c->next_seq;
+            c->next_seq = seq + 1;
+            ++c->received;
+        }
+        dds_return_loan(reader, samples, n);
+    }
+}
+
+static void on_data(dds_entity_t reader, void* arg) { take_all(reader, (struct counter*)arg); }
+
+/* listener != 0: samples are taken in Cyclone's receive thread (as ddsperf's sub does by
+ * default, and as the raw Fast DDS listener case); else on this thread from a wait set, the
+ * shape of cpm's AsyncReader. */
+static int sub(dds_entity_t participant, int listener)
+{
+    static struct counter c;
+    dds_qos_t* q = qos_for(1);
+    dds_listener_t* l = NULL;
+    if (listener) {
+        l = dds_create_listener(&c);
+        dds_lset_data_available(l, on_data);
+    }
+    const dds_entity_t reader = dds_create_reader(participant, make_topic(participant, "bench_throughput"), q, l);
+    check(reader, "reader");
+    dds_delete_qos(q);
+    if (l) dds_delete_listener(l);
+    const dds_entity_t ws = waitset_on(participant, reader);
+    const int64_t give_up = now_ns() + (int64_t)120 * 1000000000;
+    while (!c.done && !g_stop && now_ns() < give_up) {
+        if (listener) {
+            dds_sleepfor(DDS_MSECS(10));
+            continue;
+        }
+        take_all(reader, &c);
+        if (!c.done) check(dds_waitset_wait(ws, NULL, 0, DDS_MSECS(100)), "wait");
+    }
+    if (listener) dds_set_listener(reader, NULL);
+    const double seconds = (double)(c.last - c.first) / 1e9;
+    printf("received %llu lost %llu rate %.0f complete %d\n", (unsigned long long)c.received, (unsigned long long)c.lost,
+           seconds > 0 ? (double)c.received / seconds : 0.0, atomic_load(&c.done));
+    return c.done ? 0 : 1;
+}
+
+static int pub(dds_entity_t participant, size_t size, double seconds, int batch)
+{
+    /* A writer takes the batching setting when it is created (ddsperf sets it first thing). */
+    dds_write_set_batch(batch != 0);
+    dds_qos_t* q = qos_for(1);
+    const dds_entity_t writer = dds_create_writer(participant, make_topic(participant, "bench_throughput"), q, NULL);
+    check(writer, "writer");
+    dds_delete_qos(q);
+    wait_matched(writer, 1);
+    BenchPayload msg;
+    fill(&msg, size);
+    const int64_t end = now_ns() + (int64_t)(seconds * 1e9);
+    uint64_t seq = 0;
+    while (!g_stop) {
+        /* The clock is read every 64 writes: a read per write would cost as much as a write. */
+        if ((seq & 63) == 0 && now_ns() >= end) break;
+        msg.seq = seq++;
+        check(dds_write(writer, &msg), "write");
+    }
+    msg.seq = END_MARKER;
+    check(dds_write(writer, &msg), "write end marker");
+    if (batch) dds_write_flush(writer);
+    /* Every sample acknowledged before the writer goes (keep-all, reliable). */
+    check(dds_wait_for_acks(writer, DDS_SECS(30)), "wait for acknowledgements");
+    printf("written %llu\n", (unsigned long long)seq);
+    BenchPayload_free(&msg, DDS_FREE_CONTENTS);
+    return 0;
+}
+
+int main(int argc, char** argv)
+{
+    if (argc < 2 || flag(argc, argv, "--help")) {
+        fputs("usage: cyclone_bench pong|ping|sub|pub [--domain D] [--size B] [--count N] [--warmup W]"
+              " [--seconds S] [--batch] [--listener]\n",
+              argc < 2 ? stderr : stdout);
+        return argc < 2 ? 2 : 0;
+    }
+    const char* role = argv[1];
+    const int domain = atoi(arg(argc, argv, "--domain", "0"));
+    const size_t size = (size_t)atol(arg(argc, argv, "--size", "100"));
+    if (size > 70000) {
+        fprintf(stderr, "cyclone_bench: --size %zu is larger than BenchPayload's bound (70000)\n", size);
+        return 2;
+    }
+    signal(SIGTERM, on_signal);
+    signal(SIGINT, on_signal);
+    const dds_entity_t participant = dds_create_participant((dds_domainid_t)domain, NULL, NULL);
+    check(participant, "participant");
+    int rc = 2;
+    if (strcmp(role, "pong") == 0)
+        rc = pong(participant);
+    else if (strcmp(role, "ping") == 0)
+        rc = ping(participant, size, atol(arg(argc, argv, "--count", "10000")), atol(arg(argc, argv, "--warmup", "1000")));
+    else if (strcmp(role, "sub") == 0)
+        rc = sub(participant, flag(argc, argv, "--listener"));
+    else if (strcmp(role, "pub") == 0)
+        rc = pub(participant, size, atof(arg(argc, argv, "--seconds", "5")), flag(argc, argv, "--batch"));
+    else
+        fprintf(stderr, "cyclone_bench: unknown role '%s' (pong, ping, sub or pub)\n", role);
+    fflush(stdout);
+    dds_delete(participant);
+    return rc;
+}
