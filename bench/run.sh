@@ -4,10 +4,10 @@
 set -euo pipefail
 build="$1"; shift || true
 bin="$build/bin"
-echo "== bench_latency (ping-pong, cpm vs raw Fast DDS vs Cyclone ddsperf)"
+echo "== bench_latency (ping-pong, cpm vs raw Fast DDS vs Cyclone doing the same work and ddsperf)"
 "$bin/bench_latency" "$@"
 echo
-echo "== bench_throughput (1 KiB reliable, cpm vs raw Fast DDS vs Cyclone ddsperf)"
+echo "== bench_throughput (1 KiB reliable, cpm vs raw Fast DDS vs Cyclone doing the same work, batched and not, and ddsperf)"
 "$bin/bench_throughput"
 echo
 echo "== bench_timer (tick jitter, cpm::Timer vs clock_nanosleep)"

@@ -114,6 +114,8 @@ void detection_cost()
     std::printf("node detect / plain SUBPIX   p50 %.3f  (target ≤ 1.10: %s)\n", nd.p50 / ps.p50, nd.p50 / ps.p50 <= 1.10 ? "met" : "NOT met");
     std::printf("node whole / plain SUBPIX    p50 %.3f  (target ≤ 1.25: %s)\n", nw.p50 / ps.p50, nw.p50 / ps.p50 <= 1.25 ? "met" : "NOT met");
     std::printf("node detect / plain no-refine p50 %.3f (the wrapper and its sub-pixel step)\n", nd.p50 / pn.p50);
+    bench::record_latency("aruco", "detect per frame", nd, "plain detectMarkers, SUBPIX", ps, 1.10);
+    bench::record_latency("aruco", "detect + pose + message per frame", nw, "plain detectMarkers, SUBPIX", ps, 1.25);
     std::printf("absolute: %.2f ms per frame detect, %.2f ms whole (p50)\n", nd.p50 / 1000, nw.p50 / 1000);
 }
 
@@ -251,6 +253,10 @@ void detection_and_pose(bool degraded)
     const double target = degraded ? 95 : 99;
     std::printf("from 20 px: %.2f %% detected (target ≥ %.0f %%: %s), %zu wrong ids (target 0: %s)\n", 100.0 * f20 / n20, target,
                 100.0 * f20 / n20 >= target ? "met" : "NOT met", wrong, wrong == 0 ? "met" : "NOT met");
+    const std::string kind = degraded ? " (degraded frames)" : "";
+    bench::record({"aruco", "markers from 20 px detected" + kind, "%", 100.0 * f20 / n20, "", 0, degraded ? ">= 95 %" : ">= 99 %",
+                   int(100.0 * f20 / n20 >= target)});
+    bench::record({"aruco", "wrong ids" + kind, "markers", double(wrong), "", 0, "0", int(wrong == 0)});
     if (!degraded) {
         size_t n30 = 0, ok30 = 0;
         for (auto& b : bins) {
@@ -317,6 +323,8 @@ void gate_at_two_metres()
                 c.n, missing);
     std::printf("gate centre error  cm: p50 %.2f  p99 %.2f  max %.2f (target ≤ 3 cm: %s)\n", c.p50, c.p99, c.max, c.max <= 3 ? "met" : "NOT met");
     std::printf("gate direction error °: p50 %.2f  p99 %.2f  max %.2f (target ≤ 3°: %s)\n", d.p50, d.p99, d.max, d.max <= 3 ? "met" : "NOT met");
+    bench::record({"aruco", "gate centre error, max", "cm", c.max, "", 0, "<= 3 cm", int(c.max <= 3)});
+    bench::record({"aruco", "gate direction error, max", "°", d.max, "", 0, "<= 3°", int(d.max <= 3)});
 }
 
 // ---- 4. latency in the running lab --------------------------------------------------------------
@@ -351,6 +359,8 @@ void lab_latency()
     std::printf("frames %d, dropped %d, processing p50 %.2f ms; latency p50 %.2f ms (target ≤ 10: %s), p99 %.2f ms (target ≤ 33: %s)\n",
                 int(j["frames"]), int(j["dropped"]), double(j["processing_ms_p50"]), p50, p50 <= 10 ? "met" : "NOT met", p99,
                 p99 <= 33 ? "met" : "NOT met");
+    bench::record({"aruco", "camera_sim -> ArucoMarkers latency p50", "ms", p50, "", 0, "<= 10 ms", int(p50 <= 10)});
+    bench::record({"aruco", "camera_sim -> ArucoMarkers latency p99", "ms", p99, "", 0, "<= 33 ms", int(p99 <= 33)});
 }
 
 // ---- 5. CameraFrame over DDS ----------------------------------------------------------------------

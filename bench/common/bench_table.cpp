@@ -32,7 +32,7 @@ int main(int argc, char** argv)
         std::fprintf(stderr, "bench_table: cannot read %s\n", argv[1]);
         return 1;
     }
-    std::printf("%-10s %-56s %12s %-12s %-34s %12s %7s %-20s %s\n", "bench", "case", "cpm", "unit", "peer", "peer value", "ratio", "target",
+    std::printf("%-15s %-56s %12s %-10s %-44s %12s %7s %-26s %s\n", "bench", "case", "cpm", "unit", "peer", "peer value", "ratio", "target",
                 "met");
     int line_no = 0, met = 0, missed = 0;
     for (std::string line; std::getline(in, line);) {
@@ -46,7 +46,7 @@ int main(int argc, char** argv)
         const std::string verdict = f.value("met", nlohmann::json()).is_boolean() ? (f["met"].get<bool>() ? "yes" : "NO") : "-";
         met += verdict == "yes";
         missed += verdict == "NO";
-        std::printf("%-10s %-56s %12s %-12s %-34s %12s %7s %-20s %s\n", text(f.value("bench", nlohmann::json())).c_str(),
+        std::printf("%-15s %-56s %12s %-10s %-44s %12s %7s %-26s %s\n", text(f.value("bench", nlohmann::json())).c_str(),
                     text(f.value("case", nlohmann::json())).c_str(), number(f.value("cpm", nlohmann::json())).c_str(),
                     text(f.value("unit", nlohmann::json())).c_str(), text(f.value("peer", nlohmann::json())).c_str(),
                     number(f.value("peer_value", nlohmann::json())).c_str(), number(f.value("ratio", nlohmann::json())).c_str(),

@@ -135,33 +135,41 @@ static void fill(BenchPayload* msg, size_t size)
     msg->data._release = true;
 }
 
+/* A ping-pong side: a reader of one topic with its wait set, a writer of the other (keep-last 1). */
+struct side
+{
+    dds_entity_t reader, writer, waitset;
+};
+
+static struct side open_side(dds_entity_t participant, const char* read_topic, const char* write_topic)
+{
+    struct side s;
+    dds_qos_t* q = qos_for(0);
+    s.reader = dds_create_reader(participant, make_topic(participant, read_topic), q, NULL);
+    s.writer = dds_create_writer(participant, make_topic(participant, write_topic), q, NULL);
+    check(s.reader, read_topic);
+    check(s.writer, write_topic);
+    dds_delete_qos(q);
+    s.waitset = waitset_on(participant, s.reader);
+    return s;
+}
+
 static int pong(dds_entity_t participant)
 {
-    dds_qos_t* q = qos_for(0);
-    const dds_entity_t reader = dds_create_reader(participant, make_topic(participant, "bench_ping"), q, NULL);
-    const dds_entity_t writer = dds_create_writer(participant, make_topic(participant, "bench_pong"), q, NULL);
-    check(reader, "ping reader");
-    check(writer, "pong writer");
-    dds_delete_qos(q);
-    const dds_entity_t ws = waitset_on(participant, reader);
+    const struct side s = open_side(participant, "bench_ping", "bench_pong");
     void* sample[1];
     while (!g_stop) {
-        if (!take_one(ws, reader, sample, DDS_MSECS(100))) continue;
-        check(dds_write(writer, sample[0]), "write pong");
-        dds_return_loan(reader, sample, 1);
+        if (!take_one(s.waitset, s.reader, sample, DDS_MSECS(100))) continue;
+        check(dds_write(s.writer, sample[0]), "write pong");
+        dds_return_loan(s.reader, sample, 1);
     }
     return 0;
 }
 
 static int ping(dds_entity_t participant, size_t size, long count, long warmup)
 {
-    dds_qos_t* q = qos_for(0);
-    const dds_entity_t writer = dds_create_writer(participant, make_topic(participant, "bench_ping"), q, NULL);
-    const dds_entity_t reader = dds_create_reader(participant, make_topic(participant, "bench_pong"), q, NULL);
-    check(writer, "ping writer");
-    check(reader, "pong reader");
-    dds_delete_qos(q);
-    const dds_entity_t ws = waitset_on(participant, reader);
+    const struct side s = open_side(participant, "bench_pong", "bench_ping");
+    const dds_entity_t reader = s.reader, writer = s.writer, ws = s.waitset;
     wait_matched(writer, 1);
     /* The pong's writer must see this reader too before the first ping counts. */
     for (int i = 0; i < 20000; ++i) {

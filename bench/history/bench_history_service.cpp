@@ -209,6 +209,7 @@ int main(int argc, char** argv)
     bench::print_row("cpm_history at", service_stats);
     bench::print_row("plain ping-pong", echo_stats);
     bench::print_ratio("cpm_history / ping-pong (target <= 1.5)", service_stats, echo_stats);
+    bench::record_latency("history_service", "at round trip", service_stats, "plain request/reply ping-pong", echo_stats, 1.5);
     service.signal(SIGTERM);
     bench::wait_child(service, 10);
     echo_process.signal(SIGTERM);

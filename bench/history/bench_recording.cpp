@@ -124,6 +124,8 @@ int main(int argc, char** argv)
     std::printf("recording on:\n%s", on.rows.c_str());
     std::printf("highest rate with none lost: off %.0f/s, on %.0f/s (on/off %.2f; target on >= 20000: %s)\n", off.best, on.best,
                 off.best > 0 ? on.best / off.best : 0.0, on.best >= 20000 ? "met" : "not met");
+    bench::record({"recording", "ingest with none lost, recording on", "samples/s", on.best, "cpm_history, recording off", off.best,
+                   ">= 20000/s", int(on.best >= 20000)});
 
     // 2. at: live store, loaded recording, SQLite on the file.
     using namespace cpm::rtdb;
@@ -195,6 +197,7 @@ int main(int argc, char** argv)
     std::printf("%-44s %10.0f ns\n", "live store (copied answer)", live_ns);
     std::printf("%-44s %10.0f ns (%.2fx the live store)\n", "recording loaded into a store (copied answer)", loaded_ns, loaded_ns / live_ns);
     std::printf("%-44s %10.0f ns (%.1fx the loaded store)\n", "SQLite on the file, index (oid, commit_ns)", sql_ns, sql_ns / loaded_ns);
+    bench::record({"recording", "at from a loaded recording (copied answer)", "ns", loaded_ns, "SQLite on the file, index (oid, commit_ns)", sql_ns});
     std::printf("(checksum %llu)\n", (unsigned long long)(sink & 0xff));
 
     // 3. Size.

@@ -3,6 +3,8 @@
 // (fixed priority by id, speed capping, no stopping; --mode cpm_lab), same map, seeds, margin.
 #include <cpm/routing/Simulate.hpp>
 
+#include "bench_common.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -37,6 +39,8 @@ int main(int argc, char** argv)
                 graph.nodes.size(), graph.edges.size(), graph.total_length(), table.sample_count(), table.pair_count(),
                 table.zones().size());
     std::printf("start-up (load, check, conflict table): median %.1f ms of 5 (target <= 1000 ms)\n\n", percentile(startup, 0.5));
+    bench::record({"routing", "start-up (load, check, conflict table)", "ms", percentile(startup, 0.5), "", 0, "<= 1000 ms",
+                   int(percentile(startup, 0.5) <= 1000)});
 
     // Planning time per 400 ms cycle: ideal cars, 60 simulated seconds, 3 seeds each.
     std::printf("planning time per cycle (cooperative, 60 s, seeds 1-3; cars placed anywhere when the map cannot hold them outside zones)\n");
@@ -63,6 +67,9 @@ int main(int argc, char** argv)
         }
         std::printf("%6zu %10.2f %10.2f %10.2f %7d/3%s\n", n, percentile(all, 0.5), percentile(all, 0.99), percentile(all, 1.0), stalled,
                     n == 20 ? "   (target p99 <= 40 ms at 20 cars)" : "");
+        if (n == 20)
+            bench::record({"routing", "planning per cycle, 20 cars, p99", "ms", percentile(all, 0.99), "", 0, "<= 40 ms",
+                           int(percentile(all, 0.99) <= 40)});
     }
 
     // Traffic: the same seeds and start poses for both planners, bodies 0.5 m apart at the start
@@ -93,6 +100,8 @@ int main(int argc, char** argv)
         }
         std::printf("%6zu | %12.1f %10.2f %6d/5 | %12.1f %10.2f %6d/5 | %7.2fx\n", n, through[0], delay[0], stalls[0], through[1], delay[1],
                     stalls[1], through[1] > 0 ? through[0] / through[1] : 0.0);
+        bench::record({"routing", std::to_string(n) + " cars into the central zone", "cars/min", through[0], "cpm_lab's scheme", through[1],
+                       ">= 1.30x peer", int(through[0] >= 1.3 * through[1])});
     }
     std::printf("(target: at least 1.3x cpm_lab's throughput, and no stall where it stalls)\n");
     return 0;
