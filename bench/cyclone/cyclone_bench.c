@@ -82,16 +82,24 @@ static dds_entity_t make_topic(dds_entity_t participant, const char* name)
     return t;
 }
 
-/* Waits until the writer has `n` matched readers (or the stop flag). */
-static void wait_matched(dds_entity_t writer, uint32_t n)
+/* Waits until a writer has a matched reader, or a reader a matched writer (or the stop flag). */
+static void wait_matched(dds_entity_t entity, int is_writer)
 {
     for (int i = 0; i < 20000 && !g_stop; ++i) {
-        dds_publication_matched_status_t st;
-        check(dds_get_publication_matched_status(writer, &st), "matched status");
-        if (st.current_count >= n) return;
+        uint32_t count;
+        if (is_writer) {
+            dds_publication_matched_status_t st;
+            check(dds_get_publication_matched_status(entity, &st), "publication matched status");
+            count = st.current_count;
+        } else {
+            dds_subscription_matched_status_t st;
+            check(dds_get_subscription_matched_status(entity, &st), "subscription matched status");
+            count = st.current_count;
+        }
+        if (count >= 1) return;
         dds_sleepfor(DDS_MSECS(1));
     }
-    fprintf(stderr, "cyclone_bench: no reader matched within 20 s\n");
+    fprintf(stderr, "cyclone_bench: no %s matched within 20 s\n", is_writer ? "reader" : "writer");
     exit(1);
 }
 
@@ -171,13 +179,7 @@ static int ping(dds_entity_t participant, size_t size, long count, long warmup)
     const struct side s = open_side(participant, "bench_pong", "bench_ping");
     const dds_entity_t reader = s.reader, writer = s.writer, ws = s.waitset;
     wait_matched(writer, 1);
-    /* The pong's writer must see this reader too before the first ping counts. */
-    for (int i = 0; i < 20000; ++i) {
-        dds_subscription_matched_status_t st;
-        check(dds_get_subscription_matched_status(reader, &st), "subscription status");
-        if (st.current_count >= 1) break;
-        dds_sleepfor(DDS_MSECS(1));
-    }
+    wait_matched(reader, 0); /* the pong's writer must see this reader before the first ping counts */
     BenchPayload msg;
     fill(&msg, size);
     void* sample[1];
