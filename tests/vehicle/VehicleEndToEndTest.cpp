@@ -9,6 +9,7 @@
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm_test/RawWriter.hpp>
 #include <cpm/vehicle/Protocol.hpp>
 #include <cpm/vehicle/SerialPort.hpp>
 
@@ -27,6 +28,7 @@
 #include <atomic>
 #include <cmath>
 #include <csignal>
+#include <cstring>
 #include <fcntl.h>
 #include <fstream>
 #include <map>
@@ -488,6 +490,38 @@ TEST_F(VehicleEndToEnd, CorruptBytesOnTheLineAreSurvivedBothWays)
                   sim_errors.at("bad_crc").get<int>() + sim_errors.at("oversize").get<int>(),
               0)
         << sim_stats;
+}
+
+TEST_F(VehicleEndToEnd, MalformedCommandSamplesFromAnyParticipantAreDroppedAndTheBridgeKeepsDriving)
+{
+    // Anyone on the domain may send bytes that are not a command (found by fuzzing: a wrong
+    // encapsulation made the generated type support throw through Fast DDS into the reader).
+    Car car({"--trace-pwm"});
+    cpm::Participant stranger{cpm_test::isolated_options()};
+    cpm_test::RawWriter raw(stranger, "vehicleCommandSpeedCurvature", "VehicleCommandSpeedCurvature", true);
+    ASSERT_TRUE(cpm_test::wait_until([&] { return raw.matched() > 0; }, 10s)) << car.bridge->errors();
+    // Encapsulation, Header (create, valid_after), vehicle_id at offset 20, speed, curvature.
+    std::vector<uint8_t> command(4 + 16 + 8 + 16, 0);
+    command[1] = 0x01;  // CDR little endian
+    command[20] = kId;
+    const double speed = 0.5;
+    std::memcpy(&command[28], &speed, sizeof speed);
+    std::vector<std::vector<uint8_t>> malformed;
+    for (uint8_t first : {0x01, 0x7f, 0xff}) {
+        auto m = command;
+        m[0] = first;  // not an encapsulation Fast CDR knows
+        malformed.push_back(m);
+    }
+    malformed.push_back({command.begin(), command.begin() + 22});  // cut off
+    malformed.push_back({});                                        // empty
+    for (int round = 0; round < 20; ++round)
+        for (const auto& m : malformed) ASSERT_TRUE(raw.write(m));
+    std::this_thread::sleep_for(500ms);
+    const uint64_t after_malformed = cpm::get_time_ns();
+    Repeater<VehicleCommandSpeedCurvature> good(participant, "vehicleCommandSpeedCurvature", speed_curvature(0.5, 0));
+    EXPECT_TRUE(cpm_test::wait_until([&] { return !car.pwm_trace_after(after_malformed, 1).empty(); }, 10s))
+        << "the car did not drive on the good command after the malformed ones\nbridge: " << car.bridge->errors();
+    EXPECT_EQ(car.bridge->errors().find("terminate called"), std::string::npos) << car.bridge->errors();
 }
 
 TEST_F(VehicleEndToEnd, BridgeStopsPublishingWhenTheLinkIsLostAndReconnects)

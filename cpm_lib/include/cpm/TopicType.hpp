@@ -1,6 +1,8 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <exception>
+#include <memory>
 #include <vector>
 
 namespace eprosima::fastdds::dds {
@@ -43,16 +45,31 @@ struct TopicType;
 /// at once (inline): for a file that includes PubSub's header.
 #define CPM_REGISTER_TYPE_AS(T, PubSub) CPM_DECLARE_TYPE(T) CPM_TYPE_DEFINITIONS_(inline, T, PubSub)
 
+// The type support cpm hands to Fast DDS is the generated one with one change: bytes that do not
+// decode are a sample dropped, never an exception. fastddsgen's deserialize() catches only a
+// cut-off buffer; a wrong encapsulation or an absurd length from any participant on the domain
+// would otherwise throw through Fast DDS into the reading thread and end the process.
 #define CPM_TYPE_DEFINITIONS_(SPECIFIER, T, PubSub)                                                \
     SPECIFIER ::eprosima::fastdds::dds::TopicDataType* cpm::TopicType<T>::make_type_support()     \
     {                                                                                              \
-        return new PubSub();                                                                       \
+        struct Guarded final : PubSub                                                              \
+        {                                                                                          \
+            bool deserialize(::eprosima::fastrtps::rtps::SerializedPayload_t* payload, void* data) override \
+            {                                                                                      \
+                try {                                                                              \
+                    return PubSub::deserialize(payload, data);                                     \
+                } catch (const std::exception&) {                                                  \
+                    return false;                                                                  \
+                }                                                                                  \
+            }                                                                                      \
+        };                                                                                         \
+        return new Guarded();                                                                      \
     }                                                                                              \
     SPECIFIER bool cpm::TopicType<T>::decode(const std::vector<uint8_t>& cdr, T& out)             \
     {                                                                                              \
-        PubSub type;                                                                               \
+        const std::unique_ptr<::eprosima::fastdds::dds::TopicDataType> type(make_type_support()); \
         ::eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(cdr.size())); \
         for (size_t i = 0; i < cdr.size(); ++i) payload.data[i] = cdr[i];                         \
         payload.length = static_cast<uint32_t>(cdr.size());                                        \
-        return type.deserialize(&payload, &out);                                                   \
+        return type->deserialize(&payload, &out);                                                  \
     }
