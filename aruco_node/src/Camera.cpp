@@ -26,10 +26,18 @@ cv::Mat matrix(const cv::FileStorage& fs, const std::string& path, const char* n
 {
     cv::FileNode n = fs[name];
     if (n.empty()) fail(path, std::string("missing field ") + name);
+    // The size first: a file may claim any rows and cols, and OpenCV would allocate them.
+    const cv::FileNode r = n.isMap() ? n["rows"] : cv::FileNode(), c = n.isMap() ? n["cols"] : cv::FileNode();
+    if (r.empty() || c.empty() || !r.isInt() || !c.isInt()) fail(path, std::string(name) + ": expected an opencv-matrix");
+    if (int(r) != rows || int(c) != cols) {
+        if (int64_t(int(r)) * int(c) != int64_t(rows) * cols)
+            fail(path, std::string(name) + ": expected " + std::to_string(rows) + "×" + std::to_string(cols) + " values, got " +
+                           std::to_string(int(r)) + "×" + std::to_string(int(c)));
+    }
     cv::Mat m;
     try {
         n >> m;
-    } catch (const cv::Exception&) {
+    } catch (const std::exception&) {
         fail(path, std::string(name) + ": expected an opencv-matrix");
     }
     if (m.empty() || int(m.total()) != rows * cols) {
@@ -56,7 +64,10 @@ Camera Camera::load(const std::string& path)
         if (!fs.open(path, cv::FileStorage::READ)) fail(path, "not an OpenCV FileStorage YAML file");
     } catch (const cv::Exception& e) {
         fail(path, "not an OpenCV FileStorage YAML file (" + std::string(e.err) + ")");
+    } catch (const std::exception& e) {  // OpenCV's parser also lets std::length_error and the like out
+        fail(path, "not an OpenCV FileStorage YAML file (" + std::string(e.what()) + ")");
     }
+    if (!fs.root().isMap()) fail(path, "expected a map of fields (image_width, image_height, camera_matrix, ...)");
     Camera c;
     double w = number(fs, path, "image_width"), h = number(fs, path, "image_height");
     if (w < 16 || h < 16 || w > 8192 || h > 8192 || w != std::floor(w) || h != std::floor(h)) {

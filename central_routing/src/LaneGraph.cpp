@@ -108,7 +108,7 @@ GraphLoad parse_lane_graph(const std::string& json_text, const std::string& sour
     json doc;
     try {
         doc = json::parse(json_text);
-    } catch (const json::parse_error& e) {
+    } catch (const json::exception& e) {
         result.errors.push_back(source + ": not valid JSON (" + e.what() + ")");
         return result;
     }
@@ -134,10 +134,10 @@ GraphLoad parse_lane_graph(const std::string& json_text, const std::string& sour
             }
             c.only_members(n, path, {"id", "x", "y", "yaw"});
             LaneNode node;
-            bool ok = true;
-            if (!n.contains("id") || !n["id"].is_number_integer()) {
-                c.error(path + ".id", "expected an integer id");
-                ok = false;
+            const bool id_ok = n.contains("id") && n["id"].is_number_integer() && n["id"].get<int64_t>() >= std::numeric_limits<int>::min() &&
+                               n["id"].get<int64_t>() <= std::numeric_limits<int>::max();
+            if (!id_ok) {
+                c.error(path + ".id", "expected an integer id that fits in 32 bits");
             } else {
                 node.id = n["id"].get<int>();
                 if (!index_of.emplace(node.id, i).second) {
@@ -145,9 +145,9 @@ GraphLoad parse_lane_graph(const std::string& json_text, const std::string& sour
                                               std::to_string(index_of[node.id]) + "])");
                 }
             }
-            ok &= c.number(n, path, "x", node.p.x());
-            ok &= c.number(n, path, "y", node.p.y());
-            ok &= c.number(n, path, "yaw", node.yaw);
+            c.number(n, path, "x", node.p.x());
+            c.number(n, path, "y", node.p.y());
+            c.number(n, path, "yaw", node.yaw);
             g.nodes.push_back(node);
         }
     }

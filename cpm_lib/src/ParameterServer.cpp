@@ -271,7 +271,7 @@ size_t ParameterServer::load_json_file(const std::string& path)
     nlohmann::json doc;
     try {
         doc = nlohmann::json::parse(text);
-    } catch (const nlohmann::json::parse_error& e) {
+    } catch (const nlohmann::json::exception& e) {
         throw Error("parameter file '" + path + "': not valid JSON: " + e.what());
     }
     return publish_all(parameters_of(doc, path));

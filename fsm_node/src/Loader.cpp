@@ -166,7 +166,7 @@ std::unique_ptr<Machine> load_nested(Context& ctx, const json& e, const std::str
     json nested;
     try {
         nested = json::parse(cpm::read_text_file(file.string(), "nested machine file"));
-    } catch (const json::parse_error& err) {
+    } catch (const json::exception& err) {
         ctx.error(path + ".file", file.string() + " is not valid JSON (" + err.what() + ")");
         return nullptr;
     } catch (const cpm::Error& err) {
@@ -234,7 +234,7 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
                 continue;
             }
             state_types[*id] = &f->info;
-            final_states[*id] = e.value("final", false) == true;
+            final_states[*id] = e.contains("final") && e["final"].is_boolean() && e["final"].get<bool>();
             std::unique_ptr<State> state;
             if (type == "FSMState") {
                 auto nested = load_nested(ctx, e, path);
@@ -327,7 +327,7 @@ LoadResult check_text(const std::string& text, const std::string& source, const 
     json j;
     try {
         j = json::parse(text);
-    } catch (const json::parse_error& e) {
+    } catch (const json::exception& e) {
         result.errors.push_back({source, std::string("not valid JSON (") + e.what() + ")"});
         return result;
     }

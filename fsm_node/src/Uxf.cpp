@@ -143,7 +143,13 @@ UxfConversion convert_uxf(const std::string& xml_text, const std::string& source
                 error(origin.str(), problem);
                 continue;
             }
-            for (auto it = members.begin(); it != members.end(); ++it) machine[it.key()] = it.value();
+            for (auto it = members.begin(); it != members.end(); ++it) {
+                if (it.key() == "states" || it.key() == "transitions" || it.key() == "root") {
+                    error(origin.str(), "\"" + it.key() + "\" comes from the drawing (state boxes, arrows, \"root\": true), not from the machine note");
+                } else {
+                    machine[it.key()] = it.value();
+                }
+            }
         } else if (kind == "Relation") {
             size_t arrow = lines.size();
             for (size_t i = 0; i < lines.size(); ++i) {
@@ -187,7 +193,8 @@ UxfConversion convert_uxf(const std::string& xml_text, const std::string& source
         result.transition_origin.push_back(r.origin);
     }
     machine["root"] = root.value_or(0);
-    if (result.errors.empty()) result.json = machine.dump(2);
+    // Text that is not UTF-8 (a drawing saved in another encoding) keeps its place as U+FFFD.
+    if (result.errors.empty()) result.json = machine.dump(2, ' ', false, json::error_handler_t::replace);
     return result;
 }
 

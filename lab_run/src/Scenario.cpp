@@ -253,6 +253,7 @@ Scenario load_scenario(const std::string& path)
                 if (!root["lanes"]) c.error(r, "routing.enabled", "central routing needs a lane graph: give lanes");
                 for (size_t i = 0; vehicles.IsSequence() && i < vehicles.size(); ++i) {
                     const std::string p = "vehicles[" + std::to_string(i) + "]";
+                    if (!vehicles[i].IsMap()) continue;  // said above
                     if (vehicles[i]["fsm"]) c.error(vehicles[i]["fsm"], p + ".fsm", "a car either follows its fsm or central routing, not both");
                     if (vehicles[i]["start"]) c.error(vehicles[i]["start"], p + ".start", "with routing the cars are spread over the lanes; leave start out");
                 }

@@ -146,7 +146,7 @@ World World::parse(const std::string& json_text, const std::string& source)
     json j;
     try {
         j = json::parse(json_text);
-    } catch (const json::parse_error& e) {
+    } catch (const json::exception& e) {
         throw Error(source + ": not valid JSON (" + e.what() + ")");
     }
     if (!j.is_object()) fail(source, "$", "expected an object with \"walls\", \"markers\" and \"gates\"");

@@ -25,7 +25,7 @@ public:
     {
         try {
             json_ = nlohmann::json::parse(json_text);
-        } catch (const nlohmann::json::parse_error& e) {
+        } catch (const nlohmann::json::exception& e) {
             throw Error(source_ + ": not valid JSON (" + e.what() + ")");
         }
         if (!json_.is_object()) throw Error(source_ + ": expected a JSON object of named values");
