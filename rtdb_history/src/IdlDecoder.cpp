@@ -3,6 +3,7 @@
 #include <cpm/read_text_file.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -10,9 +11,9 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <sys/stat.h>
 #include <dirent.h>
-#include <regex>
 #include <sstream>
 #include <stdexcept>
 #include <type_traits>
@@ -137,6 +138,120 @@ T number_of(const nlohmann::json& v, const std::string& path)
 
 }  // namespace
 
+namespace {
+
+bool is_word_char(char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; }
+bool is_space(char c) { return std::isspace(static_cast<unsigned char>(c)) != 0; }
+
+std::string trimmed(const std::string& s)
+{
+    const auto a = s.find_first_not_of(" \t\r\n");
+    if (a == std::string::npos) return "";
+    return s.substr(a, s.find_last_not_of(" \t\r\n") - a + 1);
+}
+
+/// Runs of white space as one space.
+std::string collapsed(const std::string& s)
+{
+    std::string out;
+    for (char c : s) {
+        if (!is_space(c)) out += c;
+        else if (out.empty() || out.back() != ' ') out += ' ';
+    }
+    return out;
+}
+
+bool iequals(const std::string& a, const char* b)
+{
+    const std::string lb(b);
+    return a.size() == lb.size() &&
+           std::equal(a.begin(), a.end(), lb.begin(), [](char x, char y) { return std::tolower(static_cast<unsigned char>(x)) == y; });
+}
+
+constexpr const char* kKeyMark = "KEY_MEMBER";
+
+/// The IDL text without comments, preprocessor lines and annotations (@key becomes KEY_MEMBER):
+/// each turned into spaces, newlines kept, so that an offset still has its line.
+std::string cleaned_idl(const std::string& text, const std::string& file)
+{
+    std::string out;
+    out.reserve(text.size());
+    bool line_start = true;
+    for (size_t i = 0; i < text.size();) {
+        const char c = text[i];
+        if (line_start && c == '#') {  // a preprocessor line
+            while (i < text.size() && text[i] != '\n') ++i;
+            continue;
+        }
+        if (c == '/' && i + 1 < text.size() && text[i + 1] == '/') {
+            while (i < text.size() && text[i] != '\n') ++i;
+            continue;
+        }
+        if (c == '/' && i + 1 < text.size() && text[i + 1] == '*') {
+            const size_t close = text.find("*/", i + 2);
+            if (close == std::string::npos) {
+                throw std::runtime_error(file + ":" + std::to_string(1 + std::count(text.begin(), text.begin() + long(i), '\n')) +
+                                         ": a /* comment that never ends");
+            }
+            for (; i < close + 2; ++i) out += text[i] == '\n' ? '\n' : ' ';
+            continue;
+        }
+        if (c == '@') {
+            size_t j = i + 1;
+            while (j < text.size() && is_word_char(text[j])) ++j;
+            const std::string name = text.substr(i + 1, j - i - 1);
+            std::string argument;
+            size_t k = j;
+            while (k < text.size() && (text[k] == ' ' || text[k] == '\t')) ++k;
+            if (k < text.size() && text[k] == '(') {
+                const size_t close = text.find(')', k);
+                if (close != std::string::npos && text.find('\n', k) > close) {
+                    argument = trimmed(text.substr(k + 1, close - k - 1));
+                    j = close + 1;
+                }
+            }
+            const bool key = iequals(name, "key") && (argument.empty() || iequals(argument, "true"));
+            out += key ? std::string(" ") + kKeyMark + " " : " ";
+            i = j;
+            line_start = false;
+            continue;
+        }
+        out += c;
+        if (c == '\n') line_start = true;
+        else if (!is_space(c)) line_start = false;
+        ++i;
+    }
+    return out;
+}
+
+struct SequenceType
+{
+    std::string element;
+    std::optional<uint64_t> bound;
+};
+
+/// "sequence<T>" or "sequence<T, N>" (spaces anywhere between); nullopt for any other type.
+std::optional<SequenceType> sequence_of(const std::string& type)
+{
+    if (type.rfind("sequence", 0) != 0) return std::nullopt;
+    const size_t open = type.find_first_not_of(" \t", 8);
+    if (open == std::string::npos || type[open] != '<') return std::nullopt;
+    const size_t close = type.find('>', open);
+    if (close == std::string::npos || type.find_first_not_of(" \t", close + 1) != std::string::npos) return std::nullopt;
+    const std::string inner = type.substr(open + 1, close - open - 1);
+    const size_t comma = inner.find(',');
+    SequenceType out{trimmed(inner.substr(0, comma)), std::nullopt};
+    if (out.element.empty()) return std::nullopt;
+    if (comma != std::string::npos) {
+        const std::string bound = trimmed(inner.substr(comma + 1));
+        if (bound.empty() || bound.size() > 10 || !std::all_of(bound.begin(), bound.end(), ::isdigit)) return std::nullopt;
+        out.bound = std::stoull(bound);
+    }
+    return out;
+}
+
+}  // namespace
+
 void IdlDecoder::write(const std::string& type, const nlohmann::json& v, CdrWriter& w, const std::string& path) const
 {
     if (type == "boolean") return w.put<uint8_t>(number_of<uint8_t>(v, path) != 0);
@@ -151,9 +266,8 @@ void IdlDecoder::write(const std::string& type, const nlohmann::json& v, CdrWrit
     if (type == "double") return w.put<double>(number_of<double>(v, path));
     if (type == "string") return w.string(v.is_null() ? "" : v.is_string() ? v.get<std::string>() : v.dump());
     if (type.rfind("sequence", 0) == 0) {
-        std::smatch m;
-        static const std::regex seq(R"(sequence\s*<\s*([^,>]+?)\s*(?:,\s*(\d+)\s*)?>)");
-        if (!std::regex_match(type, m, seq)) throw std::invalid_argument(path + ": cannot write type " + type);
+        const auto seq = sequence_of(type);
+        if (!seq) throw std::invalid_argument(path + ": cannot write type " + type);
         nlohmann::json items = v.is_null() ? nlohmann::json::array() : v;
         if (items.is_string()) {
             try {
@@ -163,9 +277,9 @@ void IdlDecoder::write(const std::string& type, const nlohmann::json& v, CdrWrit
             }
         }
         if (!items.is_array()) throw std::invalid_argument(path + ": " + v.dump() + " is not an array");
-        if (m[2].matched && items.size() > std::stoull(m[2])) throw std::invalid_argument(path + ": " + std::to_string(items.size()) + " items, at most " + m[2].str());
+        if (seq->bound && items.size() > *seq->bound) throw std::invalid_argument(path + ": " + std::to_string(items.size()) + " items, at most " + std::to_string(*seq->bound));
         w.put<uint32_t>(uint32_t(items.size()));
-        for (size_t i = 0; i < items.size(); ++i) write(m[1], items[i], w, path + "[" + std::to_string(i) + "]");
+        for (size_t i = 0; i < items.size(); ++i) write(seq->element, items[i], w, path + "[" + std::to_string(i) + "]");
         return;
     }
     if (auto e = enums_.find(type); e != enums_.end()) {
@@ -250,48 +364,127 @@ IdlDecoder::IdlDecoder(const std::map<std::string, std::string>& sources)
 
 void IdlDecoder::parse(const std::string& text, const std::string& file)
 {
-    // Drop comments, preprocessor lines and annotations; then read enum and struct blocks.
-    std::string clean;
-    std::istringstream lines(text);
-    for (std::string line; std::getline(lines, line);) {
-        if (auto c = line.find("//"); c != std::string::npos) line.erase(c);
-        auto first = line.find_first_not_of(" \t");
-        if (first != std::string::npos && line[first] == '#') continue;
-        clean += line + "\n";
-    }
-    clean = std::regex_replace(clean, std::regex(R"(/\*[\s\S]*?\*/)"), " ");
-    clean = std::regex_replace(clean, std::regex(R"(@key\b(\s*\(\s*TRUE\s*\))?)", std::regex::icase), " KEY_MEMBER ");
-    clean = std::regex_replace(clean, std::regex(R"(@\w+(\([^)]*\))?)"), " ");
-    static const std::regex block(R"((struct|enum)\s+(\w+)\s*\{([^}]*)\}\s*;)");
-    static const std::regex member(R"(^\s*((?:unsigned\s+)?(?:long\s+long|long|short)|sequence\s*<[^>]*>|\w+)\s+(\w+)\s*(?:\[\s*(\d+)\s*\])?\s*$)");
-    for (std::sregex_iterator it(clean.begin(), clean.end(), block), end; it != end; ++it) {
-        const std::string kind = (*it)[1], name = (*it)[2], body = (*it)[3];
+    // Comments, preprocessor lines and annotations out; then every `struct NAME { ... };` and
+    // `enum NAME { ... };` block read (modules, typedefs and the rest are passed over).
+    const std::string clean = cleaned_idl(text, file);
+    auto line_of = [&](size_t at) { return std::to_string(1 + std::count(clean.begin(), clean.begin() + long(at), '\n')); };
+    auto word_at = [&](size_t& i) {
+        const size_t from = i;
+        while (i < clean.size() && is_word_char(clean[i])) ++i;
+        return clean.substr(from, i - from);
+    };
+    auto skip_space = [&](size_t& i) {
+        while (i < clean.size() && is_space(clean[i])) ++i;
+    };
+    for (size_t i = 0; i < clean.size();) {
+        if (!is_word_char(clean[i])) {
+            ++i;
+            continue;
+        }
+        const std::string kind = word_at(i);
+        if (kind != "struct" && kind != "enum") continue;
+        size_t j = i;
+        skip_space(j);
+        const std::string name = word_at(j);
+        skip_space(j);
+        if (name.empty() || j >= clean.size() || clean[j] != '{') continue;  // a forward declaration, or no block
+        const size_t open = j, close = clean.find('}', open);
+        if (close == std::string::npos) throw std::runtime_error(file + ":" + line_of(open) + ": " + kind + " " + name + ": no closing }");
+        size_t after = close + 1;
+        skip_space(after);
+        if (after >= clean.size() || clean[after] != ';') throw std::runtime_error(file + ":" + line_of(close) + ": " + kind + " " + name + ": expected ; after }");
+        i = after + 1;
+        const std::string body = clean.substr(open + 1, close - open - 1);
         if (kind == "enum") {
             std::vector<std::string> values;
             std::istringstream items(body);
             for (std::string v; std::getline(items, v, ',');) {
-                v = std::regex_replace(v, std::regex(R"(\s+)"), "");
+                v.erase(std::remove_if(v.begin(), v.end(), is_space), v.end());
                 if (!v.empty()) values.push_back(v);
             }
             enums_[name] = values;
             continue;
         }
         std::vector<Member> members;
-        std::istringstream decls(body);
-        for (std::string decl; std::getline(decls, decl, ';');) {
-            if (decl.find_first_not_of(" \t\n") == std::string::npos) continue;
-            std::smatch m;
-            std::string flat = std::regex_replace(decl, std::regex(R"(\s+)"), " ");
-            const auto key_at = flat.find("KEY_MEMBER");
-            if (key_at != std::string::npos) flat.erase(key_at, 10);
-            if (!std::regex_match(flat, m, member)) throw std::runtime_error(file + ": struct " + name + ": cannot read member '" + flat + "'");
-            Member mem{m[2], std::regex_replace(std::string(m[1]), std::regex(R"(\s+)"), " "), m[3].matched ? std::stoul(m[3]) : 0,
-                       key_at != std::string::npos};
-            members.push_back(mem);
+        for (size_t from = 0; from < body.size();) {
+            size_t semi = body.find(';', from);
+            if (semi == std::string::npos) semi = body.size();
+            const std::string decl = body.substr(from, semi - from);
+            const size_t decl_at = open + 1 + from + (decl.find_first_not_of(" \t\r\n") == std::string::npos ? 0 : decl.find_first_not_of(" \t\r\n"));
+            from = semi + 1;
+            std::string flat = trimmed(collapsed(decl));
+            if (flat.empty()) continue;
+            if (semi == body.size()) throw std::runtime_error(file + ":" + line_of(decl_at) + ": struct " + name + ": member '" + flat + "' has no ;");
+            Member m;
+            if (const auto key_at = flat.find(kKeyMark); key_at != std::string::npos) {
+                m.key = true;
+                flat = trimmed(collapsed(flat.erase(key_at, std::strlen(kKeyMark))));
+            }
+            auto bad = [&](const std::string& why) {
+                return std::runtime_error(file + ":" + line_of(decl_at) + ": struct " + name + ": cannot read member '" + flat + "'" + why);
+            };
+            // TYPE NAME [ '[' N ']' ], TYPE one of: [unsigned] long long | long | short, sequence<...>, a word.
+            size_t k = 0;
+            auto next_word = [&] {
+                while (k < flat.size() && flat[k] == ' ') ++k;
+                const size_t w = k;
+                while (k < flat.size() && is_word_char(flat[k])) ++k;
+                return flat.substr(w, k - w);
+            };
+            std::string type = next_word();
+            if (type == "sequence") {
+                const size_t gt = flat.find('>', k);
+                if (gt == std::string::npos) throw bad("");
+                type = flat.substr(0, gt + 1);
+                k = gt + 1;
+                const auto seq = sequence_of(type);
+                if (!seq) throw bad(": expected sequence<TYPE> or sequence<TYPE, BOUND>");
+            } else if (type == "unsigned" || type == "long" || type == "short") {
+                const size_t save = k;
+                std::string second = next_word();
+                if (type == "unsigned" && (second == "long" || second == "short")) {
+                    type += " " + second;
+                    const size_t save2 = k;
+                    if (second == "long" && next_word() == "long") type += " long";
+                    else k = save2;
+                } else if (type == "long" && second == "long") {
+                    type += " long";
+                } else {
+                    k = save;
+                }
+            }
+            m.type = type;
+            m.name = next_word();
+            if (m.type.empty() || m.name.empty()) throw bad("");
+            while (k < flat.size() && flat[k] == ' ') ++k;
+            if (k < flat.size() && flat[k] == '[') {
+                const size_t rb = flat.find(']', k);
+                const std::string n = rb == std::string::npos ? "" : trimmed(flat.substr(k + 1, rb - k - 1));
+                if (n.empty() || !std::all_of(n.begin(), n.end(), ::isdigit)) throw bad(": expected [N]");
+                if (n.size() > 7 || std::stoul(n) == 0 || std::stoul(n) > 1'000'000) throw bad(": an array of 1..1000000 items");
+                m.array = std::stoul(n);
+                k = rb + 1;
+            }
+            while (k < flat.size() && flat[k] == ' ') ++k;
+            if (k != flat.size()) throw bad("");
+            members.push_back(m);
         }
         structs_[name] = members;
     }
 }
+
+namespace {
+
+/// A string member as JSON text can carry it: bytes that are not UTF-8 (a sender's own encoding)
+/// become U+FFFD, so that printing the sample never fails.
+std::string as_utf8(std::string s)
+{
+    if (std::all_of(s.begin(), s.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x80; })) return s;
+    const auto text = nlohmann::json(s).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+    return nlohmann::json::parse(text).get<std::string>();
+}
+
+}  // namespace
 
 nlohmann::json IdlDecoder::read(const std::string& type, CdrCursor& c) const
 {
@@ -305,14 +498,14 @@ nlohmann::json IdlDecoder::read(const std::string& type, CdrCursor& c) const
     if (type == "unsigned long long") return c.get<uint64_t>();
     if (type == "float") return c.get<float>();
     if (type == "double") return c.get<double>();
-    if (type == "string") return c.string();
+    if (type == "string") return as_utf8(c.string());
     if (type.rfind("sequence", 0) == 0) {
-        std::smatch m;
-        static const std::regex seq(R"(sequence\s*<\s*([^,>]+?)\s*(?:,\s*\d+\s*)?>)");
-        if (!std::regex_match(type, m, seq)) throw std::runtime_error("cannot read type " + type);
+        const auto seq = sequence_of(type);
+        if (!seq) throw std::runtime_error("cannot read type " + type);
         const uint32_t n = c.get<uint32_t>();
         nlohmann::json out = nlohmann::json::array();
-        for (uint32_t i = 0; i < n; ++i) out.push_back(read(m[1], c));
+        if (seq->bound && n > *seq->bound) throw std::runtime_error("a sequence of " + std::to_string(n) + " items, at most " + std::to_string(*seq->bound));
+        for (uint32_t i = 0; i < n; ++i) out.push_back(read(seq->element, c));
         return out;
     }
     if (auto e = enums_.find(type); e != enums_.end()) {
