@@ -108,6 +108,11 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
         }
     }
     // else: interfaces named, no peers, no server: standard multicast discovery on them.
+    if (!options.security.empty()) {
+        for (const auto& [name, value] : security::participant_properties(security::node_files(options.security))) {
+            qos.properties().properties().emplace_back(name, value);
+        }
+    }
     return qos;
 }
 
@@ -121,8 +126,13 @@ ParticipantCore::ParticipantCore(const ParticipantOptions& options)
                                                 dds::StatusMask::none());
     if (participant_ == nullptr) {
         throw Error("cannot create a DDS participant on domain " + std::to_string(domain_id_) +
-                    " (Fast DDS refused the transport or discovery settings; see its log above)");
+                    (options.security.empty() ? " (Fast DDS refused the transport or discovery settings; see its log above)"
+                                              : " with the security folder " + options.security +
+                                                    " (Fast DDS refused its certificate, key, governance or permissions: an "
+                                                    "expired certificate, files of another lab, a signature that does not "
+                                                    "verify; see its log above)"));
     }
+    if (!options.security.empty()) security_ = security::node_files(options.security);
     publisher_ = participant_->create_publisher(dds::PUBLISHER_QOS_DEFAULT);
     subscriber_ = participant_->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
     if (publisher_ == nullptr || subscriber_ == nullptr) {
@@ -191,6 +201,7 @@ ParticipantOptions ParticipantOptions::from_init()
     options.interfaces = settings.interfaces;
     options.initial_peers = settings.initial_peers;
     options.discovery_server = settings.discovery_server;
+    options.security = settings.security;
     return options;
 }
 

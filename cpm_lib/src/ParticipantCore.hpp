@@ -1,5 +1,7 @@
 #pragma once
+#include <cpm/Error.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/Security.hpp>
 #include <cpm/detail/TypeSupport.hpp>
 
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
@@ -8,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 namespace eprosima::fastdds::dds {
@@ -35,6 +38,13 @@ public:
     eprosima::fastdds::dds::Publisher* publisher() const { return publisher_; }
     eprosima::fastdds::dds::Subscriber* subscriber() const { return subscriber_; }
     int domain_id() const { return domain_id_; }
+    /// Empty when this participant may publish (or subscribe) the topic: always unsecured, else
+    /// as its permissions say; otherwise why not, naming the topic and the rule.
+    std::string denied(const std::string& topic, bool publish) const
+    {
+        return security_ ? security::why_not_allowed(*security_, topic, publish) : std::string();
+    }
+    bool secured() const { return security_.has_value(); }
 
     /// The topic `name` of the given type, created on first use; throws cpm::Error when the
     /// name is empty or the topic already exists here with another type. `role` (Reader,
@@ -56,7 +66,22 @@ private:
         int users;
     };
     std::map<std::string, TopicUse> topics_;
+    std::optional<security::NodeFiles> security_;
 };
+
+/// Throws cpm::Error, naming the topic, when a secured participant may not have this endpoint:
+/// its permissions do not grant the topic, or data sharing was asked for (Fast DDS refuses data
+/// sharing with DDS Security). `role` (Writer, Reader, …) names the caller.
+inline void check_secured_endpoint(const ParticipantCore& participant, const std::string& topic, bool publish, bool data_sharing,
+                                   const std::string& role)
+{
+    if (!participant.secured()) return;
+    if (data_sharing) {
+        throw Error(role + " on topic '" + topic + "': data_sharing and DDS Security (--security) cannot be used together "
+                    "(Fast DDS refuses data sharing on a secured participant); leave data_sharing off");
+    }
+    if (auto why = participant.denied(topic, publish); !why.empty()) throw Error(role + " on topic '" + topic + "': " + why);
+}
 
 /// A topic held for one reader or writer: acquired on construction (throws like
 /// ParticipantCore::acquire_topic), released on destruction. Keeps the participant alive.

@@ -116,6 +116,7 @@ ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::
                        MakeTypeSupport make_type, const ReaderOptions& options, const char* role, Sink on_arrival)
 {
     if (topic.empty()) throw Error(std::string(role) + ": the topic name is empty");
+    check_secured_endpoint(*participant, topic, false, options.data_sharing, role);
     const dds::DataReaderQos qos = reader_qos(options, topic, std::unique_ptr<dds::TopicDataType>(make_type())->m_typeSize);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type, role, std::move(on_arrival));
     impl_->incompatible = std::make_unique<IncompatibleQos>(true, topic, options.reliable, options.transient_local);

@@ -45,6 +45,7 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
                        MakeTypeSupport make_type, const WriterOptions& options)
 {
     if (topic.empty()) throw Error("Writer: the topic name is empty");
+    check_secured_endpoint(*participant, topic, true, options.data_sharing, "Writer");
     const std::unique_ptr<dds::TopicDataType> type(make_type());
     const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined, type->m_typeSize);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type);

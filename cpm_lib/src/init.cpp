@@ -2,6 +2,7 @@
 
 #include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
+#include <cpm/Security.hpp>
 
 #include "lab_clock.hpp"
 
@@ -60,13 +61,20 @@ std::optional<std::string> flag_value(int argc, const char* const argv[], int& i
     return arg.substr(prefix.size() + 1);
 }
 
+std::string security_from_environment()
+{
+    const char* s = std::getenv("CPM_SECURITY");
+    return s ? s : "";
+}
+
 }  // namespace
 
 bool is_init_flag(const std::string& flag, bool& takes_value)
 {
     static const std::pair<const char*, bool> kFlags[] = {
         {"--dds_domain", true},       {"--node_id", true},           {"--dds_interface", true},
-        {"--dds_initial_peer", true}, {"--dds_discovery_server", true}, {"--simulated_time", false}};
+        {"--dds_initial_peer", true}, {"--dds_discovery_server", true}, {"--simulated_time", false},
+        {"--security", true}};
     for (const auto& [name, value] : kFlags) {
         if (flag == name) {
             takes_value = value;
@@ -111,6 +119,9 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
         } else if (auto v = flag_value(argc, argv, i, "dds_discovery_server")) {
             if (v->empty()) throw Error("--dds_discovery_server: empty value");
             settings.discovery_server = *v;
+        } else if (auto v = flag_value(argc, argv, i, "security")) {
+            if (v->empty()) throw Error("--security: empty value (a node's security folder, LAB/nodes/NAME)");
+            settings.security = *v;
         }
     }
     return settings;
@@ -147,6 +158,8 @@ void init(int argc, char* argv[])
     try {
         settings = parse_init_settings(argc, argv, std::getenv("CPM_DOMAIN_ID"));
         for (const auto& interface : settings.interfaces) check_local_interface(interface, "--dds_interface");
+        if (settings.security.empty()) settings.security = security_from_environment();
+        if (!settings.security.empty()) (void)security::node_files(settings.security);  // every file there, or say which is not
     } catch (const cli::UsageError&) {
         throw;
     } catch (const Error& e) {
@@ -163,6 +176,7 @@ InitSettings init_settings()
     if (!g_settings) {
         const char* argv0[] = {"cpm_node"};
         g_settings = parse_init_settings(1, argv0, std::getenv("CPM_DOMAIN_ID"));
+        g_settings->security = security_from_environment();
     }
     return *g_settings;
 }

@@ -44,12 +44,17 @@ TEST(Init, DefaultsAreDomainZeroNodeIdFromProgramNameAndNoNetwork)
 TEST(Init, ReadsFlagsInBothSpellingsAndLeavesOthersAlone)
 {
     auto sut = parse({"--dds_domain=7", "--node_id", "planner", "--my_flag=3", "--dds_initial_peer=10.0.0.2",
-                      "--dds_initial_peer", "10.0.0.3:7412", "--dds_interface=eth1", "--simulated_time"});
+                      "--dds_initial_peer", "10.0.0.3:7412", "--dds_interface=eth1", "--simulated_time",
+                      "--security", "lab/nodes/car"});
     EXPECT_EQ(sut.domain_id, 7);
     EXPECT_EQ(sut.node_id, "planner");
     EXPECT_EQ(sut.initial_peers, (std::vector<std::string>{"10.0.0.2", "10.0.0.3:7412"}));
     EXPECT_EQ(sut.interfaces, (std::vector<std::string>{"eth1"}));
     EXPECT_TRUE(sut.simulated_time);
+    EXPECT_EQ(sut.security, "lab/nodes/car");
+    bool takes_value = false;
+    EXPECT_TRUE(cpm::is_init_flag("--security", takes_value));
+    EXPECT_TRUE(takes_value);
 }
 
 TEST(Init, EnvironmentGivesDomainAndFlagOverridesIt)

@@ -38,6 +38,7 @@ std::vector<Command> aruco_commands();
 std::vector<Command> routing_commands();
 std::vector<Command> record_commands();
 std::vector<Command> monitor_commands();
+std::vector<Command> security_commands();
 
 /// The participant options of cpm::init, named `name` unless --node_id named the process: a
 /// command whose role others tell by its name (cpm_play, cpm_monitor).

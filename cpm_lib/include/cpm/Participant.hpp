@@ -27,6 +27,9 @@ struct ParticipantOptions
     std::string discovery_server;            ///< "host:port" of a Fast DDS discovery server (server id 0)
     bool shared_memory = true;               ///< use shared memory between processes on this host
     int max_initial_peers_range = 32;        ///< participants per host that unicast discovery probes
+    /// A node's security folder (cpm security add-node): the participant joins a secured lab
+    /// with that node's identity and permissions. Empty: unsecured.
+    std::string security;
     /// Told of every participant, writer and reader discovered from the first moment (its
     /// discovery callbacks only; it must outlive the participant). For tools such as cpm_history.
     eprosima::fastdds::dds::DomainParticipantListener* discovery_listener = nullptr;

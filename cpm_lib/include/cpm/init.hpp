@@ -13,6 +13,7 @@ struct InitSettings
     std::vector<std::string> initial_peers;  ///< --dds_initial_peer (host or host:port)
     std::string discovery_server;            ///< --dds_discovery_server (host:port)
     bool simulated_time = false;             ///< --simulated_time
+    std::string security;                    ///< --security (or CPM_SECURITY): a node's security folder
 };
 
 /// Reads cpm's flags (`--flag=value` or `--flag value`) from the command line and
