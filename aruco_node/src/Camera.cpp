@@ -3,88 +3,92 @@
 #include <cpm/Error.hpp>
 
 #include <opencv2/core/persistence.hpp>
+#include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <fstream>
+#include <iterator>
+#include <vector>
 
 namespace cpm::aruco {
 namespace {
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) { throw Error(path + ": " + what); }
 
-double number(const cv::FileStorage& fs, const std::string& path, const char* name)
+double number(const YAML::Node& root, const std::string& path, const char* name)
 {
-    cv::FileNode n = fs[name];
-    if (n.empty()) fail(path, std::string("missing field ") + name);
-    if (!n.isReal() && !n.isInt()) fail(path, std::string(name) + ": expected a number");
-    double v = double(n);
+    const YAML::Node n = root[name];
+    if (!n) fail(path, std::string("missing field ") + name);
+    double v = 0;
+    if (!n.IsScalar() || !YAML::convert<double>::decode(n, v)) fail(path, std::string(name) + ": expected a number");
     if (!std::isfinite(v)) fail(path, std::string(name) + ": expected a finite number");
     return v;
 }
 
-cv::Mat matrix(const cv::FileStorage& fs, const std::string& path, const char* name, int rows, int cols)
+/// An opencv-matrix (rows, cols, dt, data) of rows × cols values (or cols × rows).
+std::vector<double> matrix(const YAML::Node& root, const std::string& path, const char* name, int rows, int cols)
 {
-    cv::FileNode n = fs[name];
-    if (n.empty()) fail(path, std::string("missing field ") + name);
-    // The size first: a file may claim any rows and cols, and OpenCV would allocate them.
-    const cv::FileNode r = n.isMap() ? n["rows"] : cv::FileNode(), c = n.isMap() ? n["cols"] : cv::FileNode();
-    if (r.empty() || c.empty() || !r.isInt() || !c.isInt()) fail(path, std::string(name) + ": expected an opencv-matrix");
-    if (int(r) != rows || int(c) != cols) {
-        if (int64_t(int(r)) * int(c) != int64_t(rows) * cols)
-            fail(path, std::string(name) + ": expected " + std::to_string(rows) + "×" + std::to_string(cols) + " values, got " +
-                           std::to_string(int(r)) + "×" + std::to_string(int(c)));
-    }
-    cv::Mat m;
-    try {
-        n >> m;
-    } catch (const std::exception&) {
-        fail(path, std::string(name) + ": expected an opencv-matrix");
-    }
-    if (m.empty() || int(m.total()) != rows * cols) {
+    const YAML::Node n = root[name];
+    if (!n) fail(path, std::string("missing field ") + name);
+    if (!n.IsMap() || !n["rows"] || !n["cols"] || !n["data"] || !n["rows"].IsScalar() || !n["cols"].IsScalar() || !n["data"].IsSequence())
+        fail(path, std::string(name) + ": expected an opencv-matrix (rows, cols, dt, data)");
+    long long r = 0, c = 0;
+    if (!YAML::convert<long long>::decode(n["rows"], r) || !YAML::convert<long long>::decode(n["cols"], c))
+        fail(path, std::string(name) + ": expected an opencv-matrix (rows, cols, dt, data)");
+    if (r * c != rows * cols || r <= 0 || c <= 0) {
         fail(path, std::string(name) + ": expected " + std::to_string(rows) + "×" + std::to_string(cols) + " values, got " +
-                       std::to_string(m.rows) + "×" + std::to_string(m.cols));
+                       std::to_string(r) + "×" + std::to_string(c));
     }
-    m.convertTo(m, CV_64F);
-    for (int i = 0; i < int(m.total()); ++i) {
-        if (!std::isfinite(m.at<double>(i))) fail(path, std::string(name) + ": value " + std::to_string(i) + " is not finite");
+    const YAML::Node data = n["data"];
+    if (data.size() != size_t(rows * cols)) {
+        fail(path, std::string(name) + ": data holds " + std::to_string(data.size()) + " values, rows × cols is " +
+                       std::to_string(rows * cols));
     }
-    return m.reshape(1, rows);
+    std::vector<double> out;
+    for (size_t i = 0; i < data.size(); ++i) {
+        double v = 0;
+        if (!data[i].IsScalar() || !YAML::convert<double>::decode(data[i], v)) fail(path, std::string(name) + ": value " + std::to_string(i) + " is not a number");
+        if (!std::isfinite(v)) fail(path, std::string(name) + ": value " + std::to_string(i) + " is not finite");
+        out.push_back(v);
+    }
+    return out;
 }
 
 }  // namespace
 
 Camera Camera::load(const std::string& path)
 {
-    {
-        std::ifstream probe(path);
-        if (!probe) fail(path, "cannot read the camera file");
-    }
-    cv::FileStorage fs;
+    std::ifstream in(path, std::ios::binary);
+    if (!in) fail(path, "cannot read the camera file");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    // Read with yaml-cpp, not OpenCV's FileStorage: OpenCV 4.6's reader loops forever on some
+    // malformed files (found by fuzzing). OpenCV writes a first line "%YAML:1.0", which is not
+    // standard YAML: it is dropped.
+    if (text.rfind("%YAML", 0) == 0) text.erase(0, text.find('\n') == std::string::npos ? text.size() : text.find('\n'));
+    YAML::Node root;
     try {
-        if (!fs.open(path, cv::FileStorage::READ)) fail(path, "not an OpenCV FileStorage YAML file");
-    } catch (const cv::Exception& e) {
-        fail(path, "not an OpenCV FileStorage YAML file (" + std::string(e.err) + ")");
-    } catch (const std::exception& e) {  // OpenCV's parser also lets std::length_error and the like out
-        fail(path, "not an OpenCV FileStorage YAML file (" + std::string(e.what()) + ")");
+        root = YAML::Load(text);
+    } catch (const YAML::Exception& e) {
+        fail(path, "not an OpenCV FileStorage YAML file (line " + std::to_string(e.mark.line + 2) + ": " + e.msg + ")");
     }
-    if (!fs.root().isMap()) fail(path, "expected a map of fields (image_width, image_height, camera_matrix, ...)");
+    if (!root.IsMap()) fail(path, "not an OpenCV FileStorage YAML file (expected a map of fields: image_width, image_height, camera_matrix, ...)");
     Camera c;
-    double w = number(fs, path, "image_width"), h = number(fs, path, "image_height");
+    double w = number(root, path, "image_width"), h = number(root, path, "image_height");
     if (w < 16 || h < 16 || w > 8192 || h > 8192 || w != std::floor(w) || h != std::floor(h)) {
         fail(path, "image_width and image_height must be whole numbers of pixels, 16..8192");
     }
     c.width = int(w);
     c.height = int(h);
-    cv::Mat k = matrix(fs, path, "camera_matrix", 3, 3);
-    c.camera_matrix = cv::Matx33d(k.ptr<double>());
+    const auto k = matrix(root, path, "camera_matrix", 3, 3);
+    c.camera_matrix = cv::Matx33d(k.data());
     if (c.fx() <= 0 || c.fy() <= 0) fail(path, "camera_matrix: the focal lengths fx, fy must be > 0");
-    cv::Mat d = matrix(fs, path, "distortion_coefficients", 1, 5);
-    for (int i = 0; i < 5; ++i) c.distortion[i] = d.at<double>(i);
-    c.mount.x = number(fs, path, "mount_x");
-    c.mount.y = number(fs, path, "mount_y");
-    c.mount.z = number(fs, path, "mount_z");
-    c.mount.yaw = number(fs, path, "mount_yaw");
-    c.mount.pitch = number(fs, path, "mount_pitch");
+    const auto d = matrix(root, path, "distortion_coefficients", 1, 5);
+    for (int i = 0; i < 5; ++i) c.distortion[i] = d[size_t(i)];
+    c.mount.x = number(root, path, "mount_x");
+    c.mount.y = number(root, path, "mount_y");
+    c.mount.z = number(root, path, "mount_z");
+    c.mount.yaw = number(root, path, "mount_yaw");
+    c.mount.pitch = number(root, path, "mount_pitch");
     if (std::abs(c.mount.pitch) >= M_PI / 2) fail(path, "mount_pitch: must be within ±90°");
     return c;
 }
