@@ -1,5 +1,7 @@
 #include "bench_common.hpp"
 
+#include <cpm/Security.hpp>
+
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -8,6 +10,7 @@
 #include <csignal>
 #include <cstdlib>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <thread>
 
@@ -94,6 +97,20 @@ bool data_sharing()
 {
     const char* value = std::getenv("BENCH_DATA_SHARING");
     return value != nullptr && std::string(value) == "1";
+}
+
+SecuredLab::SecuredLab()
+{
+    char tmpl[] = "/tmp/cpm_bench_lab.XXXXXX";
+    dir = std::string(::mkdtemp(tmpl)) + "/lab";
+    cpm::security::init_lab(dir, 2);
+    node = cpm::security::add_node(dir, "bench", {.publish = {"*"}, .subscribe = {"*"}, .days = 2});
+}
+
+SecuredLab::~SecuredLab()
+{
+    std::error_code ignored;
+    std::filesystem::remove_all(std::filesystem::path(dir).parent_path(), ignored);
 }
 
 std::string arg(int argc, char** argv, const std::string& name, const std::string& fallback)

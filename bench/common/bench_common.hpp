@@ -64,6 +64,17 @@ void record(const Figure& f);
 void record_latency(const std::string& bench, const std::string& what, const Stats& ours, const std::string& peer, const Stats& reference,
                     double target_p50 = 0);
 
+/// A secured lab for the benchmarks (cpm security init + one node allowed every topic) in a
+/// fresh folder, removed at the end; `node` is the node's security folder.
+struct SecuredLab
+{
+    std::string dir, node;
+    SecuredLab();
+    ~SecuredLab();
+    SecuredLab(const SecuredLab&) = delete;
+    SecuredLab& operator=(const SecuredLab&) = delete;
+};
+
 /// The value of "--name value" in argv, or fallback.
 std::string arg(int argc, char** argv, const std::string& name, const std::string& fallback);
 

@@ -45,13 +45,14 @@ const cpm::WriterOptions kWriterOptions{.reliable = true, .keep_all = false, .hi
 const cpm::ReaderOptions kReaderOptions{.reliable = true, .keep_all = false, .history_depth = 1, .data_sharing = bench::data_sharing()};
 
 /// cpm's default transports (loopback UDP + shared memory), or loopback UDP only (the
-/// transport Cyclone's ddsperf uses here).
-cpm::ParticipantOptions options_for(int domain, bool shared_memory = true)
+/// transport Cyclone's ddsperf uses here); `security`: a node's security folder (DDS Security).
+cpm::ParticipantOptions options_for(int domain, bool shared_memory = true, const std::string& security = "")
 {
     cpm::ParticipantOptions o;
     o.domain_id = domain;
     o.name = "bench_latency";
     o.shared_memory = shared_memory;
+    o.security = security;
     return o;
 }
 
@@ -66,9 +67,9 @@ std::atomic<bool> g_stop{false};
 
 // ---- pong side: echoes every ping back on "pong" ----------------------------------------
 
-void pong_cpm(int domain, bool shared_memory)
+void pong_cpm(int domain, bool shared_memory, const std::string& security = "")
 {
-    cpm::Participant participant(options_for(domain, shared_memory));
+    cpm::Participant participant(options_for(domain, shared_memory, security));
     cpm::Writer<BenchPayload> pong(participant, "pong", kWriterOptions);
     cpm::AsyncReader<BenchPayload> ping(
         [&](std::vector<BenchPayload>& batch) {
@@ -162,8 +163,8 @@ protected:
 class CpmPinger : public Pinger
 {
 public:
-    CpmPinger(int domain, bool shared_memory)
-        : participant_(options_for(domain, shared_memory)),
+    CpmPinger(int domain, bool shared_memory, const std::string& security = "")
+        : participant_(options_for(domain, shared_memory, security)),
           ping_(participant_, "ping", kWriterOptions),
           pong_(participant_, "pong", kReaderOptions)
     {
@@ -307,6 +308,7 @@ int main(int argc, char** argv)
         std::signal(SIGTERM, [](int) { g_stop = true; });
         const std::string impl = bench::arg(argc, argv, "--impl", "cpm");
         if (impl == "cpm" || impl == "cpm_udp") pong_cpm(domain, impl == "cpm");
+        else if (impl == "cpm_secured") pong_cpm(domain, true, bench::arg(argc, argv, "--security", ""));
         else if (impl == "raw_listener") pong_raw_listener(domain);
         else pong_raw_waitset(domain);
         return 0;
@@ -333,7 +335,9 @@ int main(int argc, char** argv)
     const std::vector<Case> cases{{"cpm", "cpm Writer/AsyncReader"},
                                   {"cpm_udp", "cpm, loopback UDP only"},
                                   {"raw_listener", "raw Fast DDS (listener pong)"},
-                                  {"raw_waitset", "raw Fast DDS (wait-set pong)"}};
+                                  {"raw_waitset", "raw Fast DDS (wait-set pong)"},
+                                  {"cpm_secured", "cpm, DDS Security (AES-GCM, all protected)"}};
+    const bench::SecuredLab lab;
     const int rounds = 10;
     for (size_t size : sizes) {
         bench::print_header("one-way latency, payload " + std::to_string(size) + " B");
@@ -342,9 +346,11 @@ int main(int argc, char** argv)
         std::vector<std::unique_ptr<Pinger>> pingers;
         for (size_t k = 0; k < cases.size(); ++k) {
             const int d = domain + int(k);
-            pongs.push_back(bench::spawn_self({"--role", "pong", "--impl", cases[k].impl, "--domain", std::to_string(d)}));
+            pongs.push_back(bench::spawn_self({"--role", "pong", "--impl", cases[k].impl, "--domain", std::to_string(d), "--security", lab.node}));
             if (cases[k].impl == "cpm" || cases[k].impl == "cpm_udp")
                 pingers.push_back(std::make_unique<CpmPinger>(d, cases[k].impl == "cpm"));
+            else if (cases[k].impl == "cpm_secured")
+                pingers.push_back(std::make_unique<CpmPinger>(d, true, lab.node));
             else pingers.push_back(std::make_unique<RawPinger>(d));
         }
         // Cyclone doing the same work takes its turn in every block too (a new ping process each).
@@ -395,6 +401,10 @@ int main(int argc, char** argv)
         if (results.count("cpm") && results.count("raw_listener")) {
             bench::print_ratio("cpm / raw Fast DDS (listener pong)", results["cpm"], results["raw_listener"]);
             bench::record_latency("latency", sized, results["cpm"], "raw Fast DDS (listener pong)", results["raw_listener"], 1.05);
+        }
+        if (results.count("cpm") && results.count("cpm_secured")) {
+            bench::print_ratio("cpm secured / cpm unsecured", results["cpm_secured"], results["cpm"]);
+            bench::record_latency("latency", sized + ", DDS Security", results["cpm_secured"], "cpm unsecured", results["cpm"]);
         }
         if (results.count("cpm") && results.count("raw_waitset")) {
             bench::print_ratio("cpm / raw Fast DDS (wait-set pong)", results["cpm"], results["raw_waitset"]);

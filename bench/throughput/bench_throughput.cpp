@@ -42,16 +42,20 @@ const cpm::ReaderOptions kReaderOptions{.reliable = true, .keep_all = true, .dat
 
 /// cpm's default transports (loopback UDP + shared memory) for "cpm" and "raw"; loopback UDP
 /// only for "cpm_udp" (the transport Cyclone's ddsperf uses here).
+/// "cpm_secured": cpm's defaults with DDS Security, as the node whose folder this names.
+std::string g_security;
+
 cpm::ParticipantOptions options_for(int domain, const std::string& impl)
 {
     cpm::ParticipantOptions o;
     o.domain_id = domain;
     o.name = "bench_throughput";
     o.shared_memory = impl != "cpm_udp";
+    if (impl == "cpm_secured") o.security = g_security;
     return o;
 }
 
-bool is_cpm(const std::string& impl) { return impl == "cpm" || impl == "cpm_udp"; }
+bool is_cpm(const std::string& impl) { return impl == "cpm" || impl == "cpm_udp" || impl == "cpm_secured"; }
 
 // Counts samples and gaps; shared by the cpm and raw subscribers.
 struct Counter
@@ -170,7 +174,7 @@ Result run_fastdds(const std::string& impl, int domain, size_t size, int seconds
 {
     const std::string out = "/tmp/bench_throughput_sub_" + std::to_string(getpid());
     auto sub = bench::spawn({cpm::sibling_executable("bench_throughput"), "--role", "sub", "--impl", impl, "--domain", std::to_string(domain), "--seconds",
-                                  std::to_string(seconds + 60)},
+                                  std::to_string(seconds + 60), "--security", g_security},
                                  {}, out);
     Result r;
     r.written = publish(impl, domain, size, seconds);
@@ -264,9 +268,12 @@ int main(int argc, char** argv)
     const std::string role = bench::arg(argc, argv, "--role", "main");
     const int domain = std::stoi(bench::arg(argc, argv, "--domain", "201"));
     const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "5"));
-    if (role == "sub") return subscribe(bench::arg(argc, argv, "--impl", "cpm"), domain, seconds);
+    if (role == "sub") {
+        g_security = bench::arg(argc, argv, "--security", "");
+        return subscribe(bench::arg(argc, argv, "--impl", "cpm"), domain, seconds);
+    }
     if (argc > 1 && std::string(argv[1]) == "--help") {
-        std::puts("usage: bench_throughput [--seconds 5] [--size 1024] [--domain 201] [--only cpm|raw|cyclone]");
+        std::puts("usage: bench_throughput [--seconds 5] [--size 1024] [--domain 201] [--only cpm|secured|raw|cyclone]");
         return 0;
     }
     const size_t size = std::stoul(bench::arg(argc, argv, "--size", "1024"));
@@ -275,12 +282,18 @@ int main(int argc, char** argv)
                          " s; publisher and subscriber in separate processes");
     std::printf("\nthroughput, %zu B samples\n%-44s %12s %12s %8s\n", size, "case", "samples/s", "received", "lost");
     const std::string only = bench::arg(argc, argv, "--only", "");  // cpm, raw or cyclone
-    Result cpm_result, cpm_udp, raw_result, cyclone, cyclone_same, cyclone_listener, cyclone_batched;
+    Result cpm_result, cpm_udp, cpm_secured, raw_result, cyclone, cyclone_same, cyclone_listener, cyclone_batched;
     if (only.empty() || only == "cpm") {
         cpm_result = run_fastdds("cpm", domain, size, seconds);
         print_result("cpm Writer/AsyncReader", cpm_result);
         cpm_udp = run_fastdds("cpm_udp", domain, size, seconds);
         print_result("cpm, loopback UDP only", cpm_udp);
+    }
+    if (only.empty() || only == "cpm" || only == "secured") {
+        const bench::SecuredLab lab;
+        g_security = lab.node;
+        cpm_secured = run_fastdds("cpm_secured", domain, size, seconds);
+        print_result("cpm, DDS Security (AES-GCM, all protected)", cpm_secured);
     }
     if (only.empty() || only == "raw") {
         raw_result = run_fastdds("raw", domain, size, seconds);
@@ -302,8 +315,9 @@ int main(int argc, char** argv)
         if (a.ok && b.ok && b.rate > 0) {
             std::printf("%-44s %.2f\n", label, a.rate / b.rate);
             if (peer.empty()) return;
-            bench::Figure f{"throughput", std::to_string(size) + (&a == &cpm_udp ? " B reliable, cpm on UDP only" : " B reliable"), "samples/s", a.rate, peer,
-                            b.rate};
+            bench::Figure f{"throughput",
+                            std::to_string(size) + (&a == &cpm_udp ? " B reliable, cpm on UDP only" : &a == &cpm_secured ? " B reliable, DDS Security" : " B reliable"),
+                            "samples/s", a.rate, peer, b.rate};
             if (target > 0) {
                 char t[48];
                 std::snprintf(t, sizeof t, ">= %.2fx peer", target);
@@ -316,6 +330,7 @@ int main(int argc, char** argv)
         }
     };
     ratio("cpm / raw Fast DDS (same QoS and transport)", cpm_result, raw_result, "raw Fast DDS (same QoS and transport)", 0.9);
+    ratio("cpm secured / cpm unsecured", cpm_secured, cpm_result, "cpm unsecured", 0);
     // Not the same work: ddsperf batches its writes, runs on loopback UDP and reports its
     // median second; cpm writes sample by sample and is timed from first to last sample.
     ratio("cpm / Cyclone ddsperf (batched, UDP)", cpm_result, cyclone, "Cyclone ddsperf (batched, UDP)", 0);
