@@ -17,9 +17,10 @@
 namespace cpm {
 
 /// The history service over DDS: requests on historyRequest, replies matched by client and
-/// request id on historyReply.
+/// request id on historyReply (in a secured lab, samples of topic T on historyReply/T).
 class ServiceBackend final : public HistoryBackend
 {
+    Participant& participant;
     std::string client_id;
     std::chrono::milliseconds reply_timeout;
     std::mutex mutex;
@@ -29,20 +30,41 @@ class ServiceBackend final : public HistoryBackend
     std::atomic<uint64_t> next_id{1};
     Writer<HistoryRequest> requests;
     AsyncReader<HistoryReply> reader;
+    std::mutex topic_readers_mutex;
+    std::map<std::string, std::unique_ptr<AsyncReader<HistoryReply>>> topic_readers;  // secured: per topic
+
+    void collect(std::vector<HistoryReply>& batch)
+    {
+        std::lock_guard lock(mutex);
+        for (auto& r : batch) {
+            if (r.client_id() == client_id && pending.count(r.request_id())) replies[r.request_id()] = std::move(r);
+        }
+        cv.notify_all();
+    }
+
+    /// In a secured lab: the reader of historyReply/TOPIC, made on first use. Throws cpm::Error
+    /// naming the topic when this node's permissions do not let it read that topic's past.
+    AsyncReader<HistoryReply>& topic_reader(const std::string& topic)
+    {
+        std::lock_guard lock(topic_readers_mutex);
+        auto& r = topic_readers[topic];
+        if (!r) {
+            try {
+                r = std::make_unique<AsyncReader<HistoryReply>>([this](std::vector<HistoryReply>& batch) { collect(batch); }, participant,
+                                                               topics::history_reply_topic(topic), topics::history_reply.reader);
+            } catch (const Error& e) {
+                topic_readers.erase(topic);
+                throw Error("history: the past of '" + topic + "' is not for this node: " + e.what());
+            }
+        }
+        return *r;
+    }
 
 public:
     ServiceBackend(Participant& p, std::chrono::milliseconds timeout)
-        : client_id(std::to_string(::getpid()) + "-" + std::to_string(std::random_device{}())), reply_timeout(timeout),
+        : participant(p), client_id(std::to_string(::getpid()) + "-" + std::to_string(std::random_device{}())), reply_timeout(timeout),
           requests(p, topics::history_request.name, topics::history_request.writer),
-          reader(
-              [this](std::vector<HistoryReply>& batch) {
-                  std::lock_guard lock(mutex);
-                  for (auto& r : batch) {
-                      if (r.client_id() == client_id && pending.count(r.request_id())) replies[r.request_id()] = std::move(r);
-                  }
-                  cv.notify_all();
-              },
-              p, topics::history_reply.name, topics::history_reply.reader)
+          reader([this](std::vector<HistoryReply>& batch) { collect(batch); }, p, topics::history_reply.name, topics::history_reply.reader)
     {
     }
 
@@ -55,6 +77,9 @@ public:
         if (!requests.wait_for_matched(1, left()) || !reader.wait_for_matched(1, left())) {
             throw Error("history: no history service answers on this domain (is cpm_history running?)");
         }
+        // Secured: the reply comes on historyReply/TOPIC, whose writer the service makes on the first
+        // request for TOPIC; it keeps its last replies for readers that match later.
+        if (participant.secured() && !rq.topic().empty()) (void)topic_reader(rq.topic());
         const uint64_t id = next_id++;
         rq.client_id(client_id);
         rq.request_id(id);
@@ -81,7 +106,11 @@ public:
                                                        std::chrono::seconds(1));
             if (cv.wait_until(lock, resend, [&] { return replies.count(id) != 0; })) break;
             if (std::chrono::steady_clock::now() >= deadline) {
-                throw Error("history: no reply to request " + std::to_string(id) + " (" + rq.kind() + ") in time");
+                throw Error("history: no reply to request " + std::to_string(id) + " (" + rq.kind() + ") in time" +
+                            (participant.secured() && !rq.topic().empty()
+                                 ? " (secured: the service answers on " + topics::history_reply_topic(rq.topic()) +
+                                       ", which its permissions must let it publish: historyReply*)"
+                                 : std::string()));
             }
         }
         return std::move(replies[id]);

@@ -224,6 +224,8 @@ Participant& Participant::default_participant()
 
 int Participant::domain_id() const { return core_->domain_id(); }
 
+bool Participant::secured() const { return core_->secured(); }
+
 eprosima::fastdds::dds::DomainParticipant* Participant::native() const { return core_->participant(); }
 
 }  // namespace cpm

@@ -167,6 +167,22 @@ std::vector<std::string> with_builtin(std::vector<std::string> topics, const std
     return topics;
 }
 
+/// A node that may subscribe topics may also ask the history for their past: it publishes
+/// historyRequest, subscribes historyReply (lists, errors) and historyReply/T for each topic T it
+/// may subscribe (the samples of T: the history answers there in a secured lab).
+Grant with_history(const Grant& grant)
+{
+    Grant out = grant;
+    if (grant.subscribe.empty()) return out;
+    out.publish = with_builtin(out.publish, {"historyRequest"});
+    std::vector<std::string> replies{"historyReply"};
+    for (const auto& t : grant.subscribe) {
+        if (t.rfind("historyReply", 0) != 0) replies.push_back("historyReply/" + t);
+    }
+    out.subscribe = with_builtin(out.subscribe, replies);
+    return out;
+}
+
 std::string topics_xml(const char* element, const std::vector<std::string>& topics)
 {
     if (topics.empty()) return "";
@@ -288,8 +304,8 @@ std::string add_node(const std::string& dir_text, const std::string& name, const
         <domains>
           <id_range><min>0</min><max>232</max></id_range>
         </domains>
-)" + topics_xml("publish", with_builtin(grant.publish, builtin_publish())) +
-            topics_xml("subscribe", with_builtin(grant.subscribe, builtin_subscribe())) + R"(      </allow_rule>
+)" + topics_xml("publish", with_builtin(with_history(grant).publish, builtin_publish())) +
+            topics_xml("subscribe", with_builtin(with_history(grant).subscribe, builtin_subscribe())) + R"(      </allow_rule>
       <default>DENY</default>
     </grant>
   </permissions>

@@ -210,7 +210,7 @@ struct Ingest::Impl : public dds::DomainParticipantListener
 
     bool wanted(const std::string& topic) const
     {
-        if (topic == topics::history_request.name || topic == topics::history_reply.name) return false;
+        if (topics::is_history_control(topic)) return false;
         for (const auto& re : exclude) {
             if (std::regex_match(topic, re)) return false;
         }

@@ -1,6 +1,7 @@
 #include <cpm/rtdb/Player.hpp>
 
 #include <cpm/Error.hpp>
+#include <cpm/topics.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 
 #include "RawType.hpp"
@@ -27,6 +28,12 @@ const std::vector<std::string>& control_topics()
     static const std::vector<std::string> topics = {"historyRequest", "historyReply", "historyStatus", "systemTrigger",
                                                     "readyStatus",    "parameter",    "parameterRequest"};
     return topics;
+}
+
+bool is_control(const std::string& topic)
+{
+    const auto& c = control_topics();
+    return std::find(c.begin(), c.end(), topic) != c.end() || topics::is_history_control(topic);
 }
 
 struct Player::Impl
@@ -63,7 +70,7 @@ struct Player::Impl
         for (const auto& r : exclude) {
             if (std::regex_match(topic, r)) return false;
         }
-        if (include.empty()) return std::find(control_topics().begin(), control_topics().end(), topic) == control_topics().end();
+        if (include.empty()) return !is_control(topic);
         for (const auto& r : include) {
             if (std::regex_match(topic, r)) return true;
         }

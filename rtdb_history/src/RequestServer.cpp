@@ -8,7 +8,7 @@
 namespace cpm::rtdb {
 
 RequestServer::RequestServer(const Store& store, Participant& participant, size_t workers)
-    : store_(store),
+    : store_(store), participant_(participant),
       replies_(participant, topics::history_reply.name, topics::history_reply.writer)
 {
     for (size_t i = 0; i < std::max<size_t>(1, workers); ++i) workers_.emplace_back([this] { work_loop(); });
@@ -45,7 +45,36 @@ void RequestServer::serve(const HistoryRequest& rq)
     ++requests_;
     const auto status = history::status_from(reply.status());
     if (status == history::Status::error || status == history::Status::unknown_object) ++bad_requests_;
-    (void)replies_.write(reply);
+    if (!participant_.secured() || reply.samples().empty()) {
+        (void)replies_.write(reply);
+        return;
+    }
+    // Secured: samples go out only on historyReply/T, readable by the nodes that may subscribe T,
+    // and only samples of the topic the request names (an oid alone, or several topics, would
+    // let a reply carry a topic other than the one it goes out on).
+    const std::string& topic = rq.topic();
+    bool one_topic = !topic.empty();
+    for (const auto& o : reply.objects()) one_topic = one_topic && (o.topic() == topic || o.samples_held() == 0 || o.is_process());
+    if (!one_topic) {
+        HistoryReply refused;
+        refused.client_id(rq.client_id());
+        refused.request_id(rq.request_id());
+        refused.status(std::string(history::to_string(history::Status::error)));
+        refused.error("in a secured lab a query for samples names its topic (topic), and is answered from that topic only");
+        cpm::stamp_message(refused, cpm::get_time_ns(), 0);
+        ++bad_requests_;
+        (void)replies_.write(refused);
+        return;
+    }
+    (void)topic_writer(topic).write(reply);
+}
+
+Writer<HistoryReply>& RequestServer::topic_writer(const std::string& topic)
+{
+    std::lock_guard lock(topic_writers_mutex_);
+    auto& w = topic_writers_[topic];
+    if (!w) w = std::make_unique<Writer<HistoryReply>>(participant_, topics::history_reply_topic(topic), topics::history_reply.writer);
+    return *w;
 }
 
 void RequestServer::work_loop()

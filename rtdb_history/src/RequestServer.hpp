@@ -13,6 +13,8 @@
 #include <atomic>
 #include <condition_variable>
 #include <deque>
+#include <map>
+#include <string>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -34,10 +36,15 @@ public:
 private:
     void serve(const HistoryRequest& rq);
     void work_loop();
+    /// Secured: the writer of historyReply/TOPIC, made on first use.
+    Writer<HistoryReply>& topic_writer(const std::string& topic);
 
     const Store& store_;
+    Participant& participant_;
     std::atomic<uint64_t> requests_{0}, bad_requests_{0};
     Writer<HistoryReply> replies_;
+    std::mutex topic_writers_mutex_;
+    std::map<std::string, std::unique_ptr<Writer<HistoryReply>>> topic_writers_;
     std::mutex work_mutex_;
     std::condition_variable work_cv_;
     std::deque<HistoryRequest> work_;

@@ -3,6 +3,7 @@
 // (no credentials, another lab's CA, an expired certificate, permissions signed by the wrong
 // key); a node cannot create what its permissions do not grant.
 #include <cpm/Participant.hpp>
+#include <cpm/HistoryClient.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Security.hpp>
 #include <cpm/Writer.hpp>
@@ -14,6 +15,12 @@
 #include <cpm_test/TempDir.hpp>
 
 #include <VehicleCommandDirect.h>
+#include <cpm_topic_types.hpp>
+
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/publisher/Publisher.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+#include <VehicleCommandDirectPubSubTypes.h>
 #include <VehicleState.h>
 
 #include <gtest/gtest.h>
@@ -205,6 +212,17 @@ TEST(Security, ANodeCreatesOnlyWhatItsPermissionsGrantAndSaysWhy)
     } catch (const cpm::Error& e) {
         EXPECT_NE(std::string(e.what()).find("data_sharing and DDS Security"), std::string::npos) << e.what();
     }
+    // Not only cpm's check: Fast DDS itself refuses the writer when cpm is bypassed.
+    auto* native = viewer.native();
+    eprosima::fastdds::dds::TypeSupport type(cpm::TopicType<VehicleCommandDirect>::make_type_support());
+    ASSERT_EQ(type.register_type(native), ReturnCode_t::RETCODE_OK);
+    auto* topic = native->create_topic("vehicleCommandDirect", type.get_type_name(), eprosima::fastdds::dds::TOPIC_QOS_DEFAULT);
+    ASSERT_NE(topic, nullptr);
+    auto* publisher = native->create_publisher(eprosima::fastdds::dds::PUBLISHER_QOS_DEFAULT);
+    EXPECT_EQ(publisher->create_datawriter(topic, eprosima::fastdds::dds::DATAWRITER_QOS_DEFAULT), nullptr)
+        << "Fast DDS let a node write a topic its permissions do not grant";
+    native->delete_publisher(publisher);
+    native->delete_topic(topic);
     // The builtin topics every cpm process uses need no grant.
     EXPECT_TRUE(cpm::security::why_not_allowed(cpm::security::node_files(lab.node("viewer")), "log", true).empty());
     EXPECT_TRUE(cpm::security::why_not_allowed(cpm::security::node_files(lab.node("viewer")), "parameter", false).empty());
@@ -220,4 +238,56 @@ TEST(Security, AMissingSecurityFolderIsNamedByFlagAndByEnvironment)
     Process by_env({built_program("vehicle_state_monitor")}, {"CPM_SECURITY=" + lab.node("viewer")});
     EXPECT_NE(by_env.wait(10s), 0);
     EXPECT_NE(by_env.errors().find("key.pem is missing"), std::string::npos) << by_env.errors();
+}
+
+TEST(Security, TheHistoryGivesEachNodeThePastOfWhatItMaySubscribeOnly)
+{
+    Lab lab;
+    cpm::security::add_node(lab.dir, "history", {.publish = {"historyReply*", "historyStatus"}, .subscribe = {"*"}});
+    cpm::security::add_node(lab.dir, "commander", {.publish = {"vehicleCommandDirect"}, .subscribe = {"vehicleCommandDirect"}});
+    Process history({built_program("cpm_history"), "--security", lab.node("history")});
+    Process writer({built_program("vehicle_state_writer"), "--seconds", "60", "--security", lab.node("writer")});
+
+    // The viewer may subscribe vehicleState: it gets its past, as a library call and from `cpm history`.
+    cpm::Participant viewer_p(secured(lab.node("viewer")));
+    cpm::HistoryClient viewer(viewer_p, 10s);
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        try {
+            return viewer.latest("vehicleState", "1").status() == "ok";
+        } catch (const cpm::Error&) {
+            return false;
+        }
+    }, 30s)) << history.errors() << writer.errors();
+    EXPECT_EQ(viewer.latest("vehicleState", "1").samples().size(), 1u);
+    Process cli({built_program("cpm"), "history", "latest", "--topic", "vehicleState", "--key", "2", "--security", lab.node("viewer")});
+    EXPECT_EQ(cli.wait(30s), 0) << cli.errors();
+    EXPECT_NE(cli.output().find("vehicleState/2"), std::string::npos) << cli.output();
+
+    // The commander may not: asking for it is refused before anything is sent, naming the topic.
+    cpm::Participant commander_p(secured(lab.node("commander")));
+    cpm::HistoryClient commander(commander_p, 10s);
+    try {
+        (void)commander.latest("vehicleState", "1");
+        ADD_FAILURE() << "the commander got the past of a topic it may not subscribe";
+    } catch (const cpm::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("the past of 'vehicleState' is not for this node"), std::string::npos) << e.what();
+    }
+    // Nor around it: by object id alone, or naming a topic it may read for an object of another,
+    // the service answers with an error and no samples.
+    const auto list = viewer.request(cpm::HistoryClient::make(cpm::history::Kind::search, "", "", 0));
+    uint64_t state_oid = 0;
+    for (const auto& o : list.objects()) {
+        if (o.name() == "vehicleState/1") state_oid = o.oid();
+    }
+    ASSERT_NE(state_oid, 0u) << "the object list names vehicleState/1";
+    HistoryRequest by_oid = cpm::HistoryClient::make(cpm::history::Kind::latest, "", "", 0);
+    by_oid.oid(state_oid);
+    HistoryRequest disguised = cpm::HistoryClient::make(cpm::history::Kind::latest, "vehicleCommandDirect", "", 0);
+    disguised.oid(state_oid);
+    for (const auto& rq : {by_oid, disguised}) {
+        const auto reply = commander.request(rq);
+        EXPECT_TRUE(reply.samples().empty()) << reply.status();
+        EXPECT_EQ(reply.status(), "error");
+        EXPECT_NE(reply.error().find("names its topic"), std::string::npos) << reply.error();
+    }
 }

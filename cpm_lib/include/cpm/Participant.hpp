@@ -56,6 +56,8 @@ public:
     static Participant& default_participant();
 
     int domain_id() const;
+    /// Whether it joined with DDS Security (ParticipantOptions::security).
+    bool secured() const;
     /// The Fast DDS participant, for what cpm does not wrap. Owned by this object.
     eprosima::fastdds::dds::DomainParticipant* native() const;
     /// Shared with readers and writers; not part of the stable interface.

@@ -39,7 +39,9 @@ struct Grant
 };
 
 /// Issues node `name` ([A-Za-z0-9_-]+): its key, its certificate from the identity CA and its
-/// permissions (the grant plus the builtin topics) signed by the permissions CA, into
+/// permissions (the grant plus the builtin topics; with any subscription, the history's
+/// historyRequest, historyReply and historyReply/T for each T it may subscribe) signed by the
+/// permissions CA, into
 /// DIR/nodes/NAME/ (returned). Throws cpm::Error naming what is wrong (no lab in `dir`, a bad
 /// name or topic, a node that exists already, openssl failing).
 std::string add_node(const std::string& dir, const std::string& name, const Grant& grant);

@@ -18,6 +18,7 @@
 #include <cpm/WriterOptions.hpp>
 
 #include <array>
+#include <string>
 #include <cstdint>
 #include <string_view>
 
@@ -112,6 +113,15 @@ inline constexpr TopicSpec history_request{"historyRequest", "HistoryRequest", q
 /// Transient-local: a client whose reader matched after the reply went out still gets it.
 inline constexpr TopicSpec history_reply{"historyReply", "HistoryReply", qos::reliable_writer(64, true),
                                          qos::reliable_reader(1, true, true), "the history service's answers"};
+/// In a secured lab (DDS Security) the history answers a query for samples of topic T on
+/// "historyReply/T": only a node whose permissions let it subscribe that topic reads them, so the
+/// history is no way around the permissions (cpm security add-node grants "historyReply/T" with T).
+inline std::string history_reply_topic(const std::string& topic) { return std::string(history_reply.name) + "/" + topic; }
+/// Whether `topic` is the history's own (historyRequest, historyReply, historyReply/T).
+inline bool is_history_control(const std::string& topic)
+{
+    return topic == history_request.name || topic == history_reply.name || topic.rfind(std::string(history_reply.name) + "/", 0) == 0;
+}
 inline constexpr TopicSpec history_status{"historyStatus", "HistoryStatus", qos::reliable_writer(1, true),
                                           qos::reliable_reader(1, true), "the history service's counts, once a second"};
 
