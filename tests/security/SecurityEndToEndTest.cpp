@@ -14,7 +14,9 @@
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
 
+#include <FsmStatus.h>
 #include <VehicleCommandDirect.h>
+#include <VehicleObservation.h>
 #include <cpm_topic_types.hpp>
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
@@ -26,6 +28,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -290,4 +293,40 @@ TEST(Security, TheHistoryGivesEachNodeThePastOfWhatItMaySubscribeOnly)
         EXPECT_EQ(reply.status(), "error");
         EXPECT_NE(reply.error().find("names its topic"), std::string::npos) << reply.error();
     }
+}
+
+TEST(Security, ASecuredLabDrives)
+{
+    // A simulated car (simulator and bridge), its state machine and the history, each a process
+    // with only its own grant; a viewer sees the car drive and asks the history about it.
+    Lab lab;
+    cpm::security::add_node(lab.dir, "car", {.publish = {"vehicleState", "vehicleObservation", "rangeSensors"},
+                                             .subscribe = {"vehicleCommand*", "stopRequest", "vehicleObservation"}});
+    cpm::security::add_node(lab.dir, "fsm", {.publish = {"vehicleCommandDirect", "fsmStatus", "stopRequest"},
+                                             .subscribe = {"vehicleState", "rangeSensors", "arucoMarkers", "stopRequest"}});
+    cpm::security::add_node(lab.dir, "history", {.publish = {"historyReply*", "historyStatus"}, .subscribe = {"*"}});
+    cpm::security::add_node(lab.dir, "watcher", {.publish = {}, .subscribe = {"vehicleObservation", "vehicleState", "fsmStatus"}});
+    const std::string root = CPM_SOURCE_DIR;
+    Process history({built_program("cpm_history"), "--security", lab.node("history")});
+    Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", root + "/scenarios/maps/corridor.json", "--start",
+                 "0,-0.01,0", "--security", lab.node("car")});
+    Process fsm({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", root + "/scenarios/fsm/corridor.json", "--security", lab.node("fsm")});
+
+    cpm::Participant watcher_p(secured(lab.node("watcher")));
+    cpm::ReaderAbstract<VehicleObservation> observations(watcher_p, "vehicleObservation", {.keep_all = true});
+    cpm::ReaderAbstract<FsmStatus> status(watcher_p, "fsmStatus", {.reliable = true, .keep_all = true, .transient_local = true});
+    double x_min = 1e9, x_max = -1e9;
+    bool fsm_seen = false;
+    const bool drove = cpm_test::wait_until([&] {
+        for (const auto& o : observations.take()) x_min = std::min(x_min, o.pose().x()), x_max = std::max(x_max, o.pose().x());
+        fsm_seen = fsm_seen || !status.take().empty();
+        return fsm_seen && x_max - x_min > 1.0;
+    }, 60s, 20ms);
+    EXPECT_TRUE(drove) << "moved " << x_max - x_min << " m, fsm status seen: " << fsm_seen << "\ncar: " << car.errors()
+                       << "\nfsm: " << fsm.errors();
+    cpm::HistoryClient ask(watcher_p, 10s);
+    const auto reply = ask.latest("vehicleState", "5");
+    EXPECT_EQ(reply.status(), "ok") << reply.error();
+    car.kill(SIGINT);
+    EXPECT_EQ(car.wait(10s), 0) << car.errors();
 }
