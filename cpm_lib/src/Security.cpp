@@ -76,18 +76,6 @@ std::string local_time(std::time_t t)
     return text;
 }
 
-std::string xml_escaped(const std::string& s)
-{
-    std::string out;
-    for (char c : s) {
-        if (c == '&') out += "&amp;";
-        else if (c == '<') out += "&lt;";
-        else if (c == '>') out += "&gt;";
-        else out += c;
-    }
-    return out;
-}
-
 bool valid_name(const std::string& name)
 {
     if (name.empty() || name.size() > 64) return false;
@@ -187,7 +175,7 @@ std::string topics_xml(const char* element, const std::vector<std::string>& topi
 {
     if (topics.empty()) return "";
     std::string out = std::string("      <") + element + ">\n        <topics>\n";
-    for (const auto& t : topics) out += "          <topic>" + xml_escaped(t) + "</topic>\n";
+    for (const auto& t : topics) out += "          <topic>" + t + "</topic>\n";  // checked: no XML markup
     return out + "        </topics>\n      </" + element + ">\n";
 }
 
@@ -294,7 +282,7 @@ std::string add_node(const std::string& dir_text, const std::string& name, const
 <!-- Node ')") + name + R"(' of a cpm lab (cpm security add-node): signed by the lab's permissions CA. -->
 <dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance">
   <permissions>
-    <grant name=")" + xml_escaped(name) + R"(">
+    <grant name=")" + name + R"(">
       <subject_name>)" + subject + R"(</subject_name>
       <validity>
         <not_before>)" + local_time(now - 86400) + R"(</not_before>
