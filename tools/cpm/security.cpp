@@ -46,7 +46,7 @@ int init(const std::vector<std::string>& args)
 {
     const std::string command = "cpm security init";
     const auto parsed = parse_args(args, {{"--days", true}}, command);
-    const std::string dir = only_positional(parsed, command, "the lab's security folder DIR");
+    const std::string dir = only_positional(parsed, command, "DIR (the lab's security folder)");
     cpm::security::init_lab(dir, days_flag(parsed, command));
     std::printf("cpm security: lab made in %s (identity CA, permissions CA, governance); add nodes with\n"
                 "  cpm security add-node %s NAME --publish ... --subscribe ...\n",
