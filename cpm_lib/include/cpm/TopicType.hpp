@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <exception>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 namespace eprosima::fastdds::dds {
@@ -45,10 +46,13 @@ struct TopicType;
 /// at once (inline): for a file that includes PubSub's header.
 #define CPM_REGISTER_TYPE_AS(T, PubSub) CPM_DECLARE_TYPE(T) CPM_TYPE_DEFINITIONS_(inline, T, PubSub)
 
-// The type support cpm hands to Fast DDS is the generated one with one change: bytes that do not
-// decode are a sample dropped, never an exception. fastddsgen's deserialize() catches only a
-// cut-off buffer; a wrong encapsulation or an absurd length from any participant on the domain
-// would otherwise throw through Fast DDS into the reading thread and end the process.
+// The type support cpm hands to Fast DDS is the generated one with two changes:
+// - bytes that do not decode are a sample dropped, never an exception. fastddsgen's deserialize()
+//   catches only a cut-off buffer; a wrong encapsulation or an absurd length from any participant
+//   on the domain would otherwise throw through Fast DDS into the reading thread and end the process;
+// - getKey() is serialised: the generated one computes the key in buffers of the type object,
+//   which every writer and reader of the type in a participant shares, so two writers writing at
+//   once on their own threads raced on them (ThreadSanitizer: two timers' readyStatus writers).
 #define CPM_TYPE_DEFINITIONS_(SPECIFIER, T, PubSub)                                                \
     SPECIFIER ::eprosima::fastdds::dds::TopicDataType* cpm::TopicType<T>::make_type_support()     \
     {                                                                                              \
@@ -62,6 +66,12 @@ struct TopicType;
                     return false;                                                                  \
                 }                                                                                  \
             }                                                                                      \
+            bool getKey(void* data, ::eprosima::fastrtps::rtps::InstanceHandle_t* handle, bool force_md5) override \
+            {                                                                                      \
+                const std::lock_guard<std::mutex> lock(key_mutex);                                 \
+                return PubSub::getKey(data, handle, force_md5);                                    \
+            }                                                                                      \
+            std::mutex key_mutex;                                                                  \
         };                                                                                         \
         return new Guarded();                                                                      \
     }                                                                                              \
