@@ -54,7 +54,7 @@ void RequestServer::serve(const HistoryRequest& rq)
     // let a reply carry a topic other than the one it goes out on).
     const std::string& topic = rq.topic();
     bool one_topic = !topic.empty();
-    for (const auto& o : reply.objects()) one_topic = one_topic && (o.topic() == topic || o.samples_held() == 0 || o.is_process());
+    for (const auto& o : reply.objects()) one_topic = one_topic && (o.topic() == topic || o.is_process());
     if (!one_topic) {
         HistoryReply refused;
         refused.client_id(rq.client_id());
