@@ -277,6 +277,7 @@ std::string add_node(const std::string& dir_text, const std::string& name, const
         // The subject exactly as Fast DDS compares it: RFC 2253, most specific first.
         const std::string subject = "CN=" + name + ",O=" + kOrganisation;
         const std::time_t now = std::time(nullptr);
+        const Grant full = with_history(grant);
         const std::string permissions =
             std::string(R"(<?xml version="1.0" encoding="UTF-8"?>
 <!-- Node ')") + name + R"(' of a cpm lab (cpm security add-node): signed by the lab's permissions CA. -->
@@ -292,8 +293,8 @@ std::string add_node(const std::string& dir_text, const std::string& name, const
         <domains>
           <id_range><min>0</min><max>232</max></id_range>
         </domains>
-)" + topics_xml("publish", with_builtin(with_history(grant).publish, builtin_publish())) +
-            topics_xml("subscribe", with_builtin(with_history(grant).subscribe, builtin_subscribe())) + R"(      </allow_rule>
+)" + topics_xml("publish", with_builtin(full.publish, builtin_publish())) +
+            topics_xml("subscribe", with_builtin(full.subscribe, builtin_subscribe())) + R"(      </allow_rule>
       <default>DENY</default>
     </grant>
   </permissions>
