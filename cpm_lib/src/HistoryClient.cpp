@@ -84,8 +84,17 @@ public:
         rq.client_id(client_id);
         rq.request_id(id);
         stamp_message(rq, get_time_ns(), 0);
-        // Sent again each second without an answer (queries do not change what is stored; the
-        // first reply to arrive is taken).
+        // Sent again each second without an answer. A service that matches while we wait (one
+        // started again after a crash: its dead predecessor stays matched until its lease ends and
+        // got the request) may not know our writer yet when we know its reader, and drops what
+        // comes before: it goes again at once, and a query that does not wait every 100 ms for a
+        // second after each new match (a waiting one would hold a worker of the service per copy).
+        // Queries do not change what is stored; the first reply to arrive is taken.
+        using Clock = std::chrono::steady_clock;
+        auto services = [&] { return requests.matched_subscriptions() + reader.matched_publications(); };
+        size_t known = services();
+        Clock::time_point matched_at{};
+        Clock::time_point next_send = Clock::now();
         std::unique_lock lock(mutex);
         pending.insert(id);
         struct Done
@@ -98,14 +107,22 @@ public:
                 d.replies.erase(id);
             }
         } done{*this, id};
-        for (;;) {
-            lock.unlock();
-            if (!requests.write(rq)) throw Error("history: the request could not be sent");
-            lock.lock();
-            const auto resend = std::min(deadline, std::chrono::steady_clock::now() + std::chrono::nanoseconds(rq.timeout_ns()) +
-                                                       std::chrono::seconds(1));
-            if (cv.wait_until(lock, resend, [&] { return replies.count(id) != 0; })) break;
-            if (std::chrono::steady_clock::now() >= deadline) {
+        auto answered = [&] { return replies.count(id) != 0; };
+        while (!answered()) {
+            if (Clock::now() >= next_send) {
+                lock.unlock();
+                if (!requests.write(rq)) throw Error("history: the request could not be sent");
+                lock.lock();
+                const auto now = Clock::now();
+                next_send = rq.timeout_ns() == 0 && now < matched_at + std::chrono::seconds(1)
+                                ? now + std::chrono::milliseconds(100)
+                                : now + std::chrono::nanoseconds(rq.timeout_ns()) + std::chrono::seconds(1);
+            }
+            if (cv.wait_until(lock, std::min({next_send, deadline, Clock::now() + std::chrono::milliseconds(10)}), answered)) break;
+            const size_t now_known = services();
+            if (now_known > known) next_send = matched_at = Clock::now();
+            known = now_known;  // also down, when a service leaves
+            if (Clock::now() >= deadline) {
                 throw Error("history: no reply to request " + std::to_string(id) + " (" + rq.kind() + ") in time" +
                             (participant.secured() && !rq.topic().empty()
                                  ? " (secured: the service answers on " + topics::history_reply_topic(rq.topic()) +

@@ -14,7 +14,16 @@
 #include <fastrtps/utils/IPLocator.h>
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
 #include <cstdlib>
+#include <dirent.h>
+#include <fcntl.h>
+#include <optional>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <vector>
 
 namespace cpm {
 namespace detail {
@@ -50,6 +59,67 @@ rtps::Locator_t udp_locator(const std::string& text, const std::string& what)
     return locator;
 }
 
+/// The locks of the shared-memory ports of this domain whose listening process died in the last
+/// few seconds, held while a participant is made. Fast DDS gives a new participant the first port
+/// it can open and takes over a dead process's port at once, but the dead one's peers keep
+/// sending to their handle of the old port until Fast DDS's port watchdog (once a second)
+/// notices, one to two seconds: a node started again after kill -9 heard nothing from its peers
+/// for that long. A dead port whose lock is held looks alive, so Fast DDS passes it by and the
+/// new node gets a fresh port. A port's listener holds an flock on /dev/shm/fastrtps_port<N>_el
+/// while it lives; a marker file (cpm_dead_fastrtps_port<N>) says since when a port is seen dead,
+/// and after kRecently it is left to Fast DDS to take over (its peers have let go of it by then,
+/// and ports of dead processes must not pile up past Fast DDS's 100 tries).
+class DeadPortsHeld
+{
+public:
+    explicit DeadPortsHeld(int domain_id)
+    {
+        // Fast DDS's ports of a domain: 7400 + 250 * domain + offsets below 250.
+        const unsigned first = 7400u + 250u * static_cast<unsigned>(domain_id), last = first + 250u;
+        DIR* dir = ::opendir("/dev/shm");
+        if (dir == nullptr) return;
+        const auto now = std::chrono::system_clock::now();
+        while (const dirent* entry = ::readdir(dir)) {
+            unsigned port = 0;
+            char tail[4] = {};
+            if (std::sscanf(entry->d_name, "fastrtps_port%u%3s", &port, tail) != 2 || std::string(tail) != "_el" || port < first ||
+                port >= last)
+                continue;
+            const std::string lock = std::string("/dev/shm/") + entry->d_name;
+            const std::string marker = "/dev/shm/cpm_dead_fastrtps_port" + std::to_string(port);
+            const int fd = ::open(lock.c_str(), O_RDONLY | O_CLOEXEC);
+            if (fd < 0) continue;
+            if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {  // a live port
+                ::close(fd);
+                ::unlink(marker.c_str());
+                continue;
+            }
+            struct stat seen {};
+            if (::stat(marker.c_str(), &seen) != 0) {
+                const int m = ::open(marker.c_str(), O_CREAT | O_WRONLY | O_CLOEXEC, 0644);
+                if (m >= 0) ::close(m);
+                held_.push_back(fd);
+            } else if (now - std::chrono::system_clock::from_time_t(seen.st_mtime) < kRecently) {
+                held_.push_back(fd);
+            } else {
+                ::unlink(marker.c_str());  // long dead: Fast DDS may take it over now
+                ::close(fd);
+            }
+        }
+        ::closedir(dir);
+    }
+    ~DeadPortsHeld()
+    {
+        for (int fd : held_) ::close(fd);  // closing releases the lock
+    }
+    DeadPortsHeld(const DeadPortsHeld&) = delete;
+    DeadPortsHeld& operator=(const DeadPortsHeld&) = delete;
+
+private:
+    static constexpr std::chrono::seconds kRecently{10};
+    std::vector<int> held_;
+};
+
 }  // namespace
 
 dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
@@ -76,6 +146,11 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
         auto shm = std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>();
         shm->segment_size(4 * 1024 * 1024);
         shm->port_queue_capacity(2048);
+        // A process started again after a crash gets its predecessor's port; opening it waits
+        // this long for the dead listeners before making the port anew, and its peers' sends go
+        // nowhere meanwhile (Fast DDS's 1 s made a restarted node deaf for about a second). A
+        // live listener that misses the check only re-attaches to the new port.
+        shm->healthy_check_timeout_ms(200);
         transport.user_transports.push_back(shm);
     }
     transport.user_transports.push_back(udp);
@@ -122,8 +197,11 @@ ParticipantCore::ParticipantCore(const ParticipantOptions& options)
                                    "participant option domain_id"))
 {
     dds::DomainParticipantQos qos = participant_qos(options);
+    std::optional<DeadPortsHeld> dead_ports;
+    if (options.shared_memory) dead_ports.emplace(domain_id_);
     participant_ = factory_->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, options.discovery_listener,
                                                 dds::StatusMask::none());
+    dead_ports.reset();
     if (participant_ == nullptr) {
         throw Error("cannot create a DDS participant on domain " + std::to_string(domain_id_) +
                     (options.security.empty() ? " (Fast DDS refused the transport or discovery settings; see its log above)"
@@ -202,6 +280,7 @@ ParticipantOptions ParticipantOptions::from_init()
     options.initial_peers = settings.initial_peers;
     options.discovery_server = settings.discovery_server;
     options.security = settings.security;
+    options.shared_memory = settings.shared_memory;
     return options;
 }
 

@@ -74,7 +74,7 @@ bool is_init_flag(const std::string& flag, bool& takes_value)
     static const std::pair<const char*, bool> kFlags[] = {
         {"--dds_domain", true},       {"--node_id", true},           {"--dds_interface", true},
         {"--dds_initial_peer", true}, {"--dds_discovery_server", true}, {"--simulated_time", false},
-        {"--security", true}};
+        {"--security", true},         {"--dds_shared_memory", true}};
     for (const auto& [name, value] : kFlags) {
         if (flag == name) {
             takes_value = value;
@@ -100,6 +100,9 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
     if (env_domain != nullptr && *env_domain != '\0') {
         settings.domain_id = checked_domain_id(parse_integer(env_domain, "CPM_DOMAIN_ID"), "CPM_DOMAIN_ID");
     }
+    if (const char* shm = std::getenv("CPM_SHARED_MEMORY"); shm != nullptr && *shm != '\0') {
+        settings.shared_memory = parse_bool(shm, "CPM_SHARED_MEMORY");
+    }
     for (int i = 1; i < argc; ++i) {
         if (std::strcmp(argv[i], "--simulated_time") == 0) {
             settings.simulated_time = true;
@@ -119,6 +122,8 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
         } else if (auto v = flag_value(argc, argv, i, "dds_discovery_server")) {
             if (v->empty()) throw Error("--dds_discovery_server: empty value");
             settings.discovery_server = *v;
+        } else if (auto v = flag_value(argc, argv, i, "dds_shared_memory")) {
+            settings.shared_memory = parse_bool(*v, "--dds_shared_memory");
         } else if (auto v = flag_value(argc, argv, i, "security")) {
             if (v->empty()) throw Error("--security: empty value (a node's security folder, LAB/nodes/NAME)");
             settings.security = *v;

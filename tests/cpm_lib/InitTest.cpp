@@ -52,6 +52,8 @@ TEST(Init, ReadsFlagsInBothSpellingsAndLeavesOthersAlone)
     EXPECT_EQ(sut.interfaces, (std::vector<std::string>{"eth1"}));
     EXPECT_TRUE(sut.simulated_time);
     EXPECT_EQ(sut.security, "lab/nodes/car");
+    EXPECT_FALSE(parse({"--dds_shared_memory", "off"}).shared_memory);
+    EXPECT_TRUE(parse({"--dds_shared_memory=on"}).shared_memory);
     bool takes_value = false;
     EXPECT_TRUE(cpm::is_init_flag("--security", takes_value));
     EXPECT_TRUE(takes_value);
@@ -77,6 +79,7 @@ TEST(Init, BadValuesAreErrorsNamingTheirSource)
     EXPECT_THAT(error_of({"--dds_domain=-1"}), HasSubstr("-1"));
     EXPECT_THAT(error_of({}, "999"), HasSubstr("CPM_DOMAIN_ID"));
     EXPECT_THAT(error_of({"--simulated_time=maybe"}), HasSubstr("--simulated_time: 'maybe'"));
+    EXPECT_THAT(error_of({"--dds_shared_memory=udp"}), HasSubstr("--dds_shared_memory: 'udp' is not a boolean"));
     EXPECT_THAT(error_of({"--node_id"}), HasSubstr("--node_id: missing value"));
     EXPECT_THAT(error_of({"--node_id="}), HasSubstr("--node_id: empty value"));
 }

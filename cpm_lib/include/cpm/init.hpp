@@ -14,10 +14,12 @@ struct InitSettings
     std::string discovery_server;            ///< --dds_discovery_server (host:port)
     bool simulated_time = false;             ///< --simulated_time
     std::string security;                    ///< --security (or CPM_SECURITY): a node's security folder
+    bool shared_memory = true;               ///< --dds_shared_memory on|off (or CPM_SHARED_MEMORY)
 };
 
 /// Reads cpm's flags (`--flag=value` or `--flag value`) from the command line and
-/// CPM_DOMAIN_ID from the environment; other flags are left to the program.
+/// CPM_DOMAIN_ID (CPM_SECURITY, CPM_SHARED_MEMORY) from the environment; other flags are left to
+/// the program.
 /// Throws cpm::cli::UsageError (a cpm::Error; cpm's programs exit 2 on it) naming the flag and
 /// value when a value is malformed or out of range, or an interface is not on this host.
 /// Call before the first Participant is created (the default participant uses these).

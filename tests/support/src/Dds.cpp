@@ -1,3 +1,4 @@
+#include <cpm/init.hpp>
 #include <cpm_test/Dds.hpp>
 
 #include <cpm_test/Isolation.hpp>
@@ -9,6 +10,7 @@ cpm::ParticipantOptions isolated_options()
     cpm::ParticipantOptions options;
     options.domain_id = test_domain_id();
     options.name = "cpm_test";
+    options.shared_memory = cpm::init_settings().shared_memory;  // CPM_SHARED_MEMORY=off: UDP loopback only
     return options;
 }
 
