@@ -17,6 +17,8 @@
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+
+#include "SimTrace.hpp"
 #include <cpm_test/TempDir.hpp>
 
 #include <ArucoMarkers.h>
@@ -44,8 +46,9 @@ namespace {
 using namespace std::chrono_literals;
 using cpm_test::built_program;
 using cpm_test::Process;
+using cpm_faults::kRoot;
+using cpm_faults::pwm_after;
 
-const std::string kRoot = CPM_SOURCE_DIR;
 const std::string kMap = kRoot + "/scenarios/maps/gates.json";
 const std::string kCamera = kRoot + "/scenarios/cameras/sim_640x480.yaml";
 const std::string kMachine = kRoot + "/scenarios/fsm/gates.json";
@@ -111,21 +114,6 @@ private:
     uint64_t newest_stamp_ = 0;
     std::shared_ptr<void> reader_;
 };
-
-/// The firmware simulator's `pwm T MODE PWM` trace after time t: (time, mode).
-std::vector<std::pair<uint64_t, int>> pwm_after(const Process& sim, uint64_t t)
-{
-    std::vector<std::pair<uint64_t, int>> out;
-    std::istringstream in(sim.output());
-    for (std::string word; in >> word;) {
-        if (word != "pwm") continue;
-        unsigned long long time = 0;
-        int mode = 0, pwm = 0;
-        in >> time >> mode >> pwm;
-        if (time > t) out.emplace_back(time, mode);
-    }
-    return out;
-}
 
 /// A lab of named processes, each started again with the arguments it first had.
 class Lab

@@ -1,6 +1,9 @@
 // A test helper: a reliable, keep-all VehicleState reader in its own process that prints
 // "matched" once a writer matched, then takes (and acknowledges) whatever arrives until killed.
-//   reliable_reader TOPIC        (domain from CPM_DOMAIN_ID)
+//   reliable_reader TOPIC                (domain from CPM_DOMAIN_ID)
+//   reliable_reader TOPIC --expect N     counts samples whose pose.x is their number 0, 1, 2, …:
+//       once N have arrived (or nothing came for 10 s) prints one JSON line
+//       {"received":…,"in_order":…,"gaps":…,"duplicates":…} and exits (0 when all N came in order)
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/init.hpp>
 
@@ -8,14 +11,19 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 
 int main(int argc, char** argv)
 {
     if (argc < 2) {
-        std::fprintf(stderr, "usage: reliable_reader TOPIC\n");
+        std::fprintf(stderr, "usage: reliable_reader TOPIC [--expect N]\n");
         return 2;
     }
     cpm::init(argc, argv);
+    long long expect = -1;
+    for (int i = 2; i + 1 < argc; ++i)
+        if (std::strcmp(argv[i], "--expect") == 0) expect = std::atoll(argv[i + 1]);
     cpm::ReaderOptions options;
     options.reliable = true;
     options.keep_all = true;
@@ -23,7 +31,24 @@ int main(int argc, char** argv)
     if (!reader.wait_for_matched(1, std::chrono::seconds(20))) return 3;
     std::printf("matched\n");
     std::fflush(stdout);
+    long long received = 0, next = 0, gaps = 0, duplicates = 0;
+    auto quiet_since = std::chrono::steady_clock::now();
     for (;;) {
-        if (reader.wait_for_data(std::chrono::milliseconds(100))) reader.take();
+        if (reader.wait_for_data(std::chrono::milliseconds(100))) {
+            for (const auto& s : reader.take()) {
+                ++received;
+                const auto n = static_cast<long long>(s.pose().x());
+                if (n < next) ++duplicates;
+                if (n > next) gaps += n - next;
+                if (n >= next) next = n + 1;
+            }
+            quiet_since = std::chrono::steady_clock::now();
+        }
+        if (expect < 0) continue;
+        if (received >= expect || std::chrono::steady_clock::now() - quiet_since > std::chrono::seconds(10)) break;
     }
+    const bool in_order = received == expect && next == expect && gaps == 0 && duplicates == 0;
+    std::printf("{\"received\":%lld,\"in_order\":%s,\"gaps\":%lld,\"duplicates\":%lld}\n", received, in_order ? "true" : "false", gaps,
+                duplicates);
+    return in_order ? 0 : 1;
 }
