@@ -6,6 +6,8 @@
 
 #include "lab_clock.hpp"
 
+#include <openssl/crypto.h>
+
 #include <arpa/inet.h>
 #include <ifaddrs.h>
 #include <netinet/in.h>
@@ -164,7 +166,12 @@ void init(int argc, char* argv[])
         settings = parse_init_settings(argc, argv, std::getenv("CPM_DOMAIN_ID"));
         for (const auto& interface : settings.interfaces) check_local_interface(interface, "--dds_interface");
         if (settings.security.empty()) settings.security = security_from_environment();
-        if (!settings.security.empty()) (void)security::node_files(settings.security);  // every file there, or say which is not
+        if (!settings.security.empty()) {
+            (void)security::node_files(settings.security);  // every file there, or say which is not
+            // Before anything starts OpenSSL: it must not free itself at exit under Fast DDS's
+            // threads (see ParticipantCore).
+            OPENSSL_init_crypto(OPENSSL_INIT_NO_ATEXIT, nullptr);
+        }
     } catch (const cli::UsageError&) {
         throw;
     } catch (const Error& e) {
