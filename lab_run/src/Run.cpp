@@ -4,6 +4,7 @@
 #include <cpm/ChildProcess.hpp>
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/Security.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/Writer.hpp>
@@ -218,6 +219,17 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     fs::create_directories(dir, ec);
     if (ec) throw std::runtime_error("cannot make the run's folder " + dir.string() + ": " + ec.message());
     fs::copy_file(s.file, dir / "scenario.yaml", fs::copy_options::overwrite_existing, ec);
+    // A secured lab: the run's own nodes, each allowed the topics its process uses, for two days.
+    // A node of the same name is an earlier run's whose folder had the same name (and is gone
+    // now, or this one could not start): issued again.
+    if (!s.security.empty()) {
+        auto issue = [&](const std::string& name, const ProcessPlan& p) {
+            fs::remove_all(fs::path(s.security) / "nodes" / name);
+            return security::add_node(s.security, name, {p.publish, p.subscribe, 2});
+        };
+        po.security = issue(security_node_name(settings, "cpm_lab_run"), lab_run_process());
+        for (const auto& p : plan) (void)issue(fs::path(p.security_node).filename().string(), p);
+    }
 
     RunResult result;
     result.dir = dir.string();

@@ -5,6 +5,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -17,6 +18,10 @@ namespace cpm::lab {
 namespace fs = std::filesystem;
 
 namespace {
+
+/// What a simulated car's processes (firmware_sim, vehicle_bridge) write and read.
+const std::vector<std::string> kCarPublishes{"vehicleState", "vehicleObservation", "rangeSensors"};
+const std::vector<std::string> kCarSubscribes{"vehicleCommand*", "stopRequest", "vehicleObservation"};
 
 std::string join(const std::vector<std::string>& errors)
 {
@@ -176,7 +181,7 @@ Scenario load_scenario(const std::string& path)
     Checker c(path);
     if (!root.IsMap()) throw ScenarioError({path + ": expected a map of keys (name, time, duration, world, vehicles, ...)"});
     c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor",
-                    "parameters"});
+                    "parameters", "security"});
 
     if (!root["name"]) c.error(root, "name", "missing (the run's name; its folder is runs/<name>-<UTC time>)");
     else if (auto n = c.text(root["name"], "name")) {
@@ -196,6 +201,21 @@ Scenario load_scenario(const std::string& path)
     if (root["world"]) s.world = c.file(root["world"], "world", s.dir, "world file");
     if (root["lanes"]) s.lanes = c.file(root["lanes"], "lanes", s.dir, "lane graph");
     if (root["parameters"]) s.parameters = c.file(root["parameters"], "parameters", s.dir, "parameter file");
+    if (root["security"]) {
+        if (auto t = c.text(root["security"], "security")) {
+            const fs::path p = fs::path(*t).is_absolute() ? fs::path(*t) : fs::path(s.dir) / *t;
+            std::error_code ec;
+            bool lab = true;
+            for (const char* f : {"identity_ca.cert.pem", "identity_ca.key.pem", "permissions_ca.cert.pem", "permissions_ca.key.pem", "governance.p7s"})
+                lab = lab && fs::is_regular_file(p / f, ec);
+            if (!lab) {
+                c.error(root["security"], "security", "'" + *t + "' (" + p.lexically_normal().string() +
+                                                          ") is not a lab's security folder with its CAs' keys (make one with: cpm security init DIR)");
+            } else {
+                s.security = fs::weakly_canonical(p).string();
+            }
+        }
+    }
 
     const YAML::Node vehicles = root["vehicles"];
     if (!vehicles) c.error(root, "vehicles", "missing (a list of cars, each with an id)");
@@ -312,6 +332,23 @@ Scenario load_scenario(const std::string& path)
     return s;
 }
 
+std::string security_node_name(const RunSettings& settings, const std::string& process)
+{
+    std::string name = fs::path(settings.run_dir).filename().string() + "-" + process;
+    for (char& ch : name)
+        if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '_' && ch != '-') ch = '-';
+    return name;
+}
+
+ProcessPlan lab_run_process()
+{
+    ProcessPlan p;
+    p.name = "cpm_lab_run";
+    p.publish = {"stopRequest", "systemTrigger"};
+    p.subscribe = {"log", "historyStatus", "readyStatus"};
+    return p;
+}
+
 std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
 {
     std::vector<std::string> missing;
@@ -341,9 +378,10 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         if (t != "*") history.insert(history.end(), {"--include", cpm::cli::glob_regex(t)});
     }
     for (const auto& t : s.record.exclude) history.insert(history.end(), {"--exclude", cpm::cli::glob_regex(t)});
-    plan.push_back({"cpm_history", history, false, 9, ""});
+    plan.push_back({"cpm_history", history, false, 9, "", {"historyReply*", "historyStatus"}, {"*"}});
     if (!s.parameters.empty()) {
-        plan.push_back({"parameters", {program("cpm"), "param", "serve", s.parameters, "--dds_domain", domain}, false, 8, ""});
+        plan.push_back({"parameters", {program("cpm"), "param", "serve", s.parameters, "--dds_domain", domain}, false, 8, "", {"parameter"},
+                        {"parameterRequest"}});
     }
     if (s.monitor_port) {
         std::vector<std::string> argv{program("cpm"), "monitor", "--port", std::to_string(*s.monitor_port)};
@@ -351,7 +389,9 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         if (!s.lanes.empty()) argv.insert(argv.end(), {"--lanes", s.lanes});
         if (s.monitor_allow_stop) argv.push_back("--allow-stop");
         argv.insert(argv.end(), {"--dds_domain", domain});
-        plan.push_back({"monitor", argv, false, 8, ""});
+        std::vector<std::string> publish;
+        if (s.monitor_allow_stop) publish.push_back("stopRequest");
+        plan.push_back({"monitor", argv, false, 8, "", publish, {"*"}});
     }
 
     // The cars: with routing all in one simulator spread over the lanes, else one each.
@@ -363,14 +403,17 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         plan.push_back({"cars",
                         with_common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count", std::to_string(s.vehicles.size()),
                                      "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed)}),
-                        restart, 5, "firmware_sim_" + std::to_string(first) + ",vehicle_bridge_" + std::to_string(first)});
+                        restart, 5, "firmware_sim_" + std::to_string(first) + ",vehicle_bridge_" + std::to_string(first),
+                        kCarPublishes, kCarSubscribes});
     } else {
         for (const auto& v : s.vehicles) {
             const std::string id = std::to_string(v.id);
             std::vector<std::string> argv{program("cpm"), "vehicle", "sim", "--id", id, "--map", s.world, "--start",
                                           number(v.x) + "," + number(v.y) + "," + number(v.yaw)};
             if (!v.camera.empty()) argv.insert(argv.end(), {"--camera", v.camera});
-            plan.push_back({"car_" + id, with_common(argv), v.restart, 5, "firmware_sim_" + id + ",vehicle_bridge_" + id});
+            std::vector<std::string> publish = kCarPublishes;
+            if (!v.camera.empty()) publish.push_back("cameraFrame");
+            plan.push_back({"car_" + id, with_common(argv), v.restart, 5, "firmware_sim_" + id + ",vehicle_bridge_" + id, publish, kCarSubscribes});
         }
     }
     for (const auto& v : s.vehicles) {
@@ -378,7 +421,7 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         const std::string id = std::to_string(v.id);
         plan.push_back({"aruco_" + id,
                         {program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world, "--dds_domain", domain},
-                        v.restart, 3, ""});
+                        v.restart, 3, "", {"arucoMarkers"}, {"cameraFrame"}});
     }
     if (s.routing.enabled) {
         std::string ids;
@@ -386,13 +429,21 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         plan.push_back({"central_routing",
                         with_common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed),
                                      "--period", std::to_string(s.routing.period_ns / 1'000'000) + "ms"}),
-                        s.routing.restart, 1, "central_routing"});
+                        s.routing.restart, 1, "central_routing", {"vehicleCommandTrajectory"}, {"vehicleState"}});
     }
     for (const auto& v : s.vehicles) {
         if (v.fsm.empty()) continue;
         const std::string id = std::to_string(v.id);
         plan.push_back({"fsm_" + id, with_common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}), v.restart, 1,
-                        "fsm_node_" + id});
+                        "fsm_node_" + id, {"vehicleCommandDirect", "fsmStatus", "stopRequest"},
+                        {"vehicleState", "rangeSensors", "arucoMarkers", "stopRequest"}});
+    }
+    // A secured run: every process as a node of its own, allowed what it uses (issued by the run).
+    if (!s.security.empty()) {
+        for (auto& p : plan) {
+            p.security_node = (fs::path(s.security) / "nodes" / security_node_name(r, p.name)).string();
+            p.argv.insert(p.argv.end(), {"--security", p.security_node});
+        }
     }
     if (!missing.empty()) {
         std::vector<std::string> errors;

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
@@ -159,8 +160,9 @@ TEST(LabRun, ANodeWithRestartTrueIsStartedAgainAndEveryNodeGetsTheScenariosQos)
     TempDir dir;
     const std::string out = dir.file("run");
     const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
-    // vehicleState is best effort unless a scenario says otherwise.
-    const std::string file = dir.write("restart.yaml", "name: restart\ntime: simulated\nduration: 30s\nworld: " + source +
+    // vehicleState is best effort unless a scenario says otherwise. Real time: in simulated time
+    // a quick machine drove the whole corridor (its machine ends, exit 0) before the kill came.
+    const std::string file = dir.write("restart.yaml", "name: restart\ntime: real\nduration: 12s\nworld: " + source +
                                                            "maps/corridor.json\nvehicles:\n  - id: 5\n    start: [0.0, -0.01, 0.0]\n"
                                                            "    fsm: " + source + "fsm/corridor.json\n    restart: true\n"
                                                            "qos: {vehicleState: {reliable: true, history_depth: 2}}\n");
@@ -267,4 +269,40 @@ TEST(LabRun, RoutingInRealTimeRunsItsWholeDurationFromTheCommonStart)
     std::ifstream log(out + "/central_routing.log");
     const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
     EXPECT_EQ(text.find("\"cycles\":0,"), std::string::npos) << "the planner ran\n" << text;
+}
+
+TEST(LabRun, ASecuredLabRunsEachProcessAsItsOwnNodeAndAStrangerSeesNothing)
+{
+    TempDir dir;
+    const std::string lab = dir.file("lab-sec");
+    Process init({built_program("cpm"), "security", "init", lab, "--days", "30"});
+    ASSERT_EQ(init.wait(60s), 0) << init.errors();
+    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string file = dir.write("secured.yaml", "name: secured\ntime: simulated\nduration: 20s\nworld: " + source +
+                                                           "maps/corridor.json\nvehicles:\n  - id: 5\n    start: [0.0, -0.01, 0.0]\n"
+                                                           "    fsm: " + source + "fsm/corridor.json\nsecurity: " + lab + "\n");
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return fs::exists(out + "/fsm_5.log") || run.wait(0ms) != -1; }, 60s)) << run.errors();
+    // A participant without the lab's credentials on the run's domain sees no topic at all.
+    Process stranger({built_program("cpm"), "topic", "list"});
+    ASSERT_EQ(stranger.wait(30s), 0) << stranger.errors();
+    EXPECT_EQ(stranger.output().find("vehicleState"), std::string::npos) << stranger.output();
+    EXPECT_EQ(run.wait(120s), 0) << run.output() << run.errors();
+    EXPECT_EQ(run.wait(0ms), 0) << "the run was still going when the stranger looked";
+
+    // Every process ran as a node of its own, issued by the run, and the secured history
+    // recorded the car.
+    for (const char* node : {"run-cpm_lab_run", "run-cpm_history", "run-car_5", "run-fsm_5"})
+        EXPECT_TRUE(fs::exists(fs::path(lab) / "nodes" / node / "permissions.p7s")) << node;
+    const auto summary = summary_of(out);
+    EXPECT_EQ(summary["ok"], true) << summary.dump(2);
+    Process latest({built_program("cpm"), "history", "--file", out + "/recording.db", "latest", "--topic", "vehicleState", "--key", "5"});
+    EXPECT_EQ(latest.wait(30s), 0) << latest.output() << latest.errors();
+    for (const auto& p : summary["processes"]) {
+        const auto argv = p["argv"].get<std::vector<std::string>>();
+        const auto flag = std::find(argv.begin(), argv.end(), "--security");
+        ASSERT_NE(flag, argv.end()) << p.dump();
+        EXPECT_EQ(*(flag + 1), lab + "/nodes/run-" + p["name"].get<std::string>()) << p.dump();
+    }
 }

@@ -186,7 +186,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
                                        "qos: {vehicleState: {reliable: maybe}}\n"); // 14
     const auto errors = errors_of(file);
     const std::vector<std::string> expected = {
-        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters",
+        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security",
         file + ":1: name: 'bad run': use letters, digits, - and _ only",
         file + ":2: time: 'sometimes': expected real or simulated",
         file + ":1: duration: missing (how long the run lasts, e.g. 30s)",
@@ -254,4 +254,37 @@ TEST(Scenario, RoutingNeedsConsecutiveIdsForItsOneSimulator)
                                                  "vehicles:\n  - {id: 1}\n  - {id: 3}\n");
     EXPECT_EQ(errors_of(file), std::vector<std::string>{file + ":6: vehicles: with routing the cars run in one simulator and need "
                                                                "consecutive ids (e.g. 1, 2, 3)"});
+}
+
+TEST(Scenario, ASecuredLabRunsEachProcessAsANodeAllowedTheTopicsItUses)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    // What `cpm security init` leaves (the run only checks that they are there).
+    fs::create_directories(dir.path / "lab-sec");
+    for (const char* f : {"identity_ca.cert.pem", "identity_ca.key.pem", "permissions_ca.cert.pem", "permissions_ca.key.pem", "governance.p7s"})
+        dir.write(std::string("lab-sec/") + f, "x");
+    const std::string file =
+        dir.write("s.yaml", "name: s\nduration: 5s\nworld: map.json\nsecurity: lab-sec\nvehicles: [{id: 2, fsm: map.json}]\n");
+    const Scenario s = load_scenario(file);
+    EXPECT_EQ(s.security, fs::weakly_canonical(dir.path / "lab-sec").string());
+    const auto plan = plan_run(s, {.bin_dir = fake_bin(dir, {"cpm_history", "cpm", "fsm_node"}), .run_dir = "/runs/s-1", .domain = 3});
+    ASSERT_EQ(plan.size(), 3u);
+    for (const auto& p : plan) {
+        const std::string node = s.security + "/nodes/s-1-" + p.name;
+        EXPECT_EQ(p.security_node, node);
+        ASSERT_GE(p.argv.size(), 2u);
+        EXPECT_EQ(std::vector<std::string>(p.argv.end() - 2, p.argv.end()), (std::vector<std::string>{"--security", node})) << p.name;
+    }
+    EXPECT_EQ(plan[1].name, "car_2");
+    EXPECT_EQ(plan[1].publish, (std::vector<std::string>{"vehicleState", "vehicleObservation", "rangeSensors"}));
+    EXPECT_EQ(plan[1].subscribe, (std::vector<std::string>{"vehicleCommand*", "stopRequest", "vehicleObservation"}));
+    EXPECT_EQ(plan[2].name, "fsm_2");
+    EXPECT_EQ(plan[2].publish, (std::vector<std::string>{"vehicleCommandDirect", "fsmStatus", "stopRequest"}));
+
+    // A folder that is not a lab's is named with what to do.
+    const auto errors = errors_of(dir.write("bad.yaml", "name: b\nduration: 5s\nworld: map.json\nsecurity: map.json\nvehicles: [{id: 2}]\n"));
+    ASSERT_EQ(errors.size(), 1u);
+    EXPECT_NE(errors[0].find("bad.yaml:4: security: 'map.json'"), std::string::npos) << errors[0];
+    EXPECT_NE(errors[0].find("cpm security init DIR"), std::string::npos) << errors[0];
 }

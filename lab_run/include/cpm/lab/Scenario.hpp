@@ -18,6 +18,8 @@
 //   qos: {vehicleState: {reliable: false, history_depth: 1}}
 //   record: {topics: ["*"], exclude: ["cameraFrame"]}
 //   parameters: ../params/lab.yaml  # served to every node (cpm param serve)
+//   security: ../lab-sec            # a secured lab (a folder from `cpm security init`): each
+//                                   # process runs as a node of its own, allowed the topics it uses
 //   monitor: 8080                   # cpm monitor on this port while the run lasts, or
 //                                   # {port: 8080, allow_stop: true} for its stop buttons
 //
@@ -74,6 +76,7 @@ struct Scenario
     std::string world;  ///< absolute path
     std::string lanes;  ///< absolute path, or empty
     std::string parameters;  ///< absolute path of a parameter file (`cpm param serve`), or empty
+    std::string security;    ///< absolute path of the lab's security folder (`cpm security init`), or empty
     std::vector<VehicleSpec> vehicles;
     RoutingSpec routing;
     std::map<std::string, QosOverride> qos;
@@ -105,6 +108,9 @@ struct ProcessPlan
     bool restart = false;
     int stop_order = 0;             ///< stopped in rising order at the end (cars' controllers first)
     std::string timer;              ///< the node id of its timer for the lab clock, if it has one
+    std::vector<std::string> publish;    ///< the topics it writes (patterns), beyond every process's own
+    std::vector<std::string> subscribe;  ///< the topics it reads (patterns)
+    std::string security_node;      ///< secured run: the node folder it runs as (--security), issued by the run
 };
 
 struct RunSettings
@@ -115,6 +121,13 @@ struct RunSettings
     uint64_t duration_ns = 0; ///< the scenario's unless overridden
     TimeMode time = TimeMode::real;
 };
+
+/// A secured run's node name for one of its processes ("cpm_lab_run" for the run itself): the
+/// run's folder name and the process, so that every run has nodes of its own.
+std::string security_node_name(const RunSettings& settings, const std::string& process);
+/// The topics `cpm lab run` itself uses: the stop requests and the clock's start it writes; the
+/// log, the history's status and the timers' readiness it reads.
+ProcessPlan lab_run_process();
 
 /// The processes of a run, in the order they start: the history recording first, the parameter
 /// server, the monitor, then the cars
