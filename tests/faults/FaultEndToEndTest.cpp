@@ -47,6 +47,7 @@ using namespace std::chrono_literals;
 using cpm_test::built_program;
 using cpm_test::Process;
 using cpm_faults::kRoot;
+using cpm_faults::first_mode_after;
 using cpm_faults::pwm_after;
 
 const std::string kMap = kRoot + "/scenarios/maps/gates.json";
@@ -161,7 +162,6 @@ public:
         const double took = double(cpm::get_time_ns() - restarted) * 1e-9;
         EXPECT_TRUE(ok) << name << " started again did not work within 10 s\n" << logs();
         std::printf("%s: restarted and working after %.0f ms\n", name.c_str(), took * 1000);
-
         return ok ? took : 1e9;
     }
 
@@ -264,25 +264,15 @@ protected:
     }
 
     /// What the watchdogs did after a kill: the first brake (mode 0) after t, in seconds after t.
-    double brake_after(uint64_t t, std::chrono::milliseconds wait = 3s)
+    double brake_after(uint64_t t)
     {
-        EXPECT_TRUE(cpm_test::wait_until([&] {
-            for (auto& [time, mode] : pwm_after(lab["sim"], t))
-                if (mode == 0) return true;
-            return false;
-        }, wait));
-        for (auto& [time, mode] : pwm_after(lab["sim"], t))
-            if (mode == 0) return double(time - t) * 1e-9;
-        return 1e9;
+        EXPECT_TRUE(cpm_test::wait_until([&] { return first_mode_after(lab["sim"], t, 0) != 0; }, 3s));
+        const uint64_t braked = first_mode_after(lab["sim"], t, 0);
+        return braked != 0 ? double(braked - t) * 1e-9 : 1e9;
     }
 
     /// The car drives forward on commands written after t.
-    bool drives_after(uint64_t t)
-    {
-        for (auto& [time, mode] : pwm_after(lab["sim"], t))
-            if (mode == 1) return true;
-        return false;
-    }
+    bool drives_after(uint64_t t) { return first_mode_after(lab["sim"], t, 1) != 0; }
 };
 
 TEST_F(CarLab, KillingTheStateMachineBrakesTheCarWithinTheCommandsFreshnessAndItsRestartDrivesAgain)
