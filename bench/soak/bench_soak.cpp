@@ -178,6 +178,15 @@ int main(int argc, char** argv)
         fd_growth = std::max(fd_growth, e->second.fds - w.fds);
         std::printf("%-34s %8.1f M %8.1f M %7.2f%% %6d %6d\n", name.c_str(), w.rss_mib, e->second.rss_mib, growth, w.fds, e->second.fds);
     }
+    // A process that grew: its memory over the whole run, to tell a leak from a late warm-up.
+    for (const auto& [name, w] : rows[warm].processes) {
+        const auto e = rows[last].processes.find(name);
+        if (e == rows[last].processes.end() || (e->second.rss_mib - w.rss_mib) / w.rss_mib < 0.01) continue;
+        std::printf("%s RSS (MiB) every 10 s:", name.c_str());
+        for (const auto& row : rows)
+            if (auto r = row.processes.find(name); r != row.processes.end()) std::printf(" %.1f", r->second.rss_mib);
+        std::printf("\n");
+    }
     std::printf("/dev/shm: %d files %.1f MiB after the warm-up (%.0f s), %d files %.1f MiB at %.0f s\n", rows[warm].shm_files,
                 rows[warm].shm_mib, rows[warm].t_s, rows[last].shm_files, rows[last].shm_mib, rows[last].t_s);
 

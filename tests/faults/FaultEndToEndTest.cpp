@@ -56,20 +56,6 @@ const std::string kMachine = kRoot + "/scenarios/fsm/gates.json";
 const std::string kLanes = kRoot + "/scenarios/lanes/intersection.json";
 constexpr uint64_t kMsNs = 1'000'000;
 
-/// A port nobody listens on now (the system's choice for port 0).
-int free_port()
-{
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-    socklen_t len = sizeof a;
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    ::close(fd);
-    return ntohs(a.sin_port);
-}
-
 /// When the samples of one topic arrived here (cpm::get_time_ns), and the newest create stamp.
 class Arrivals
 {
@@ -201,7 +187,7 @@ class CarLab : public ::testing::Test
 protected:
     Lab lab;
     std::string link = lab.tmp.file("car6.tty");
-    int port = free_port();
+    int port = cpm_test::free_tcp_port();
     Arrivals states{lab.participant, "vehicleState", static_cast<VehicleState*>(nullptr)};
     Arrivals commands{lab.participant, "vehicleCommandDirect", static_cast<VehicleCommandDirect*>(nullptr)};
     Arrivals markers{lab.participant, "arucoMarkers", static_cast<ArucoMarkers*>(nullptr)};

@@ -35,20 +35,6 @@ namespace t = cpm::topics;
 
 namespace {
 
-/// A port nobody listens on now (the system's choice for port 0).
-int free_port()
-{
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-    socklen_t len = sizeof a;
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    ::close(fd);
-    return ntohs(a.sin_port);
-}
-
 /// What the test itself reads off the domain: every car's samples of the last seconds, by stamp.
 struct LabView
 {
@@ -126,7 +112,7 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
 {
     cpm_test::test_domain_id();
     TempDir dir;
-    const int port = free_port();
+    const int port = cpm_test::free_tcp_port();
     std::string yaml = kScenario;
     yaml = std::regex_replace(yaml, std::regex("WORLD"), std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json");
     yaml = std::regex_replace(yaml, std::regex("FSM"), std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json");

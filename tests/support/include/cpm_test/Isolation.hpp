@@ -14,6 +14,9 @@ int test_domain_id();
 /// A topic name unique to this process and call ("base_<pid>_<n>").
 std::string unique_topic(const std::string& base);
 
+/// A TCP port on 127.0.0.1 nobody listens on now (the system's choice for port 0).
+int free_tcp_port();
+
 /// Polls `condition` until it is true or `timeout` passes; returns its last value.
 bool wait_until(const std::function<bool()>& condition,
                 std::chrono::milliseconds timeout = std::chrono::seconds(5),
