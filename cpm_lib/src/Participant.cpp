@@ -201,7 +201,7 @@ ParticipantCore::ParticipantCore(const ParticipantOptions& options)
     if (!options.security.empty()) {
         // OpenSSL frees itself at exit, while Fast DDS's receive threads may still decrypt a
         // message (the default participant lives until the process ends): a secured node killed
-        // by SIGSEGV on its way out, one run in three (cpm lab run with security:). A process
+        // by SIGSEGV on its way out, about one run in two (cpm lab run with security:). A process
         // that uses DDS Security leaves OpenSSL to the end of the process instead.
         OPENSSL_init_crypto(OPENSSL_INIT_NO_ATEXIT, nullptr);
     }
