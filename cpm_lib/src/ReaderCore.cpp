@@ -41,13 +41,15 @@ protected:
 struct ReaderCore::Impl : public dds::DataReaderListener
 {
     Impl(std::shared_ptr<ParticipantCore> participant, const std::string& name, MakeTypeSupport make_type,
-         const char* role, Sink sink)
-        : topic(std::move(participant), name, make_type, role), on_arrival(std::move(sink))
+         const char* role, Sink sink, BatchEnd batch_end)
+        : topic(std::move(participant), name, make_type, role), on_arrival(std::move(sink)),
+          after_arrivals(std::move(batch_end))
     {
     }
     TopicLease topic;
     dds::DataReader* reader = nullptr;
     Sink on_arrival;
+    BatchEnd after_arrivals;
 
 
     // Fast DDS calls the listener with the reader's history locked, so nobody may call into
@@ -61,14 +63,22 @@ struct ReaderCore::Impl : public dds::DataReaderListener
 
     std::mutex listener_mutex;  // held while a listener callback runs
     bool closing = false;
+    dds::SampleInfoSeq listener_infos;  // under listener_mutex: no allocation per arrival
+    // The core whose listener callback this thread is running (stop_arrivals from inside).
+    static thread_local const Impl* running_here;
 
     // Samples are passed in arrival order; the sink may move from them (a loaned sample is
     // deserialized anew before Fast DDS lends it again).
     size_t drain_from(dds::DataReader* from, const Sink& sink)
     {
+        dds::SampleInfoSeq infos;
+        return drain_from(from, sink, infos);
+    }
+    // `infos` is reused from call to call where one thread at a time drains (the listener).
+    size_t drain_from(dds::DataReader* from, const Sink& sink, dds::SampleInfoSeq& infos)
+    {
         size_t n = 0;
         LoanedSamples samples;
-        dds::SampleInfoSeq infos;
         while (from->take(samples, infos) == ReturnCode_t::RETCODE_OK) {
             for (LoanedSamples::size_type i = 0; i < samples.length(); ++i) {
                 if (!infos[i].valid_data) continue;  // disposals and unregistrations carry no data
@@ -89,7 +99,16 @@ struct ReaderCore::Impl : public dds::DataReaderListener
         std::lock_guard<std::mutex> lock(listener_mutex);
         if (closing) return;
         if (on_arrival) {
-            drain_from(from, on_arrival);
+            running_here = this;
+            drain_from(from, on_arrival, listener_infos);
+            if (after_arrivals && !closing) {
+                try {
+                    after_arrivals();
+                } catch (const std::exception& e) {
+                    log_error("reader on topic '" + topic.name() + "': the callback threw: " + e.what());
+                }
+            }
+            running_here = nullptr;
             return;
         }
         {
@@ -112,13 +131,22 @@ struct ReaderCore::Impl : public dds::DataReaderListener
     std::unique_ptr<IncompatibleQos> incompatible;
 };
 
+thread_local const ReaderCore::Impl* ReaderCore::Impl::running_here = nullptr;
+
 ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
-                       MakeTypeSupport make_type, const ReaderOptions& options, const char* role, Sink on_arrival)
+                       MakeTypeSupport make_type, const ReaderOptions& options, const char* role, Sink on_arrival,
+                       BatchEnd after_arrivals)
 {
     if (topic.empty()) throw Error(std::string(role) + ": the topic name is empty");
+    if (options.dds_thread_callback && !after_arrivals) {
+        throw Error(std::string(role) + " on topic '" + topic + "': option dds_thread_callback cannot be used with a " + role +
+                    ": it is read by the caller's thread (take/get_sample/wait_for_...), and only an AsyncReader's "
+                    "callback can run on the DDS thread");
+    }
     check_secured_endpoint(*participant, topic, false, options.data_sharing, role);
     const dds::DataReaderQos qos = reader_qos(options, topic, std::unique_ptr<dds::TopicDataType>(make_type())->m_typeSize);
-    impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type, role, std::move(on_arrival));
+    impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type, role, std::move(on_arrival),
+                                   std::move(after_arrivals));
     impl_->incompatible = std::make_unique<IncompatibleQos>(true, topic, options.reliable, options.transient_local);
     impl_->reader = impl_->topic.participant().subscriber()->create_datareader(
         impl_->topic.topic(), qos, impl_.get(),
@@ -143,13 +171,20 @@ ReaderCore& ReaderCore::operator=(ReaderCore&& other) noexcept
     return *this;
 }
 
+void ReaderCore::stop_arrivals()
+{
+    if (Impl::running_here == impl_.get()) {  // inside its own callback: the lock is ours already
+        impl_->closing = true;
+        return;
+    }
+    std::lock_guard<std::mutex> lock(impl_->listener_mutex);  // waits for a running callback
+    impl_->closing = true;
+}
+
 void ReaderCore::close() noexcept
 {
     if (!impl_) return;  // moved from
-    {
-        std::lock_guard<std::mutex> lock(impl_->listener_mutex);  // waits for a running callback
-        impl_->closing = true;
-    }
+    stop_arrivals();
     interrupt();
     impl_->reader->set_listener(nullptr);
     impl_->topic.participant().subscriber()->delete_datareader(impl_->reader);

@@ -15,6 +15,15 @@ struct ReaderOptions
     size_t buffer_capacity = 2000; ///< Reader/MultiVehicleReader: samples buffered per vehicle; oldest arrivals go first
     std::optional<uint8_t> vehicle_id;  ///< Reader of a keyed type: only this vehicle's samples
     bool data_sharing = false;     ///< Fast DDS data sharing (see WriterOptions::data_sharing)
+    /// AsyncReader only: run the callback on the DDS receive thread that delivered the
+    /// samples, instead of the reader's own thread. Saves a thread hop (the latency of a raw
+    /// Fast DDS listener), for callbacks that are short and never block: while it runs, this
+    /// reader receives nothing and other readers sharing that DDS thread wait too. Writing
+    /// with a cpm::Writer from it is fine; waiting for anything (a lock held long, a reply,
+    /// sleep, a reliable writer's full window) stalls DDS. Never destroy the reader from
+    /// inside its callback (stop() is fine). A writer in the same process delivers on its own
+    /// thread, inside its write(). Other readers refuse the option.
+    bool dds_thread_callback = false;
 };
 
 }  // namespace cpm

@@ -19,12 +19,18 @@ public:
     /// Receives one sample with valid data; it may move from it.
     using Sink = std::function<void(void* sample)>;
 
+    /// Runs after a batch of arrivals has been passed to `on_arrival`, on the same thread.
+    using BatchEnd = std::function<void()>;
+
     /// `on_arrival`, if given, is called for every sample as it arrives, on a DDS receive
-    /// thread with DDS locks held (used to fill internal buffers; then do not call drain). `role` names the reader in error messages.
+    /// thread with DDS locks held (used to fill internal buffers; then do not call drain);
+    /// `after_arrivals`, if given, after each batch of them (an exception from it is logged).
+    /// `role` names the reader in error messages. Only a core with `after_arrivals` (a
+    /// callback on the DDS thread) accepts options.dds_thread_callback.
     /// Throws cpm::Error naming the topic when the reader cannot be created.
     ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::string& topic,
                MakeTypeSupport make_type, const ReaderOptions& options, const char* role,
-               Sink on_arrival = {});
+               Sink on_arrival = {}, BatchEnd after_arrivals = {});
     ~ReaderCore();
     ReaderCore(const ReaderCore&) = delete;
     ReaderCore& operator=(const ReaderCore&) = delete;
@@ -41,6 +47,9 @@ public:
     bool wait_for_data(std::chrono::nanoseconds timeout);
     /// Wakes every wait_for_data (used to stop worker threads).
     void interrupt();
+    /// No more calls of on_arrival/after_arrivals; returns once a running one has returned,
+    /// or at once when called from inside one. Idempotent.
+    void stop_arrivals();
 
     size_t matched_publications() const;
     bool wait_for_matched(size_t n, std::chrono::nanoseconds timeout) const;
