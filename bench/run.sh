@@ -10,6 +10,9 @@ echo
 echo "== bench_throughput (1 KiB reliable, cpm vs raw Fast DDS vs Cyclone doing the same work, batched and not, and ddsperf)"
 "$bin/bench_throughput"
 echo
+echo "== bench_large (307 kB frames and 1 MiB: shared-memory transport, data sharing, written and read in place, vs Cyclone doing the same work)"
+"$bin/bench_large"
+echo
 echo "== bench_timer (tick jitter, cpm::Timer vs clock_nanosleep)"
 "$bin/bench_timer"
 echo

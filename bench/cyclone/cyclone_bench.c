@@ -12,9 +12,15 @@
  *                        writes as fast as the writer accepts for S seconds, then the end marker;
  *                        --batch packs writes into fewer messages (dds_write_set_batch), as ddsperf does
  *
+ * --type blob sends BenchBlob (BenchLarge.idl, up to 1 MiB) instead of BenchPayload (up to 70,000 B):
+ * the same layout, so the code below handles both as BenchPayload.
+ *
  * QoS as in the cpm benchmarks: reliable; keep-last 1 for ping-pong, keep-all for throughput.
  * Transports come from CYCLONEDDS_URI (the benchmarks pin Cyclone to loopback UDP). */
+#include "BenchLarge.h"
 #include "BenchPayload.h"
+
+#include <stddef.h>
 
 #include <dds/dds.h>
 
@@ -75,9 +81,14 @@ static dds_qos_t* qos_for(int keep_all)
     return q;
 }
 
+_Static_assert(offsetof(BenchBlob, seq) == offsetof(BenchPayload, seq) && offsetof(BenchBlob, data) == offsetof(BenchPayload, data) &&
+                   sizeof(BenchBlob) == sizeof(BenchPayload),
+               "BenchBlob must be laid out as BenchPayload");
+static const dds_topic_descriptor_t* g_type = &BenchPayload_desc;
+
 static dds_entity_t make_topic(dds_entity_t participant, const char* name)
 {
-    dds_entity_t t = dds_create_topic(participant, &BenchPayload_desc, name, NULL, NULL);
+    dds_entity_t t = dds_create_topic(participant, g_type, name, NULL, NULL);
     check(t, name);
     return t;
 }
@@ -308,15 +319,24 @@ int main(int argc, char** argv)
 {
     if (argc < 2 || flag(argc, argv, "--help")) {
         fputs("usage: cyclone_bench pong|ping|sub|pub [--domain D] [--size B] [--count N] [--warmup W]"
-              " [--seconds S] [--batch] [--listener]\n",
+              " [--seconds S] [--batch] [--listener] [--type payload|blob]\n",
               argc < 2 ? stderr : stdout);
         return argc < 2 ? 2 : 0;
     }
     const char* role = argv[1];
     const int domain = atoi(arg(argc, argv, "--domain", "0"));
+    const char* type = arg(argc, argv, "--type", "payload");
+    size_t bound = 70000;
+    if (strcmp(type, "blob") == 0) {
+        g_type = &BenchBlob_desc;
+        bound = 1048576;
+    } else if (strcmp(type, "payload") != 0) {
+        fprintf(stderr, "cyclone_bench: --type %s: expected payload or blob\n", type);
+        return 2;
+    }
     const size_t size = (size_t)atol(arg(argc, argv, "--size", "100"));
-    if (size > 70000) {
-        fprintf(stderr, "cyclone_bench: --size %zu is larger than BenchPayload's bound (70000)\n", size);
+    if (size > bound) {
+        fprintf(stderr, "cyclone_bench: --size %zu is larger than the type's bound (%zu; --type blob takes up to 1048576)\n", size, bound);
         return 2;
     }
     signal(SIGTERM, on_signal);

@@ -1,7 +1,11 @@
 #include "QosFromOptions.hpp"
 
+#include <algorithm>
+
 #include <cpm/Error.hpp>
 #include <cpm/QosOverrides.hpp>
+
+#include <fastdds/dds/topic/TopicDataType.hpp>
 
 namespace cpm::detail {
 
@@ -42,6 +46,9 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
     }
     if (data_sharing) {
         qos.data_sharing().automatic();
+        // Slots beyond the history (see kSharedTakeBatch).
+        const size_t history_samples = size_t(keep_all ? std::max(keep_all_limit, 1) : depth);
+        limits.extra_samples = int32_t(shared_pool_samples(history_samples) - history_samples);
     } else {
         qos.data_sharing().off();  // shared-memory transport instead: faster for small samples
         if (max_sample_bytes > kLargeSampleBytes) {
@@ -51,6 +58,28 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
 }
 
 }  // namespace
+
+void check_data_sharing(bool data_sharing, const dds::TopicDataType& type, size_t pool_samples, const std::string& topic,
+                        const char* role)
+{
+    if (!data_sharing) return;
+    const std::string where = std::string(role) + " on topic '" + topic + "': data_sharing with type " + type.getName();
+    if (type.m_isGetKeyDefined) {
+        throw Error(where + ": the type has a key (@key), and Fast DDS shares only unkeyed types; leave data_sharing off "
+                    "(the shared-memory transport still carries it) or publish an unkeyed type");
+    }
+    if (!type.is_bounded()) {
+        throw Error(where + ": the type is not bounded (an unbounded string or sequence), and Fast DDS shares only "
+                    "bounded types; bound every string and sequence in the IDL, or leave data_sharing off");
+    }
+    const uint64_t pool_bytes = uint64_t(pool_samples) * type.m_typeSize;  // 0 for a reader
+    if (pool_bytes > kMaxSharedPoolBytes) {
+        throw Error(where + ": the shared pool would hold " + std::to_string(pool_samples) + " samples of up to " +
+                    std::to_string(type.m_typeSize) + " bytes (" + std::to_string(pool_bytes >> 20) + " MiB, more than " +
+                    std::to_string(kMaxSharedPoolBytes >> 20) + " MiB: twice the history, and a few more); lower history_depth "
+                    "or max_unacknowledged");
+    }
+}
 
 dds::DataWriterQos writer_qos(const WriterOptions& given, const std::string& topic, bool keyed, uint32_t max_sample_bytes)
 {

@@ -6,6 +6,8 @@
 #include "log_internal.hpp"
 
 #include <cpm/Error.hpp>
+#include <cpm/LogThrottle.hpp>
+#include <cpm/get_time_ns.hpp>
 
 #include <fastdds/dds/subscriber/DataReader.hpp>
 #include <fastdds/dds/subscriber/DataReaderListener.hpp>
@@ -64,6 +66,19 @@ struct ReaderCore::Impl : public dds::DataReaderListener
     std::mutex listener_mutex;  // held while a listener callback runs
     bool closing = false;
     dds::SampleInfoSeq listener_infos;  // under listener_mutex: no allocation per arrival
+    int32_t max_per_take = dds::LENGTH_UNLIMITED;  // kSharedTakeBatch with data sharing
+    bool loans_are_shared = false;  // data sharing with a plain type: loans lie in the writer's pool
+    std::mutex overwritten_mutex;
+    LogThrottle overwritten_log;  // under overwritten_mutex
+
+    void report_overwritten()
+    {
+        std::lock_guard<std::mutex> lock(overwritten_mutex);
+        uint64_t held = 0;
+        if (!overwritten_log.allow(get_time_ns(), held)) return;
+        log_error("reader on topic '" + topic.name() + "': a shared sample was overwritten by its writer while it was read (" +
+                  std::to_string(held) + " more since the last report); raise the writer's history_depth or read faster");
+    }
     // The core whose listener callback this thread is running (stop_arrivals from inside).
     static thread_local const Impl* running_here;
 
@@ -79,7 +94,7 @@ struct ReaderCore::Impl : public dds::DataReaderListener
     {
         size_t n = 0;
         LoanedSamples samples;
-        while (from->take(samples, infos) == ReturnCode_t::RETCODE_OK) {
+        while (from->take(samples, infos, max_per_take) == ReturnCode_t::RETCODE_OK) {
             for (LoanedSamples::size_type i = 0; i < samples.length(); ++i) {
                 if (!infos[i].valid_data) continue;  // disposals and unregistrations carry no data
                 try {
@@ -87,6 +102,10 @@ struct ReaderCore::Impl : public dds::DataReaderListener
                 } catch (const std::exception& e) {
                     log_error("reader on topic '" + topic.name() + "': dropped a sample: " + e.what());
                 }
+                // Read in place from data sharing's pool (a plain type), a sample can be
+                // overwritten meanwhile by a writer that needed its slot back. (Fast DDS's check
+                // reads the bytes before the sample: only a shared loan has them.)
+                if (loans_are_shared && !from->is_sample_valid(samples.at(i), &infos[i])) report_overwritten();
                 ++n;
             }
             from->return_loan(samples, infos);
@@ -144,10 +163,14 @@ ReaderCore::ReaderCore(std::shared_ptr<ParticipantCore> participant, const std::
                     "callback can run on the DDS thread");
     }
     check_secured_endpoint(*participant, topic, false, options.data_sharing, role);
-    const dds::DataReaderQos qos = reader_qos(options, topic, std::unique_ptr<dds::TopicDataType>(make_type())->m_typeSize);
+    const std::unique_ptr<dds::TopicDataType> type(make_type());
+    check_data_sharing(options.data_sharing, *type, 0, topic, role);
+    const dds::DataReaderQos qos = reader_qos(options, topic, type->m_typeSize);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type, role, std::move(on_arrival),
                                    std::move(after_arrivals));
     impl_->incompatible = std::make_unique<IncompatibleQos>(true, topic, options.reliable, options.transient_local);
+    if (options.data_sharing) impl_->max_per_take = kSharedTakeBatch;
+    impl_->loans_are_shared = options.data_sharing && type->is_plain();
     impl_->reader = impl_->topic.participant().subscriber()->create_datareader(
         impl_->topic.topic(), qos, impl_.get(),
         dds::StatusMask::data_available() << dds::StatusMask::subscription_matched()

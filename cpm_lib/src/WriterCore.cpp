@@ -13,6 +13,8 @@
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TopicDataType.hpp>
 
+#include <algorithm>
+
 
 namespace cpm::detail {
 
@@ -27,6 +29,8 @@ struct WriterCore::Impl : public dds::DataWriterListener
     TopicLease topic;
     dds::DataWriter* writer = nullptr;
     MatchCounter matched;
+    bool plain = false;         // DDS lends samples of plain types only
+    bool shared_loans = false;  // ... in shared memory, with data sharing
 
     void on_publication_matched(dds::DataWriter*, const dds::PublicationMatchedStatus& status) override
     {
@@ -47,8 +51,13 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
     if (topic.empty()) throw Error("Writer: the topic name is empty");
     check_secured_endpoint(*participant, topic, true, options.data_sharing, "Writer");
     const std::unique_ptr<dds::TopicDataType> type(make_type());
+    check_data_sharing(options.data_sharing, *type,
+                       shared_pool_samples(size_t(std::max(options.keep_all ? options.max_unacknowledged : options.history_depth, 1))),
+                       topic, "Writer");
     const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined, type->m_typeSize);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type);
+    impl_->plain = type->is_plain();
+    impl_->shared_loans = options.data_sharing && impl_->plain;
     impl_->incompatible = std::make_unique<IncompatibleQos>(false, topic, options.reliable, options.transient_local);
     impl_->writer = impl_->topic.participant().publisher()->create_datawriter(
         impl_->topic.topic(), qos, impl_.get(),
@@ -84,6 +93,25 @@ bool WriterCore::write(const void* sample)
     // Fast DDS takes a non-const pointer but only reads the sample.
     return impl_->writer->write(const_cast<void*>(sample));
 }
+
+void* WriterCore::loan() noexcept
+{
+    void* sample = nullptr;
+    if (!impl_->plain) return nullptr;
+    if (impl_->writer->loan_sample(sample) != ReturnCode_t::RETCODE_OK) return nullptr;
+    return sample;
+}
+
+bool WriterCore::write_loan(void* sample) noexcept
+{
+    if (impl_->writer->write(sample)) return true;
+    discard_loan(sample);  // a refused write leaves the sample on loan
+    return false;
+}
+
+void WriterCore::discard_loan(void* sample) noexcept { (void)impl_->writer->discard_loan(sample); }
+
+bool WriterCore::loans_are_shared() const noexcept { return impl_->shared_loans; }
 
 size_t WriterCore::matched_subscriptions() const { return impl_->matched.get(); }
 

@@ -35,6 +35,17 @@ public:
         return samples;
     }
 
+    /// Takes what arrived, like take(), but passes each sample to `each(const T&)` where it
+    /// lies instead of moving it into a vector. Shared by a writer with data_sharing and a plain
+    /// type (Writer::write_in_place), that is the writer's memory: nothing is copied. Keep
+    /// `each` short: the sample's slot returns to the writer afterwards (a writer that needs
+    /// it back sooner overwrites it, which is logged). Returns how many samples were passed.
+    template <class Each>
+    size_t take_each(Each&& each)
+    {
+        return core_.drain([&](void* s) { each(*static_cast<const T*>(s)); });
+    }
+
     /// Waits until a sample can be taken; false on timeout.
     [[nodiscard]] bool wait_for_data(std::chrono::milliseconds timeout) { return core_.wait_for_data(timeout); }
 

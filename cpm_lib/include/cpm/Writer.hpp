@@ -1,5 +1,6 @@
 #pragma once
 #include <chrono>
+#include <memory>
 #include <string>
 
 #include <cpm/Participant.hpp>
@@ -29,6 +30,32 @@ public:
     /// Publishes one sample. False when DDS refused it (a keep-all history stayed full
     /// for 100 ms, or the writer is broken). Thread-safe.
     [[nodiscard]] bool write(const T& sample) { return core_.write(&sample); }
+
+    /// Fills a sample in place and publishes it: `fill(T&)` sets every field, for a lent sample
+    /// holds an earlier sample's bytes. With data_sharing and a plain type (fixed-size fields
+    /// only, no sequence or string; see shares_in_place()) the sample lies in shared memory and
+    /// readers on this host read it there: no copy between the processes, none into DDS. A
+    /// plain type without data sharing is still not copied into DDS; any other type is filled
+    /// in a new sample and written as by write(). False as for write(); an exception from fill
+    /// passes through and nothing is published.
+    template <class Fill>
+    [[nodiscard]] bool write_in_place(Fill&& fill)
+    {
+        if (void* lent = core_.loan()) {
+            try {
+                fill(*static_cast<T*>(lent));
+            } catch (...) {
+                core_.discard_loan(lent);
+                throw;
+            }
+            return core_.write_loan(lent);
+        }
+        auto sample = std::make_unique<T>();
+        fill(*sample);
+        return core_.write(sample.get());
+    }
+    /// Whether write_in_place() hands readers on this host the very memory it filled.
+    bool shares_in_place() const { return core_.loans_are_shared(); }
 
     /// Readers matched right now (goes down again when a reader goes away).
     size_t matched_subscriptions() const { return core_.matched_subscriptions(); }

@@ -26,6 +26,16 @@ public:
 
     /// Publishes one sample; false when DDS refused it (e.g. keep-all history full). Never throws.
     bool write(const void* sample);
+    /// A sample DDS lends to be filled in place (default-initialised), or nullptr when it
+    /// cannot lend one (a type that is not plain, or every loanable sample in use).
+    void* loan() noexcept;
+    /// Publishes a loaned sample; the loan ends either way. Never throws.
+    bool write_loan(void* sample) noexcept;
+    /// Gives a loaned sample back unpublished.
+    void discard_loan(void* sample) noexcept;
+    /// Whether loaned samples live in memory the readers on this host read directly (data
+    /// sharing with a plain type: zero copies between the processes).
+    bool loans_are_shared() const noexcept;
     size_t matched_subscriptions() const;
     bool wait_for_matched(size_t n, std::chrono::nanoseconds timeout) const;
     /// Waits until every matched reliable reader acknowledged everything written.

@@ -1,0 +1,374 @@
+// Large samples between two processes: a 640 × 480 mono camera frame (307,200 B) and 1 MiB.
+// One-way latency (ping-pong, reliable keep-last 1) and throughput (reliable keep-all, a window of
+// 16 samples) for three ways cpm can carry them, beside Cyclone DDS doing the same work:
+//
+//   shm       BenchBlob (a bounded sequence) over cpm's default shared-memory transport
+//   sharing   BenchBlob with data_sharing: serialized into a pool both processes map
+//   in_place  BenchFrame (plain) with data_sharing, Writer::write_in_place and
+//             ReaderAbstract::take_each: written and read where it lies, no copy
+//   Cyclone   cyclone_bench --type blob (BenchBlob through idlc), loopback UDP
+//
+//   bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 230]
+//
+// Every sample carries only a fresh sequence number; its bytes are written once, before the run,
+// in every case (as ddsperf and cyclone_bench do), so the figures are what carrying costs.
+#include "bench_common.hpp"
+
+#include <cpm/ReaderAbstract.hpp>
+#include <cpm/TopicType.hpp>
+#include <cpm/Writer.hpp>
+
+#include <BenchLargePubSubTypes.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <thread>
+
+#include <unistd.h>
+
+CPM_REGISTER_TYPE(BenchBlob)
+CPM_REGISTER_TYPE(BenchFrame307k)
+CPM_REGISTER_TYPE(BenchFrame1M)
+
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+constexpr uint64_t kEndMarker = UINT64_MAX;
+constexpr int kWindow = 16;  // keep-all throughput: samples unacknowledged at most
+std::atomic<bool> g_stop{false};
+
+/// One process's writer on one topic and reader on another, in one of the modes.
+class Side
+{
+public:
+    virtual ~Side() = default;
+    virtual bool write(uint64_t seq) = 0;
+    /// Passes the sequence number of every sample that arrived; returns how many.
+    virtual size_t take(const std::function<void(uint64_t)>& each) = 0;
+    virtual bool wait(std::chrono::milliseconds timeout) = 0;
+    virtual bool connected() = 0;         ///< both directions matched
+    virtual void wait_acknowledged() = 0;
+};
+
+template <class T, bool kInPlace>
+class SideOf : public Side
+{
+public:
+    SideOf(cpm::Participant& p, const std::string& out, const std::string& in, size_t size, bool sharing, bool keep_all)
+        : writer_(p, out, cpm::WriterOptions{.reliable = true, .keep_all = keep_all, .max_unacknowledged = kWindow,
+                                             .data_sharing = sharing}),
+          reader_(p, in, cpm::ReaderOptions{.reliable = true, .keep_all = keep_all, .data_sharing = sharing})
+    {
+        if constexpr (kInPlace) {
+            (void)size;  // the type's own
+            if (!writer_.shares_in_place()) throw std::runtime_error("in_place: the writer does not share in place");
+        } else {
+            sample_.data(std::vector<uint8_t>(size - 28, 0x5a));  // 16 header + 8 seq + 4 length
+        }
+    }
+    bool write(uint64_t seq) override
+    {
+        if constexpr (kInPlace) {
+            return writer_.write_in_place([&](T& s) { s.seq(seq); });
+        } else {
+            sample_.seq(seq);
+            return writer_.write(sample_);
+        }
+    }
+    size_t take(const std::function<void(uint64_t)>& each) override
+    {
+        return reader_.take_each([&](const T& s) { each(s.seq()); });
+    }
+    bool wait(std::chrono::milliseconds timeout) override { return reader_.wait_for_data(timeout); }
+    bool connected() override { return writer_.wait_for_matched(1, 20s) && reader_.wait_for_matched(1, 20s); }
+    void wait_acknowledged() override { (void)writer_.wait_for_acknowledgments(30s); }
+
+private:
+    cpm::Writer<T> writer_;
+    cpm::ReaderAbstract<T> reader_;
+    T sample_;
+};
+
+cpm::ParticipantOptions options_for(int domain)
+{
+    cpm::ParticipantOptions o;
+    o.domain_id = domain;
+    o.name = "bench_large";
+    return o;
+}
+
+std::unique_ptr<Side> make_side(cpm::Participant& p, const std::string& mode, size_t size, const std::string& out,
+                                const std::string& in, bool keep_all)
+{
+    if (mode == "shm" || mode == "sharing")
+        return std::make_unique<SideOf<BenchBlob, false>>(p, out, in, size, mode == "sharing", keep_all);
+    if (mode == "in_place" && size == 307200) return std::make_unique<SideOf<BenchFrame307k, true>>(p, out, in, size, true, keep_all);
+    if (mode == "in_place" && size == 1048576) return std::make_unique<SideOf<BenchFrame1M, true>>(p, out, in, size, true, keep_all);
+    throw std::runtime_error("no side for mode " + mode + " and size " + std::to_string(size) +
+                             " (in_place: 307200 or 1048576)");
+}
+
+// ---- child roles --------------------------------------------------------------------------
+
+int pong(int domain, const std::string& mode, size_t size)
+{
+    cpm::Participant participant(options_for(domain));
+    auto side = make_side(participant, mode, size, "large_pong", "large_ping", false);
+    while (!g_stop) {
+        if (!side->wait(100ms)) continue;
+        side->take([&](uint64_t seq) { (void)side->write(seq); });
+    }
+    return 0;
+}
+
+// Prints "received N lost L seconds S" once the end marker arrived (or max_seconds passed).
+int subscribe(int domain, const std::string& mode, size_t size, int max_seconds)
+{
+    cpm::Participant participant(options_for(domain));
+    auto side = make_side(participant, mode, size, "large_ready", "large_stream", true);
+    // Matched both ways, then says so: with data sharing, what a writer writes while the reader
+    // is still matching it can be missed, as DDS allows for a volatile reader not yet matched.
+    if (!side->connected() || !side->write(0)) return 1;
+    uint64_t received = 0, lost = 0, next = 0;
+    Clock::time_point first, last;
+    bool done = false;
+    const auto deadline = Clock::now() + std::chrono::seconds(max_seconds);
+    while (!done && Clock::now() < deadline) {
+        if (!side->wait(100ms)) continue;
+        side->take([&](uint64_t seq) {
+            if (seq == kEndMarker) {
+                done = true;
+                return;
+            }
+            last = Clock::now();
+            if (received++ == 0) first = last;
+            if (seq > next) lost += seq - next;
+            next = seq + 1;
+        });
+    }
+    std::printf("received %llu lost %llu seconds %.6f\n", (unsigned long long)received, (unsigned long long)lost,
+                std::chrono::duration<double>(last - first).count());
+    return done ? 0 : 1;
+}
+
+// ---- measurements -------------------------------------------------------------------------
+
+// Appends `count` one-way latencies (µs, RTT/2) after `warmup` unmeasured round trips.
+bool ping_block(Side& side, uint64_t& seq, int count, int warmup, std::vector<double>& one_way_us)
+{
+    for (int i = 0; i < warmup + count; ++i) {
+        const uint64_t mine = ++seq;
+        const auto t0 = Clock::now();
+        bool answered = false;
+        for (int tries = 0; !answered; ++tries) {
+            if (tries == (i < warmup ? 20 : 1)) return false;  // a reply can be lost only before both sides matched
+            if (!side.write(mine)) continue;
+            const auto deadline = Clock::now() + 1s;
+            while (!answered && Clock::now() < deadline) {
+                if (side.wait(100ms)) side.take([&](uint64_t s) { answered = answered || s == mine; });
+            }
+        }
+        if (i >= warmup) one_way_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count() / 2);
+    }
+    return true;
+}
+
+bool cyclone_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us)
+{
+    const std::string out = "/tmp/bench_large_cyclone_" + std::to_string(getpid());
+    auto ping = bench::spawn({cpm::sibling_executable("cyclone_bench"), "ping", "--type", "blob", "--domain", std::to_string(domain),
+                              "--size", std::to_string(size - 28), "--count", std::to_string(count), "--warmup", std::to_string(warmup)},
+                             {bench::cyclone_loopback_env()}, out);
+    const int code = bench::wait_child(ping, 120);
+    const size_t before = one_way_us.size();
+    std::ifstream in(out);
+    for (double v; in >> v;) one_way_us.push_back(v);
+    std::remove(out.c_str());
+    return code == 0 && one_way_us.size() - before == size_t(count);
+}
+
+struct Rate
+{
+    double samples_per_s = 0;
+    uint64_t written = 0, received = 0, lost = 0;
+    bool ok = false;
+};
+
+Rate cpm_throughput(int domain, const std::string& mode, size_t size, int seconds)
+{
+    const std::string out = "/tmp/bench_large_sub_" + std::to_string(getpid());
+    auto sub = bench::spawn({cpm::sibling_executable("bench_large"), "--role", "sub", "--mode", mode, "--size", std::to_string(size),
+                             "--domain", std::to_string(domain), "--seconds", std::to_string(seconds + 60)},
+                            {}, out);
+    Rate r;
+    {
+        cpm::Participant participant(options_for(domain));
+        auto side = make_side(participant, mode, size, "large_stream", "large_ready", true);
+        if (!side->wait(20s)) return r;  // the subscriber's "ready"
+        side->take([](uint64_t) {});
+        const auto end = Clock::now() + std::chrono::seconds(seconds);
+        while (Clock::now() < end) {
+            if (side->write(r.written)) ++r.written;
+        }
+        for (int i = 0; i < 100 && !side->write(kEndMarker); ++i) {
+        }
+        // With data sharing the samples live in the writer's pool: it must stay until read.
+        side->wait_acknowledged();
+    }
+    const int code = bench::wait_child(sub, seconds + 90);
+    std::string word;
+    double secs = 0;
+    std::ifstream(out) >> word >> r.received >> word >> r.lost >> word >> secs;
+    std::remove(out.c_str());
+    r.samples_per_s = secs > 0 ? double(r.received) / secs : 0;
+    r.ok = code == 0 && r.received == r.written && r.lost == 0;
+    return r;
+}
+
+Rate cyclone_throughput(int domain, size_t size, int seconds)
+{
+    const std::string sub_out = "/tmp/bench_large_cyclone_sub_" + std::to_string(getpid());
+    const std::string pub_out = "/tmp/bench_large_cyclone_pub_" + std::to_string(getpid());
+    const std::vector<std::string> env{bench::cyclone_loopback_env()};
+    const std::string exe = cpm::sibling_executable("cyclone_bench");
+    auto sub = bench::spawn({exe, "sub", "--type", "blob", "--domain", std::to_string(domain)}, env, sub_out);
+    auto pub = bench::spawn({exe, "pub", "--type", "blob", "--domain", std::to_string(domain), "--size", std::to_string(size - 28),
+                             "--seconds", std::to_string(seconds)},
+                            env, pub_out);
+    const int pub_code = bench::wait_child(pub, seconds + 60);
+    const int sub_code = bench::wait_child(sub, seconds + 90);
+    Rate r;
+    std::string word;
+    int complete = 0;
+    std::ifstream(sub_out) >> word >> r.received >> word >> r.lost >> word >> r.samples_per_s >> word >> complete;
+    std::ifstream(pub_out) >> word >> r.written;
+    std::remove(sub_out.c_str());
+    std::remove(pub_out.c_str());
+    r.ok = pub_code == 0 && sub_code == 0 && complete == 1 && r.received == r.written && r.lost == 0;
+    return r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    const std::string role = bench::arg(argc, argv, "--role", "main");
+    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "230"));
+    if (role != "main") {
+        std::signal(SIGTERM, [](int) { g_stop = true; });
+        const std::string mode = bench::arg(argc, argv, "--mode", "shm");
+        const size_t size = std::stoul(bench::arg(argc, argv, "--size", "1048576"));
+        if (role == "pong") return pong(domain, mode, size);
+        return subscribe(domain, mode, size, std::stoi(bench::arg(argc, argv, "--seconds", "60")));
+    }
+    if (argc > 1 && std::string(argv[1]) == "--help") {
+        std::puts("usage: bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 230]");
+        return 0;
+    }
+    const int count = std::stoi(bench::arg(argc, argv, "--count", "500"));
+    const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "3"));
+    std::vector<size_t> sizes;
+    std::stringstream size_list(bench::arg(argc, argv, "--sizes", "307200,1048576"));
+    for (std::string v; std::getline(size_list, v, ',');) sizes.push_back(std::stoul(v));
+
+    bench::print_machine("one way: reliable keep-last 1, " + std::to_string(count) +
+                         " round trips in 10 alternating blocks, one-way = RTT/2 (µs); throughput: reliable keep-all, "
+                         "a window of " + std::to_string(kWindow) + " samples, " + std::to_string(seconds) +
+                         " s; cpm on its default transports (shared memory + loopback UDP), Cyclone DDS on loopback UDP");
+    struct Mode
+    {
+        std::string name, label;
+    };
+    const std::vector<Mode> modes{{"shm", "cpm, shared-memory transport (BenchBlob)"},
+                                  {"sharing", "cpm, data_sharing (BenchBlob)"},
+                                  {"in_place", "cpm, data_sharing + in place (plain BenchFrame)"}};
+    const std::string cyclone_label = "Cyclone DDS, same work (BenchBlob, UDP)";
+    int exit_code = 0;
+    for (size_t size : sizes) {
+        const std::string sized = std::to_string(size) + " B";
+        bench::print_header("one-way latency, " + sized);
+        std::vector<cpm::ChildProcess> pongs;
+        std::vector<std::unique_ptr<cpm::Participant>> participants;
+        std::vector<std::unique_ptr<Side>> sides;
+        for (size_t k = 0; k < modes.size(); ++k) {
+            const int d = domain + int(k);
+            pongs.push_back(bench::spawn_self({"--role", "pong", "--mode", modes[k].name, "--size", std::to_string(size), "--domain",
+                                               std::to_string(d)}));
+            participants.push_back(std::make_unique<cpm::Participant>(options_for(d)));
+            sides.push_back(make_side(*participants.back(), modes[k].name, size, "large_ping", "large_pong", false));
+        }
+        const int cyclone_domain = domain + int(modes.size());
+        pongs.push_back(bench::spawn({cpm::sibling_executable("cyclone_bench"), "pong", "--type", "blob", "--domain",
+                                      std::to_string(cyclone_domain)},
+                                     {bench::cyclone_loopback_env()}, ""));
+        std::vector<std::vector<double>> samples(modes.size() + 1);
+        std::vector<bool> ok(modes.size() + 1, true);
+        std::vector<uint64_t> seqs(modes.size(), 0);
+        for (size_t k = 0; k < modes.size(); ++k) ok[k] = sides[k]->connected();
+        for (int block = 0; block < 10; ++block) {
+            const int warmup = block == 0 ? 50 : 5;
+            for (size_t k = 0; k < modes.size(); ++k) {
+                if (ok[k]) ok[k] = ping_block(*sides[k], seqs[k], count / 10, warmup, samples[k]);
+            }
+            if (ok.back()) ok.back() = cyclone_block(cyclone_domain, size, count / 10, warmup, samples.back());
+        }
+        sides.clear();
+        participants.clear();
+        for (auto& p : pongs) p.signal(SIGTERM);
+        for (auto& p : pongs) bench::wait_child(p, 10);
+
+        std::map<std::string, bench::Stats> latency;
+        for (size_t k = 0; k <= modes.size(); ++k) {
+            const std::string label = k < modes.size() ? modes[k].label : cyclone_label;
+            if (!ok[k]) {
+                std::printf("%-48s FAILED after %zu round trips\n", label.c_str(), samples[k].size());
+                exit_code = 1;
+                continue;
+            }
+            latency[k < modes.size() ? modes[k].name : "cyclone"] = bench::stats_of(samples[k]);
+            bench::print_row(label, latency[k < modes.size() ? modes[k].name : "cyclone"]);
+        }
+        if (latency.count("cyclone")) {
+            for (const auto& m : modes) {
+                if (!latency.count(m.name)) continue;
+                bench::print_ratio(m.name + " / Cyclone", latency[m.name], latency["cyclone"]);
+                // The target: 1 MiB one way no slower than Cyclone's, for the best choice.
+                const double target = size >= 1048576 && m.name == "in_place" ? 1.0 : 0;
+                bench::record_latency("large", sized + " one-way, " + m.label.substr(5), latency[m.name], cyclone_label, latency["cyclone"],
+                                      target);
+            }
+        }
+        if (latency.count("shm") && latency.count("in_place"))
+            bench::print_ratio("in_place / shared-memory transport", latency["in_place"], latency["shm"]);
+
+        std::printf("\nthroughput, %s          samples/s        MB/s   written  received  lost\n", sized.c_str());
+        std::map<std::string, Rate> rates;
+        for (size_t k = 0; k <= modes.size(); ++k) {
+            const bool cyclone = k == modes.size();
+            const std::string name = cyclone ? "cyclone" : modes[k].name;
+            Rate r = cyclone ? cyclone_throughput(cyclone_domain, size, seconds) : cpm_throughput(domain + int(k), name, size, seconds);
+            std::printf("%-48s %10.0f %10.0f %9llu %9llu %5llu  %s\n", (cyclone ? cyclone_label : modes[k].label).c_str(), r.samples_per_s,
+                        r.samples_per_s * double(size) / 1e6, (unsigned long long)r.written, (unsigned long long)r.received,
+                        (unsigned long long)r.lost, r.ok ? "ok" : "INCOMPLETE");
+            if (!r.ok) exit_code = 1;
+            rates[name] = r;
+        }
+        for (const auto& m : modes) {
+            if (!rates[m.name].ok || !rates["cyclone"].ok) continue;
+            const double ratio = rates[m.name].samples_per_s / rates["cyclone"].samples_per_s;
+            std::printf("%-48s %.2f\n", (m.name + " / Cyclone throughput").c_str(), ratio);
+            bench::record({"large", sized + " throughput, " + m.label.substr(5), "samples/s", rates[m.name].samples_per_s, cyclone_label,
+                           rates["cyclone"].samples_per_s, "", -1});
+        }
+    }
+    return exit_code;
+}
