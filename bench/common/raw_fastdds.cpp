@@ -2,6 +2,8 @@
 
 #include "bench_common.hpp"
 
+#include <cstdlib>
+
 
 namespace bench {
 
@@ -32,6 +34,17 @@ void same_as_cpm(Qos& qos, bool keep_all, int depth)
 }
 }  // namespace
 
+namespace {
+/// BENCH_FASTDDS_MODE: more of Fast DDS 2.9's throughput settings for the raw endpoints, to
+/// try beside cpm's (bench/README.md has the figures), comma-separated: async (asynchronous
+/// publishing, default flow controller), noack (positive acknowledgements off, samples kept 100 ms).
+bool mode_has(const char* what)
+{
+    const char* mode = std::getenv("BENCH_FASTDDS_MODE");
+    return mode && std::string(mode).find(what) != std::string::npos;
+}
+}  // namespace
+
 fdds::DataWriter* RawEndpoints::writer(const std::string& topic, bool keep_all, int depth)
 {
     auto* t = participant->create_topic(topic, type.get_type_name(), fdds::TOPIC_QOS_DEFAULT);
@@ -44,6 +57,11 @@ fdds::DataWriter* RawEndpoints::writer(const std::string& topic, bool keep_all, 
         qos.resource_limits().max_samples = 1024;
     }
     qos.reliability().max_blocking_time = {0, 100'000'000};
+    if (mode_has("async")) qos.publish_mode().kind = fdds::ASYNCHRONOUS_PUBLISH_MODE;
+    if (mode_has("noack")) {
+        qos.reliable_writer_qos().disable_positive_acks.enabled = true;
+        qos.reliable_writer_qos().disable_positive_acks.duration = {0, 100'000'000};
+    }
     return publisher->create_datawriter(t, qos);
 }
 
@@ -53,6 +71,8 @@ fdds::DataReader* RawEndpoints::reader(const std::string& topic, bool keep_all, 
     auto* t = participant->create_topic(topic, type.get_type_name(), fdds::TOPIC_QOS_DEFAULT);
     fdds::DataReaderQos qos = fdds::DATAREADER_QOS_DEFAULT;
     same_as_cpm(qos, keep_all, depth);
+    qos.reliable_reader_qos().times.heartbeatResponseDelay = {0, 0};  // as cpm's readers
+    if (mode_has("noack")) qos.reliable_reader_qos().disable_positive_ACKs.enabled = true;
     return subscriber->create_datareader(t, qos, listener,
                                          listener ? fdds::StatusMask::data_available() : fdds::StatusMask::none());
 }

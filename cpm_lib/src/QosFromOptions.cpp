@@ -106,6 +106,9 @@ dds::DataReaderQos reader_qos(const ReaderOptions& given, const std::string& top
     // A keep-all reader keeps what was not taken yet, without limit.
     apply_common(qos, options.reliable, options.transient_local, options.keep_all, options.history_depth, 0,
                  true, options.data_sharing, max_sample_bytes, topic, "Reader");
+    // Fast DDS 2.9 waits 5 ms before answering a heartbeat: a keep-all writer whose window is
+    // full waits that long for the acknowledgement that frees it (bench/throughput: +12 % raw).
+    qos.reliable_reader_qos().times.heartbeatResponseDelay = {0, 0};
     return qos;
 }
 
