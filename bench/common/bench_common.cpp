@@ -93,6 +93,49 @@ int wait_child(cpm::ChildProcess& child, double timeout_s)
 
 std::string cyclone_loopback_env() { return "CYCLONEDDS_URI=file://" CPM_CYCLONE_LOOPBACK_XML; }
 
+bool cyclone_ping_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us,
+                        const std::vector<std::string>& extra)
+{
+    const std::string out = "/tmp/bench_cyclone_ping_" + std::to_string(getpid());
+    std::vector<std::string> argv{cpm::sibling_executable("cyclone_bench"), "ping", "--domain", std::to_string(domain), "--size",
+                                  std::to_string(size), "--count", std::to_string(count), "--warmup", std::to_string(warmup)};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    auto ping = spawn(argv, {cyclone_loopback_env()}, out);
+    const int code = wait_child(ping, 120);
+    const size_t before = one_way_us.size();
+    std::ifstream in(out);
+    for (double v; in >> v;) one_way_us.push_back(v);
+    std::remove(out.c_str());
+    return code == 0 && one_way_us.size() - before == size_t(count);
+}
+
+Rate cyclone_pub_sub(int domain, size_t size, int seconds, const std::vector<std::string>& pub_extra,
+                            const std::vector<std::string>& sub_extra)
+{
+    const std::string sub_out = "/tmp/bench_cyclone_sub_" + std::to_string(getpid());
+    const std::string pub_out = "/tmp/bench_cyclone_pub_" + std::to_string(getpid());
+    const std::vector<std::string> env{cyclone_loopback_env()};
+    const std::string exe = cpm::sibling_executable("cyclone_bench");
+    std::vector<std::string> sub_argv{exe, "sub", "--domain", std::to_string(domain)};
+    sub_argv.insert(sub_argv.end(), sub_extra.begin(), sub_extra.end());
+    auto sub = spawn(sub_argv, env, sub_out);
+    std::vector<std::string> pub_argv{exe, "pub", "--domain", std::to_string(domain), "--size", std::to_string(size), "--seconds",
+                                      std::to_string(seconds)};
+    pub_argv.insert(pub_argv.end(), pub_extra.begin(), pub_extra.end());
+    auto pub = spawn(pub_argv, env, pub_out);
+    const int pub_code = wait_child(pub, seconds + 60);
+    const int sub_code = wait_child(sub, seconds + 90);
+    Rate r;
+    std::string word;
+    int complete = 0;
+    std::ifstream(sub_out) >> word >> r.received >> word >> r.lost >> word >> r.rate >> word >> complete;
+    std::ifstream(pub_out) >> word >> r.written;
+    std::remove(sub_out.c_str());
+    std::remove(pub_out.c_str());
+    r.ok = pub_code == 0 && sub_code == 0 && complete == 1 && r.received == r.written && r.lost == 0;
+    return r;
+}
+
 bool data_sharing()
 {
     const char* value = std::getenv("BENCH_DATA_SHARING");

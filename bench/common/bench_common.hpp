@@ -38,6 +38,24 @@ int wait_child(cpm::ChildProcess& child, double timeout_s);
 /// CYCLONEDDS_URI=... for loopback only, unicast discovery, no multicast.
 std::string cyclone_loopback_env();
 
+/// One block of round trips from a fresh `cyclone_bench ping` (loopback UDP) against the pong on
+/// `domain`; appends its one-way latencies (µs). False when the block did not complete. `extra`:
+/// more arguments (e.g. --type blob).
+bool cyclone_ping_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us,
+                        const std::vector<std::string>& extra = {});
+
+/// What one throughput run measured (cyclone_bench's pub and sub report these too).
+struct Rate
+{
+    double rate = 0;  ///< samples/s, first to last arrival
+    uint64_t received = 0, lost = 0, written = 0;
+    bool ok = false;  ///< both ended well and every written sample arrived, none lost
+};
+/// `cyclone_bench sub` and `pub` on `domain` (loopback UDP) for `seconds`; `pub_extra` and
+/// `sub_extra` are added to their arguments (--batch, --listener, --type blob).
+Rate cyclone_pub_sub(int domain, size_t size, int seconds, const std::vector<std::string>& pub_extra,
+                            const std::vector<std::string>& sub_extra);
+
 /// Whether this run uses Fast DDS data sharing (BENCH_DATA_SHARING=1), for cpm and raw alike;
 /// off by default, as in cpm.
 bool data_sharing();

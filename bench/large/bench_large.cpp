@@ -182,26 +182,7 @@ bool ping_block(Side& side, uint64_t& seq, int count, int warmup, std::vector<do
     return true;
 }
 
-bool cyclone_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us)
-{
-    const std::string out = "/tmp/bench_large_cyclone_" + std::to_string(getpid());
-    auto ping = bench::spawn({cpm::sibling_executable("cyclone_bench"), "ping", "--type", "blob", "--domain", std::to_string(domain),
-                              "--size", std::to_string(size - 28), "--count", std::to_string(count), "--warmup", std::to_string(warmup)},
-                             {bench::cyclone_loopback_env()}, out);
-    const int code = bench::wait_child(ping, 120);
-    const size_t before = one_way_us.size();
-    std::ifstream in(out);
-    for (double v; in >> v;) one_way_us.push_back(v);
-    std::remove(out.c_str());
-    return code == 0 && one_way_us.size() - before == size_t(count);
-}
-
-struct Rate
-{
-    double samples_per_s = 0;
-    uint64_t written = 0, received = 0, lost = 0;
-    bool ok = false;
-};
+using bench::Rate;
 
 Rate cpm_throughput(int domain, const std::string& mode, size_t size, int seconds)
 {
@@ -229,32 +210,14 @@ Rate cpm_throughput(int domain, const std::string& mode, size_t size, int second
     double secs = 0;
     std::ifstream(out) >> word >> r.received >> word >> r.lost >> word >> secs;
     std::remove(out.c_str());
-    r.samples_per_s = secs > 0 ? double(r.received) / secs : 0;
+    r.rate = secs > 0 ? double(r.received) / secs : 0;
     r.ok = code == 0 && r.received == r.written && r.lost == 0;
     return r;
 }
 
 Rate cyclone_throughput(int domain, size_t size, int seconds)
 {
-    const std::string sub_out = "/tmp/bench_large_cyclone_sub_" + std::to_string(getpid());
-    const std::string pub_out = "/tmp/bench_large_cyclone_pub_" + std::to_string(getpid());
-    const std::vector<std::string> env{bench::cyclone_loopback_env()};
-    const std::string exe = cpm::sibling_executable("cyclone_bench");
-    auto sub = bench::spawn({exe, "sub", "--type", "blob", "--domain", std::to_string(domain)}, env, sub_out);
-    auto pub = bench::spawn({exe, "pub", "--type", "blob", "--domain", std::to_string(domain), "--size", std::to_string(size - 28),
-                             "--seconds", std::to_string(seconds)},
-                            env, pub_out);
-    const int pub_code = bench::wait_child(pub, seconds + 60);
-    const int sub_code = bench::wait_child(sub, seconds + 90);
-    Rate r;
-    std::string word;
-    int complete = 0;
-    std::ifstream(sub_out) >> word >> r.received >> word >> r.lost >> word >> r.samples_per_s >> word >> complete;
-    std::ifstream(pub_out) >> word >> r.written;
-    std::remove(sub_out.c_str());
-    std::remove(pub_out.c_str());
-    r.ok = pub_code == 0 && sub_code == 0 && complete == 1 && r.received == r.written && r.lost == 0;
-    return r;
+    return bench::cyclone_pub_sub(domain, size - 28, seconds, {"--type", "blob"}, {"--type", "blob"});
 }
 
 }  // namespace
@@ -319,7 +282,7 @@ int main(int argc, char** argv)
             for (size_t k = 0; k < modes.size(); ++k) {
                 if (ok[k]) ok[k] = ping_block(*sides[k], seqs[k], count / 10, warmup, samples[k]);
             }
-            if (ok.back()) ok.back() = cyclone_block(cyclone_domain, size, count / 10, warmup, samples.back());
+            if (ok.back()) ok.back() = bench::cyclone_ping_block(cyclone_domain, size - 28, count / 10, warmup, samples.back(), {"--type", "blob"});
         }
         sides.clear();
         participants.clear();
@@ -356,18 +319,18 @@ int main(int argc, char** argv)
             const bool cyclone = k == modes.size();
             const std::string name = cyclone ? "cyclone" : modes[k].name;
             Rate r = cyclone ? cyclone_throughput(cyclone_domain, size, seconds) : cpm_throughput(domain + int(k), name, size, seconds);
-            std::printf("%-48s %10.0f %10.0f %9llu %9llu %5llu  %s\n", (cyclone ? cyclone_label : modes[k].label).c_str(), r.samples_per_s,
-                        r.samples_per_s * double(size) / 1e6, (unsigned long long)r.written, (unsigned long long)r.received,
+            std::printf("%-48s %10.0f %10.0f %9llu %9llu %5llu  %s\n", (cyclone ? cyclone_label : modes[k].label).c_str(), r.rate,
+                        r.rate * double(size) / 1e6, (unsigned long long)r.written, (unsigned long long)r.received,
                         (unsigned long long)r.lost, r.ok ? "ok" : "INCOMPLETE");
             if (!r.ok) exit_code = 1;
             rates[name] = r;
         }
         for (const auto& m : modes) {
             if (!rates[m.name].ok || !rates["cyclone"].ok) continue;
-            const double ratio = rates[m.name].samples_per_s / rates["cyclone"].samples_per_s;
+            const double ratio = rates[m.name].rate / rates["cyclone"].rate;
             std::printf("%-48s %.2f\n", (m.name + " / Cyclone throughput").c_str(), ratio);
-            bench::record({"large", sized + " throughput, " + m.label.substr(5), "samples/s", rates[m.name].samples_per_s, cyclone_label,
-                           rates["cyclone"].samples_per_s, "", -1});
+            bench::record({"large", sized + " throughput, " + m.label.substr(5), "samples/s", rates[m.name].rate, cyclone_label,
+                           rates["cyclone"].rate, "", -1});
         }
     }
     return exit_code;

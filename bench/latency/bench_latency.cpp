@@ -283,24 +283,6 @@ bench::Stats ddsperf_latency(int domain, size_t size, int seconds, size_t& windo
     return s;
 }
 
-// ---- Cyclone DDS doing this same work: cyclone_bench (same IDL, per-sample percentiles) ------
-
-/// One block of round trips from a fresh `cyclone_bench ping` against the pong on `domain`;
-/// appends its one-way latencies, false when the block did not complete.
-bool cyclone_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us)
-{
-    const std::string out = "/tmp/bench_cyclone_ping_" + std::to_string(getpid());
-    auto ping = bench::spawn({cpm::sibling_executable("cyclone_bench"), "ping", "--domain", std::to_string(domain), "--size",
-                              std::to_string(size), "--count", std::to_string(count), "--warmup", std::to_string(warmup)},
-                             {bench::cyclone_loopback_env()}, out);
-    const int code = bench::wait_child(ping, 60);
-    const size_t before = one_way_us.size();
-    std::ifstream in(out);
-    for (double v; in >> v;) one_way_us.push_back(v);
-    std::remove(out.c_str());
-    return code == 0 && one_way_us.size() - before == size_t(count);
-}
-
 }  // namespace
 
 int main(int argc, char** argv)
@@ -373,7 +355,7 @@ int main(int argc, char** argv)
                 if (!ok[k]) continue;
                 ok[k] = pingers[k]->run(size, count / rounds, block_warmup, samples[k]);
             }
-            if (cyclone_ok) cyclone_ok = cyclone_block(cyclone_domain, size, count / rounds, block_warmup, cyclone_samples);
+            if (cyclone_ok) cyclone_ok = bench::cyclone_ping_block(cyclone_domain, size, count / rounds, block_warmup, cyclone_samples);
         }
         pingers.clear();
         for (auto& pong : pongs) pong.signal(SIGTERM);

@@ -163,12 +163,7 @@ uint64_t publish(const std::string& impl, int domain, size_t size, int seconds)
     return seq;
 }
 
-struct Result
-{
-    double rate = 0;
-    uint64_t received = 0, lost = 0, written = 0;
-    bool ok = false;
-};
+using Result = bench::Rate;
 
 Result run_fastdds(const std::string& impl, int domain, size_t size, int seconds)
 {
@@ -230,28 +225,10 @@ Result run_ddsperf(int domain, size_t size, int seconds)
 // and ddsperf).
 Result run_cyclone_bench(int domain, size_t size, int seconds, bool batch, bool listener)
 {
-    const std::string sub_out = "/tmp/bench_cyclone_sub_" + std::to_string(getpid());
-    const std::string pub_out = "/tmp/bench_cyclone_pub_" + std::to_string(getpid());
-    const std::vector<std::string> env{bench::cyclone_loopback_env()};
-    const std::string exe = cpm::sibling_executable("cyclone_bench");
-    std::vector<std::string> sub_argv{exe, "sub", "--domain", std::to_string(domain)};
-    if (listener) sub_argv.push_back("--listener");
-    auto sub = bench::spawn(sub_argv, env, sub_out);
-    std::vector<std::string> pub_argv{exe, "pub", "--domain", std::to_string(domain), "--size", std::to_string(size), "--seconds",
-                                      std::to_string(seconds)};
-    if (batch) pub_argv.push_back("--batch");
-    auto pub = bench::spawn(pub_argv, env, pub_out);
-    const int pub_code = bench::wait_child(pub, seconds + 60);
-    const int sub_code = bench::wait_child(sub, seconds + 90);
-    Result r;
-    std::string word;
-    int complete = 0;
-    std::ifstream(sub_out) >> word >> r.received >> word >> r.lost >> word >> r.rate >> word >> complete;
-    std::ifstream(pub_out) >> word >> r.written;
-    std::remove(sub_out.c_str());
-    std::remove(pub_out.c_str());
-    r.ok = pub_code == 0 && sub_code == 0 && complete == 1 && r.received == r.written && r.lost == 0;
-    return r;
+    std::vector<std::string> pub_extra, sub_extra;
+    if (batch) pub_extra.push_back("--batch");
+    if (listener) sub_extra.push_back("--listener");
+    return bench::cyclone_pub_sub(domain, size, seconds, pub_extra, sub_extra);
 }
 
 void print_result(const std::string& label, const Result& r)

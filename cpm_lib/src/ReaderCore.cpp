@@ -118,6 +118,9 @@ struct ReaderCore::Impl : public dds::DataReaderListener
         std::lock_guard<std::mutex> lock(listener_mutex);
         if (closing) return;
         if (on_arrival) {
+            // A callback may write to a reader of this process, which Fast DDS then calls here
+            // on this very thread: the outer core is restored afterwards.
+            const Impl* outer = running_here;
             running_here = this;
             drain_from(from, on_arrival, listener_infos);
             if (after_arrivals && !closing) {
@@ -125,9 +128,11 @@ struct ReaderCore::Impl : public dds::DataReaderListener
                     after_arrivals();
                 } catch (const std::exception& e) {
                     log_error("reader on topic '" + topic.name() + "': the callback threw: " + e.what());
+                } catch (...) {
+                    log_error("reader on topic '" + topic.name() + "': the callback threw a non-standard exception");
                 }
             }
-            running_here = nullptr;
+            running_here = outer;
             return;
         }
         {
