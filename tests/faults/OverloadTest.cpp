@@ -74,12 +74,15 @@ TEST(Overload, AReaderThatStopsReadingDoesNotGrowTheWritersMemoryAndWritingResum
 
     reader.kill(SIGSTOP);  // alive, matched, and acknowledging nothing
     const size_t before = resident_bytes();
-    // Keep-last: 200,000 samples (an unbounded history would hold them all: tens of MB).
-    for (int i = 0; i < 200'000; ++i) (void)last.write(cpm_test::vehicle_state(2, cpm::get_time_ns(), 0, i));
-    // Keep-all: its window of 1024 unacknowledged samples, then refusals (100 ms each).
+    // Keep-all first, well within the stopped reader's 10 s lease (after it the reader is gone and
+    // a writer rightly accepts everything): its window of 1024 unacknowledged samples, then
+    // refusals (100 ms each).
     int accepted = 0, refused = 0;
     const auto end = std::chrono::steady_clock::now() + 2s;
     while (std::chrono::steady_clock::now() < end) (all.write(cpm_test::vehicle_state(1, cpm::get_time_ns(), 0, 1)) ? accepted : refused)++;
+    ASSERT_EQ(all.matched_subscriptions(), 1u) << "the stopped reader's lease ran out before the window was measured";
+    // Keep-last: 200,000 samples (an unbounded history would hold them all: tens of MB).
+    for (int i = 0; i < 200'000; ++i) (void)last.write(cpm_test::vehicle_state(2, cpm::get_time_ns(), 0, i));
     const double grown_mib = (double(resident_bytes()) - double(before)) / (1024.0 * 1024.0);
     EXPECT_LE(accepted, 1024) << "the window of unacknowledged samples";
     EXPECT_GT(refused, 0) << "a full window refuses, visibly";
