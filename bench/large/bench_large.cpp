@@ -24,6 +24,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -241,7 +242,14 @@ int main(int argc, char** argv)
     const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "3"));
     std::vector<size_t> sizes;
     std::stringstream size_list(bench::arg(argc, argv, "--sizes", "307200,1048576"));
-    for (std::string v; std::getline(size_list, v, ',');) sizes.push_back(std::stoul(v));
+    for (std::string v; std::getline(size_list, v, ',');) {
+        const size_t size = std::strtoul(v.c_str(), nullptr, 10);
+        if (size != 307200 && size != 1048576) {
+            std::fprintf(stderr, "bench_large: --sizes %s: each size must be 307200 or 1048576 (the plain frame types)\n", v.c_str());
+            return 2;
+        }
+        sizes.push_back(size);
+    }
 
     bench::print_machine("one way: reliable keep-last 1, " + std::to_string(count) +
                          " round trips in 10 alternating blocks, one-way = RTT/2 (µs); throughput: reliable keep-all, "
