@@ -120,7 +120,10 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
     const std::string out = dir.file("run");
     Process run({built_program("cpm"), "lab", "run", dir.write("four.yaml", yaml), "--out", out});
     ASSERT_TRUE(wait_until([&] { return four_cars_running(api_state(port)) || run.errors().find("nothing started") != std::string::npos; },
-                           60s, 200ms));
+                           60s, 200ms))
+        << "no four cars on the monitor (port " << port << ") within 60 s; it shows:\n"
+        << api_state(port).dump() << "\nthe lab run said:\n"
+        << run.errors();
     ASSERT_TRUE(four_cars_running(api_state(port))) << "the lab run's monitor shows four cars, each with its state and machine\n"
                                                     << run.errors();
     // The test's own reader joins once the run has claimed its domain (a run refuses a domain
