@@ -59,7 +59,7 @@ void apply_common(Qos& qos, bool reliable, bool transient_local, bool keep_all, 
 
 }  // namespace
 
-void check_data_sharing(bool data_sharing, const dds::TopicDataType& type, size_t pool_samples, const std::string& topic,
+void check_data_sharing(bool data_sharing, const dds::TopicDataType& type, size_t history_samples, const std::string& topic,
                         const char* role)
 {
     if (!data_sharing) return;
@@ -72,7 +72,8 @@ void check_data_sharing(bool data_sharing, const dds::TopicDataType& type, size_
         throw Error(where + ": the type is not bounded (an unbounded string or sequence), and Fast DDS shares only "
                     "bounded types; bound every string and sequence in the IDL, or leave data_sharing off");
     }
-    const uint64_t pool_bytes = uint64_t(pool_samples) * type.m_typeSize;  // 0 for a reader
+    const size_t pool_samples = history_samples == 0 ? 0 : shared_pool_samples(history_samples);
+    const uint64_t pool_bytes = uint64_t(pool_samples) * type.m_typeSize;
     if (pool_bytes > kMaxSharedPoolBytes) {
         throw Error(where + ": the shared pool would hold " + std::to_string(pool_samples) + " samples of up to " +
                     std::to_string(type.m_typeSize) + " bytes (" + std::to_string(pool_bytes >> 20) + " MiB, more than " +

@@ -27,9 +27,10 @@ eprosima::fastdds::dds::DataReaderQos reader_qos(const ReaderOptions& options, c
 inline constexpr uint32_t kLargeSampleBytes = 64 * 1024;
 
 /// Refuses data sharing where Fast DDS would quietly do without it, or where a writer's shared
-/// pool (shared_pool_samples(history) of the type's largest size; a reader passes 0, it maps the
-/// writer's) would exceed kMaxSharedPoolBytes. Throws cpm::Error naming the role, topic, type and reason.
-void check_data_sharing(bool data_sharing, const eprosima::fastdds::dds::TopicDataType& type, size_t pool_samples,
+/// pool (shared_pool_samples(history_samples) of the type's largest size) would exceed
+/// kMaxSharedPoolBytes. A reader passes history_samples 0: it maps the writer's pool. Throws
+/// cpm::Error naming the role, topic, type and reason.
+void check_data_sharing(bool data_sharing, const eprosima::fastdds::dds::TopicDataType& type, size_t history_samples,
                         const std::string& topic, const char* role);
 inline constexpr uint64_t kMaxSharedPoolBytes = 512ull << 20;
 

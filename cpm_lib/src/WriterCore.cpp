@@ -52,8 +52,7 @@ WriterCore::WriterCore(std::shared_ptr<ParticipantCore> participant, const std::
     check_secured_endpoint(*participant, topic, true, options.data_sharing, "Writer");
     const std::unique_ptr<dds::TopicDataType> type(make_type());
     check_data_sharing(options.data_sharing, *type,
-                       shared_pool_samples(size_t(std::max(options.keep_all ? options.max_unacknowledged : options.history_depth, 1))),
-                       topic, "Writer");
+                       size_t(std::max(options.keep_all ? options.max_unacknowledged : options.history_depth, 1)), topic, "Writer");
     const dds::DataWriterQos qos = writer_qos(options, topic, type->m_isGetKeyDefined, type->m_typeSize);
     impl_ = std::make_unique<Impl>(std::move(participant), topic, make_type);
     impl_->plain = type->is_plain();

@@ -26,7 +26,8 @@ public:
 
     /// Publishes one sample; false when DDS refused it (e.g. keep-all history full). Never throws.
     bool write(const void* sample);
-    /// A sample DDS lends to be filled in place (default-initialised), or nullptr when it
+    /// A sample DDS lends to be filled in place (not initialised: it holds an earlier sample's
+    /// bytes), or nullptr when it
     /// cannot lend one (a type that is not plain, or every loanable sample in use).
     void* loan() noexcept;
     /// Publishes a loaned sample; the loan ends either way. Never throws.
