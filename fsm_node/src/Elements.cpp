@@ -89,7 +89,12 @@ protected:
     std::optional<double> eold_;
 };
 
-/// BasicFollowWall that ignores range jumps over 2 cm (door frames, niches).
+/// BasicFollowWall that ignores range jumps over 2 cm (door frames, niches). The original
+/// compared each reading with the last one it took, so a car that drifted more than 2 cm
+/// sideways while it ignored a niche never took the wall back behind it and drove blind. Here
+/// the 2 cm grow by 10 cm per metre driven since the last reading taken (a heading error
+/// of up to 0.1 rad while blind, or a late sample): the wall behind a niche is taken back,
+/// the niche itself (deeper than that) is still ignored.
 class FollowWall : public BasicFollowWall
 {
 public:
@@ -98,18 +103,24 @@ public:
     {
         BasicFollowWall::on_enter(in);
         last_range_ = side_range(in, side_);
+        last_odometer_ = in.odometer;
     }
 
 protected:
     double measured(const Inputs& in) override
     {
-        double r = side_range(in, side_);
-        if (std::abs(r - last_range_) <= 0.02) last_range_ = r;
+        const double r = side_range(in, side_);
+        const double blind = std::max(0.0, in.odometer - last_odometer_);
+        if (std::abs(r - last_range_) <= kJump + kDriftPerMetre * blind) {
+            last_range_ = r;
+            last_odometer_ = in.odometer;
+        }
         return last_range_;
     }
 
 private:
-    double last_range_ = 0;
+    static constexpr double kJump = 0.02, kDriftPerMetre = 0.1;
+    double last_range_ = 0, last_odometer_ = 0;
 };
 
 /// Clearance changes linearly from the one at entry to target_clearance over `distance`.

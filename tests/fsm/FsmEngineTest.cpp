@@ -105,6 +105,22 @@ TEST(FsmEngine, FollowWallIgnoresRangeJumpsOverTwoCentimetres)
     EXPECT_NEAR(sut->tick(at(0.025, 0.02, 0.41), 0.0125).steering, -0.02, 1e-12);
 }
 
+TEST(FsmEngine, FollowWallTakesTheWallBackAfterANicheItDriftedAcross)
+{
+    auto sut = machine(R"({"root": 0, "states": [{"id": 0, "type": "FollowWall", "side": "right", "clearance": 0.4, "p": 2, "d": 0}], "transitions": []})");
+    sut->tick(at(0, 0, 0.40), 0.0125);
+    // A niche 0.8 m long: ignored all along, its far end included.
+    for (double s = 0.01; s < 0.8; s += 0.01) EXPECT_NEAR(sut->tick(at(s, s, 0.65), 0.0125).steering, 0.0, 1e-12) << s;
+    // Behind it the wall is 3 cm further than before (the car drifted while blind): that is
+    // the wall again, not a jump, and the follower steers back to it.
+    EXPECT_NEAR(sut->tick(at(0.81, 0.81, 0.43), 0.0125).steering, -0.06, 1e-12);
+    EXPECT_NEAR(sut->tick(at(0.82, 0.82, 0.425), 0.0125).steering, -0.05, 1e-12);
+    // Right after, a jump is a jump again.
+    EXPECT_NEAR(sut->tick(at(0.83, 0.83, 0.47), 0.0125).steering, -0.05, 1e-12);
+    // A late sample after 0.3 m driven in one tick: 2.5 cm is the car's drift, followed.
+    EXPECT_NEAR(sut->tick(at(1.13, 1.13, 0.45), 0.3).steering, -0.1, 1e-12);
+}
+
 TEST(FsmEngine, SensorLevelWaitsForItsDebounceCountAndTimeoutForItsSeconds)
 {
     auto sut = machine(R"({"root": 0,
