@@ -84,7 +84,8 @@ struct HistoryService::Impl
 
     void control_loop()
     {
-        uint64_t next_status = 0, unmatched_since = 0;
+        uint64_t next_status = 0;
+        StatusWatch watch;
         while (ingest.process_events(std::chrono::milliseconds(100))) {
             const uint64_t now = cpm::get_time_ns();
             ingest.locked([&] { store.expire(now); });
@@ -92,28 +93,38 @@ struct HistoryService::Impl
                 publish_status(now);
                 next_status = now + options.status_period_ns;
             }
-            heal_one_sided_drop(now, unmatched_since);
+            heal_one_sided_drop(now, watch);
         }
     }
 
     /// After this process was stopped past the lease (SIGSTOP, a debugger, a stalled VM), the
-    /// serving participant may drop the recorder while the recorder keeps it; Fast DDS 2.9 then
-    /// never exchanges their endpoints again (seen as the status writer matching no reader for
-    /// good, about 1 freeze in 8 under load; Fast DDS issues #155 and #457), and the service's
-    /// own status goes unrecorded. A status writer that the recording reader has not matched
-    /// for 2 s gets the recorder replaced: a new participant meets everyone afresh.
-    void heal_one_sided_drop(uint64_t now, uint64_t& unmatched_since)
+    /// serving participant and the recorder may drop each other one-sidedly; Fast DDS 2.9 then
+    /// never exchanges their endpoints again (Fast DDS issues #155 and #457), and the service's
+    /// own status goes unrecorded. Seen both ways round: the status writer matching no reader,
+    /// and (about 1 freeze in 10 under load) the writer still matching the recorder's reader
+    /// while the recorder has dropped the writer, so nothing arrives. The check is therefore on
+    /// what arrives: no status recorded for 2 s and 3 periods while this service published
+    /// them gets the recorder replaced (a new participant meets everyone afresh).
+    struct StatusWatch
     {
-        if (!ingest.records(topics::history_status.name) || status.matched_subscriptions() > 0) {
-            unmatched_since = 0;
+        uint64_t received = 0, since = 0;
+    };
+    void heal_one_sided_drop(uint64_t now, StatusWatch& watch)
+    {
+        if (!ingest.records(topics::history_status.name)) return;
+        uint64_t received = 0;
+        for (const auto& t : ingest.topic_counts())
+            if (t.topic == topics::history_status.name) received = t.received;
+        if (watch.since == 0 || received != watch.received) {
+            watch = {received, now};
             return;
         }
-        if (unmatched_since == 0) unmatched_since = now;
-        if (now - unmatched_since < 2'000'000'000ull) return;
-        CPM_LOG_WARN("cpm_history: the recorder lost the service's own status for 2 s (a freeze past the lease?); "
-                     "replacing the recording participant");
+        if (now - watch.since < std::max<uint64_t>(2'000'000'000ull, 3 * options.status_period_ns)) return;
+        CPM_LOG_WARN("cpm_history: the recorder has received none of the service's own status for %llu ms "
+                     "(a freeze past the lease?); replacing the recording participant",
+                     (unsigned long long)((now - watch.since) / 1'000'000));
         ingest.rebuild();
-        unmatched_since = 0;
+        watch = {received, now};
     }
 
     void publish_status(uint64_t now)
