@@ -3,11 +3,13 @@
 // --dds_initial_peer and shared memory off (/dev/shm is the same in every namespace). Car 5 (the
 // firmware simulator and its bridge) and a history on side A; its state machine and another
 // history on side B. Cutting the link brakes the car within a second; each history keeps what it
-// saw; healing it lets the machine drive the car again within two seconds.
+// saw; healing it lets the machine drive the car again within two seconds. And the README's
+// secured lab across two machines, on the same two namespaces.
 #include <cpm/get_time_ns.hpp>
 
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm_test/TempDir.hpp>
 
 #include "SimTrace.hpp"
 
@@ -156,6 +158,36 @@ TEST(Partition, CuttingTheLinkBrakesTheCarEachHistoryKeepsWhatItSawAndHealingDri
     for (Process* p : {&history_a, &history_b, &sim, &bridge, &fsm}) EXPECT_EQ(p->wait(0ms), -1) << "every process still runs\n" << logs();
     std::printf("partition: braked %.0f ms after the cut, drove again %.0f ms after the link came back\n", braked * 1000, drove * 1000);
     ::unlink(link.c_str());
+}
+
+/// The README's "A secured lab" across two machines, A and B: the lab made with `cpm security`,
+/// a writer of four cars' states on A with its node's folder, on B a viewer with its own and a
+/// stranger with none, each with --dds_interface, --dds_initial_peer and no shared memory.
+TEST(Partition, ASecuredLabAcrossTwoHostsIsReadByItsViewerAndNotByAStranger)
+{
+    if (::geteuid() != 0) GTEST_SKIP() << "making network namespaces needs root (ip netns); not run";
+    if (ip_program().empty()) GTEST_SKIP() << "iproute2's ip is not installed; not run";
+    TwoHosts hosts;
+    if (!hosts.made()) GTEST_SKIP() << "could not make two network namespaces joined by a veth pair (ip netns, ip link); not run";
+    cpm_test::TempDir tmp;
+    const std::string lab = tmp.file("lab-sec");
+    for (std::vector<std::string> args : {std::vector<std::string>{"init", lab},
+                                          {"add-node", lab, "car5", "--publish", "vehicleState"},
+                                          {"add-node", lab, "viewer", "--subscribe", "vehicleState"}}) {
+        args.insert(args.begin(), {built_program("cpm"), "security"});
+        Process make(args);
+        ASSERT_EQ(make.wait(30s), 0) << args[2] << ": " << make.errors();
+    }
+    const std::vector<std::string> env{"CPM_SHARED_MEMORY=off"};
+    Process writer(hosts.program(0, {built_program("vehicle_state_writer"), "--seconds", "60", "--security", lab + "/nodes/car5"}), env);
+    Process viewer(hosts.program(1, {built_program("vehicle_state_monitor"), "--seconds", "5", "--security", lab + "/nodes/viewer"}), env);
+    Process stranger(hosts.program(1, {built_program("vehicle_state_monitor"), "--seconds", "5"}), env);
+    // The monitor exits 0 when a report had a valid state of every car, 2 when none had.
+    EXPECT_EQ(viewer.wait(30s), 0) << viewer.output() << viewer.errors() << "\nwriter:\n" << writer.errors();
+    EXPECT_NE(viewer.output().find("of 5 reports had a valid state for all 4 vehicles"), std::string::npos) << viewer.output();
+    EXPECT_EQ(stranger.wait(30s), 2) << stranger.output() << stranger.errors();
+    EXPECT_NE(stranger.output().find("monitor: 0 of 5 reports"), std::string::npos) << stranger.output();
+    EXPECT_EQ(writer.wait(0ms), -1) << "the writer still runs\n" << writer.errors();
 }
 
 }  // namespace
