@@ -100,11 +100,12 @@ struct HistoryService::Impl
     /// After this process was stopped past the lease (SIGSTOP, a debugger, a stalled VM), the
     /// serving participant and the recorder may drop each other one-sidedly; Fast DDS 2.9 then
     /// never exchanges their endpoints again (Fast DDS issues #155 and #457), and the service's
-    /// own status goes unrecorded. Seen both ways round: the status writer matching no reader,
-    /// and (about 1 freeze in 10 under load) the writer still matching the recorder's reader
-    /// while the recorder has dropped the writer, so nothing arrives. The check is therefore on
-    /// what arrives: no status recorded for 2 s and 3 periods while this service published
-    /// them gets the recorder replaced (a new participant meets everyone afresh).
+    /// own status goes unrecorded. That was once seen as the status writer matching no reader;
+    /// the writer's match count cannot show the drop the other way round (the writer still
+    /// matching the recorder's reader that has dropped it), and a full test run failed with
+    /// the status unrecorded all the same. The check is therefore on what arrives: no status
+    /// recorded for 2 s and 3 periods gets the recorder replaced (a new participant meets
+    /// everyone afresh). Another service's status on the domain counts as arriving too.
     struct StatusWatch
     {
         uint64_t received = 0, since = 0;
