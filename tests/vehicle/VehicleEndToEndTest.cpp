@@ -183,9 +183,8 @@ class Repeater
 {
 public:
     Repeater(cpm::Participant& p, const std::string& topic, T command, uint8_t vehicle_id = kId)
-        : writer_(p, topic), command_(std::move(command)), thread_([this] { run(); })
+        : writer_(p, topic), command_(with_id(std::move(command), vehicle_id)), thread_([this] { run(); })
     {
-        command_.vehicle_id(vehicle_id);
     }
     ~Repeater()
     {
@@ -194,6 +193,13 @@ public:
     }
 
 private:
+    // The id is set before the thread starts (set after, the first command went to car 0 and
+    // raced with the thread's write).
+    static T with_id(T command, uint8_t vehicle_id)
+    {
+        command.vehicle_id(vehicle_id);
+        return command;
+    }
     void run()
     {
         while (!stop_) {
