@@ -2,6 +2,7 @@
 #include <cpm/init.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -253,16 +254,20 @@ std::string glob_regex(const std::string& glob)
 }
 
 namespace {
-volatile std::sig_atomic_t g_stop_requested = 0;
+// Set by the signal handler, read by any thread (a timer's, a node's loop): a lock-free atomic,
+// which is safe in a handler, not a volatile sig_atomic_t, which is safe only for the thread
+// the signal interrupted (TSan reported the timer thread's read as a race).
+std::atomic<bool> g_stop_requested{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
 }  // namespace
 
 void stop_on_signals()
 {
-    std::signal(SIGINT, [](int) { g_stop_requested = 1; });
-    std::signal(SIGTERM, [](int) { g_stop_requested = 1; });
+    std::signal(SIGINT, [](int) { g_stop_requested.store(true); });
+    std::signal(SIGTERM, [](int) { g_stop_requested.store(true); });
 }
 
-bool stop_requested() { return g_stop_requested != 0; }
+bool stop_requested() { return g_stop_requested.load(); }
 
 int run_main(int argc, char** argv, const char* program, const char* help, const std::function<int(int, char**)>& run)
 {

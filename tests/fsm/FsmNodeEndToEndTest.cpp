@@ -191,7 +191,7 @@ TEST(FsmNodeEndToEnd, WithoutACarItBrakesAndSaysWhy)
     EXPECT_TRUE(cpm_test::wait_until([&] { return sut.errors().find("vehicle 6: no VehicleState; braking") != std::string::npos; }))
         << sut.errors();
     sut.kill(SIGTERM);
-    EXPECT_EQ(sut.wait(5s), 0);
+    EXPECT_EQ(sut.wait(5s), 0) << sut.errors();
 }
 
 TEST(FsmNodeEndToEnd, AMachineWithErrorsIsNotStartedAndEveryErrorIsListed)

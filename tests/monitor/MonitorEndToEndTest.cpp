@@ -233,10 +233,11 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
     // The same recording played back to a monitor without --allow-stop: a replay, and no stops.
     Process watch({built_program("cpm"), "monitor", "--port", "0", "--world", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json"});
     std::smatch m;
+    std::string said;  // m points into it: it must outlive the wait (TSan saw a use after free)
     ASSERT_TRUE(wait_until(
         [&] {
-            const std::string o = watch.output();
-            return std::regex_search(o, m, std::regex("at (http://127\\.0\\.0\\.1:([0-9]+)/)"));
+            said = watch.output();
+            return std::regex_search(said, m, std::regex("at (http://127\\.0\\.0\\.1:([0-9]+)/)"));
         },
         20s, 50ms))
         << watch.output() << watch.errors();

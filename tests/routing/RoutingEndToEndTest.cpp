@@ -120,7 +120,7 @@ TEST(RoutingEndToEnd, ACarOnNoLaneIsLoggedWithItsPoseAndTheOthersAreServed)
     ASSERT_TRUE(seen.count(1));
     EXPECT_GT(path_length(seen.at(1)), 3.0);  // car 1 drives all the same
     routing.kill(SIGINT);
-    EXPECT_EQ(routing.wait(10s), 0);
+    EXPECT_EQ(routing.wait(10s), 0) << log_text(routing);
 }
 
 TEST(RoutingEndToEnd, ACarThatGoesSilentIsDroppedAndTakenBackWhenItReturns)
@@ -139,7 +139,7 @@ TEST(RoutingEndToEnd, ACarThatGoesSilentIsDroppedAndTakenBackWhenItReturns)
         return drop != std::string::npos && log.find("vehicle 3 is back: taken into planning again", drop) != std::string::npos;
     }, 10s)) << log_text(routing);
     routing.kill(SIGINT);
-    EXPECT_EQ(routing.wait(10s), 0);
+    EXPECT_EQ(routing.wait(10s), 0) << log_text(routing);
 }
 
 TEST(RoutingEndToEnd, BadFilesAndFlagsAreNamedAndExitNonZero)
