@@ -45,18 +45,29 @@ std::string rendered_dom(const std::string& file)
 }
 
 /// The pid of the process whose command line holds `needle` (from /proc), or 0.
-int pid_with(const std::string& needle)
+/// The pid of a process of one lab run (its environment holds `tag`, which the test gave the
+/// run and the run passes on to every process it starts) whose command line holds `needle`; 0
+/// if none. Only the run's own: other tests (a secured lab, the fsm tests) may run an fsm_node
+/// with the same arguments at the same time, and killing theirs would fail both.
+int pid_with(const std::string& needle, const std::string& tag)
 {
+    auto text_of = [](const fs::path& file) {
+        std::ifstream in(file);
+        std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        std::replace(text.begin(), text.end(), '\0', ' ');
+        return text + ' ';
+    };
     for (const auto& e : fs::directory_iterator("/proc")) {
         const std::string name = e.path().filename();
         if (name.find_first_not_of("0123456789") != std::string::npos) continue;
-        std::ifstream in(e.path() / "cmdline");
-        std::string cmd((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-        std::replace(cmd.begin(), cmd.end(), '\0', ' ');
-        if (cmd.find(needle) != std::string::npos) return std::stoi(name);
+        if (text_of(e.path() / "cmdline").find(needle) == std::string::npos) continue;
+        if (text_of(e.path() / "environ").find(tag + ' ') != std::string::npos) return std::stoi(name);
     }
     return 0;
 }
+
+/// The environment entry that marks a run's processes for pid_with.
+std::string run_tag(const std::string& out) { return "CPM_TEST_LAB_RUN=" + out; }
 
 }  // namespace
 
@@ -139,10 +150,11 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     TempDir dir;
     const std::string out = dir.file("run");
     // Real time: in simulated time the corridor's 60 s pass in about 4 s, before the test acts.
-    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out, "--monitor", "off"});
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out, "--monitor", "off"},
+                {run_tag(out)});
     const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json").string();
     int pid = 0;
-    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args)) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args, run_tag(out))) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
     std::this_thread::sleep_for(2s);  // driving
     ::kill(pid, SIGKILL);
     EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
@@ -151,8 +163,8 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     const auto summary = summary_of(out);
     EXPECT_EQ(summary["ok"], false);
     EXPECT_NE(summary["error"].get<std::string>().find("fsm_5"), std::string::npos);
-    EXPECT_EQ(pid_with(out + "/recording.db"), 0) << "every process of the run is stopped";
-    EXPECT_EQ(pid_with("--map " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string() + " --start"), 0);
+    EXPECT_EQ(pid_with(out + "/recording.db", run_tag(out)), 0) << "every process of the run is stopped";
+    EXPECT_EQ(pid_with("--map " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string() + " --start", run_tag(out)), 0);
 }
 
 TEST(LabRun, ANodeWithRestartTrueIsStartedAgainAndEveryNodeGetsTheScenariosQos)
@@ -166,10 +178,10 @@ TEST(LabRun, ANodeWithRestartTrueIsStartedAgainAndEveryNodeGetsTheScenariosQos)
                                                            "maps/corridor.json\nvehicles:\n  - id: 5\n    start: [0.0, -0.01, 0.0]\n"
                                                            "    fsm: " + source + "fsm/corridor.json\n    restart: true\n"
                                                            "qos: {vehicleState: {reliable: true, history_depth: 2}}\n");
-    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"});
+    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
     const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(source + "fsm/corridor.json").string();
     int pid = 0;
-    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args)) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args, run_tag(out))) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
 
     // Every writer and reader of vehicleState on the run's domain is reliable now.
     Process info({built_program("cpm"), "topic", "info", "vehicleState", "--json"});
@@ -224,7 +236,8 @@ TEST(LabRun, CtrlCStopsEverythingAndLeavesAReadableRecording)
     TempDir dir;
     const std::string out = dir.file("run");
     // Real time: in simulated time the corridor's 60 s pass in about 4 s, before the test acts.
-    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out, "--monitor", "off"});
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out, "--monitor", "off"},
+                {run_tag(out)});
     ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("processes on domain") != std::string::npos; }, 30s)) << run.errors();
     std::this_thread::sleep_for(4s);
     run.kill(SIGINT);
