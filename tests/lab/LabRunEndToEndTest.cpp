@@ -44,7 +44,6 @@ std::string rendered_dom(const std::string& file)
     return chromium.output();
 }
 
-/// The pid of the process whose command line holds `needle` (from /proc), or 0.
 /// The pid of a process of one lab run (its environment holds `tag`, which the test gave the
 /// run and the run passes on to every process it starts) whose command line holds `needle`; 0
 /// if none. Only the run's own: other tests (a secured lab, the fsm tests) may run an fsm_node
