@@ -113,9 +113,7 @@ struct HistoryService::Impl
     void heal_one_sided_drop(uint64_t now, StatusWatch& watch)
     {
         if (!ingest.records(topics::history_status.name)) return;
-        uint64_t received = 0;
-        for (const auto& t : ingest.topic_counts())
-            if (t.topic == topics::history_status.name) received = t.received;
+        const uint64_t received = ingest.received(topics::history_status.name);
         if (watch.since == 0 || received != watch.received) {
             watch = {received, now};
             return;

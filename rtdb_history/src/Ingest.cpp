@@ -418,6 +418,13 @@ size_t Ingest::topic_count() const
     return impl_->topics.size();
 }
 
+uint64_t Ingest::received(const std::string& topic) const
+{
+    std::lock_guard lock(mutex_);
+    const auto it = impl_->topics.find(topic);
+    return it == impl_->topics.end() ? 0 : it->second->received;
+}
+
 std::vector<TopicCount> Ingest::topic_counts() const
 {
     std::lock_guard lock(mutex_);

@@ -61,6 +61,8 @@ public:
     uint64_t lost() const { return lost_; }
     size_t topic_count() const;
     std::vector<TopicCount> topic_counts() const;
+    /// Samples received on one topic (0 if it has none).
+    uint64_t received(const std::string& topic) const;
 
 private:
     struct Impl;

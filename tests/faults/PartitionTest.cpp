@@ -17,6 +17,7 @@
 
 #include <cstdlib>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <unistd.h>
 
@@ -112,13 +113,28 @@ int held_states(const TwoHosts& hosts, int side, uint64_t t0, uint64_t t1)
     return lines;
 }
 
-TEST(Partition, CuttingTheLinkBrakesTheCarEachHistoryKeepsWhatItSawAndHealingDrivesItAgain)
+/// Each test on its own pair of namespaces; skipped, saying why, where they cannot be made.
+class Partition : public ::testing::Test
 {
-    if (::geteuid() != 0) GTEST_SKIP() << "making network namespaces needs root (ip netns); not run";
-    if (ip_program().empty()) GTEST_SKIP() << "iproute2's ip is not installed; not run";
-    TwoHosts hosts;
-    if (!hosts.made()) GTEST_SKIP() << "could not make two network namespaces joined by a veth pair (ip netns, ip link); not run";
+protected:
+    void SetUp() override
+    {
+        if (::geteuid() != 0) GTEST_SKIP() << "making network namespaces needs root (ip netns); not run";
+        if (ip_program().empty()) GTEST_SKIP() << "iproute2's ip is not installed; not run";
+        hosts_.emplace();
+        if (!hosts_->made()) GTEST_SKIP() << "could not make two network namespaces joined by a veth pair (ip netns, ip link); not run";
+    }
+    const TwoHosts& hosts() const { return *hosts_; }
+    /// Every process of both sides: UDP only (/dev/shm is the same in every namespace).
     const std::vector<std::string> env{"CPM_SHARED_MEMORY=off"};
+
+private:
+    std::optional<TwoHosts> hosts_;
+};
+
+TEST_F(Partition, CuttingTheLinkBrakesTheCarEachHistoryKeepsWhatItSawAndHealingDrivesItAgain)
+{
+    const TwoHosts& hosts = this->hosts();
 
     Process history_a(hosts.program(0, {built_program("cpm_history"), "--window", "60s"}), env);
     Process history_b(hosts.program(1, {built_program("cpm_history"), "--window", "60s"}), env);
@@ -163,12 +179,9 @@ TEST(Partition, CuttingTheLinkBrakesTheCarEachHistoryKeepsWhatItSawAndHealingDri
 /// The README's "A secured lab" across two machines, A and B: the lab made with `cpm security`,
 /// a writer of four cars' states on A with its node's folder, on B a viewer with its own and a
 /// stranger with none, each with --dds_interface, --dds_initial_peer and no shared memory.
-TEST(Partition, ASecuredLabAcrossTwoHostsIsReadByItsViewerAndNotByAStranger)
+TEST_F(Partition, ASecuredLabAcrossTwoHostsIsReadByItsViewerAndNotByAStranger)
 {
-    if (::geteuid() != 0) GTEST_SKIP() << "making network namespaces needs root (ip netns); not run";
-    if (ip_program().empty()) GTEST_SKIP() << "iproute2's ip is not installed; not run";
-    TwoHosts hosts;
-    if (!hosts.made()) GTEST_SKIP() << "could not make two network namespaces joined by a veth pair (ip netns, ip link); not run";
+    const TwoHosts& hosts = this->hosts();
     cpm_test::TempDir tmp;
     const std::string lab = tmp.file("lab-sec");
     for (std::vector<std::string> args : {std::vector<std::string>{"init", lab},
@@ -178,7 +191,6 @@ TEST(Partition, ASecuredLabAcrossTwoHostsIsReadByItsViewerAndNotByAStranger)
         Process make(args);
         ASSERT_EQ(make.wait(30s), 0) << args[2] << ": " << make.errors();
     }
-    const std::vector<std::string> env{"CPM_SHARED_MEMORY=off"};
     Process writer(hosts.program(0, {built_program("vehicle_state_writer"), "--seconds", "60", "--security", lab + "/nodes/car5"}), env);
     Process viewer(hosts.program(1, {built_program("vehicle_state_monitor"), "--seconds", "5", "--security", lab + "/nodes/viewer"}), env);
     Process stranger(hosts.program(1, {built_program("vehicle_state_monitor"), "--seconds", "5"}), env);
