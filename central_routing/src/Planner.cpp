@@ -62,8 +62,9 @@ struct Planner::Impl
     bool gave_up = false;
     std::vector<std::string> warnings;
     // Scratch for the window lookup, reused across cars.
-    std::vector<int32_t> window_head, window_next;
-    std::vector<uint8_t> blocked;
+    std::vector<int32_t> window_head, window_next, marks;
+    std::vector<uint8_t> blocked, dilated;
+    std::vector<uint8_t> outside_zone;  // per window sample: outside every conflict zone
     std::vector<int> last_blocked;  // per window sample: the last step it is blocked at (-1: never)
     std::vector<size_t> edge_load;  // cars on each edge at the start of the cycle
     std::vector<double> follow_errors;  // |measured - planned| along the route, every measured car and cycle
@@ -311,6 +312,7 @@ void Planner::Impl::mark_blocked(const Car& c, const std::vector<const Car*>& be
 {
     const size_t w = c.ws.size();
     blocked.assign((steps + 1) * w, 0);
+    last_blocked.assign(w, -1);  // the last step each sample is blocked at, before the slack below
     window_next.resize(w);
     for (size_t i = 0; i < w; ++i) {
         window_next[i] = window_head[c.wsample[i]];
@@ -341,11 +343,23 @@ void Planner::Impl::mark_blocked(const Car& c, const std::vector<const Car*>& be
             // A distrusted car planned before this one: both its plan and its braking.
             for (const auto* occupied : {&other->at_step, other->distrusted ? &other->braking_at_step : nullptr}) {
                 if (!occupied || occupied->empty()) continue;
+                // The window samples one occupied sample blocks, found again only when the
+                // sample changes (a standing car occupies the same one step after step).
+                uint32_t marked_for = UINT32_MAX;
                 for (size_t k = 0; k <= steps; ++k) {
-                    for (uint32_t n : table.conflicts((*occupied)[std::min(k, occupied->size() - 1)])) {
-                        for (int32_t i = window_head[n]; i >= 0; i = window_next[size_t(i)]) {
-                            if (i > ignore_up_to) blocked[k * w + size_t(i)] = 1;
+                    const uint32_t sample = (*occupied)[std::min(k, occupied->size() - 1)];
+                    if (sample != marked_for) {
+                        marks.clear();
+                        for (uint32_t n : table.conflicts(sample)) {
+                            for (int32_t i = window_head[n]; i >= 0; i = window_next[size_t(i)]) {
+                                if (i > ignore_up_to) marks.push_back(i);
+                            }
                         }
+                        marked_for = sample;
+                    }
+                    for (int32_t i : marks) {
+                        blocked[k * w + size_t(i)] = 1;
+                        last_blocked[size_t(i)] = std::max(last_blocked[size_t(i)], int(k));
                     }
                 }
             }
@@ -356,21 +370,19 @@ void Planner::Impl::mark_blocked(const Car& c, const std::vector<const Car*>& be
     // time_slack after it has gone, so that a car a little late on its plan (real cars lag
     // theirs by a few centimetres) still keeps its distance.
     const size_t slack = size_t(std::llround(o.time_slack / o.dt));
-    if (slack > 0) {
-        std::vector<uint8_t> dilated(blocked.size(), 0);
-        for (size_t i = 0; i < w; ++i) {
-            for (size_t k = 0; k <= steps; ++k) {
-                if (!blocked[k * w + i]) continue;
-                for (size_t m = k > slack ? k - slack : 0; m <= std::min(steps, k + slack); ++m) dilated[m * w + i] = 1;
+    if (slack > 0) {  // row m: the rows m - slack .. m + slack or-ed (whole rows, which vectorise)
+        dilated.assign(blocked.size(), 0);
+        for (size_t m = 0; m <= steps; ++m) {
+            uint8_t* out = dilated.data() + m * w;
+            for (size_t k = m > slack ? m - slack : 0; k <= std::min(steps, m + slack); ++k) {
+                const uint8_t* in = blocked.data() + k * w;
+                for (size_t i = 0; i < w; ++i) out[i] |= in[i];
             }
         }
         blocked.swap(dilated);
     }
-    last_blocked.assign(w, -1);
-    for (size_t k = 0; k <= steps; ++k) {
-        for (size_t i = 0; i < w; ++i) {
-            if (blocked[k * w + i]) last_blocked[i] = int(k);
-        }
+    for (int& last : last_blocked) {
+        if (last >= 0) last = int(std::min(steps, size_t(last) + slack));
     }
 }
 
@@ -380,10 +392,13 @@ void Planner::Impl::plan_cooperative(Car& c)
     // A car may come to stand only outside every conflict zone (standing in a crossing it could
     // block the car it waits for), at the end of its route, or where it stands now.
     const double s_start = c.fs[0];
-    auto may_stand = [&](double s) {
-        return s - s_start < 1e-6 || table.zone_of(c.wsample[window_index(c, s)]) < 0 ||
-               (c.finite_route && s > route_length_end(c) - 0.05);
-    };
+    const size_t w = c.ws.size();
+    outside_zone.resize(w);
+    for (size_t i = 0; i < w; ++i) outside_zone[i] = table.zone_of(c.wsample[i]) < 0;
+    const double route_end = c.finite_route ? route_length_end(c) : std::numeric_limits<double>::infinity();
+    // s at window sample i (window_index(c, s) == i).
+    auto may_stand_at = [&](double s, size_t i) { return s - s_start < 1e-6 || outside_zone[i] || s > route_end - 0.05; };
+    auto may_stand = [&](double s) { return may_stand_at(s, window_index(c, s)); };
     // Where the first conflict zone ahead ends: a car that enters it must be able to leave it.
     double s_exit = s_start;
     {
@@ -398,13 +413,19 @@ void Planner::Impl::plan_cooperative(Car& c)
     // Each is a rule of the state alone, so the next step of a safe way leads to a safe state:
     // the car always has a safe choice.
     enum class Way { Brake, Hold, Go };
+    // Beyond the window, or past the end of a finite route: blocked at every step.
+    const double last_s = std::min(c.ws.back(), route_end - 0.02);
     auto safe = [&](size_t k, double s, double v, Way way) {
-        if (v < 1e-9 && !may_stand(s)) return false;  // it would stand, even for a moment, in a zone
+        // s only grows along a way: its window sample is followed forward, as window_index
+        // would find it (the nearest, the later one on a tie).
+        size_t at = window_index(c, s);
+        if (v < 1e-9 && !may_stand_at(s, at)) return false;  // it would stand, even for a moment, in a zone
         const double cruise = way == Way::Go ? o.v_max : v;
         bool braking = way == Way::Brake;
         for (size_t m = k; m <= steps; ++m) {
-            if (v == 0 && braking) return may_stand(s) && standing_free(c, m, s);
-            if (blocked_at(c, m, s) || m == steps) return false;  // met someone, or still moving at the horizon's end
+            while (at + 1 < w && !(s - c.ws[at] < c.ws[at + 1] - s)) ++at;
+            if (v == 0 && braking) return may_stand_at(s, at) && s <= last_s && last_blocked[at] < int(m);  // standing_free
+            if (s > last_s || blocked[m * w + at] || m == steps) return false;  // met someone, or still moving at the horizon's end
             if (!braking) {
                 // Brake for the first place past the zone where it may stand and no one comes.
                 const double stop = s + v * v / (2 * a);
