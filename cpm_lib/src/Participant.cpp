@@ -157,8 +157,11 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
     transport.user_transports.push_back(udp);
 
     auto& builtin = qos.wire_protocol().builtin;
-    builtin.discovery_config.leaseDuration_announcementperiod = {1, 0};
-    builtin.discovery_config.leaseDuration = {10, 0};
+    const auto lease = checked_lease(options.lease, "participant option lease");
+    const auto announce = std::min<std::chrono::milliseconds>(lease / 3, std::chrono::seconds(1));
+    builtin.discovery_config.leaseDuration = {int32_t(lease.count() / 1000), uint32_t(lease.count() % 1000 * 1'000'000)};
+    builtin.discovery_config.leaseDuration_announcementperiod = {int32_t(announce.count() / 1000),
+                                                                 uint32_t(announce.count() % 1000 * 1'000'000)};
     builtin.discovery_config.initial_announcements.count = 5;
     builtin.discovery_config.initial_announcements.period = {0, 100'000'000};
     qos.wire_protocol().participant_id = -1;
@@ -289,6 +292,7 @@ ParticipantOptions ParticipantOptions::from_init()
     options.discovery_server = settings.discovery_server;
     options.security = settings.security;
     options.shared_memory = settings.shared_memory;
+    options.lease = settings.lease;
     return options;
 }
 

@@ -76,7 +76,7 @@ bool is_init_flag(const std::string& flag, bool& takes_value)
     static const std::pair<const char*, bool> kFlags[] = {
         {"--dds_domain", true},       {"--node_id", true},           {"--dds_interface", true},
         {"--dds_initial_peer", true}, {"--dds_discovery_server", true}, {"--simulated_time", false},
-        {"--security", true},         {"--dds_shared_memory", true}};
+        {"--security", true},         {"--dds_shared_memory", true},  {"--dds_lease", true}};
     for (const auto& [name, value] : kFlags) {
         if (flag == name) {
             takes_value = value;
@@ -95,6 +95,24 @@ int checked_domain_id(long long domain_id, const std::string& source)
     return static_cast<int>(domain_id);
 }
 
+std::chrono::milliseconds checked_lease(std::chrono::milliseconds lease, const std::string& source, const std::string& text)
+{
+    if (lease < std::chrono::seconds(1) || lease > std::chrono::hours(1)) {
+        throw Error(source + ": " + (text.empty() ? std::to_string(lease.count()) + "ms" : text) +
+                    " is outside 1s..1h (how long the others wait for a silent participant before dropping it)");
+    }
+    return lease;
+}
+
+namespace {
+
+std::chrono::milliseconds parse_lease(const std::string& text, const std::string& source)
+{
+    return checked_lease(std::chrono::milliseconds(cli::parse_duration(source, text) / 1'000'000), source, text);
+}
+
+}  // namespace
+
 InitSettings parse_init_settings(int argc, const char* const argv[], const char* env_domain)
 {
     InitSettings settings;
@@ -104,6 +122,9 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
     }
     if (const char* shm = std::getenv("CPM_SHARED_MEMORY"); shm != nullptr && *shm != '\0') {
         settings.shared_memory = parse_bool(shm, "CPM_SHARED_MEMORY");
+    }
+    if (const char* lease = std::getenv("CPM_DDS_LEASE"); lease != nullptr && *lease != '\0') {
+        settings.lease = parse_lease(lease, "CPM_DDS_LEASE");
     }
     for (int i = 1; i < argc; ++i) {
         if (std::strcmp(argv[i], "--simulated_time") == 0) {
@@ -126,6 +147,8 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
             settings.discovery_server = *v;
         } else if (auto v = flag_value(argc, argv, i, "dds_shared_memory")) {
             settings.shared_memory = parse_bool(*v, "--dds_shared_memory");
+        } else if (auto v = flag_value(argc, argv, i, "dds_lease")) {
+            settings.lease = parse_lease(*v, "--dds_lease");
         } else if (auto v = flag_value(argc, argv, i, "security")) {
             if (v->empty()) throw Error("--security: empty value (a node's security folder, LAB/nodes/NAME)");
             settings.security = *v;

@@ -8,6 +8,9 @@
 #include <gtest/gtest.h>
 #include <gmock/gmock.h>
 
+#include <chrono>
+#include <cstdlib>
+
 using ::testing::HasSubstr;
 
 namespace {
@@ -82,6 +85,26 @@ TEST(Init, BadValuesAreErrorsNamingTheirSource)
     EXPECT_THAT(error_of({"--dds_shared_memory=udp"}), HasSubstr("--dds_shared_memory: 'udp' is not a boolean"));
     EXPECT_THAT(error_of({"--node_id"}), HasSubstr("--node_id: missing value"));
     EXPECT_THAT(error_of({"--node_id="}), HasSubstr("--node_id: empty value"));
+}
+
+TEST(Init, TheLeaseIsTenSecondsUnlessTheFlagOrTheEnvironmentSaysOtherwise)
+{
+    using std::chrono::milliseconds;
+    ::unsetenv("CPM_DDS_LEASE");
+    EXPECT_EQ(parse({}).lease, milliseconds(10'000));
+    EXPECT_EQ(parse({"--dds_lease", "3s"}).lease, milliseconds(3'000));
+    EXPECT_EQ(parse({"--dds_lease=1500ms"}).lease, milliseconds(1'500));
+    ::setenv("CPM_DDS_LEASE", "4s", 1);
+    EXPECT_EQ(parse({}).lease, milliseconds(4'000));
+    EXPECT_EQ(parse({"--dds_lease=2s"}).lease, milliseconds(2'000)) << "the flag wins";
+    ::setenv("CPM_DDS_LEASE", "soon", 1);
+    EXPECT_THAT(error_of({}), HasSubstr("CPM_DDS_LEASE: 'soon' is not a duration"));
+    ::unsetenv("CPM_DDS_LEASE");
+    EXPECT_THAT(error_of({"--dds_lease=200ms"}), HasSubstr("--dds_lease: 200ms is outside 1s..1h"));
+    EXPECT_THAT(error_of({"--dds_lease=2h"}), HasSubstr("--dds_lease: 2h is outside 1s..1h"));
+    bool takes_value = false;
+    EXPECT_TRUE(cpm::is_init_flag("--dds_lease", takes_value));
+    EXPECT_TRUE(takes_value);
 }
 
 TEST(Init, AnInterfaceThisHostDoesNotHaveIsRefusedNamingIt)

@@ -17,6 +17,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
+#include <csignal>
 #include <mutex>
 
 using namespace std::chrono_literals;
@@ -89,6 +92,57 @@ TEST(Participant, DefaultParticipantAnnouncesOnlyLoopbackAndSharedMemory)
         const bool loopback = l.kind == LOCATOR_KIND_UDPv4 && rtps::IPLocator::toIPv4string(l) == "127.0.0.1";
         EXPECT_TRUE(shm || loopback) << "announces a locator beyond this host: " << describe(l);
     }
+}
+
+TEST(Participant, APeerKilledIsDroppedWhenItsShorterLeaseRunsOut)
+{
+    // A participant's lease (--dds_lease) is how long the others wait for it once it falls
+    // silent; the default is 10 s. A reader process with a 1.5 s lease, killed with SIGKILL,
+    // is dropped within a few seconds.
+    struct Drops : fdds::DomainParticipantListener
+    {
+        void on_participant_discovery(fdds::DomainParticipant*, rtps::ParticipantDiscoveryInfo&& info) override
+        {
+            if (info.status != rtps::ParticipantDiscoveryInfo::DROPPED_PARTICIPANT &&
+                info.status != rtps::ParticipantDiscoveryInfo::REMOVED_PARTICIPANT)
+                return;
+            if (info.info.m_participantName.to_string() == "reliable_reader") dropped_at.store(std::chrono::steady_clock::now());
+        }
+        std::atomic<std::chrono::steady_clock::time_point> dropped_at{};
+    } drops;
+    cpm::ParticipantOptions options = cpm_test::isolated_options();
+    options.discovery_listener = &drops;
+    const std::string topic = cpm_test::unique_topic("vehicleState");
+    cpm::Participant participant(options);
+    cpm::Writer<VehicleState> writer(participant, topic, {.reliable = true});
+    cpm_test::Process reader({cpm_test::built_program("reliable_reader"), topic, "--dds_lease", "1500ms"});
+    ASSERT_TRUE(writer.wait_for_matched(1, 10000ms));
+    const auto killed = std::chrono::steady_clock::now();
+    reader.kill(SIGKILL);
+    ASSERT_TRUE(cpm_test::wait_until([&] { return drops.dropped_at.load() > killed; }, 10000ms))
+        << "not dropped within the default lease";
+    const double after = std::chrono::duration<double>(drops.dropped_at.load() - killed).count();
+    std::printf("dropped %.2f s after the kill\n", after);
+    EXPECT_LT(after, 5.0) << "a 1.5 s lease";
+    EXPECT_TRUE(cpm_test::wait_until([&] { return writer.matched_subscriptions() == 0; }, 2000ms)) << "its reader still matched";
+}
+
+TEST(Participant, ALeaseOutsideOneSecondToAnHourIsRefused)
+{
+    cpm::ParticipantOptions options = cpm_test::isolated_options();
+    options.lease = std::chrono::milliseconds(999);
+    try {
+        cpm::Participant sut(options);
+        FAIL() << "no error";
+    } catch (const cpm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("participant option lease: 999ms is outside 1s..1h"));
+    }
+    options.lease = std::chrono::milliseconds(2000);
+    cpm::Participant sut(options);
+    const auto& discovery = sut.native()->get_qos().wire_protocol().builtin.discovery_config;
+    EXPECT_EQ(discovery.leaseDuration.seconds, 2);
+    EXPECT_LE(discovery.leaseDuration_announcementperiod.to_ns() * 3, discovery.leaseDuration.to_ns())
+        << "announced at least three times per lease";
 }
 
 TEST(Participant, DomainAbove232IsRejected)

@@ -1,6 +1,7 @@
 #pragma once
 #include <cpm/Error.hpp>
 
+#include <chrono>
 #include <memory>
 #include <string>
 #include <vector>
@@ -27,6 +28,11 @@ struct ParticipantOptions
     std::string discovery_server;            ///< "host:port" of a Fast DDS discovery server (server id 0)
     bool shared_memory = true;               ///< use shared memory between processes on this host
     int max_initial_peers_range = 32;        ///< participants per host that unicast discovery probes
+    /// How long the others wait for this participant once it falls silent (its process killed,
+    /// frozen or cut off) before they drop it, its readers and writers; 1s..1h. It announces
+    /// itself every third of it (at most once a second). Shorter finds a dead node sooner, and
+    /// drops a live one that is starved of CPU or network for that long.
+    std::chrono::milliseconds lease{10'000};
     /// A node's security folder (cpm security add-node): the participant joins a secured lab
     /// with that node's identity and permissions. Empty: unsecured.
     std::string security;

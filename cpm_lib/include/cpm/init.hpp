@@ -1,4 +1,5 @@
 #pragma once
+#include <chrono>
 #include <string>
 #include <vector>
 
@@ -15,10 +16,13 @@ struct InitSettings
     bool simulated_time = false;             ///< --simulated_time
     std::string security;                    ///< --security (or CPM_SECURITY): a node's security folder
     bool shared_memory = true;               ///< --dds_shared_memory on|off (or CPM_SHARED_MEMORY)
+    /// --dds_lease (or CPM_DDS_LEASE), 1s..1h: how long the others wait for this process's
+    /// participants once they fall silent (a crash) before dropping them and what they wrote.
+    std::chrono::milliseconds lease{10'000};
 };
 
 /// Reads cpm's flags (`--flag=value` or `--flag value`) from the command line and
-/// CPM_DOMAIN_ID (CPM_SECURITY, CPM_SHARED_MEMORY) from the environment; other flags are left to
+/// CPM_DOMAIN_ID (CPM_SECURITY, CPM_SHARED_MEMORY, CPM_DDS_LEASE) from the environment; other flags are left to
 /// the program.
 /// Throws cpm::cli::UsageError (a cpm::Error; cpm's programs exit 2 on it) naming the flag and
 /// value when a value is malformed or out of range, or an interface is not on this host.
@@ -43,5 +47,10 @@ void check_local_interface(const std::string& interface, const std::string& sour
 /// Checks a DDS domain id: Fast DDS accepts 233 and above but then never discovers anyone.
 /// `source` names where the value came from in the error message.
 int checked_domain_id(long long domain_id, const std::string& source);
+
+/// Checks a participant's lease (1s..1h; below a second, a busy machine drops live peers).
+/// The error names `source` and `text` (the value as given; empty: the milliseconds).
+std::chrono::milliseconds checked_lease(std::chrono::milliseconds lease, const std::string& source,
+                                        const std::string& text = "");
 
 }  // namespace cpm
