@@ -54,10 +54,10 @@ protected:
     {
         return ::wait_for_samples(client, topic, key, n, 20s);
     }
-    Process writer(std::vector<std::string> args)
+    Process writer(std::vector<std::string> args, std::vector<std::string> env = {})
     {
         args.insert(args.begin(), built_program("history_writer"));
-        return Process(args);
+        return Process(args, std::move(env));
     }
 };
 
@@ -302,6 +302,9 @@ TEST(HistoryServiceOptions, ATopicKeepsItsOwnWindowAndBadOptionsAreRefused)
 TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReadable)
 {
     Process disposing = writer({"--type", "vehicle", "--vehicle", "8", "--count", "4", "--dispose"});
+    // Known gap (2026-12-03): the service's raw reader never takes the dispose itself (nor
+    // acknowledges it: the writer waits its 10 s for that, then exits). The object is marked
+    // deleted once its writer is gone, so this checks deletion after the writer's exit.
     ASSERT_EQ(disposing.wait(30s), 0) << disposing.errors();
     auto deleted = [&](const std::string& key) {
         auto r = client.latest("vehicleState", key);
@@ -310,12 +313,13 @@ TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReada
     EXPECT_TRUE(cpm_test::wait_until([&] { return deleted("8"); }, 10s, 20ms));
     EXPECT_EQ(client.latest<VehicleState>("vehicleState", 8).sample.pose().x(), 3);  // readable after deletion
 
-    Process doomed = writer({"--type", "vehicle", "--vehicle", "9", "--count", "4", "--stay"});
+    Process doomed = writer({"--type", "vehicle", "--vehicle", "9", "--count", "4", "--stay"}, {"CPM_DDS_LEASE=2s"});
     ASSERT_TRUE(cpm_test::wait_until([&] { return doomed.output().find("written 4") != std::string::npos; }, 30s, 20ms));
     EXPECT_FALSE(deleted("9"));
     doomed.kill(SIGKILL);
     doomed.wait(5s);
-    // Its participant's lease (10 s) runs out, then its writer and its instances are gone.
+    // Its participant's lease (2 s here; 10 s by default) runs out, then its writer and its
+    // instances are gone.
     EXPECT_TRUE(cpm_test::wait_until([&] { return deleted("9"); }, 30s, 100ms));
     EXPECT_EQ(client.latest<VehicleState>("vehicleState", 9).sample.pose().x(), 3);
     HistoryRequest alive = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
