@@ -4,6 +4,8 @@
 #include <cpm/init.hpp>
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/log/Log.hpp>
+#include <fastdds/dds/log/StdoutErrConsumer.hpp>
 #include <fastdds/dds/publisher/Publisher.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
@@ -20,6 +22,7 @@
 #include <cstdlib>
 #include <dirent.h>
 #include <fcntl.h>
+#include <mutex>
 #include <optional>
 #include <sys/file.h>
 #include <sys/stat.h>
@@ -195,11 +198,30 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
     return qos;
 }
 
+namespace {
+
+/// Fast DDS prints its own log on stdout by default, into what a program writes there for
+/// others to read (`cpm topic echo --json`, the "device: …" line `cpm vehicle sim` waits for).
+/// Every message goes to stderr instead, once per process.
+void send_fast_dds_log_to_stderr()
+{
+    static std::once_flag once;
+    std::call_once(once, [] {
+        auto consumer = std::make_unique<dds::StdoutErrConsumer>();
+        consumer->stderr_threshold(dds::Log::Kind::Info);
+        dds::Log::ClearConsumers();
+        dds::Log::RegisterConsumer(std::move(consumer));
+    });
+}
+
+}  // namespace
+
 ParticipantCore::ParticipantCore(const ParticipantOptions& options)
     : factory_(dds::DomainParticipantFactory::get_shared_instance()),
       domain_id_(checked_domain_id(options.domain_id >= 0 ? options.domain_id : init_settings().domain_id,
                                    "participant option domain_id"))
 {
+    send_fast_dds_log_to_stderr();
     dds::DomainParticipantQos qos = participant_qos(options);
     if (!options.security.empty()) {
         // OpenSSL frees itself at exit, while Fast DDS's receive threads may still decrypt a

@@ -12,6 +12,7 @@
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/log/Log.hpp>
 #include <fastrtps/utils/IPLocator.h>
 
 #include <gmock/gmock.h>
@@ -20,7 +21,9 @@
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <cstdio>
 #include <mutex>
+#include <unistd.h>
 
 using namespace std::chrono_literals;
 using ::testing::HasSubstr;
@@ -125,6 +128,40 @@ TEST(Participant, APeerKilledIsDroppedWhenItsShorterLeaseRunsOut)
     std::printf("dropped %.2f s after the kill\n", after);
     EXPECT_LT(after, 5.0) << "a 1.5 s lease";
     EXPECT_TRUE(cpm_test::wait_until([&] { return writer.matched_subscriptions() == 0; }, 2000ms)) << "its reader still matched";
+}
+
+TEST(Participant, FastDdsLogsGoToStderrNeverIntoTheProgramsStdout)
+{
+    // A program's stdout is its output (`cpm topic echo --json`, firmware_sim's "device: …"
+    // line that `cpm vehicle sim` reads); Fast DDS prints its own log to stdout by default.
+    cpm::Participant participant(cpm_test::isolated_options());
+    std::fflush(stdout);
+    std::fflush(stderr);
+    FILE* out = std::tmpfile();
+    FILE* err = std::tmpfile();
+    const int saved_out = ::dup(1), saved_err = ::dup(2);
+    ::dup2(::fileno(out), 1);
+    ::dup2(::fileno(err), 2);
+    using FastDdsLog = eprosima::fastdds::dds::Log;  // (the IDL's Log type is ::Log)
+    FastDdsLog::QueueLog("a marker error 4711", FastDdsLog::Context{__FILE__, __LINE__, __func__, "CPM_TEST"},
+                         FastDdsLog::Kind::Error);
+    FastDdsLog::Flush();
+    std::fflush(stdout);
+    std::fflush(stderr);
+    ::dup2(saved_out, 1);
+    ::dup2(saved_err, 2);
+    ::close(saved_out);
+    ::close(saved_err);
+    auto text = [](FILE* f) {
+        std::string s;
+        std::rewind(f);
+        for (int c; (c = std::fgetc(f)) != EOF;) s += char(c);
+        std::fclose(f);
+        return s;
+    };
+    const std::string on_stdout = text(out), on_stderr = text(err);
+    EXPECT_EQ(on_stdout.find("4711"), std::string::npos) << "stdout: " << on_stdout;
+    EXPECT_NE(on_stderr.find("a marker error 4711"), std::string::npos) << "stderr: " << on_stderr;
 }
 
 TEST(Participant, ALeaseOutsideOneSecondToAnHourIsRefused)

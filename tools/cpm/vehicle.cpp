@@ -159,10 +159,18 @@ int vehicle_sim(const std::vector<std::string>& args)
         std::vector<std::string> devices;
         for (const auto& id : ids) {
             // "device: PATH" for one car, "device ID: PATH" for each of several
-            const std::string line = sim.read_line().value_or("");
+            const auto line = sim.read_line();
             const std::string prefix = ids.size() == 1 ? "device: " : "device " + id + ": ";
-            if (line.rfind(prefix, 0) != 0) throw cpm::Error("firmware_sim " + name + " did not start (see its error above)");
-            devices.push_back(line.substr(prefix.size()));
+            if (!line) {
+                const auto end = sim.wait(std::chrono::seconds(2));
+                throw cpm::Error("firmware_sim " + name + " did not start: it " + (end ? end->describe() : "closed its output") +
+                                 " before naming its device (its errors, if any, are above)");
+            }
+            if (line->rfind(prefix, 0) != 0) {
+                throw cpm::Error("firmware_sim " + name + " did not start: it printed '" + *line + "' where '" + prefix +
+                                 "PATH' was expected");
+            }
+            devices.push_back(line->substr(prefix.size()));
         }
         std::vector<std::string> bridge_argv{vehicle_bridge, "--vehicle_id", name, "--device", join(devices, ","),
                                              "--start", join(starts, ";")};
