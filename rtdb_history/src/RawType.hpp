@@ -39,7 +39,9 @@ inline eprosima::fastdds::dds::DataReaderQos raw_reader_qos(bool reliable, bool 
     qos.resource_limits().max_samples = 0;
     qos.resource_limits().max_instances = 0;
     qos.resource_limits().max_samples_per_instance = 0;
-    qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
+    // Not DYNAMIC_REUSABLE: Fast DDS 2.9's reader then refuses a dispose (its payload is
+    // empty) and never acknowledges it; the disposed object stayed alive until its writer left.
+    qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::PREALLOCATED_WITH_REALLOC_MEMORY_MODE;
     qos.data_sharing().off();
     return qos;
 }

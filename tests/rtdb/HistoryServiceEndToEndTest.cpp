@@ -301,17 +301,18 @@ TEST(HistoryServiceOptions, ATopicKeepsItsOwnWindowAndBadOptionsAreRefused)
 
 TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReadable)
 {
-    Process disposing = writer({"--type", "vehicle", "--vehicle", "8", "--count", "4", "--dispose"});
-    // Known gap (2026-12-03): the service's raw reader never takes the dispose itself (nor
-    // acknowledges it: the writer waits its 10 s for that, then exits). The object is marked
-    // deleted once its writer is gone, so this checks deletion after the writer's exit.
-    ASSERT_EQ(disposing.wait(30s), 0) << disposing.errors();
+    Process disposing = writer({"--type", "vehicle", "--vehicle", "8", "--count", "4", "--dispose", "--stay"}, {"CPM_DDS_LEASE=2s"});
     auto deleted = [&](const std::string& key) {
         auto r = client.latest("vehicleState", key);
         return !r.objects().empty() && r.objects()[0].deleted_ts() != 0;
     };
-    EXPECT_TRUE(cpm_test::wait_until([&] { return deleted("8"); }, 10s, 20ms));
+    // Disposed by a writer that lives on: the service takes (and acknowledges) the dispose.
+    ASSERT_TRUE(cpm_test::wait_until([&] { return disposing.output().find("disposed") != std::string::npos; }, 30s, 20ms))
+        << disposing.errors();
+    EXPECT_TRUE(cpm_test::wait_until([&] { return deleted("8"); }, 5s, 20ms));
+    EXPECT_EQ(disposing.wait(0ms), -1) << "the writer still runs";
     EXPECT_EQ(client.latest<VehicleState>("vehicleState", 8).sample.pose().x(), 3);  // readable after deletion
+    disposing.kill(SIGKILL);
 
     Process doomed = writer({"--type", "vehicle", "--vehicle", "9", "--count", "4", "--stay"}, {"CPM_DDS_LEASE=2s"});
     ASSERT_TRUE(cpm_test::wait_until([&] { return doomed.output().find("written 4") != std::string::npos; }, 30s, 20ms));
