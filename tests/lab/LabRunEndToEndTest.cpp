@@ -249,7 +249,12 @@ TEST(LabRun, CtrlCStopsEverythingAndLeavesAReadableRecording)
     EXPECT_TRUE(rec.complete) << rec.warning;
     const auto car = rec.store->find("vehicleState", "5");
     ASSERT_TRUE(car);
-    EXPECT_GT(rec.store->info(*car)->samples_total, 100u);
+#ifdef CPM_TEST_SANITIZED
+    const size_t at_least = 20;  // a car 5-15 times slower under a sanitizer (77 seen there)
+#else
+    const size_t at_least = 100;  // 4 s at 50 Hz, less the start
+#endif
+    EXPECT_GT(rec.store->info(*car)->samples_total, at_least);
     EXPECT_EQ(summary_of(out)["interrupted"], true);
 }
 

@@ -35,6 +35,12 @@ namespace t = cpm::topics;
 
 namespace {
 
+#ifdef CPM_TEST_SANITIZED
+constexpr auto kStateWait = std::chrono::seconds(15);  // every process 5-15 times slower
+#else
+constexpr auto kStateWait = std::chrono::seconds(5);
+#endif
+
 /// What the test itself reads off the domain: every car's samples of the last seconds, by stamp.
 struct LabView
 {
@@ -188,7 +194,7 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
             }
             return false;
         },
-        5s, 100ms))
+        kStateWait, 100ms))
         << "its state machine says why";
 
     EXPECT_EQ(browser.eval("document.getElementById('source').textContent"), "live");
