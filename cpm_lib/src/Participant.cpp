@@ -162,9 +162,11 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
     auto& builtin = qos.wire_protocol().builtin;
     const auto lease = checked_lease(options.lease, "participant option lease");
     const auto announce = std::min<std::chrono::milliseconds>(lease / 3, std::chrono::seconds(1));
-    builtin.discovery_config.leaseDuration = {int32_t(lease.count() / 1000), uint32_t(lease.count() % 1000 * 1'000'000)};
-    builtin.discovery_config.leaseDuration_announcementperiod = {int32_t(announce.count() / 1000),
-                                                                 uint32_t(announce.count() % 1000 * 1'000'000)};
+    auto duration = [](std::chrono::milliseconds ms) {
+        return eprosima::fastrtps::Duration_t{int32_t(ms.count() / 1000), uint32_t(ms.count() % 1000 * 1'000'000)};
+    };
+    builtin.discovery_config.leaseDuration = duration(lease);
+    builtin.discovery_config.leaseDuration_announcementperiod = duration(announce);
     builtin.discovery_config.initial_announcements.count = 5;
     builtin.discovery_config.initial_announcements.period = {0, 100'000'000};
     qos.wire_protocol().participant_id = -1;
