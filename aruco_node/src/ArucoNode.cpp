@@ -6,13 +6,17 @@
 #include <cpm/Error.hpp>
 #include <cpm/LogThrottle.hpp>
 #include <cpm/Logging.hpp>
+#include <cpm/Reader.hpp>
+#include <cpm/Timer.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
 #include <cpm/percentile.hpp>
 #include <cpm/topics.hpp>
 
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -82,6 +86,10 @@ struct ArucoNode::Impl
         : options(std::move(o)), detector(options.camera, options.detector, options.sizes),
           writer(topics::aruco_markers.name, topics::aruco_markers.writer)
     {
+        if (options.source != FrameSourceKind::topic && init_settings().simulated_time) {
+            throw Error("aruco_node: --simulated_time takes frames from the cameraFrame topic only (camera_sim on the same clock); " +
+                        options.path + " is read in real time");
+        }
         switch (options.source) {
         case FrameSourceKind::device: source = open_device(options.path); break;
         case FrameSourceKind::video: source = open_video(options.path); break;
@@ -93,17 +101,19 @@ struct ArucoNode::Impl
     /// One frame: detect, publish, count.
     void process(const cv::Mat& gray, uint64_t exposure_ns)
     {
-        const uint64_t start = get_time_ns();
+        // Processing on the real clock (lab time stands still in a simulated tick); latency on the lab's.
+        const auto start = std::chrono::steady_clock::now();
         // Counted aside and added under the lock afterwards: stats() never waits for a detection.
         ArucoNodeStats frame;
         const ArucoMarkers message = markers_message(detector, options.vehicle_id, gray, exposure_ns, &frame);
         (void)writer.write(message);
         const uint64_t done = get_time_ns();
+        const auto took = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count();
         std::lock_guard<std::mutex> lock(mutex);
         counts.frames += frame.frames;
         counts.markers += frame.markers;
         counts.unknown_size += frame.unknown_size;
-        processing_ns.push_back(done - start);
+        processing_ns.push_back(uint64_t(took));
         latency_ns.push_back(done > exposure_ns ? done - exposure_ns : 0);
         if (processing_ns.size() > 100000) {  // bounded: keep the newest
             processing_ns.pop_front();
@@ -137,13 +147,48 @@ struct ArucoNode::Impl
             std::lock_guard<std::mutex> lock(mutex);
             counts.dropped += mine - 1;
         }
+        process_frame(*newest);
+    }
+
+    void process_frame(const CameraFrame& f)
+    {
         std::string why;
-        cv::Mat gray = frame_image(*newest, options.camera, why);
+        cv::Mat gray = frame_image(f, options.camera, why);
         if (gray.empty()) {
             bad_frame(why);
             return;
         }
-        process(gray, newest->header().create_stamp().nanoseconds());
+        process(gray, f.header().create_stamp().nanoseconds());
+    }
+
+    /// The topic source on the lab's simulated clock: one tick per camera frame, kSimulatedDetection_ns
+    /// after the camera's. The camera wrote its frame before the clock moved on, but it may still
+    /// be in flight: a tick with no new frame waits for one (up to 100 ms of real time, once the
+    /// camera has sent a first frame).
+    void run_simulated(const std::function<bool()>& stop_requested)
+    {
+        const auto period_ns = static_cast<uint64_t>(1e9 / options.frame_rate_hz);
+        const uint64_t offset_ns = std::min(kSimulatedDetection_ns, period_ns / 2);
+        Reader<CameraFrame> frames(topics::camera_frame.name, topics::camera_frame.reader_for(options.vehicle_id));
+        uint64_t last_stamp = 0;
+        bool seen_any = false;
+        auto timer = Timer::create("aruco_node_" + std::to_string(options.vehicle_id), period_ns, offset_ns,
+                                   TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
+        timer->run_until(stop_requested, [&](uint64_t t) {
+            auto newest = frames.get_sample(t);
+            auto fresh = [&] { return newest.valid && newest.sample.header().create_stamp().nanoseconds() > last_stamp; };
+            const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+            while (seen_any && !fresh() && !stop_requested()) {
+                const auto left = deadline - std::chrono::steady_clock::now();
+                if (left <= std::chrono::nanoseconds(0)) break;
+                (void)frames.wait_for_new_sample(left);
+                newest = frames.get_sample(t);
+            }
+            if (!fresh()) return;
+            seen_any = true;
+            last_stamp = newest.sample.header().create_stamp().nanoseconds();
+            process_frame(newest.sample);
+        });
     }
 
     ArucoNodeOptions options;
@@ -163,6 +208,10 @@ ArucoNode::~ArucoNode() = default;
 void ArucoNode::run(const std::function<bool()>& stop_requested)
 {
     Impl& d = *impl_;
+    if (d.options.source == FrameSourceKind::topic && init_settings().simulated_time) {
+        d.run_simulated(stop_requested);
+        return;
+    }
     if (d.options.source == FrameSourceKind::topic) {
         // Depth 8: frames that pile up while one is processed arrive in the next batch and are
         // counted as dropped (more than 8 in one processing time are dropped uncounted).

@@ -12,6 +12,7 @@
 #include <CameraFrame.h>
 #include <VehicleObservation.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -35,7 +36,8 @@ struct CameraSimNode::Impl
 
     void tick()
     {
-        const uint64_t now = get_time_ns();
+        const uint64_t now = get_time_ns();  // the lab's clock: real, or simulated under --simulated_time
+        const auto started = std::chrono::steady_clock::now();
         auto pose = poses.get_sample(now);
         if (!pose.valid) {
             std::lock_guard<std::mutex> lock(mutex);
@@ -74,7 +76,7 @@ struct CameraSimNode::Impl
         (void)frames.write(message);
         std::lock_guard<std::mutex> lock(mutex);
         ++count;
-        render_ns.push_back(get_time_ns() - now);
+        render_ns.push_back(uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - started).count()));
         if (render_ns.size() > 100000) render_ns.erase(render_ns.begin(), render_ns.begin() + 50000);
     }
 
@@ -100,7 +102,7 @@ void CameraSimNode::run(const std::function<bool()>& stop_requested)
 {
     const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
     auto timer = Timer::create("camera_sim_" + std::to_string(impl_->options.vehicle_id), period_ns, 0,
-                               TimerOptions{.wait_for_start = false, .simulated_time_allowed = false});
+                               TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) { impl_->tick(); });
 }
 

@@ -10,12 +10,13 @@ namespace {
 
 const char* kHelp =
     "usage: camera_sim --vehicle_id N --camera FILE --map FILE [--rate 30] [--noise SIGMA] [--blur K]\n"
-    "                  [--seed S] [--dictionary NAME] [--dds_domain N]\n"
+    "                  [--seed S] [--dictionary NAME] [--simulated_time] [--dds_domain N]\n"
     "\n"
     "Renders what car N's camera sees from the car's true pose (VehicleObservation) in the map:\n"
     "each marker with its white quiet zone, projected through the camera model; markers behind\n"
     "the camera, facing away or hidden by a wall are left out. Publishes mono8 CameraFrame at\n"
-    "--rate Hz with the pose's time as create_stamp.\n"
+    "--rate Hz with the pose's time as create_stamp. With --simulated_time it ticks on the lab's\n"
+    "simulated clock (timer camera_sim_N, to name to cpm lab clock --simulated --nodes).\n"
     "\n"
     "  --noise SIGMA  Gaussian noise, grey levels of 255 (default 0)\n"
     "  --blur K       K×K box blur (default none)\n"

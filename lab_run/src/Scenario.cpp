@@ -249,9 +249,6 @@ Scenario load_scenario(const std::string& path)
             if (v["fsm"]) spec.fsm = c.file(v["fsm"], p + ".fsm", s.dir, "state machine");
             if (v["restart"]) spec.restart = c.boolean(v["restart"], p + ".restart").value_or(false);
             if (v["camera"] && !root["world"]) c.error(v["camera"], p + ".camera", "a camera needs the world's markers: give world");
-            if (s.time == TimeMode::simulated && v["camera"]) {
-                c.error(v["camera"], p + ".camera", "the synthetic camera and aruco_node run in real time only; use time: real");
-            }
             s.vehicles.push_back(spec);
         }
     }
@@ -413,15 +410,16 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
             if (!v.camera.empty()) argv.insert(argv.end(), {"--camera", v.camera});
             std::vector<std::string> publish = kCarPublishes;
             if (!v.camera.empty()) publish.push_back("cameraFrame");
-            plan.push_back({"car_" + id, with_common(argv), v.restart, 5, "firmware_sim_" + id + ",vehicle_bridge_" + id, publish, kCarSubscribes});
+            std::string timers = "firmware_sim_" + id + ",vehicle_bridge_" + id;
+            if (!v.camera.empty() && simulated) timers += ",camera_sim_" + id;  // in real time it starts at once
+            plan.push_back({"car_" + id, with_common(argv), v.restart, 5, timers, publish, kCarSubscribes});
         }
     }
     for (const auto& v : s.vehicles) {
         if (v.camera.empty()) continue;
         const std::string id = std::to_string(v.id);
-        plan.push_back({"aruco_" + id,
-                        {program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world, "--dds_domain", domain},
-                        v.restart, 3, "", {"arucoMarkers"}, {"cameraFrame"}});
+        plan.push_back({"aruco_" + id, with_common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world}),
+                        v.restart, 3, simulated ? "aruco_node_" + id : "", {"arucoMarkers"}, {"cameraFrame"}});
     }
     if (s.routing.enabled) {
         std::string ids;

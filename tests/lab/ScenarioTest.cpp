@@ -206,17 +206,24 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
     EXPECT_EQ(errors, expected);
 }
 
-TEST(Scenario, SimulatedTimeRefusesWhatRunsInRealTimeOnly)
+TEST(Scenario, InSimulatedTimeACarsCameraAndItsMarkerFinderTickOnTheLabClock)
 {
     TempDir dir;
-    dir.write("map.json", "{}");
-    dir.write("m.json", "{}");
-    dir.write("cam.yaml", "%YAML:1.0\n");
-    const std::string file = dir.write("sim.yaml", "name: sim\ntime: simulated\nduration: 10s\nworld: map.json\n"
-                                                   "vehicles:\n  - {id: 1, fsm: m.json, camera: cam.yaml}\n");
-    const auto errors = errors_of(file);
-    ASSERT_EQ(errors.size(), 1u);  // fsm_node follows the simulated clock
-    EXPECT_EQ(errors[0], file + ":6: vehicles[0].camera: the synthetic camera and aruco_node run in real time only; use time: real");
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "fsm_node", "aruco_node"});
+    const Scenario gates = load_scenario(labs("gates.yaml"));
+    const auto plan = plan_run(gates, {.bin_dir = bin, .run_dir = "/runs/g", .domain = 4, .time = TimeMode::simulated});
+    ASSERT_EQ(plan.size(), 5u);
+    EXPECT_EQ(plan[2].name, "car_6");
+    EXPECT_EQ(plan[2].argv.back(), "--simulated_time");
+    EXPECT_EQ(plan[2].timer, "firmware_sim_6,vehicle_bridge_6,camera_sim_6");
+    EXPECT_EQ(plan[3].name, "aruco_6");
+    EXPECT_EQ(plan[3].argv.back(), "--simulated_time");
+    EXPECT_EQ(plan[3].timer, "aruco_node_6");
+    // In real time the marker finder takes each frame as it comes: no timer for the clock.
+    const auto real = plan_run(gates, {.bin_dir = bin, .run_dir = "/runs/g", .domain = 4});
+    EXPECT_EQ(real[2].timer, "firmware_sim_6,vehicle_bridge_6");
+    EXPECT_EQ(real[3].timer, "");
+    EXPECT_EQ(std::find(real[3].argv.begin(), real[3].argv.end(), "--simulated_time"), real[3].argv.end());
 }
 
 TEST(Scenario, AFileThatIsNotYamlOrNotThereIsNamed)

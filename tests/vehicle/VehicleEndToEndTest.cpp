@@ -681,9 +681,6 @@ TEST_F(VehicleEndToEnd, ManyCarFlagsThatDoNotAddUpAreNamed)
     fails({"firmware_sim", "--vehicle_id", "3,4", "--trace-pwm"}, 2, "--trace-pwm is for one car; --vehicle_id lists 2");
     fails({"vehicle_bridge", "--vehicle_id", "3,4", "--device", "/dev/null"}, 2, "--device names 1 device(s) for 2 car(s)");
     fails({"vehicle_bridge", "--vehicle_id", "3,0", "--device", "/dev/null,/dev/null"}, 2, "--vehicle_id");
-    fails({"cpm", "vehicle", "sim", "--id", "3", "--map", CPM_SOURCE_DIR "/scenarios/maps/gates.json", "--camera",
-           CPM_SOURCE_DIR "/scenarios/cameras/sim_640x480.yaml", "--simulated_time"},
-          2, "--camera runs in real time only");
     // A device that is no terminal ends a many-car bridge as it ends a one-car bridge.
     fails({"vehicle_bridge", "--vehicle_id", "3,4", "--device", "/dev/null,/dev/null"}, 1, "/dev/null: not a terminal device");
 }

@@ -157,12 +157,6 @@ int lab_run(const std::vector<std::string>& args)
         std::fprintf(stderr, "%s: %zu error(s), nothing started:\n%s\n", command.c_str(), e.errors().size(), e.what());
         return 1;
     }
-    if (options.time == cpm::lab::TimeMode::simulated && s.time != cpm::lab::TimeMode::simulated) {
-        for (const auto& v : s.vehicles) {
-            if (!v.camera.empty())
-                throw UsageError(command + ": --time simulated: vehicle " + std::to_string(v.id) + "'s camera and aruco_node run in real time only");
-        }
-    }
     if (parsed.has("--monitor")) {
         const std::string m = parsed.get("--monitor");
         if (m == "off") {

@@ -40,10 +40,11 @@ const char* const kVehicleSimHelp =
     "--camera-rate Hz (default 30) from its true pose; run aruco_node to turn the frames into\n"
     "arucoMarkers. All cars run in one firmware_sim and one vehicle_bridge process (each car still\n"
     "behind its own pty, line and loop); --process-per-car starts a pair of processes per car\n"
-    "instead (more isolation, fewer cars per machine). With --simulated_time the cars follow the\n"
-    "lab's simulated clock (not with --camera): it prints the timers to name to `cpm lab clock\n"
-    "--simulated --nodes`, and ends when that clock stops them. Runs until Ctrl-C, then prints\n"
-    "each car's statistics (JSON lines).\n";
+    "instead (more isolation, fewer cars per machine). With --simulated_time the cars and their\n"
+    "cameras follow the lab's simulated clock (give aruco_node --simulated_time and the camera's\n"
+    "rate as --rate too): it prints the timers to name to `cpm lab clock --simulated --nodes`, and\n"
+    "ends when that clock stops them. Runs until Ctrl-C, then prints each car's statistics (JSON\n"
+    "lines).\n";
 
 std::string pose_text(double x, double y, double yaw)
 {
@@ -69,9 +70,6 @@ int vehicle_sim(const std::vector<std::string>& args)
     }
     if (parsed.has("--camera")) cpm::aruco::Camera::load(parsed.get("--camera"));  // a wrong file fails here, not in a child
     const bool simulated = std::find(parsed.init_args.begin(), parsed.init_args.end(), "--simulated_time") != parsed.init_args.end();
-    if (simulated && parsed.has("--camera")) {
-        throw cpm::cli::UsageError("cpm vehicle sim: --camera runs in real time only; leave out --camera or --simulated_time");
-    }
     const std::string camera_rate = parsed.get("--camera-rate", "30");
     cpm::cli::parse_number("--camera-rate", camera_rate, 0.1, 1000);
     auto start = cpm::vehicle::parse_pose("--start", parsed.get("--start", "0,0,0"));
@@ -186,6 +184,7 @@ int vehicle_sim(const std::vector<std::string>& args)
                                                                         "--map", parsed.get("--map"), "--rate", camera_rate},
                                                    false);
                 std::printf("vehicle %s: camera_sim pid %d, %s Hz\n", id.c_str(), camera.pid(), camera_rate.c_str());
+                timers += ",camera_sim_" + id;
             }
         }
         std::fflush(stdout);

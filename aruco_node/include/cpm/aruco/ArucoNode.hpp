@@ -32,7 +32,16 @@ struct ArucoNodeOptions
     FrameSourceKind source = FrameSourceKind::topic;
     std::string path;   ///< device, video file or image folder
     double fps = 30;    ///< replay rate of an image folder
+    /// Simulated time (--simulated_time; the topic source only): the camera's frame rate. The
+    /// node then ticks on the lab clock (timer aruco_node_N) once per frame, a detection's time
+    /// (kSimulatedDetection_ns, less for rates above 100 Hz) after the camera, and processes that
+    /// frame; runs are repeatable.
+    double frame_rate_hz = 30;
 };
+
+/// Simulated time: how long after the camera's tick aruco_node's tick comes, i.e. the lab time
+/// a detection takes (about what one 640×480 frame takes on a lab computer).
+inline constexpr uint64_t kSimulatedDetection_ns = 5'000'000;
 
 /// Counts since the start.
 struct ArucoNodeStats
@@ -55,7 +64,9 @@ cv::Mat frame_image(const CameraFrame& frame, const Camera& camera, std::string&
 
 /// aruco_node's work: frames from one source → ArucoMarkers of the car, one per frame (also
 /// when empty). Frames that arrive while one is processed are dropped and counted, never
-/// queued. Bad frames are counted and logged at most once a second. Uses the process's
+/// queued. Under --simulated_time (topic source only) it ticks on the lab clock instead: each
+/// tick takes the camera's newest frame (waiting up to 100 ms of real time for one not yet
+/// arrived), so that the clock never runs ahead of the detection. Bad frames are counted and logged at most once a second. Uses the process's
 /// default participant (cpm::init first).
 class ArucoNode
 {

@@ -22,7 +22,8 @@ struct CameraSimOptions
 /// camera_sim's work: at rate_hz, renders what the car's camera sees from its true pose
 /// (VehicleObservation, moved on to the moment of the frame by the car's motion between its
 /// last two observations) and publishes it as a mono8 CameraFrame whose create_stamp is that
-/// moment, the exposure. Uses the process's default participant (cpm::init first).
+/// moment, the exposure. Under --simulated_time it ticks on the lab's simulated clock (timer
+/// camera_sim_N) and the moment is lab time. Uses the process's default participant (cpm::init first).
 class CameraSimNode
 {
 public:
