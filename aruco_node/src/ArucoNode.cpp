@@ -184,7 +184,15 @@ struct ArucoNode::Impl
                 (void)frames.wait_for_new_sample(left);
                 newest = frames.get_sample(t);
             }
-            if (!fresh()) return;
+            if (!fresh()) {
+                uint64_t held = 0;
+                if (seen_any && no_frame_log.allow(t, held)) {
+                    CPM_LOG_WARN("aruco_node %u: no new camera frame at lab time %.3f s within 100 ms; is camera_sim on the "
+                                 "simulated clock at --rate %g Hz? (%llu more since the last report)",
+                                 unsigned(options.vehicle_id), double(t) * 1e-9, options.frame_rate_hz, (unsigned long long)held);
+                }
+                return;
+            }
             seen_any = true;
             last_stamp = newest.sample.header().create_stamp().nanoseconds();
             process_frame(newest.sample);
@@ -198,6 +206,7 @@ struct ArucoNode::Impl
     mutable std::mutex mutex;
     ArucoNodeStats counts;
     LogThrottle bad_log;
+    LogThrottle no_frame_log;  ///< simulated time: a tick whose frame never came
     std::deque<uint64_t> processing_ns, latency_ns;
 };
 

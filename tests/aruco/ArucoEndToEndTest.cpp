@@ -382,6 +382,10 @@ GateDrive drive_gates(const std::string& world_file, const std::string& start, C
     node.wait(10s);
     car.kill(SIGINT);
     car.wait(10s);
+    if (simulated) {
+        // Each tick of the marker finder found the camera's frame of that moment.
+        EXPECT_EQ(node.errors().find("no new camera frame"), std::string::npos) << node.errors();
+    }
     return run;
 }
 
@@ -426,4 +430,25 @@ TEST(ArucoEndToEnd, FsmNodeDrivesThroughEveryGateOfASeededCourse)
 TEST(ArucoEndToEnd, FsmNodeDrivesThroughEveryGateOfSeededCoursesOnTheLabClock)
 {
     drive_seeded_courses({11, 12, 13}, Clock::simulated);
+}
+
+// A marker finder told another rate than the camera's waits in vain on the ticks without a frame:
+// it says so, naming the rate, and still takes every frame that comes.
+TEST(ArucoEndToEnd, AMarkerFinderAtAnotherRateThanItsCameraSaysSoOnTheLabClock)
+{
+    Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", kGates, "--camera", kCamera, "--camera-rate", "10",
+                 "--start", "1.0,0.1,0.2", "--simulated_time"});
+    Process node({built_program("aruco_node"), "--vehicle_id", "5", "--camera", kCamera, "--world", kGates, "--simulated_time"});
+    Process clock({built_program("cpm"), "lab", "clock", "--nodes", "firmware_sim_5,vehicle_bridge_5,camera_sim_5,aruco_node_5",
+                   "--simulated", "--until", "3s"});
+    ASSERT_EQ(clock.wait(60s), 0) << clock.output() << clock.errors();
+    // The clock's stop ends the timers: the node prints its counts and exits by itself.
+    ASSERT_EQ(node.wait(10s), 0) << node.errors();
+    EXPECT_NE(node.errors().find("no new camera frame at lab time"), std::string::npos) << node.errors();
+    EXPECT_NE(node.errors().find("--rate 30 Hz"), std::string::npos) << node.errors();
+    const auto stats = last_json_line(node.output());
+    EXPECT_GE(stats.value("frames", 0), 25) << node.output();  // 10 Hz for 3 s of lab time
+    EXPECT_LE(stats.value("frames", 0), 31) << node.output();
+    car.kill(SIGINT);
+    car.wait(10s);
 }
