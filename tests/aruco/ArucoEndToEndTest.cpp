@@ -370,7 +370,8 @@ GateDrive drive_gates(const std::string& world_file, const std::string& start, C
         collect();
         return fsm.wait(0ms) >= 0;
     }, simulated ? 240s : 120s, 20ms);
-    EXPECT_TRUE(stopped) << fsm.output() << fsm.errors();
+    EXPECT_TRUE(stopped) << fsm.output() << fsm.errors() << "\naruco_node: " << node.errors() << "\ncar: " << car.errors()
+                         << (lab_clock ? "\nclock: " + lab_clock->output() + lab_clock->errors() : std::string());
     collect();
     run.fsm_exit = fsm.wait(10s);
     run.output = fsm.output();
