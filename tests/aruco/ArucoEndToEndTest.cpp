@@ -366,12 +366,19 @@ GateDrive drive_gates(const std::string& world_file, const std::string& start, C
             run.path.push_back({o.header().create_stamp().nanoseconds() * 1e-9, {o.pose().x(), o.pose().y(), o.pose().yaw()}});
         }
     };
-    const bool stopped = cpm_test::wait_until([&] {
+    // On the lab clock the course ends in lab time (the machine stops, or the clock at 120 s of
+    // lab time); the real-time limit there only guards against a hang (a course took up to 4
+    // minutes under TSan beside other tests).
+    bool machine_stopped = false;
+    (void)cpm_test::wait_until([&] {
         collect();
-        return fsm.wait(0ms) >= 0;
-    }, simulated ? 240s : 120s, 20ms);
-    EXPECT_TRUE(stopped) << fsm.output() << fsm.errors() << "\naruco_node: " << node.errors() << "\ncar: " << car.errors()
-                         << (lab_clock ? "\nclock: " + lab_clock->output() + lab_clock->errors() : std::string());
+        machine_stopped = fsm.wait(0ms) >= 0;
+        return machine_stopped || (lab_clock && lab_clock->wait(0ms) >= 0);
+    }, simulated ? 600s : 120s, 20ms);
+    EXPECT_TRUE(machine_stopped) << "the machine did not reach its final state"
+                                 << (simulated ? " within 120 s of lab time or 10 minutes\n" : " within 120 s\n") << fsm.output()
+                                 << fsm.errors() << "\naruco_node: " << node.errors() << "\ncar: " << car.errors()
+                                 << (lab_clock ? "\nclock: " + lab_clock->output() + lab_clock->errors() : std::string());
     collect();
     run.fsm_exit = fsm.wait(10s);
     run.output = fsm.output();
@@ -430,7 +437,12 @@ TEST(ArucoEndToEnd, FsmNodeDrivesThroughEveryGateOfASeededCourse)
 // other tests).
 TEST(ArucoEndToEnd, FsmNodeDrivesThroughEveryGateOfSeededCoursesOnTheLabClock)
 {
+#ifdef CPM_TEST_SANITIZED
+    // One course there: it takes 1.5 to 4 minutes at a sanitizer's pace and runs the same code.
+    drive_seeded_courses({11}, Clock::simulated);
+#else
     drive_seeded_courses({11, 12, 13}, Clock::simulated);
+#endif
 }
 
 // A marker finder told another rate than the camera's waits in vain on the ticks without a frame:
