@@ -147,7 +147,18 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
     // with the stamp the monitor names, its position that of the VehicleObservation it names.
     {
         const auto state = api_state(port);
-        std::this_thread::sleep_for(300ms);  // the test's reader has the same samples by now
+        // The test's reader gets the same samples, a little later on a slow machine (a sanitizer).
+        (void)wait_until(
+            [&] {
+                std::lock_guard lock(lab.mutex);
+                for (const auto& v : state["vehicles"]) {
+                    const int id = v["id"];
+                    if (!lab.states[id].count(v["state_stamp_ns"].get<uint64_t>())) return false;
+                    if (v["pose_from"] == "vehicleObservation" && !lab.seen[id].count(v["pose_stamp_ns"].get<uint64_t>())) return false;
+                }
+                return true;
+            },
+            10s, 50ms);
         std::lock_guard lock(lab.mutex);
         for (const auto& v : state["vehicles"]) {
             const int id = v["id"];
