@@ -41,13 +41,10 @@ bool intraprocess_off()
     return true;
 }
 
-Participant* serving_participant(const ServiceOptions& options, std::unique_ptr<Participant>& own)
+/// The lease the service's participants announce: how long the others wait for them.
+std::chrono::milliseconds own_lease(const ServiceOptions& options)
 {
-    if (!options.participant) return &Participant::default_participant();
-    ParticipantOptions srv = *options.participant;
-    if (srv.name.empty()) srv.name = "cpm_history";
-    own = std::make_unique<Participant>(srv);
-    return own.get();
+    return options.participant ? options.participant->lease : ParticipantOptions::from_init().lease;
 }
 
 }  // namespace
@@ -59,21 +56,54 @@ struct HistoryService::Impl
     Store store;
     Outlet outlet;
     Ingest ingest;
-    std::unique_ptr<Participant> own_serving;  // when the options name a participant
-    Participant* serving;
-    RequestServer requests;
-    Writer<HistoryStatus> status;
+    /// Requests, replies and status: through the default participant, or one of the service's
+    /// own (options.participant, or made after a freeze, see heal_after_freeze).
+    struct Serving
+    {
+        std::unique_ptr<Participant> own;
+        Participant* participant;
+        RequestServer requests;
+        Writer<HistoryStatus> status;
+
+        Serving(const Store& store, std::unique_ptr<Participant> p, size_t workers)
+            : own(std::move(p)), participant(own ? own.get() : &Participant::default_participant()),
+              requests(store, *participant, workers), status(*participant, topics::history_status.name, topics::history_status.writer)
+        {
+        }
+    };
+    mutable std::mutex serving_mutex;  // counters() reads while the control thread replaces it
+    std::unique_ptr<Serving> serving;
+    uint64_t requests_before = 0, bad_requests_before = 0;  // counted by the servers replaced
     std::map<std::string, uint64_t> received_at_last_status;  // per topic, on the control thread
     std::thread control;
 
     explicit Impl(ServiceOptions o)
         : options(std::move(o)), store(StoreOptions{{options.window_ns, options.max_bytes_per_topic}, options.max_bytes_total}),
-          outlet(store, options.sinks), ingest(options, outlet), serving(serving_participant(options, own_serving)),
-          requests(store, *serving, options.workers),
-          status(*serving, topics::history_status.name, topics::history_status.writer)
+          outlet(store, options.sinks), ingest(options, outlet),
+          serving(std::make_unique<Serving>(store, own_participant(false), options.workers))
     {
         for (const auto& [topic, window] : options.topic_windows_ns) store.set_retention(topic, {window, options.max_bytes_per_topic});
         control = std::thread([this] { control_loop(); });
+    }
+
+    /// The options' participant; after a freeze one of the init settings when none is named.
+    std::unique_ptr<Participant> own_participant(bool after_freeze) const
+    {
+        if (!options.participant && !after_freeze) return nullptr;
+        ParticipantOptions srv = options.participant.value_or(ParticipantOptions::from_init());
+        if (srv.name.empty()) srv.name = "cpm_history";
+        return std::make_unique<Participant>(srv);
+    }
+
+    uint64_t requests() const
+    {
+        std::lock_guard lock(serving_mutex);
+        return requests_before + serving->requests.requests();
+    }
+    uint64_t bad_requests() const
+    {
+        std::lock_guard lock(serving_mutex);
+        return bad_requests_before + serving->requests.bad_requests();
     }
 
     ~Impl()
@@ -86,8 +116,12 @@ struct HistoryService::Impl
     {
         uint64_t next_status = 0;
         StatusWatch watch;
+        auto last_turn = std::chrono::steady_clock::now();
         while (ingest.process_events(std::chrono::milliseconds(100))) {
             const uint64_t now = cpm::get_time_ns();
+            const auto turn = std::chrono::steady_clock::now();
+            if (heal_after_freeze(turn - last_turn)) watch = {};
+            last_turn = turn;
             ingest.locked([&] { store.expire(now); });
             if (now >= next_status) {
                 publish_status(now);
@@ -95,6 +129,30 @@ struct HistoryService::Impl
             }
             heal_one_sided_drop(now, watch);
         }
+    }
+
+    /// This loop turns every 100 ms. A turn that took nearly the lease means the process stood
+    /// still (SIGSTOP, a debugger, a stalled VM) for long enough that the others dropped its
+    /// participants while it may not have dropped them. Fast DDS 2.9 then never sends them its
+    /// endpoints again (its writers of discovery data take the others for up to date): a client
+    /// that waited through the freeze would never be answered again, while one started afresh is.
+    /// New participants (new GUIDs) meet everyone afresh on both sides. The default participant
+    /// (the process's log) cannot be replaced; the service serves from one of its own from then on.
+    bool heal_after_freeze(std::chrono::steady_clock::duration turn)
+    {
+        const auto lease = own_lease(options);
+        if (turn < lease - std::min<std::chrono::milliseconds>(lease / 3, std::chrono::seconds(1))) return false;
+        CPM_LOG_WARN("cpm_history: this process stood still for %.1f s, past its %.1f s lease: making the service's "
+                     "participants anew, so that every other participant meets them afresh",
+                     std::chrono::duration<double>(turn).count(), std::chrono::duration<double>(lease).count());
+        ingest.rebuild();
+        auto renewed = std::make_unique<Serving>(store, own_participant(true), options.workers);
+        serving->requests.stop();  // its counts are final from here
+        std::lock_guard lock(serving_mutex);
+        requests_before += serving->requests.requests();
+        bad_requests_before += serving->requests.bad_requests();
+        serving = std::move(renewed);
+        return true;
     }
 
     /// After this process was stopped past the lease (SIGSTOP, a debugger, a stalled VM), the
@@ -139,8 +197,8 @@ struct HistoryService::Impl
         s.evicted(st.evicted);
         s.dropped(ingest.dropped());
         s.lost(ingest.lost());
-        s.requests(requests.requests());
-        s.bad_requests(requests.bad_requests());
+        s.requests(requests());
+        s.bad_requests(bad_requests());
         const double period_s = double(options.status_period_ns) * 1e-9;
         for (const auto& t : ingest.topic_counts()) {
             HistoryTopicStatus ts;
@@ -153,7 +211,7 @@ struct HistoryService::Impl
             before = t.received;
             s.topics().push_back(ts);
         }
-        (void)status.write(s);
+        (void)serving->status.write(s);
     }
 };
 
@@ -166,7 +224,7 @@ const Store& HistoryService::store() const { return impl_->store; }
 ServiceCounters HistoryService::counters() const
 {
     const auto& d = *impl_;
-    return {d.ingest.topic_count(), d.ingest.received(), d.ingest.dropped(), d.requests.requests(), d.requests.bad_requests(),
+    return {d.ingest.topic_count(), d.ingest.received(), d.ingest.dropped(), d.requests(), d.bad_requests(),
             d.ingest.lost()};
 }
 

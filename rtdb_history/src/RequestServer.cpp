@@ -27,7 +27,9 @@ RequestServer::RequestServer(const Store& store, Participant& participant, size_
         participant, topics::history_request.name, topics::history_request.reader);
 }
 
-RequestServer::~RequestServer()
+RequestServer::~RequestServer() { stop(); }
+
+void RequestServer::stop()
 {
     {
         std::lock_guard lock(work_mutex_);
@@ -35,7 +37,9 @@ RequestServer::~RequestServer()
         work_cv_.notify_all();
     }
     reader_->stop();
-    for (auto& t : workers_) t.join();
+    for (auto& t : workers_) {
+        if (t.joinable()) t.join();
+    }
 }
 
 void RequestServer::serve(const HistoryRequest& rq)

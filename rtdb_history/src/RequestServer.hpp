@@ -30,6 +30,9 @@ public:
     RequestServer(const RequestServer&) = delete;
     RequestServer& operator=(const RequestServer&) = delete;
 
+    /// Answers no more requests (those being answered are finished); the counts are final.
+    void stop();
+
     uint64_t requests() const { return requests_; }
     uint64_t bad_requests() const { return bad_requests_; }
 

@@ -531,10 +531,12 @@ TEST_F(HistoryService, AfterAFreezeLongerThanTheLeaseItRecordsEverythingAgainIts
         << service.errors();
     EXPECT_TRUE(cpm_test::wait_until([&] { return newest("historyStatus", "") > resumed + 1'000'000'000ull; }, 15s))
         << "its own status is no longer recorded\n" << service.errors();
-    // How it recovered, for whoever reads the test's output: by rediscovery alone, or with the
-    // recorder replaced after a one-sided drop.
-    std::printf("recorder replaced after the freeze: %s\n",
-                service.errors().find("replacing the recording participant") != std::string::npos ? "yes" : "no");
+    // How it recovered, for whoever reads the test's output: its participants made anew on
+    // seeing its own freeze, and also the recorder replaced when its own status stayed away.
+    const std::string said = service.errors();
+    std::printf("participants made anew after the freeze: %s; recorder replaced for a missing status: %s\n",
+                said.find("making the service's participants anew") != std::string::npos ? "yes" : "no",
+                said.find("replacing the recording participant") != std::string::npos ? "yes" : "no");
     if (::testing::Test::HasFailure()) {  // what a process that never saw the freeze sees
         for (std::vector<std::string> args : {std::vector<std::string>{"dump"}, {"topic", "info", "historyStatus"}}) {
             args.insert(args.begin(), built_program("cpm"));

@@ -27,6 +27,9 @@ struct ServiceOptions
     /// Unset: requests, replies and status go through the process's default participant (the one
     /// cpm::init's settings make, which cpm::Logging uses too), so the process shows as one
     /// participant of its name besides its recorder. Set: a participant of these options.
+    /// After the process stood still for nearly its lease (SIGSTOP, a debugger), the service
+    /// makes its participants anew (then one of its own even when unset), so that the others,
+    /// which dropped it meanwhile, meet it afresh.
     std::optional<ParticipantOptions> participant;
     /// Beside the store, these get every object, sample and deletion the service records.
     std::vector<std::shared_ptr<IngestSink>> sinks;
