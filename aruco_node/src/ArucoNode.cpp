@@ -8,6 +8,7 @@
 #include <cpm/Logging.hpp>
 #include <cpm/Reader.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
@@ -172,7 +173,7 @@ struct ArucoNode::Impl
         Reader<CameraFrame> frames(topics::camera_frame.name, topics::camera_frame.reader_for(options.vehicle_id));
         uint64_t last_stamp = 0;
         bool seen_any = false;
-        auto timer = Timer::create("aruco_node_" + std::to_string(options.vehicle_id), period_ns, offset_ns,
+        auto timer = Timer::create(timer_ids::aruco_node(options.vehicle_id), period_ns, offset_ns,
                                    TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
         timer->run_until(stop_requested, [&](uint64_t t) {
             auto newest = frames.get_sample(t);

@@ -4,6 +4,7 @@
 #include <cpm/Logging.hpp>
 #include <cpm/Reader.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/percentile.hpp>
@@ -101,7 +102,7 @@ CameraSimNode::~CameraSimNode() = default;
 void CameraSimNode::run(const std::function<bool()>& stop_requested)
 {
     const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
-    auto timer = Timer::create("camera_sim_" + std::to_string(impl_->options.vehicle_id), period_ns, 0,
+    auto timer = Timer::create(timer_ids::camera_sim(impl_->options.vehicle_id), period_ns, 0,
                                TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) { impl_->tick(); });
 }

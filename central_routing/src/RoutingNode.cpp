@@ -5,6 +5,7 @@
 #include <cpm/Logging.hpp>
 #include <cpm/MultiVehicleReader.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/stamp_message.hpp>
 
@@ -163,7 +164,7 @@ RoutingNode::~RoutingNode() = default;
 void RoutingNode::run(const std::function<bool()>& stop_requested)
 {
     auto& d = *impl_;
-    auto timer = Timer::create("central_routing", d.options.period_ns, 0,
+    auto timer = Timer::create(timer_ids::central_routing, d.options.period_ns, 0,
                                cpm::TimerOptions{.wait_for_start = d.options.wait_for_start, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t t_nominal) { d.cycle(t_nominal); });
 }

@@ -4,6 +4,7 @@
 #include <cpm/Logging.hpp>
 #include <cpm/Reader.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/percentile.hpp>
@@ -269,7 +270,7 @@ void FsmNode::run(const std::function<bool()>& stop_requested)
         impl_->brake(get_time_ns(), true);
         return;
     }
-    auto timer = Timer::create("fsm_node_" + std::to_string(impl_->options.vehicle_id), period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
+    auto timer = Timer::create(timer_ids::fsm_node(impl_->options.vehicle_id), period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) {
         if (!impl_->tick()) timer->stop();
     });

@@ -7,6 +7,7 @@
 #include <cpm/Security.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
@@ -290,7 +291,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
             });
         } else if (s.routing.enabled) {
             try {
-                real_start = master.start_real_time({"central_routing"}, std::chrono::milliseconds(1000), std::chrono::seconds(30));
+                real_start = master.start_real_time({timer_ids::central_routing}, std::chrono::milliseconds(1000), std::chrono::seconds(30));
             } catch (const std::exception& e) {
                 result.error = std::string("the lab clock could not start: ") + e.what();
             }

@@ -1,6 +1,7 @@
 #include <cpm/lab/Scenario.hpp>
 
 #include <cpm/CommandLine.hpp>
+#include <cpm/timer_ids.hpp>
 
 #include <yaml-cpp/yaml.h>
 
@@ -400,7 +401,7 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         plan.push_back({"cars",
                         with_common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count", std::to_string(s.vehicles.size()),
                                      "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed)}),
-                        restart, 5, "firmware_sim_" + std::to_string(first) + ",vehicle_bridge_" + std::to_string(first),
+                        restart, 5, timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first),
                         kCarPublishes, kCarSubscribes});
     } else {
         for (const auto& v : s.vehicles) {
@@ -410,8 +411,8 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
             if (!v.camera.empty()) argv.insert(argv.end(), {"--camera", v.camera});
             std::vector<std::string> publish = kCarPublishes;
             if (!v.camera.empty()) publish.push_back("cameraFrame");
-            std::string timers = "firmware_sim_" + id + ",vehicle_bridge_" + id;
-            if (!v.camera.empty() && simulated) timers += ",camera_sim_" + id;  // in real time it starts at once
+            std::string timers = timer_ids::firmware_sim(v.id) + "," + timer_ids::vehicle_bridge(v.id);
+            if (!v.camera.empty() && simulated) timers += "," + timer_ids::camera_sim(v.id);  // in real time it starts at once
             plan.push_back({"car_" + id, with_common(argv), v.restart, 5, timers, publish, kCarSubscribes});
         }
     }
@@ -419,7 +420,7 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         if (v.camera.empty()) continue;
         const std::string id = std::to_string(v.id);
         plan.push_back({"aruco_" + id, with_common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world}),
-                        v.restart, 3, simulated ? "aruco_node_" + id : "", {"arucoMarkers"}, {"cameraFrame"}});
+                        v.restart, 3, simulated ? timer_ids::aruco_node(v.id) : "", {"arucoMarkers"}, {"cameraFrame"}});
     }
     if (s.routing.enabled) {
         std::string ids;
@@ -427,13 +428,13 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         plan.push_back({"central_routing",
                         with_common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed),
                                      "--period", std::to_string(s.routing.period_ns / 1'000'000) + "ms"}),
-                        s.routing.restart, 1, "central_routing", {"vehicleCommandTrajectory"}, {"vehicleState"}});
+                        s.routing.restart, 1, timer_ids::central_routing, {"vehicleCommandTrajectory"}, {"vehicleState"}});
     }
     for (const auto& v : s.vehicles) {
         if (v.fsm.empty()) continue;
         const std::string id = std::to_string(v.id);
         plan.push_back({"fsm_" + id, with_common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}), v.restart, 1,
-                        "fsm_node_" + id, {"vehicleCommandDirect", "fsmStatus", "stopRequest"},
+                        timer_ids::fsm_node(v.id), {"vehicleCommandDirect", "fsmStatus", "stopRequest"},
                         {"vehicleState", "rangeSensors", "arucoMarkers", "stopRequest"}});
     }
     // A secured run: every process as a node of its own, allowed what it uses (issued by the run).

@@ -281,6 +281,8 @@ protected:
 
 TEST_F(CarLab, KillingTheStateMachineBrakesTheCarWithinTheCommandsFreshnessAndItsRestartDrivesAgain)
 {
+    // The newest command this test has seen (the car drives on them; this reader may match later).
+    ASSERT_TRUE(cpm_test::wait_until([&] { return commands.newest_stamp() != 0; }, 10s)) << lab.logs();
     const uint64_t last_command = commands.newest_stamp();
     const uint64_t killed = lab.kill9("fsm");
     // Its newest command goes stale 1 s after it was made; the bridge brakes on its next cycle.
@@ -444,6 +446,8 @@ protected:
 
 TEST_F(RoutedLab, KillingThePlannerStopsTheCarsWithinTheTrajectorysFreshnessAndItsRestartRoutesThemAgain)
 {
+    // The newest trajectory this test has seen (the cars drive on them; this reader may match later).
+    ASSERT_TRUE(cpm_test::wait_until([&] { return trajectories.newest_stamp() != 0; }, 10s)) << lab.logs();
     const uint64_t newest = trajectories.newest_stamp();
     const uint64_t killed = lab.kill9("routing");
     // The newest trajectory is fresh for 1 s after it was made, then the bridge brakes; a car at

@@ -6,6 +6,7 @@
 #include <cpm/Error.hpp>
 #include <cpm/aruco/Camera.hpp>
 #include <cpm/routing/Simulate.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/vehicle/BridgeNode.hpp>
 #include <cpm/vehicle/FirmwareSimNode.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
@@ -184,7 +185,7 @@ int vehicle_sim(const std::vector<std::string>& args)
                                                                         "--map", parsed.get("--map"), "--rate", camera_rate},
                                                    false);
                 std::printf("vehicle %s: camera_sim pid %d, %s Hz\n", id.c_str(), camera.pid(), camera_rate.c_str());
-                timers += ",camera_sim_" + id;
+                timers += "," + cpm::timer_ids::camera_sim(std::stoi(id));
             }
         }
         std::fflush(stdout);

@@ -8,6 +8,7 @@
 #include <cpm/init.hpp>
 #include <cpm/MultiVehicleReader.hpp>
 #include <cpm/ReaderAbstract.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
@@ -344,7 +345,7 @@ BridgeNode::BridgeNode(BridgeNodeOptions options) : BridgeNode(std::vector<Bridg
 BridgeNode::BridgeNode(std::vector<BridgeNodeOptions> cars) : impl_(std::make_unique<Impl>(std::move(cars))) {}
 BridgeNode::~BridgeNode() = default;
 
-std::string BridgeNode::timer_name(uint8_t first_vehicle_id) { return "vehicle_bridge_" + std::to_string(first_vehicle_id); }
+std::string BridgeNode::timer_name(uint8_t first_vehicle_id) { return timer_ids::vehicle_bridge(first_vehicle_id); }
 
 void BridgeNode::run(const std::function<bool()>& stop_requested)
 {

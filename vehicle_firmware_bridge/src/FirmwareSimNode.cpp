@@ -7,6 +7,7 @@
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/init.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
@@ -288,7 +289,7 @@ void FirmwareSimNode::Impl::tick(uint64_t t_nominal)
     for (auto& car : cars) trace(*car, get_time_ns());
 }
 
-std::string FirmwareSimNode::timer_name(uint8_t first_vehicle_id) { return "firmware_sim_" + std::to_string(first_vehicle_id); }
+std::string FirmwareSimNode::timer_name(uint8_t first_vehicle_id) { return timer_ids::firmware_sim(first_vehicle_id); }
 
 FirmwareSimNode::FirmwareSimNode(FirmwareSimNodeOptions options) : impl_(std::make_unique<Impl>(std::move(options)))
 {

@@ -1,0 +1,19 @@
+#pragma once
+// The node ids of the timers of cpm's own nodes. On the lab's simulated clock `cpm lab clock`
+// (and `cpm lab run`) waits until each named id says it is ready, so a node names its timer with
+// one of these and every program that starts nodes and tells the clock whom to wait for (`cpm
+// vehicle sim`, `cpm lab run`) names the same one.
+#include <string>
+
+namespace cpm::timer_ids {
+
+/// One firmware_sim process, named by the first of its vehicles.
+inline std::string firmware_sim(int first_vehicle_id) { return "firmware_sim_" + std::to_string(first_vehicle_id); }
+/// One vehicle_bridge process, named by the first of its vehicles.
+inline std::string vehicle_bridge(int first_vehicle_id) { return "vehicle_bridge_" + std::to_string(first_vehicle_id); }
+inline std::string camera_sim(int vehicle_id) { return "camera_sim_" + std::to_string(vehicle_id); }
+inline std::string aruco_node(int vehicle_id) { return "aruco_node_" + std::to_string(vehicle_id); }
+inline std::string fsm_node(int vehicle_id) { return "fsm_node_" + std::to_string(vehicle_id); }
+inline constexpr const char* central_routing = "central_routing";
+
+}  // namespace cpm::timer_ids
