@@ -52,6 +52,7 @@ std::chrono::milliseconds own_lease(const ServiceOptions& options)
 struct HistoryService::Impl
 {
     ServiceOptions options;
+    std::chrono::milliseconds lease = own_lease(options);  // what the others wait for it
     bool intraprocess_set = intraprocess_off();  // before any participant of the service is made
     Store store;
     Outlet outlet;
@@ -140,9 +141,8 @@ struct HistoryService::Impl
     /// (the process's log) cannot be replaced; the service serves from one of its own from then on.
     bool heal_after_freeze(std::chrono::steady_clock::duration turn)
     {
-        const auto lease = own_lease(options);
         if (turn < lease - std::min<std::chrono::milliseconds>(lease / 3, std::chrono::seconds(1))) return false;
-        CPM_LOG_WARN("cpm_history: this process stood still for %.1f s, past its %.1f s lease: making the service's "
+        CPM_LOG_WARN("cpm_history: this process stood still for %.1f s (its lease: %.1f s): making the service's "
                      "participants anew, so that every other participant meets them afresh",
                      std::chrono::duration<double>(turn).count(), std::chrono::duration<double>(lease).count());
         ingest.rebuild();
