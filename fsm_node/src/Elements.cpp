@@ -94,7 +94,14 @@ protected:
 /// sideways while it ignored a niche never took the wall back behind it and drove blind. Here
 /// the 2 cm grow by 10 cm per metre driven since the last reading taken (a heading error
 /// of up to 0.1 rad while blind, or a late sample): the wall behind a niche is taken back,
-/// the niche itself (deeper than that) is still ignored.
+/// the niche itself (deeper than that) is still ignored. While blind, the wall is where the
+/// last reading taken put it, moved by the car's own sideways travel since (odometer and the
+/// heading turned from that reading's): a steering correction made while blind is seen, so
+/// the car holds its line across the niche. (Holding the last reading instead, a car whose last
+/// reading before a niche caught the niche's edge, 2 cm deep, steered on those 2 cm all the
+/// way across it, turned 0.1 rad, and swerved back behind it.) A reading is taken only when the
+/// one before it (taken or not) was within 2 cm of it too: a single reading half in the niche
+/// (its edge) is never taken for the wall.
 class FollowWall : public BasicFollowWall
 {
 public:
@@ -102,25 +109,32 @@ public:
     void on_enter(const Inputs& in) override
     {
         BasicFollowWall::on_enter(in);
-        last_range_ = side_range(in, side_);
-        last_odometer_ = in.odometer;
+        expected_ = previous_ = side_range(in, side_);
+        taken_odometer_ = odometer_ = in.odometer;
+        taken_yaw_ = in.yaw;
     }
 
 protected:
     double measured(const Inputs& in) override
     {
+        const double step = std::max(0.0, in.odometer - odometer_);
+        odometer_ = in.odometer;
+        expected_ -= side_sign(side_) * step * std::sin(std::remainder(in.yaw - taken_yaw_, 2 * M_PI));
         const double r = side_range(in, side_);
-        const double blind = std::max(0.0, in.odometer - last_odometer_);
-        if (std::abs(r - last_range_) <= kJump + kDriftPerMetre * blind) {
-            last_range_ = r;
-            last_odometer_ = in.odometer;
+        const double blind = std::max(0.0, in.odometer - taken_odometer_);
+        const bool steady = std::abs(r - previous_) <= kJump;
+        previous_ = r;
+        if (steady && std::abs(r - expected_) <= kJump + kDriftPerMetre * blind) {
+            expected_ = r;
+            taken_odometer_ = in.odometer;
+            taken_yaw_ = in.yaw;
         }
-        return last_range_;
+        return expected_;
     }
 
 private:
     static constexpr double kJump = 0.02, kDriftPerMetre = 0.1;
-    double last_range_ = 0, last_odometer_ = 0;
+    double expected_ = 0, previous_ = 0, taken_odometer_ = 0, taken_yaw_ = 0, odometer_ = 0;
 };
 
 /// Clearance changes linearly from the one at entry to target_clearance over `distance`.

@@ -13,8 +13,10 @@ namespace cpm_test {
 class ClosedLoopCar
 {
 public:
-    ClosedLoopCar(const cpm::vehicle::VehicleParameters& params, const cpm::vehicle::World& world, cpm::vehicle::Pose start)
-        : params_(params), car_(params, world, start, 1, 1), bridge_(1, cpm::vehicle::Calibration{}, start)
+    /// `seed`: the simulator's sensor noise.
+    ClosedLoopCar(const cpm::vehicle::VehicleParameters& params, const cpm::vehicle::World& world, cpm::vehicle::Pose start,
+                  uint32_t seed = 1)
+        : params_(params), car_(params, world, start, 1, seed), bridge_(1, cpm::vehicle::Calibration{}, start)
     {
     }
 

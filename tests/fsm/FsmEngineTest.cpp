@@ -101,8 +101,11 @@ TEST(FsmEngine, FollowWallIgnoresRangeJumpsOverTwoCentimetres)
     // A door niche: the range jumps from 0.40 to 0.65.
     EXPECT_NEAR(sut->tick(at(0.0125, 0.01, 0.65), 0.0125).steering, 0.0, 1e-12);
     EXPECT_NEAR(basic->tick(at(0.0125, 0.01, 0.65), 0.0125).steering, -0.5, 1e-12);
-    // Small changes are followed.
-    EXPECT_NEAR(sut->tick(at(0.025, 0.02, 0.41), 0.0125).steering, -0.02, 1e-12);
+    // Small changes are followed, from the second reading after a jump on (the first one could
+    // be half in the niche).
+    EXPECT_NEAR(sut->tick(at(0.025, 0.02, 0.41), 0.0125).steering, 0.0, 1e-12);
+    EXPECT_NEAR(sut->tick(at(0.0375, 0.03, 0.41), 0.0125).steering, -0.02, 1e-12);
+    EXPECT_NEAR(sut->tick(at(0.05, 0.04, 0.415), 0.0125).steering, -0.03, 1e-12);
 }
 
 TEST(FsmEngine, FollowWallTakesTheWallBackAfterANicheItDriftedAcross)
@@ -112,13 +115,41 @@ TEST(FsmEngine, FollowWallTakesTheWallBackAfterANicheItDriftedAcross)
     // A niche 0.8 m long: ignored all along, its far end included.
     for (double s = 0.01; s < 0.8; s += 0.01) EXPECT_NEAR(sut->tick(at(s, s, 0.65), 0.0125).steering, 0.0, 1e-12) << s;
     // Behind it the wall is 3 cm further than before (the car drifted while blind): that is
-    // the wall again, not a jump, and the follower steers back to it.
-    EXPECT_NEAR(sut->tick(at(0.81, 0.81, 0.43), 0.0125).steering, -0.06, 1e-12);
+    // the wall again, not a jump, and the follower steers back to it once two readings agree.
+    EXPECT_NEAR(sut->tick(at(0.81, 0.81, 0.43), 0.0125).steering, 0.0, 1e-12);
     EXPECT_NEAR(sut->tick(at(0.82, 0.82, 0.425), 0.0125).steering, -0.05, 1e-12);
-    // Right after, a jump is a jump again.
+    // Right after, a jump is a jump again, and so is the reading after it.
     EXPECT_NEAR(sut->tick(at(0.83, 0.83, 0.47), 0.0125).steering, -0.05, 1e-12);
-    // A late sample after 0.3 m driven in one tick: 2.5 cm is the car's drift, followed.
-    EXPECT_NEAR(sut->tick(at(1.13, 1.13, 0.45), 0.3).steering, -0.1, 1e-12);
+    EXPECT_NEAR(sut->tick(at(0.84, 0.84, 0.43), 0.0125).steering, -0.05, 1e-12);
+    // A late sample after 0.3 m driven in one tick: 2 cm is the car's drift, followed.
+    EXPECT_NEAR(sut->tick(at(1.14, 1.14, 0.445), 0.3).steering, -0.09, 1e-12);
+}
+
+TEST(FsmEngine, FollowWallNeverTakesALoneReadingAtANichesEdge)
+{
+    auto sut = machine(R"({"root": 0, "states": [{"id": 0, "type": "FollowWall", "side": "right", "clearance": 0.4, "p": 2, "d": 0}], "transitions": []})");
+    sut->tick(at(0, 0, 0.40), 0.0125);
+    for (double s = 0.01; s < 0.8; s += 0.01) sut->tick(at(s, s, 0.65), 0.0125);
+    // The ranger's beam leaves the niche across its edge: one reading half in it, within the
+    // 10 cm that 0.8 m blind allows, then the wall.
+    EXPECT_NEAR(sut->tick(at(0.80, 0.80, 0.48), 0.0125).steering, 0.0, 1e-12);
+    EXPECT_NEAR(sut->tick(at(0.81, 0.81, 0.40), 0.0125).steering, 0.0, 1e-12);
+    EXPECT_NEAR(sut->tick(at(0.82, 0.82, 0.41), 0.0125).steering, -0.02, 1e-12);
+}
+
+TEST(FsmEngine, WhileBlindFollowWallMovesTheWallByTheCarsOwnTurn)
+{
+    auto sut = machine(R"({"root": 0, "states": [{"id": 0, "type": "FollowWall", "side": "right", "clearance": 0.4, "p": 2, "d": 0}], "transitions": []})");
+    sut->tick(at(0, 0, 0.42), 0.0125);  // 2 cm too far: steers right
+    EXPECT_NEAR(sut->tick(at(0.01, 0.01, 0.42), 0.0125).steering, -0.04, 1e-12);
+    // Into a niche, the car turned 0.1 rad right: after 0.2 m the wall it cannot see is
+    // 0.2 sin(0.1) nearer, so it steers back left.
+    Inputs in = at(0.02, 0.21, 0.65);
+    in.yaw = -0.1;
+    EXPECT_NEAR(sut->tick(in, 0.0125).steering, -2 * (0.42 - 0.2 * std::sin(0.1) - 0.4), 1e-12);
+    // Turned back to the heading of the last reading taken, it keeps that line.
+    in = at(0.03, 0.31, 0.65);
+    EXPECT_NEAR(sut->tick(in, 0.0125).steering, -2 * (0.42 - 0.2 * std::sin(0.1) - 0.4), 1e-12);
 }
 
 TEST(FsmEngine, SensorLevelWaitsForItsDebounceCountAndTimeoutForItsSeconds)
