@@ -325,4 +325,26 @@ void LabTimer::start_async(Callback callback, std::function<void()> on_stop)
 }
 
 }  // namespace detail
+bool wait_for_inputs(const std::string& node_id, const std::vector<TimerInput>& inputs, const std::function<bool()>& stop_requested)
+{
+    const auto said_at = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    bool said = false;
+    for (;;) {
+        std::string missing;
+        for (const auto& in : inputs) {
+            if (in.matched_writers() == 0) missing += (missing.empty() ? "" : ", ") + in.topic;
+        }
+        if (missing.empty()) {
+            if (said) CPM_LOG_INFO("%s: every input has a writer now; joining the lab clock", node_id.c_str());
+            return true;
+        }
+        if (stop_requested()) return false;
+        if (!said && std::chrono::steady_clock::now() >= said_at) {
+            CPM_LOG_WARN("%s: waiting for a writer of %s before joining the lab's simulated clock", node_id.c_str(), missing.c_str());
+            said = true;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+}
+
 }  // namespace cpm

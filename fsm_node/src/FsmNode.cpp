@@ -7,6 +7,7 @@
 #include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
 #include <cpm/percentile.hpp>
 #include <cpm/stamp_message.hpp>
 #include <cpm/topics.hpp>
@@ -81,6 +82,18 @@ std::string RunReport::text() const
 }
 
 namespace {
+
+/// Whether a state or transition of the machine works on ArUco markers.
+bool uses_markers(const Machine& m)
+{
+    for (const auto& st : m.states()) {
+        if (st->type().find("Aruco") != std::string::npos) return true;
+    }
+    for (const auto& t : m.transitions()) {
+        if (t->type().find("Aruco") != std::string::npos) return true;
+    }
+    return false;
+}
 
 /// The states that follow a wall: id → (side, clearance), from the checked machine's JSON.
 std::map<int, std::pair<std::string, double>> walls_of(const std::string& machine_json)
@@ -270,7 +283,17 @@ void FsmNode::run(const std::function<bool()>& stop_requested)
         impl_->brake(get_time_ns(), true);
         return;
     }
-    auto timer = Timer::create(timer_ids::fsm_node(impl_->options.vehicle_id), period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
+    const std::string node_id = timer_ids::fsm_node(impl_->options.vehicle_id);
+    if (init_settings().simulated_time) {
+        // The car's state and ranges, and the markers when the machine looks for gates.
+        std::vector<TimerInput> inputs{{topics::vehicle_state.name, [this] { return impl_->states.matched_publications(); }},
+                                       {topics::range_sensors.name, [this] { return impl_->ranges.matched_publications(); }}};
+        if (uses_markers(*impl_->machine)) {
+            inputs.push_back({topics::aruco_markers.name, [this] { return impl_->markers.matched_publications(); }});
+        }
+        if (!wait_for_inputs(node_id, inputs, stop_requested)) return;
+    }
+    auto timer = Timer::create(node_id, period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) {
         if (!impl_->tick()) timer->stop();
     });

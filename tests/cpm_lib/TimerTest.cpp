@@ -437,3 +437,41 @@ TEST_F(TimerTest, CpmLabsTwoBooleanFormStillWorks)
     EXPECT_TRUE(cpm_test::wait_until([&] { return calls() >= 2; }, 5000ms));  // ticked without waiting for a start
     sut->stop();
 }
+
+// A node on the simulated clock waits for a writer of each input before it announces its timer:
+// it says which topics it still waits for, and goes on once they have writers.
+TEST_F(TimerTest, ANodeWaitsForAWriterOfEachInputBeforeJoiningTheSimulatedClockAndSaysWhichItLacks)
+{
+    const std::string log = "/tmp/cpm_timer_inputs_" + std::to_string(::getpid()) + ".csv";
+    cpm::Logging::instance().set_file(log);
+    cpm::ReaderAbstract<ReadyStatus> first(node, "inputOne", {.reliable = true});
+    cpm::ReaderAbstract<ReadyStatus> second(node, "inputTwo", {.reliable = true});
+    const std::vector<cpm::TimerInput> inputs{{"inputOne", [&] { return first.matched_publications(); }},
+                                              {"inputTwo", [&] { return second.matched_publications(); }}};
+    // No writers: it waits until told to stop, and says so after 2 s, naming both topics.
+    std::atomic<bool> stop{false};
+    std::thread stopper([&] {
+        std::this_thread::sleep_for(2500ms);
+        stop = true;
+    });
+    EXPECT_FALSE(cpm::wait_for_inputs("some_node_3", inputs, [&] { return stop.load(); }));
+    stopper.join();
+    // One writer appears at once, the other 300 ms later: it returns once both are there.
+    cpm::Writer<ReadyStatus> one(lab, "inputOne", {.reliable = true});
+    std::unique_ptr<cpm::Writer<ReadyStatus>> two;
+    std::thread later([&] {
+        std::this_thread::sleep_for(300ms);
+        two = std::make_unique<cpm::Writer<ReadyStatus>>(lab, "inputTwo", cpm::WriterOptions{.reliable = true});
+    });
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_TRUE(cpm::wait_for_inputs("some_node_3", inputs, [] { return false; }));
+    EXPECT_GE(std::chrono::steady_clock::now() - t0, 300ms);
+    later.join();
+    EXPECT_EQ(second.matched_publications(), 1u);
+    cpm::Logging::instance().set_file("");
+    std::ifstream in(log);
+    std::string said;
+    for (std::string line; std::getline(in, line);) said += line + "\n";
+    std::remove(log.c_str());
+    EXPECT_THAT(said, HasSubstr("some_node_3: waiting for a writer of inputOne, inputTwo before joining the lab's simulated clock"));
+}

@@ -5,6 +5,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include <cpm/Participant.hpp>
 
@@ -88,5 +89,20 @@ public:
 /// N back from such a message (cpm lab run counts the lab's missed deadlines this way); nullopt
 /// for any other message.
 std::optional<std::pair<std::string, uint64_t>> timer_missed_ticks(const std::string& message);
+
+/// An input of a node: its topic and how many writers its reader has matched.
+struct TimerInput
+{
+    std::string topic;
+    std::function<size_t()> matched_writers;
+};
+
+/// On the lab's simulated clock, lab time moves on as soon as every timer has finished its tick:
+/// a sample written before its reader had matched is lost for good, and what a run does would
+/// depend on how fast discovery was. A node on that clock calls this before it creates its
+/// timer (which announces it to the clock): it waits until each input has a writer. After 2 s
+/// it says once, as `node_id`, which topics it still waits for. False when `stop_requested()`
+/// turned true first.
+bool wait_for_inputs(const std::string& node_id, const std::vector<TimerInput>& inputs, const std::function<bool()>& stop_requested);
 
 }  // namespace cpm
