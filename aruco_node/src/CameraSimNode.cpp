@@ -7,6 +7,7 @@
 #include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/init.hpp>
 #include <cpm/percentile.hpp>
 #include <cpm/topics.hpp>
 
@@ -102,7 +103,14 @@ CameraSimNode::~CameraSimNode() = default;
 void CameraSimNode::run(const std::function<bool()>& stop_requested)
 {
     const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
-    auto timer = Timer::create(timer_ids::camera_sim(impl_->options.vehicle_id), period_ns, 0,
+    const std::string node_id = timer_ids::camera_sim(impl_->options.vehicle_id);
+    // On the simulated clock: the car's true pose must reach the first frame.
+    if (init_settings().simulated_time &&
+        !wait_for_inputs(node_id, {{topics::vehicle_observation.name, [&] { return impl_->poses.matched_publications(); }}},
+                         stop_requested)) {
+        return;
+    }
+    auto timer = Timer::create(node_id, period_ns, 0,
                                TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) { impl_->tick(); });
 }

@@ -226,12 +226,13 @@ protected:
         lab.start("fsm", {built_program("fsm_node"), "--vehicle_id", "6", "--fsm", kMachine});
         history = std::make_unique<cpm::HistoryClient>(lab.participant);
         // Running: the car drives forward on the machine's commands, markers are seen, the
-        // history holds the car's state.
+        // history holds the car's state and its markers (the kill tests ask it for both).
         ASSERT_TRUE(cpm_test::wait_until(
             [&] {
                 const auto pwm = pwm_after(lab["sim"], 0);
                 return !pwm.empty() && pwm.back().second == 1 && markers.first_after(0) &&
-                       history->latest("vehicleState", "6").status() == "ok";
+                       history->latest("vehicleState", "6").status() == "ok" &&
+                       history->latest("arucoMarkers", "6").status() == "ok";
             },
             30s, 20ms))
             << lab.logs();

@@ -149,15 +149,15 @@ TEST_P(FsmNodeTicking, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCorn
         ++checked_second;
     }
     EXPECT_GT(checked_second, 30u);
-    EXPECT_LT(worst_second, 0.05);
+    EXPECT_LT(worst_second, 0.05) << run.output;
     // Where it must stop: 0.5 m from the right wall (x = 8.0 - 0.5 - 0.09, the ranger's offset),
     // heading up the leg, and once the front ranger (0.30 m ahead) read 0.6 m to the end wall
     // (y = 5.0 - 0.6 - 0.30) plus what 0.5 m/s covers in the 2-tick debounce, the 30 ms actuation
     // delay and the braking (~0.1 s): about 0.05 m.
     const auto& end = run.track.back().pose();
-    EXPECT_NEAR(end.yaw(), M_PI / 2, 0.1);
-    EXPECT_NEAR(end.x(), 8.0 - 0.5 - 0.09, 0.1);
-    EXPECT_NEAR(end.y(), 5.0 - 0.6 - 0.30 + 0.05, 0.1);
+    EXPECT_NEAR(end.yaw(), M_PI / 2, 0.1) << run.output;
+    EXPECT_NEAR(end.x(), 8.0 - 0.5 - 0.09, 0.1) << run.output;
+    EXPECT_NEAR(end.y(), 5.0 - 0.6 - 0.30 + 0.05, 0.1) << run.output;
     std::printf("first leg: clearance within %.0f mm of 0.5 m over %zu observations; second leg within %.0f mm over %zu; "
                 "|steering| (0.2 s mean) up to %.2f on the straight, %.2f at the niche; stopped at (%.2f, %.2f, %.2f)\n",
                 worst * 1000, checked, worst_second * 1000, checked_second, steer_straight, steer_niche, end.x(), end.y(),
