@@ -174,7 +174,9 @@ struct ArucoNode::Impl
         uint64_t last_stamp = 0;
         bool seen_any = false;
         const std::string node_id = timer_ids::aruco_node(options.vehicle_id);
-        if (!wait_for_inputs(node_id, {{topics::camera_frame.name, [&] { return frames.matched_publications(); }}}, stop_requested)) return;
+        if (!wait_for_inputs(node_id, {{topics::camera_frame.name, [&] { return frames.matched_publications(); }}}, stop_requested)) {
+            return;
+        }
         auto timer = Timer::create(node_id, period_ns, offset_ns,
                                    TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
         timer->run_until(stop_requested, [&](uint64_t t) {

@@ -291,7 +291,10 @@ void FsmNode::run(const std::function<bool()>& stop_requested)
         if (uses_markers(*impl_->machine)) {
             inputs.push_back({topics::aruco_markers.name, [this] { return impl_->markers.matched_publications(); }});
         }
-        if (!wait_for_inputs(node_id, inputs, stop_requested)) return;
+        if (!wait_for_inputs(node_id, inputs, stop_requested)) {
+            impl_->brake(get_time_ns(), true);
+            return;
+        }
     }
     auto timer = Timer::create(node_id, period_ns, 0, cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) {
