@@ -62,15 +62,15 @@ struct HistoryService::Impl
     struct Serving
     {
         std::unique_ptr<Participant> own;
-        Participant* participant;
         RequestServer requests;
         Writer<HistoryStatus> status;
 
         Serving(const Store& store, std::unique_ptr<Participant> p, size_t workers)
-            : own(std::move(p)), participant(own ? own.get() : &Participant::default_participant()),
-              requests(store, *participant, workers), status(*participant, topics::history_status.name, topics::history_status.writer)
+            : own(std::move(p)), requests(store, participant(), workers),
+              status(participant(), topics::history_status.name, topics::history_status.writer)
         {
         }
+        Participant& participant() const { return own ? *own : Participant::default_participant(); }
     };
     mutable std::mutex serving_mutex;  // counters() reads while the control thread replaces it
     std::unique_ptr<Serving> serving;
@@ -96,15 +96,11 @@ struct HistoryService::Impl
         return std::make_unique<Participant>(srv);
     }
 
-    uint64_t requests() const
+    /// Requests answered and refused, the replaced servers' included.
+    std::pair<uint64_t, uint64_t> request_counts() const
     {
         std::lock_guard lock(serving_mutex);
-        return requests_before + serving->requests.requests();
-    }
-    uint64_t bad_requests() const
-    {
-        std::lock_guard lock(serving_mutex);
-        return bad_requests_before + serving->requests.bad_requests();
+        return {requests_before + serving->requests.requests(), bad_requests_before + serving->requests.bad_requests()};
     }
 
     ~Impl()
@@ -197,8 +193,9 @@ struct HistoryService::Impl
         s.evicted(st.evicted);
         s.dropped(ingest.dropped());
         s.lost(ingest.lost());
-        s.requests(requests());
-        s.bad_requests(bad_requests());
+        const auto [answered, refused] = request_counts();
+        s.requests(answered);
+        s.bad_requests(refused);
         const double period_s = double(options.status_period_ns) * 1e-9;
         for (const auto& t : ingest.topic_counts()) {
             HistoryTopicStatus ts;
@@ -224,7 +221,8 @@ const Store& HistoryService::store() const { return impl_->store; }
 ServiceCounters HistoryService::counters() const
 {
     const auto& d = *impl_;
-    return {d.ingest.topic_count(), d.ingest.received(), d.ingest.dropped(), d.requests(), d.bad_requests(),
+    const auto [answered, refused] = d.request_counts();
+    return {d.ingest.topic_count(), d.ingest.received(), d.ingest.dropped(), answered, refused,
             d.ingest.lost()};
 }
 
