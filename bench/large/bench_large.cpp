@@ -8,7 +8,8 @@
 //             ReaderAbstract::take_each: written and read where it lies, no copy
 //   Cyclone   cyclone_bench --type blob (BenchBlob through idlc), loopback UDP
 //
-//   bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 230]
+//   bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 220]
+//   (domains D to D+3: one per cpm case, the last for Cyclone DDS, whose highest is 232)
 //
 // Every sample carries only a fresh sequence number; its bytes are written once, before the run,
 // in every case (as ddsperf and cyclone_bench do), so the figures are what carrying costs.
@@ -79,7 +80,8 @@ public:
     bool write(uint64_t seq) override
     {
         if constexpr (kInPlace) {
-            return writer_.write_in_place([&](T& s) { s.seq(seq); });
+            // A 32-bit sequence number (the type has no 8-byte field); the end marker is its maximum.
+            return writer_.write_in_place([&](T& s) { s.seq(seq == kEndMarker ? UINT32_MAX : static_cast<uint32_t>(seq)); });
         } else {
             sample_.seq(seq);
             return writer_.write(sample_);
@@ -87,7 +89,11 @@ public:
     }
     size_t take(const std::function<void(uint64_t)>& each) override
     {
-        return reader_.take_each([&](const T& s) { each(s.seq()); });
+        if constexpr (kInPlace) {
+            return reader_.take_each([&](const T& s) { each(s.seq() == UINT32_MAX ? kEndMarker : s.seq()); });
+        } else {
+            return reader_.take_each([&](const T& s) { each(s.seq()); });
+        }
     }
     bool wait(std::chrono::milliseconds timeout) override { return reader_.wait_for_data(timeout); }
     bool connected() override { return writer_.wait_for_matched(1, 20s) && reader_.wait_for_matched(1, 20s); }
@@ -226,7 +232,7 @@ Rate cyclone_throughput(int domain, size_t size, int seconds)
 int main(int argc, char** argv)
 {
     const std::string role = bench::arg(argc, argv, "--role", "main");
-    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "230"));
+    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "220"));
     if (role != "main") {
         std::signal(SIGTERM, [](int) { g_stop = true; });
         const std::string mode = bench::arg(argc, argv, "--mode", "shm");
@@ -235,8 +241,14 @@ int main(int argc, char** argv)
         return subscribe(domain, mode, size, std::stoi(bench::arg(argc, argv, "--seconds", "60")));
     }
     if (argc > 1 && std::string(argv[1]) == "--help") {
-        std::puts("usage: bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 230]");
+        std::puts("usage: bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 220]\n"
+                  "  uses domains D to D+3; the last is Cyclone DDS's, which must be at most 232");
         return 0;
+    }
+    if (domain < 0 || domain + 3 > 232) {
+        std::fprintf(stderr, "bench_large: --domain %d: the run uses domains %d to %d, and Cyclone DDS (the last) "
+                     "takes at most 232\n", domain, domain, domain + 3);
+        return 2;
     }
     const int count = std::stoi(bench::arg(argc, argv, "--count", "500"));
     const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "3"));

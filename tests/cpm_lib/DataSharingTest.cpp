@@ -6,6 +6,7 @@
 #include <cpm_test/Isolation.hpp>
 
 #include <Log.h>
+#include <LogLevel.h>
 #include <SystemTrigger.h>
 #include <VehicleState.h>
 
@@ -69,22 +70,59 @@ TEST_F(DataSharing, APoolLargerThanTheBoundIsRefusedWithItsSize)
 
 TEST_F(DataSharing, APlainTypeWrittenInPlaceArrivesWhereItLiesInOrder)
 {
-    cpm::Writer<SystemTrigger> writer(writer_side, topic, kSharedWriter);
-    cpm::ReaderAbstract<SystemTrigger> reader(reader_side, topic, kSharedReader);
+    static_assert(alignof(LogLevel) <= 4, "a type Fast DDS 2.9 lends aligned in data sharing's pool");
+    cpm::Writer<LogLevel> writer(writer_side, topic, kSharedWriter);
+    cpm::ReaderAbstract<LogLevel> reader(reader_side, topic, kSharedReader);
     ASSERT_TRUE(writer.wait_for_matched(1, 5000ms) && reader.wait_for_matched(1, 5000ms));
     EXPECT_TRUE(writer.shares_in_place());
 
+    for (uint16_t i = 1; i <= 50; ++i) {
+        ASSERT_TRUE(writer.write_in_place([&](LogLevel& l) { l.log_level(i); }));
+    }
+
+    std::vector<uint16_t> got;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        reader.take_each([&](const LogLevel& l) { got.push_back(l.log_level()); });
+        return got.size() >= 50;
+    })) << got.size() << " of 50";
+    std::vector<uint16_t> expected;
+    for (uint16_t i = 1; i <= 50; ++i) expected.push_back(i);
+    EXPECT_EQ(got, expected);
+}
+
+// Fast DDS 2.9 lays a shared sample 4 bytes past an 8-byte boundary: a type with 8-byte fields
+// is not handed out there (a T& would be misaligned; the sanitizer build reports that), it is
+// written as a copy and each reader gets an aligned copy, every value intact and in order.
+TEST_F(DataSharing, APlainTypeWithEightByteFieldsIsWrittenAndReadAsAlignedCopies)
+{
+    static_assert(alignof(SystemTrigger) == 8);
+    cpm::Writer<SystemTrigger> writer(writer_side, topic, kSharedWriter);
+    cpm::ReaderAbstract<SystemTrigger> reader(reader_side, topic, kSharedReader);
+    ASSERT_TRUE(writer.wait_for_matched(1, 5000ms) && reader.wait_for_matched(1, 5000ms));
+    EXPECT_FALSE(writer.shares_in_place());
+
     for (uint64_t i = 1; i <= 50; ++i) {
-        ASSERT_TRUE(writer.write_in_place([&](SystemTrigger& t) { t.next_start().nanoseconds(i); }));
+        const uint64_t big = (i << 40) + i;  // bytes beyond the first four
+        if (i % 2 == 0) {
+            ASSERT_TRUE(writer.write_in_place([&](SystemTrigger& t) { t.next_start().nanoseconds(big); }));
+        } else {
+            SystemTrigger t;
+            t.next_start().nanoseconds(big);
+            ASSERT_TRUE(writer.write(t));
+        }
     }
 
     std::vector<uint64_t> got;
     ASSERT_TRUE(cpm_test::wait_until([&] {
-        reader.take_each([&](const SystemTrigger& t) { got.push_back(t.next_start().nanoseconds()); });
+        if (got.size() < 25) {
+            reader.take_each([&](const SystemTrigger& t) { got.push_back(t.next_start().nanoseconds()); });
+        } else {
+            for (const SystemTrigger& t : reader.take()) got.push_back(t.next_start().nanoseconds());
+        }
         return got.size() >= 50;
     })) << got.size() << " of 50";
     std::vector<uint64_t> expected;
-    for (uint64_t i = 1; i <= 50; ++i) expected.push_back(i);
+    for (uint64_t i = 1; i <= 50; ++i) expected.push_back((i << 40) + i);
     EXPECT_EQ(got, expected);
 }
 
@@ -108,22 +146,23 @@ TEST_F(DataSharing, WriteInPlaceOfATypeThatIsNotPlainWritesACopy)
 
 TEST_F(DataSharing, AFillThatThrowsPublishesNothing)
 {
-    cpm::Writer<SystemTrigger> writer(writer_side, topic, kSharedWriter);
-    cpm::ReaderAbstract<SystemTrigger> reader(reader_side, topic, kSharedReader);
+    cpm::Writer<LogLevel> writer(writer_side, topic, kSharedWriter);
+    cpm::ReaderAbstract<LogLevel> reader(reader_side, topic, kSharedReader);
     ASSERT_TRUE(writer.wait_for_matched(1, 5000ms) && reader.wait_for_matched(1, 5000ms));
+    ASSERT_TRUE(writer.shares_in_place());  // the fill runs on a lent sample, which goes back unpublished
 
-    EXPECT_THROW((void)writer.write_in_place([](SystemTrigger&) { throw std::runtime_error("camera failed"); }),
+    EXPECT_THROW((void)writer.write_in_place([](LogLevel&) { throw std::runtime_error("camera failed"); }),
                  std::runtime_error);
-    ASSERT_TRUE(writer.write_in_place([](SystemTrigger& t) { t.next_start().nanoseconds(7); }));
+    ASSERT_TRUE(writer.write_in_place([](LogLevel& l) { l.log_level(7); }));
 
-    std::vector<uint64_t> got;
+    std::vector<uint16_t> got;
     ASSERT_TRUE(cpm_test::wait_until([&] {
-        reader.take_each([&](const SystemTrigger& t) { got.push_back(t.next_start().nanoseconds()); });
+        reader.take_each([&](const LogLevel& l) { got.push_back(l.log_level()); });
         return !got.empty();
     }));
     EXPECT_TRUE(cpm_test::holds_for([&] {
-        reader.take_each([&](const SystemTrigger& t) { got.push_back(t.next_start().nanoseconds()); });
+        reader.take_each([&](const LogLevel& l) { got.push_back(l.log_level()); });
         return got.size() == 1;
     }, 200ms));
-    EXPECT_EQ(got, std::vector<uint64_t>{7});
+    EXPECT_EQ(got, std::vector<uint16_t>{7});
 }

@@ -44,7 +44,7 @@ public:
         // The worker owns what it touches, so a reader destroyed from inside its callback is safe.
         worker_ = std::make_unique<detail::AsyncWorker>(core_, [this, callback = std::move(callback)] {
             std::vector<T> batch;
-            core_.drain([&](void* s) { batch.push_back(std::move(*static_cast<T*>(s))); });
+            core_.drain([&](void* s) { detail::with_lent<T>(s, [&](T& t) { batch.push_back(std::move(t)); }); });
             if (!batch.empty()) callback(batch);
         });
     }
@@ -68,7 +68,7 @@ private:
     detail::ReaderCore::Sink arrival_sink(const ReaderOptions& options)
     {
         if (!options.dds_thread_callback) return {};
-        return [this](void* s) { batch_.push_back(std::move(*static_cast<T*>(s))); };
+        return [this](void* s) { detail::with_lent<T>(s, [this](T& t) { batch_.push_back(std::move(t)); }); };
     }
     detail::ReaderCore::BatchEnd batch_end(const ReaderOptions& options)
     {

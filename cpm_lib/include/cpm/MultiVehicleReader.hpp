@@ -45,7 +45,7 @@ public:
                        ReaderOptions options = {})
         : buffers_(make_buffers(topic, vehicle_ids, options.buffer_capacity)),
           core_(participant.core(), topic, &detail::make_type_support<T>, options, "MultiVehicleReader",
-                [this](void* s) { buffer(std::move(*static_cast<T*>(s))); })
+                [this](void* s) { detail::with_lent<T>(s, [this](T& t) { buffer(std::move(t)); }); })
     {
     }
 

@@ -39,7 +39,7 @@ public:
         : selector_(options.buffer_capacity),
           vehicle_filter_(vehicle_filter(topic, options)),
           core_(participant.core(), topic, &detail::make_type_support<T>, options, "Reader",
-                [this](void* s) { buffer(std::move(*static_cast<T*>(s))); })
+                [this](void* s) { detail::with_lent<T>(s, [this](T& t) { buffer(std::move(t)); }); })
     {
     }
 

@@ -31,19 +31,20 @@ public:
     std::vector<T> take()
     {
         std::vector<T> samples;
-        core_.drain([&](void* s) { samples.push_back(std::move(*static_cast<T*>(s))); });
+        core_.drain([&](void* s) { detail::with_lent<T>(s, [&](T& t) { samples.push_back(std::move(t)); }); });
         return samples;
     }
 
     /// Takes what arrived, like take(), but passes each sample to `each(const T&)` where it
     /// lies instead of moving it into a vector. Shared by a writer with data_sharing and a plain
-    /// type (Writer::write_in_place), that is the writer's memory: nothing is copied. Keep
+    /// type (Writer::write_in_place), that is the writer's memory: nothing is copied (a type with
+    /// 8-byte fields lies misaligned there and is passed as an aligned copy). Keep
     /// `each` short: the sample's slot returns to the writer afterwards (a writer that needs
     /// it back sooner overwrites it, which is logged). Returns how many samples were passed.
     template <class Each>
     size_t take_each(Each&& each)
     {
-        return core_.drain([&](void* s) { each(*static_cast<const T*>(s)); });
+        return core_.drain([&](void* s) { detail::with_lent<T>(s, [&](const T& t) { each(t); }); });
     }
 
     /// Waits until a sample can be taken; false on timeout.

@@ -33,15 +33,21 @@ public:
 
     /// Fills a sample in place and publishes it: `fill(T&)` sets every field, for a lent sample
     /// holds an earlier sample's bytes. With data_sharing and a plain type (fixed-size fields
-    /// only, no sequence or string; see shares_in_place()) the sample lies in shared memory and
-    /// readers on this host read it there: no copy between the processes, none into DDS. A
-    /// plain type without data sharing is still not copied into DDS; any other type is filled
-    /// in a new sample and written as by write(). False as for write(); an exception from fill
-    /// passes through and nothing is published.
+    /// only, no sequence or string) aligned to at most 4 bytes (see shares_in_place()) the sample
+    /// lies in shared memory and readers on this host read it there: no copy between the
+    /// processes, none into DDS. A plain type without data sharing is still not copied into DDS;
+    /// any other type, and a plain type that Fast DDS would lend misaligned, is filled in a new
+    /// sample and written as by write(). False as for write(); an exception from fill passes
+    /// through and nothing is published.
     template <class Fill>
     [[nodiscard]] bool write_in_place(Fill&& fill)
     {
-        if (void* lent = core_.loan()) {
+        void* lent = core_.loan();
+        if (lent != nullptr && !detail::aligned_for<T>(lent)) {
+            core_.discard_loan(lent);  // a T& there would be undefined behaviour
+            lent = nullptr;
+        }
+        if (lent != nullptr) {
             try {
                 fill(*static_cast<T*>(lent));
             } catch (...) {
@@ -54,8 +60,14 @@ public:
         fill(*sample);
         return core_.write(sample.get());
     }
-    /// Whether write_in_place() hands readers on this host the very memory it filled.
-    bool shares_in_place() const { return core_.loans_are_shared(); }
+    /// Whether write_in_place() hands readers on this host the very memory it filled: with
+    /// data_sharing, for a plain type whose alignment is at most 4 (Fast DDS 2.9 lays shared
+    /// samples 4 bytes past an 8-byte boundary, so a type with 8-byte fields is copied instead;
+    /// give a zero-copy type 4-byte fields: `unsigned long`, `float`, octet arrays).
+    bool shares_in_place() const
+    {
+        return core_.loans_are_shared() && alignof(T) <= detail::kLentSampleAlignment;
+    }
 
     /// Readers matched right now (goes down again when a reader goes away).
     size_t matched_subscriptions() const { return core_.matched_subscriptions(); }

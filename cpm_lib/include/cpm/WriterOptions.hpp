@@ -22,7 +22,8 @@ struct WriterOptions
     /// transport); off by default, slower for small ones (bench/latency). Needs a bounded,
     /// unkeyed type and no DDS Security (else refused, naming why); the pool holds twice the
     /// history (history_depth, or max_unacknowledged with keep_all) and is limited to 512 MiB.
-    /// With a plain type, write_in_place() and ReaderAbstract::take_each() copy nothing at all.
+    /// With a plain type aligned to at most 4 bytes (Writer::shares_in_place()),
+    /// write_in_place() and ReaderAbstract::take_each() copy nothing at all.
     /// The samples live in the writer's pool: what a reader has not taken when the writer is
     /// destroyed is lost, so wait_for_acknowledgments() before a writer goes.
     bool data_sharing = false;
