@@ -86,7 +86,13 @@ TEST(Overload, AReaderThatStopsReadingDoesNotGrowTheWritersMemoryAndWritingResum
     const double grown_mib = (double(resident_bytes()) - double(before)) / (1024.0 * 1024.0);
     EXPECT_LE(accepted, 1024) << "the window of unacknowledged samples";
     EXPECT_GT(refused, 0) << "a full window refuses, visibly";
+#ifndef __SANITIZE_ADDRESS__
     EXPECT_LT(grown_mib, 16.0) << "the writer's memory grew by " << grown_mib << " MiB for a reader that reads nothing";
+#else
+    // AddressSanitizer holds up to 256 MB of freed memory back (its quarantine): the growth of the
+    // resident set says nothing there. Judged in every other build.
+    std::printf("AddressSanitizer build: the writer's memory growth (%.1f MiB) is not judged\n", grown_mib);
+#endif
 
     reader.kill(SIGCONT);
     EXPECT_TRUE(all.wait_for_acknowledgments(20s)) << "the reader takes what was kept for it";

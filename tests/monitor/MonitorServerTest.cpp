@@ -20,6 +20,7 @@
 
 #include <arpa/inet.h>
 #include <atomic>
+#include <cstdio>
 #include <fstream>
 #include <regex>
 #include <netinet/in.h>
@@ -315,5 +316,12 @@ TEST_F(MonitorServer, AWatcherThatStopsReadingIsDroppedWithoutSlowingTheOthers)
     ::close(stuck);
     EXPECT_TRUE(dropped) << "the watcher that stopped reading is let go after the write timeout";
     EXPECT_GE(got, 8 * 15) << "the reading watcher kept getting snapshots (most of 50 a second)";
+#ifndef __SANITIZE_ADDRESS__
     EXPECT_LT(rss_bytes(), rss_before + 32u * 1024 * 1024) << "no queue grows for the stuck watcher";
+#else
+    // AddressSanitizer holds up to 256 MB of freed memory back (its quarantine): the growth of the
+    // resident set says nothing there. Judged in every other build.
+    std::printf("AddressSanitizer build: the memory growth (%.1f MiB) is not judged\n",
+                (double(rss_bytes()) - double(rss_before)) / (1024.0 * 1024.0));
+#endif
 }
