@@ -7,6 +7,8 @@
 #include <cpm/init.hpp>
 #include <cpm/topics.hpp>
 
+#include "UntilExit.hpp"
+
 #include <Log.h>
 #include <LogLevel.h>
 
@@ -84,10 +86,10 @@ struct Logging::Impl
     /// `pending` and are published once the writer exists.
     void start()
     {
-        if (dds.load(std::memory_order_acquire) != nullptr || creating.exchange(true)) return;
-        Dds* d = nullptr;
+        if (creating.exchange(true)) return;
+        std::unique_ptr<Dds> d;
         try {
-            d = new Dds(level);  // never destroyed, like Logging itself
+            d = std::make_unique<Dds>(level);  // destroyed at exit (UntilExit), the log itself never
         } catch (const std::exception& e) {
             std::fprintf(stderr, "[error] %s: Logging: no `log` topic (%s); messages go to stderr and the file only\n",
                          node_id.c_str(), e.what());
@@ -95,34 +97,37 @@ struct Logging::Impl
         std::vector<Log> waiting;
         {
             std::lock_guard<std::mutex> lock(pending_mutex);
-            dds.store(d, std::memory_order_release);
             failed = d == nullptr;
+            if (d) dds.set(std::move(d));
             waiting.swap(pending);
         }
-        if (d != nullptr) {
-            for (const auto& w : waiting) (void)d->log_writer.write(w);
+        if (auto use = dds.use()) {
+            for (const auto& w : waiting) (void)use->log_writer.write(w);
         }
     }
 
     void publish(const Log& log)
     {
-        Dds* d = dds.load(std::memory_order_acquire);
-        if (d == nullptr) {
-            std::lock_guard<std::mutex> lock(pending_mutex);
-            d = dds.load(std::memory_order_relaxed);
-            if (d == nullptr) {
-                if (!failed) pending.push_back(log);
+        for (;;) {
+            if (auto use = dds.use()) {
+                (void)use->log_writer.write(log);  // never under pending_mutex: a reader in this process may log from the write
                 return;
             }
+            std::lock_guard<std::mutex> lock(pending_mutex);
+            if (failed || dds.closed()) return;  // no topic, or the process is exiting: stderr and the file only
+            if (!dds.is_set()) {
+                pending.push_back(log);
+                return;
+            }
+            // set meanwhile: written outside the lock
         }
-        (void)d->log_writer.write(log);  // never under pending_mutex: a reader in this process may log from the write
     }
 
     const std::string node_id;
     std::atomic<uint16_t> level{static_cast<uint16_t>(Severity::info)};
     std::mutex file_mutex;
     std::FILE* file = nullptr;
-    std::atomic<Dds*> dds{nullptr};
+    detail::UntilExit<Dds> dds;
     std::atomic<bool> creating{false};
     std::mutex pending_mutex;
     std::vector<Log> pending;  ///< under pending_mutex, while another thread creates `dds`

@@ -63,6 +63,31 @@ rtps::Locator_t udp_locator(const std::string& text, const std::string& what)
     return locator;
 }
 
+/// Fast DDS's shared-memory ports of a domain: 7400 + 250 * domain + offsets below 250.
+bool port_of_domain(unsigned port, int domain_id)
+{
+    const unsigned first = 7400u + 250u * static_cast<unsigned>(domain_id);
+    return port >= first && port < first + 250u;
+}
+
+/// Removes the markers (below) of this domain's ports whose files are gone: a port that its
+/// process released on a clean exit needs no marker, and none may pile up in /dev/shm.
+void forget_gone_ports(int domain_id)
+{
+    DIR* dir = ::opendir("/dev/shm");
+    if (dir == nullptr) return;
+    while (const dirent* entry = ::readdir(dir)) {
+        unsigned port = 0;
+        char tail = 0;
+        if (std::sscanf(entry->d_name, "cpm_dead_fastrtps_port%u%c", &port, &tail) != 1 || !port_of_domain(port, domain_id)) continue;
+        struct stat lock {};
+        if (::stat(("/dev/shm/fastrtps_port" + std::to_string(port) + "_el").c_str(), &lock) != 0) {
+            ::unlink((std::string("/dev/shm/") + entry->d_name).c_str());
+        }
+    }
+    ::closedir(dir);
+}
+
 /// The locks of the shared-memory ports of this domain whose listening process died in the last
 /// few seconds, held while a participant is made. Fast DDS gives a new participant the first port
 /// it can open and takes over a dead process's port at once, but the dead one's peers keep
@@ -78,16 +103,15 @@ class DeadPortsHeld
 public:
     explicit DeadPortsHeld(int domain_id)
     {
-        // Fast DDS's ports of a domain: 7400 + 250 * domain + offsets below 250.
-        const unsigned first = 7400u + 250u * static_cast<unsigned>(domain_id), last = first + 250u;
+        forget_gone_ports(domain_id);
         DIR* dir = ::opendir("/dev/shm");
         if (dir == nullptr) return;
         const auto now = std::chrono::system_clock::now();
         while (const dirent* entry = ::readdir(dir)) {
             unsigned port = 0;
             char tail[4] = {};
-            if (std::sscanf(entry->d_name, "fastrtps_port%u%3s", &port, tail) != 2 || std::string(tail) != "_el" || port < first ||
-                port >= last)
+            if (std::sscanf(entry->d_name, "fastrtps_port%u%3s", &port, tail) != 2 || std::string(tail) != "_el" ||
+                !port_of_domain(port, domain_id))
                 continue;
             const std::string lock = std::string("/dev/shm/") + entry->d_name;
             const std::string marker = "/dev/shm/cpm_dead_fastrtps_port" + std::to_string(port);
@@ -258,7 +282,8 @@ ParticipantCore::ParticipantCore(const ParticipantOptions& options)
 ParticipantCore::~ParticipantCore()
 {
     participant_->delete_contained_entities();
-    factory_->delete_participant(participant_);
+    factory_->delete_participant(participant_);  // Fast DDS unlinks this participant's shared memory here
+    forget_gone_ports(domain_id_);
 }
 
 dds::Topic* ParticipantCore::acquire_topic(const std::string& name, MakeTypeSupport make_type, const char* role)
@@ -331,10 +356,12 @@ Participant& Participant::operator=(Participant&&) noexcept = default;
 
 Participant& Participant::default_participant()
 {
-    // Never destroyed: readers and writers in static objects may outlive main(), and Fast
-    // DDS's factory deletes whatever participants remain when the process ends.
-    static Participant* instance = new Participant(ParticipantOptions::from_init());
-    return *instance;
+    // Destroyed at exit, so that Fast DDS unlinks its shared-memory segment and port files
+    // (4 MB of RAM-backed /dev/shm each, left behind by every process while this was leaked).
+    // Readers and writers in static objects that outlive it hold the participant's core, which
+    // goes with the last of them.
+    static Participant instance(ParticipantOptions::from_init());
+    return instance;
 }
 
 int Participant::domain_id() const { return core_->domain_id(); }

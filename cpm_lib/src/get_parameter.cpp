@@ -5,6 +5,7 @@
 #include <cpm/Writer.hpp>
 #include <cpm/topics.hpp>
 
+#include "UntilExit.hpp"
 #include "parameter_types.hpp"
 
 #include <Parameter.h>
@@ -12,6 +13,7 @@
 
 #include <condition_variable>
 #include <map>
+#include <functional>
 #include <mutex>
 
 namespace cpm {
@@ -61,7 +63,7 @@ private:
             lock.unlock();
             ParameterRequest request;
             request.name(name);
-            (void)requests_.write(request);
+            if (auto use = dds_.use()) (void)use->requests.write(request);
             lock.lock();
             const auto wake = std::min(deadline, std::chrono::steady_clock::now() + std::chrono::milliseconds(500));
             changed_.wait_until(lock, wake, [&] { return values_.count(name) > 0; });
@@ -73,24 +75,32 @@ private:
     }
 
     ParameterCache()
-        : requests_(topics::parameter_request.name, topics::parameter_request.writer),
-          values_reader_(
-              [this](std::vector<Parameter>& batch) {
-                  {
-                      std::lock_guard<std::mutex> lock(mutex_);
-                      for (auto& p : batch) values_[p.name()] = p;
-                  }
-                  changed_.notify_all();
-              },
-              topics::parameter.name, topics::parameter.reader)
     {
+        dds_.set(std::make_unique<Dds>([this](std::vector<Parameter>& batch) {
+            {
+                std::lock_guard<std::mutex> lock(mutex_);
+                for (auto& p : batch) values_[p.name()] = p;
+            }
+            changed_.notify_all();
+        }));
     }
+
+    /// On the default participant; destroyed at exit, the cache itself never.
+    struct Dds
+    {
+        explicit Dds(std::function<void(std::vector<Parameter>&)> on_values)
+            : requests(topics::parameter_request.name, topics::parameter_request.writer),
+              values(std::move(on_values), topics::parameter.name, topics::parameter.reader)
+        {
+        }
+        Writer<ParameterRequest> requests;
+        AsyncReader<Parameter> values;
+    };
 
     std::mutex mutex_;
     std::condition_variable changed_;
     std::map<std::string, Parameter> values_;
-    Writer<ParameterRequest> requests_;
-    AsyncReader<Parameter> values_reader_;  // last: its thread uses the members above
+    detail::UntilExit<Dds> dds_;  // last: its reader's thread uses the members above
 };
 
 Parameter fetch(const std::string& name, ParameterType type, std::chrono::milliseconds timeout)
