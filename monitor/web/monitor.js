@@ -22,6 +22,14 @@ function el(name, attrs, parent) {
   return e;
 }
 
+// An HTML element with attributes and children; a child that is not a node becomes text.
+function html(name, attrs, ...children) {
+  const e = document.createElement(name);
+  for (const [k, v] of Object.entries(attrs || {})) e.setAttribute(k, v);
+  for (const c of children) e.append(c instanceof Node ? c : String(c ?? ""));
+  return e;
+}
+
 // ---- the map ----------------------------------------------------------------------------------
 const bounds = { minx: Infinity, miny: Infinity, maxx: -Infinity, maxy: -Infinity };
 function include(x, y) {
@@ -96,7 +104,7 @@ function sightLines(vehicles) {
       if (m.x === null || m.y === null) continue;
       const c = Math.cos(v.yaw), s = Math.sin(v.yaw);
       el("line", { class: "sight", x1: v.x, y1: v.y, x2: v.x + c * m.x - s * m.y, y2: v.y + s * m.x + c * m.y }, sight);
-      const drawn = document.querySelector(`.marker[data-id="${m.id}"]`);
+      const drawn = document.querySelector(`.marker[data-id="${CSS.escape(String(m.id))}"]`);
       if (drawn) drawn.classList.add("seen");
     }
   }
@@ -110,8 +118,8 @@ function panelFor(v, allowStop) {
     p.className = "panel";
     p.dataset.id = v.id;
     p.style.setProperty("--car", colour(v.id));
-    p.innerHTML = `<h3><span>car ${v.id}</span><span class="stale-tag"></span>` +
-      `<button class="stop" data-id="${v.id}">Stop</button></h3><dl></dl>`;
+    const button = html("button", { class: "stop", "data-id": v.id }, "Stop");
+    p.append(html("h3", {}, html("span", {}, `car ${v.id}`), html("span", { class: "stale-tag" }), button), html("dl"));
     p.querySelector("button").addEventListener("click", () => stop(v.id));
     $("panels").appendChild(p);
     c.panel = p;
@@ -134,7 +142,7 @@ function panelFor(v, allowStop) {
     ["markers", (v.markers || []).length ? v.markers.map((m) => `#${m.id} ${fixed(m.distance, 2)} m`).join(", ") : "none seen"],
     ["newest", `${fixed(v.age_ms, 0)} ms ago`],
   ];
-  p.querySelector("dl").innerHTML = rows.map(([k, val]) => `<dt>${k}</dt><dd data-field="${k}">${val}</dd>`).join("");
+  p.querySelector("dl").replaceChildren(...rows.flatMap(([k, val]) => [html("dt", {}, k), html("dd", { "data-field": k }, val)]));
 }
 
 async function stop(id) {
@@ -150,16 +158,15 @@ async function stop(id) {
 $("stop-all").addEventListener("click", () => stop(0));
 
 // ---- topics and log ---------------------------------------------------------------------------
-function escapeHtml(s) {
-  return String(s).replace(/[&<>"]/g, (ch) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[ch]);
-}
+// Every string here comes from the DDS domain, where any participant may write: rows are built
+// as nodes with their text set, never parsed as HTML.
 function topicsTable(topics) {
-  $("topics").tBodies[0].innerHTML = topics
-    .map((t) => `<tr><td>${escapeHtml(t.name)}</td><td>${fixed(t.rate_hz, 1)}</td><td class="muted">${t.from}</td></tr>`).join("");
+  $("topics").tBodies[0].replaceChildren(...topics.map((t) =>
+    html("tr", {}, html("td", {}, t.name), html("td", {}, fixed(t.rate_hz, 1)), html("td", { class: "muted" }, t.from))));
 }
 function logTable(lines) {
-  $("log").tBodies[0].innerHTML = lines.slice().reverse()
-    .map((l) => `<tr class="${l.level}"><td>${l.level}</td><td>${escapeHtml(l.id)}</td><td>${escapeHtml(l.text)}</td></tr>`).join("");
+  $("log").tBodies[0].replaceChildren(...lines.slice().reverse().map((l) =>
+    html("tr", { class: l.level }, html("td", {}, l.level), html("td", {}, l.id), html("td", {}, l.text))));
 }
 
 // ---- plots ------------------------------------------------------------------------------------
