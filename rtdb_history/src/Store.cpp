@@ -394,6 +394,7 @@ struct ObjectState
         i.samples_total = samples_total;
         i.samples_lost = lost_total;
         i.newest_commit_ns = records.empty() ? 0 : records.back().commit;
+        i.oldest_commit_ns = records.empty() ? 0 : records.front().commit;
         i.avg_cycle_s = samples_total > 1 ? double(cycle_sum) * 1e-9 / double(samples_total - 1) : 0;
         i.max_cycle_s = double(cycle_max) * 1e-9;
         return i;
@@ -722,7 +723,10 @@ Range Store::range_of(const Object& o, uint64_t t0, uint64_t t1, By by, size_t l
         }
         r.lost = o.lost_within(first, last);
     }
-    if (!r.samples.empty()) r.status = Status::ok;
+    // Samples of [t0, t1) were evicted before the first one held: the answer is the part held.
+    const bool cut_by_window = o.any_evicted && (by == By::commit ? t0 <= o.last_evicted_commit
+                                                                  : t0 <= o.max_evicted_data && o.max_evicted_data < t1);
+    if (!r.samples.empty()) r.status = cut_by_window ? Status::partial : Status::ok;
     else if (t1 > t0 && o.nothing_at_or_before(t1, by, false) == Status::evicted &&
              (by == By::commit ? t0 <= o.last_evicted_commit : t0 <= o.max_evicted_data)) r.status = Status::evicted;
     else if (!o.records.empty() && t0 > (by == By::commit ? o.records.back().commit : o.nth_by_data(o.records.size() - 1).data)) r.status = Status::not_yet;

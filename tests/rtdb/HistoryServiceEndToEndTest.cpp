@@ -30,6 +30,7 @@
 #include <thread>
 #include <set>
 #include <sstream>
+#include <tuple>
 #include <utility>
 
 CPM_REGISTER_TYPE(LabOnlyThing)
@@ -297,6 +298,66 @@ TEST(HistoryServiceOptions, ATopicKeepsItsOwnWindowAndBadOptionsAreRefused)
     Process zero({built_program("cpm_history"), "--window", "0s"});
     EXPECT_EQ(zero.wait(10s), 2);
     EXPECT_NE(zero.errors().find("--window must be longer than 0"), std::string::npos) << zero.errors();
+}
+
+TEST(HistoryServiceRange, ASpanReachingPastTheWindowSaysPartialAndExitsOneUnlessPartialOk)
+{
+    cpm::Participant participant{udp_only()};
+    // The second batch must stay held while the command is asked four times.
+#ifdef CPM_TEST_SANITIZED
+    const std::string window = "shortLived=20s";
+#else
+    const std::string window = "shortLived=4s";
+#endif
+    Process service({built_program("cpm_history"), "--window", "30s", "--topic-window", window});
+    cpm::HistoryClient client(participant);
+    // The first writer stays: its instance (the object) lives on while the window drops its samples.
+    Process first({built_program("history_writer"), "--type", "vehicle", "--topic", "shortLived", "--vehicle", "1", "--count", "5", "--stay"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return client.latest("shortLived", "1").status() == "ok"; }, 10s, 20ms));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return client.latest("shortLived", "1").status() == "evicted"; }, 30s, 50ms));
+    Process second({built_program("history_writer"), "--type", "vehicle", "--topic", "shortLived", "--vehicle", "1", "--count", "5"});
+    ASSERT_EQ(second.wait(30s), 0) << second.errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        auto r = client.latest("shortLived", "1");
+        return !r.objects().empty() && r.objects()[0].samples_held() == 5;
+    }, 10s, 20ms));
+
+    auto range = [](std::vector<std::string> extra) {
+        std::vector<std::string> args{built_program("cpm"), "history", "range", "--topic", "shortLived", "--key", "1", "--from", "-1m", "--to", "now"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        Process p(args);
+        const int code = p.wait(30s);
+        return std::make_tuple(code, p.output(), p.errors());
+    };
+    const auto [code, out, err] = range({"--json"});
+    EXPECT_EQ(code, 1) << "the first batch was asked for and is gone\n" << out << err;
+    std::vector<nlohmann::json> lines;
+    std::istringstream in(out);
+    for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
+    ASSERT_EQ(lines.size(), 6u) << out;
+    for (size_t i = 0; i < 5; ++i) EXPECT_EQ(lines[i]["status"], "ok") << lines[i].dump();
+    EXPECT_EQ(lines[5]["status"], "partial") << lines[5].dump();
+    EXPECT_EQ(lines[5]["first_held_ns"], lines[0]["commit_ns"]) << lines[5].dump();
+    EXPECT_EQ(lines[5]["topic"], "shortLived");
+    EXPECT_NE(err.find("partial"), std::string::npos) << err;
+
+    const auto [table_code, table, table_err] = range({});
+    EXPECT_EQ(table_code, 1);
+    EXPECT_NE(table.find("\npartial: the span's start"), std::string::npos) << table;
+
+    const auto [ok_code, ok_out, ok_err] = range({"--json", "--partial-ok"});
+    EXPECT_EQ(ok_code, 0) << ok_err;
+    EXPECT_EQ(std::count(ok_out.begin(), ok_out.end(), '\n'), 6) << "the same answer, said the same way\n" << ok_out;
+
+    // Only what is held asked for: ok, nothing more said.
+    const auto [held_code, held_out, held_err] = [&] {
+        Process p({built_program("cpm"), "history", "range", "--topic", "shortLived", "--key", "1", "--from",
+                   lines[0]["commit_ns"].dump(), "--to", "now", "--json"});
+        const int c = p.wait(30s);
+        return std::make_tuple(c, p.output(), p.errors());
+    }();
+    EXPECT_EQ(held_code, 0) << held_err;
+    EXPECT_EQ(std::count(held_out.begin(), held_out.end(), '\n'), 5) << held_out;
 }
 
 TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReadable)

@@ -143,6 +143,16 @@ TEST(RecordingEndToEnd, ARecordedRunAnswersEveryVerbAsTheLiveServiceDid)
         EXPECT_EQ(recorded.out, live[i].out) << q;
         EXPECT_FALSE(recorded.out.empty() && recorded.code == 0) << q;
     }
+    // The answer cut at --limit 7 ends with a line that says so and where the rest starts.
+    {
+        std::vector<nlohmann::json> cut;
+        std::istringstream in(live[12].out);
+        for (std::string line; std::getline(in, line);) cut.push_back(nlohmann::json::parse(line));
+        ASSERT_EQ(cut.size(), 8u) << live[12].out;
+        EXPECT_EQ(cut[6]["topic"], "labThing");
+        EXPECT_EQ(cut[7]["status"], "truncated") << cut[7].dump();
+        EXPECT_EQ(cut[7]["next_from_ns"], cut[6]["commit_ns"].get<uint64_t>() + 1) << cut[7].dump();
+    }
     const Answer recorded_search = ask({"search", "--name", "vehicleState|labThing", "--json"}, file);
     ASSERT_EQ(recorded_search.code, 0) << recorded_search.err;
     EXPECT_EQ(without_now(recorded_search.out), without_now(live_search.out));

@@ -50,9 +50,9 @@ std::string answer(const Found& f)
 
 std::string answer(const Range& r)
 {
-    if (r.status != Status::ok) return std::string(to_string(r.status));
-    std::string s;
-    for (auto& x : r.samples) s += (s.empty() ? "c" : " c") + std::to_string(x.commit_ns);
+    if (r.status != Status::ok && r.status != Status::partial) return std::string(to_string(r.status));
+    std::string s = r.status == Status::partial ? "partial:" : "";
+    for (auto& x : r.samples) s += (s.empty() || s.back() == ':' ? "c" : " c") + std::to_string(x.commit_ns);
     return s;
 }
 
@@ -147,7 +147,7 @@ INSTANTIATE_TEST_SUITE_P(
                       Case{"between", By::data, 25, "c300", "c300", "c200", "c200"},
                       Case{"after last", By::data, 40, "c200", "c200", "not_yet", "not_yet"},
                       Case{"evicted", By::data, 15, "evicted", "evicted", "c300", "c300 c200"},
-                      Case{"evicted", By::data, 5, "not_found", "not_found", "evicted", "c300 c200"},
+                      Case{"evicted", By::data, 5, "not_found", "not_found", "evicted", "partial:c300 c200"},
                       Case{"deleted", By::data, 25, "c300", "c300", "c200", "c200"},
                       Case{"purged", By::data, 25, "unknown_object", "unknown_object", "unknown_object", "unknown_object"}));
 
@@ -194,6 +194,19 @@ TEST(StoreQuery, RangeHonoursItsLimitAndSaysSo)
     EXPECT_EQ(answer(r), "c100 c200");
     EXPECT_TRUE(r.truncated);
     EXPECT_EQ(answer(f.store.range(f.oid, 300, 200)), "not_found");  // t1 < t0 is empty
+}
+
+TEST(StoreQuery, ARangeReachingIntoTheEvictedPartIsPartialWithWhatIsHeld)
+{
+    Fixture f;
+    f.fill();
+    f.store.expire(100 + kWindow + 1);  // c100 (data 10) goes
+    EXPECT_EQ(answer(f.store.range(f.oid, 0, 1000)), "partial:c200 c300");
+    EXPECT_EQ(answer(f.store.range(f.oid, 100, 1000)), "partial:c200 c300");  // c100 itself was asked for
+    EXPECT_EQ(answer(f.store.range(f.oid, 101, 1000)), "c200 c300");          // nothing asked for is gone
+    EXPECT_EQ(answer(f.store.range(f.oid, 0, 1000, By::data)), "partial:c300 c200");
+    EXPECT_EQ(answer(f.store.range(f.oid, 11, 1000, By::data)), "c300 c200");
+    EXPECT_EQ(answer(f.store.range(f.oid, 0, 150)), "evicted");  // only the evicted part
 }
 
 /// What a store holding `window` of the samples a test commits must answer, found by scanning

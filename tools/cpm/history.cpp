@@ -40,7 +40,12 @@ const char* const kHistoryHelp =
     "  latest --topic NAME [--key K]\n"
     "  at|older|younger --topic NAME [--key K] --time T [--by commit|data]\n"
     "                                       newest at or before / strictly before / after T\n"
-    "  range --topic NAME [--key K] --from T --to T [--by commit|data] [--limit N]\n"
+    "  range --topic NAME [--key K] --from T --to T [--by commit|data] [--limit N] [--partial-ok]\n"
+    "                                       the samples of [from, to), oldest first, at most --limit\n"
+    "                                       (default 1000, up to 100000; a cut answer ends with a line\n"
+    "                                       saying where the rest starts). A span reaching back past\n"
+    "                                       the history's window answers what is held with status\n"
+    "                                       partial and exit 1, exit 0 with --partial-ok\n"
     "  wait --topic NAME [--key K] [--time T] [--timeout 10s]   newest committed after T (default now)\n"
     "  successor --topic NAME [--key K] --time T [--timeout 10s]  exactly the next one, or 'gap'\n"
     "  snapshot --objects TOPIC[/KEY],... --time T [--by commit|data]   one consistent cut\n"
@@ -54,7 +59,7 @@ const char* const kHistoryHelp =
     "Output: a table, or one JSON object per line (--json) with every field of a cpm type\n"
     "decoded; a type cpm does not know is shown with its stamps and payload_base64.\n"
     "Exit code 0 when the answer is ok; 1 with the status (not_found, evicted, not_yet, timeout,\n"
-    "gap) or the service's error on stderr; 2 on a usage error.\n";
+    "gap, partial) or the service's error on stderr; 2 on a usage error.\n";
 
 const char* const kDumpHelp =
     "usage: cpm dump [--alive] [--all] [--json] [--file recording.db] [--dds_domain N]\n"
@@ -286,6 +291,7 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
                                         {"--creator", true},
                                         {"--alive-at", true},
                                         {"--since", true},
+                                        {"--partial-ok", false},
                                         {"--json", false}},
                                        command);
     const Source source = open_source(file, command);
@@ -341,12 +347,39 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     if (verb == "changes") print_changes(reply, json, rq.t0(), source.now);
     else if (about_objects) print_objects(reply, json, source.now);
     else print_samples(reply, json, source.decoder());
-    if (reply.truncated()) std::fprintf(stderr, "cpm history %s: more samples matched than --limit; the oldest are shown\n", verb.c_str());
+    const std::string object = rq.topic().empty() ? "" : rq.topic() + (rq.key().empty() ? "" : "/" + rq.key());
+    // The end of an answer that is not the whole span asked for says so, on stdout too (a script
+    // reading --json sees it as the last line), and how to get the rest.
+    auto closing_line = [&](const std::string& said, nlohmann::json line) {
+        std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(), object.empty() ? "" : (object + ": ").c_str(), said.c_str());
+        if (!json) {
+            std::printf("\n%s\n", said.c_str());
+            return;
+        }
+        if (!object.empty()) line.update({{"topic", rq.topic()}, {"key", rq.key()}});
+        line["message"] = said;
+        std::printf("%s\n", line.dump().c_str());
+    };
+    if (status == cpm::history::Status::partial && verb == "range" && !reply.samples().empty()) {
+        const auto& first = reply.samples().front();
+        const uint64_t first_held = rq.by() == "data" ? first.data_ns() : first.commit_ns();
+        closing_line("partial: the span's start (" + cpm::cli::format_time(rq.t0(), 9) + ") is older than what the history holds; the samples " +
+                         "shown start at " + cpm::cli::format_time(first_held, 9) + " (--partial-ok: take what is held, exit 0)",
+                     {{"status", "partial"}, {"from_ns", rq.t0()}, {"first_held_ns", first_held}});
+    }
+    if (reply.truncated() && !reply.samples().empty()) {
+        const auto& last = reply.samples().back();
+        const uint64_t next = rq.by() == "data" ? last.data_ns() : last.commit_ns() + 1;
+        closing_line("cut at --limit " + std::to_string(reply.samples().size()) + ": more samples matched; the oldest are shown. The rest: --from " +
+                         std::to_string(next) + (rq.by() == "data" ? " (repeats the samples of that data time)" : "") + ", or a larger --limit",
+                     {{"status", "truncated"}, {"limit", reply.samples().size()}, {"next_from_ns", next}});
+    }
     if (reply.lost() > 0)
         std::fprintf(stderr, "cpm history %s: %llu samples between the first and the last shown never reached the service\n",
                      verb.c_str(), (unsigned long long)reply.lost());
+    if (status == cpm::history::Status::partial && verb == "range") return parsed.has("--partial-ok") ? 0 : 1;
     if (status != cpm::history::Status::ok) {
-        const std::string what = rq.topic().empty() ? "" : rq.topic() + (rq.key().empty() ? "" : "/" + rq.key()) + ": ";
+        const std::string what = object.empty() ? "" : object + ": ";
         std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(), what.c_str(), reply.status().c_str());
         if (json && reply.samples().empty()) {
             nlohmann::json miss{{"status", reply.status()}};

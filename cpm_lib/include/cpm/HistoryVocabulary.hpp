@@ -23,7 +23,8 @@ enum class Status {
     not_yet,         ///< after the newest sample held
     timeout,         ///< a waiting request's time ran out
     gap,             ///< successor: the next sample was evicted (or never arrived) before it was asked for
-    partial,         ///< snapshot: some objects had a sample, some not (each sample carries its own status)
+    partial,         ///< snapshot: some objects had a sample, some not (each sample carries its own status);
+                     ///< range: part of the span was evicted, the samples are the part still held
     unknown_object,  ///< no object by that name or oid
     error,           ///< the request was malformed; the reply's error says why
 };
