@@ -124,10 +124,23 @@ Player::Player(Participant& participant, const std::string& path, PlayOptions op
         qos.durability().kind = dds::VOLATILE_DURABILITY_QOS;
         qos.history().kind = dds::KEEP_LAST_HISTORY_QOS;
         qos.history().depth = 5000;
-        qos.resource_limits().max_samples = 5000 * 64;
+        // Any number of keys (Fast DDS's default of 10 instances would refuse the eleventh car),
+        // each its newest `depth`; 0 is "unlimited" in Fast DDS 2.9.
+        qos.resource_limits().max_instances = 0;
+        qos.resource_limits().max_samples = 0;
         qos.resource_limits().max_samples_per_instance = 5000;
         qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
         qos.data_sharing().off();
+        // A topic whose readers in cpm ask for transient-local (fsmStatus, log, parameter, …)
+        // is played as the lab's own writers offer it: a volatile writer matches no such reader
+        // (the monitor showed no state machine and no log in a replay). The newest per key, as
+        // the table says, is what a reader that joins during the replay gets.
+        if (const auto* spec = cpm::topics::find(topic); spec && spec->writer.transient_local) {
+            const int depth = std::max(spec->writer.history_depth, 1);
+            qos.durability().kind = dds::TRANSIENT_LOCAL_DURABILITY_QOS;
+            qos.history().depth = depth;
+            qos.resource_limits().max_samples_per_instance = depth;
+        }
         out.writer = im.publisher->create_datawriter(out.topic_entity, qos);
         if (!out.writer) throw cpm::Error("cpm play: DDS refused a writer on topic " + topic);
         im.writers.emplace(topic, out);

@@ -269,6 +269,23 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
     EXPECT_EQ(browser.eval("[...document.querySelectorAll('.panel button.stop')].every(b => b.disabled)"), true);
     EXPECT_EQ(browser.eval("fetch('/api/stop', {method: 'POST', body: '{\"vehicle_id\": 1}'}).then(r => r.status)"), 403);
     EXPECT_EQ(api_state(watch_port)["source"], "replay");
+    // The replay carries the state machines and the log as the live run did (cpm play offers
+    // them as the lab's writers do, so the monitor's transient-local readers match).
+    EXPECT_TRUE(wait_until(
+        [&] {
+            const auto state = api_state(watch_port);
+            if (!state.contains("log") || state["log"].empty() || state["vehicles"].size() != 4) return false;
+            for (const auto& v : state["vehicles"]) {
+                if (v["fsm_state"].is_null()) return false;
+            }
+            return true;
+        },
+        20s, 100ms))
+        << api_state(watch_port).dump();
+    EXPECT_TRUE(browser.wait_for("document.querySelectorAll('#log tbody tr').length > 0 && "
+                                 "[...document.querySelectorAll('.panel [data-field=\"state\"]')].every(d => d.textContent !== '–')",
+                                 10s))
+        << browser.eval("document.body.innerText").dump();
     play.kill(SIGINT);
     play.wait(20s);
     watch.kill(SIGINT);
