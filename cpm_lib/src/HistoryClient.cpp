@@ -138,7 +138,11 @@ double update_rate_hz(const HistoryObject& o, uint64_t now_ns)
 {
     if (o.is_process() || o.samples_held() == 0) return 0;
     const uint64_t end = o.deleted_ts() ? std::min(o.deleted_ts(), now_ns) : now_ns;
-    const uint64_t start = std::max(o.created_ts(), end - std::min(end, o.history_interval_ns()));
+    // Over the window the object holds, or, where its samples reach further back (a recording
+    // keeps every sample of its run), over the time they span.
+    uint64_t start = end - std::min(end, o.history_interval_ns());
+    if (o.oldest_commit_ns() != 0) start = std::min(start, o.oldest_commit_ns());
+    start = std::max(o.created_ts(), start);
     if (end < start + 1'000'000'000ull) return 0;  // too short to tell (or another machine's clock ahead of ours)
     return double(o.samples_held()) * 1e9 / double(end - start);
 }

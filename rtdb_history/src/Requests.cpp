@@ -202,6 +202,7 @@ HistoryObject to_wire(const ObjectInfo& i)
     w.samples_total(i.samples_total);
     w.samples_lost(i.samples_lost);
     w.newest_commit_ns(i.newest_commit_ns);
+    w.oldest_commit_ns(i.oldest_commit_ns);
     w.avg_cycle_s(i.avg_cycle_s);
     w.max_cycle_s(i.max_cycle_s);
     w.data_time(i.data_time);

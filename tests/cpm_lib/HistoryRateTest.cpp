@@ -25,6 +25,18 @@ TEST(HistoryRate, APeriodicObjectShowsItsRateOverTheWindowItHolds)
     EXPECT_DOUBLE_EQ(cpm::update_rate_hz(object(1000 * kS, 0, 300), 1003 * kS), 100.0);
 }
 
+TEST(HistoryRate, ARecordingThatKeepsEverySampleShowsThemOverTheTimeTheySpan)
+{
+    // 50 Hz for 75 s, every sample kept though the live window was 60 s: 50 Hz, not 3750 / 60.
+    HistoryObject recorded = object(1000 * kS, 0, 3750, 60 * kS);
+    recorded.oldest_commit_ns(1000 * kS);
+    EXPECT_DOUBLE_EQ(cpm::update_rate_hz(recorded, 1075 * kS), 50.0);
+    // A live window holds less than its life: the window it holds, as before.
+    HistoryObject live = object(1000 * kS, 0, 500, 10 * kS);
+    live.oldest_commit_ns(1065 * kS + 20'000'000);
+    EXPECT_DOUBLE_EQ(cpm::update_rate_hz(live, 1075 * kS), 50.0);
+}
+
 TEST(HistoryRate, TwoSamplesAMomentApartAreNotAFastObject)
 {
     // Two log lines 0.1 ms apart, 3 s ago: 1 / avg cycle would say 10 kHz.

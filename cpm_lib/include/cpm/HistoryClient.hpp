@@ -57,7 +57,8 @@ std::unique_ptr<HistoryBackend> history_service_backend(Participant& participant
 
 /// How often an object has been updated lately, as `cpm dump` shows it: the samples it holds
 /// over the time they can span — from the later of its creation and its history interval
-/// before now (or before its deletion) until then. 0 for a process, an object holding nothing,
+/// before now (or before its deletion) until then; from its oldest sample held where that lies
+/// further back (a recording keeps every sample). 0 for a process, an object holding nothing,
 /// or one whose samples span less than a second, too short to tell a rate (unlike
 /// 1 / avg_cycle_s, two log lines a moment apart do not make 10 kHz).
 double update_rate_hz(const HistoryObject& o, uint64_t now_ns);

@@ -126,6 +126,7 @@ struct ObjectInfo
     uint64_t samples_total = 0;     ///< ever committed
     uint64_t samples_lost = 0;      ///< ever sent by its writers and never received (Incoming::lost_before)
     uint64_t newest_commit_ns = 0;
+    uint64_t oldest_commit_ns = 0;  ///< of the samples held
     double avg_cycle_s = 0;         ///< observed mean time between commits
     double max_cycle_s = 0;
 };
