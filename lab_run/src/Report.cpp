@@ -70,6 +70,18 @@ std::string html_escape(const std::string& s)
     return out;
 }
 
+/// Why a run did not end well, as summary.json says it: its error, or that it was stopped early.
+std::string why_not_ok(const nlohmann::json& summary)
+{
+    const std::string error = summary.value("error", std::string());
+    if (!error.empty()) return error;
+    if (summary.value("interrupted", false)) return "it was stopped (Ctrl-C or SIGTERM) before its end";
+    for (const auto& p : summary.value("processes", nlohmann::json::array())) {
+        if (p.value("failed", false)) return p.value("name", std::string("a process")) + " " + p.value("end", std::string("failed"));
+    }
+    return "see summary.json";
+}
+
 std::string fixed(double v, int decimals)
 {
     std::ostringstream s;
@@ -383,9 +395,8 @@ Report make_report(const std::string& run_dir)
          "document.body.dataset.imagesLoaded=i.filter(x=>x.complete&&x.naturalWidth>0).length;});</script></head>\n<body>\n"
       << "<h1>Run " << html_escape(name) << "</h1>\n<p>" << html_escape(summary.value("time", std::string("?"))) << " time, "
       << fixed(summary.value("lab_time_s", 0.0), 1) << " s of lab time in " << fixed(summary.value("real_s", 0.0), 1) << " s; "
-      << (summary.value("ok", false) ? "every process ran its time" : "<span class=\"bad\">the run did not end well: " +
-                                                                             html_escape(summary.value("error", std::string("see summary.json"))) + "</span>")
-      << ". Recording: <code>recording.db</code> (" << rec.samples << " samples; ask it with <code>cpm history --file</code>).</p>\n";
+      << (summary.value("ok", false) ? "every process ran its time" : "<span class=\"bad\">the run did not end well: " + html_escape(why_not_ok(summary)) + "</span>")
+      << ". Recording: <code>recording.db</code> (" << rec.samples << " samples; ask it with <code>cpm history --file recording.db</code>).</p>\n";
     const bool with_gates = world && !world->gates().empty();
     h << "<h2>Cars</h2>\n<table><tr><th>car</th><th>driven (m)</th><th>top speed (m/s)</th><th>least clearance to a wall (m)</th><th>last state</th>"
       << (with_gates ? "<th>gates passed</th>" : "") << "</tr>\n";

@@ -345,14 +345,17 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     }
     if (tty) std::fprintf(o.progress, "\n");
     const uint64_t end_ns = cpm::get_time_ns();
-    result.lab_time_ns = settings.time == TimeMode::simulated ? simulated_until.load()
-                                                              : std::min(settings.duration_ns, end_ns - std::min(end_ns, real_start));
+    // A simulated run stopped early ran until the lab clock's last step.
+    const bool simulated = settings.time == TimeMode::simulated;
+    result.lab_time_ns = simulated ? (clock_done && clock_error.empty() ? simulated_until.load() : master.simulated_now())
+                                   : std::min(settings.duration_ns, end_ns - std::min(end_ns, real_start));
 
     // The end, in order: every car told to stop, the timers stopped, then the processes that
-    // command the cars, the cars, and the history last (it closes the recording).
+    // command the cars, the cars, and the history last (it closes the recording). The stop is
+    // stamped on the run's one clock: lab time in a simulated run, as every other sample.
     StopRequest all;
     all.vehicle_id(0);
-    cpm::stamp_message(all, cpm::get_time_ns(), 0);
+    cpm::stamp_message(all, simulated ? master.simulated_now() : cpm::get_time_ns(), 0);
     (void)stops.write(all);
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     master.stop_all();
@@ -387,8 +390,8 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
                            {"scenario", fs::absolute(s.file).string()},
                            {"time", settings.time == TimeMode::simulated ? "simulated" : "real"},
                            {"domain", settings.domain},
-                           {"duration_s", double(settings.duration_ns) * 1e-9},
-                           {"lab_time_s", double(result.lab_time_ns) * 1e-9},
+                           {"duration_s", double(settings.duration_ns) / 1e9},  // not * 1e-9: 15.000000000000002
+                           {"lab_time_s", double(result.lab_time_ns) / 1e9},
                            {"real_s", result.real_seconds},
                            {"ok", result.ok},
                            {"interrupted", result.interrupted},
@@ -398,7 +401,9 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
                            {"lanes", s.lanes},
                            {"processes", processes},
                            {"missed_deadlines", watch.missed()},
-                           {"samples_recorded", watch.recorded()},
+                           // The recording's own final count; the history's last status while it lasts.
+                           {"samples_recorded", recorded.contains("recording") ? recorded["recording"].value("written", watch.recorded())
+                                                                               : watch.recorded()},
                            {"qos", qos.empty() ? nlohmann::json::object() : nlohmann::json::parse(qos)},
                            {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()}};
     std::ofstream(dir / "summary.json") << summary.dump(2) << "\n";

@@ -15,6 +15,7 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <regex>
 
 using namespace std::chrono_literals;
 using cpm_test::built_program;
@@ -104,6 +105,14 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     EXPECT_LT(first[0].data_ns, 1'000'000'000u) << "lab time starts at 0";
     EXPECT_GT(double(last.sample.data_ns - first[0].data_ns) * 1e-9, 7.0);
     EXPECT_GT(summary["samples_recorded"].get<uint64_t>(), 300u) << "the history's own count, as the progress line shows it";
+    EXPECT_EQ(summary["samples_recorded"], summary["recording"]["written"]) << "one count of the samples recorded";
+    // The run's own stop is on the lab's clock like every other sample of a simulated run.
+    const auto stop = rec.store->find("stopRequest", "0");
+    ASSERT_TRUE(stop) << "the run's stop for every car is recorded";
+    const auto stop_sample = rec.store->latest(*stop);
+    ASSERT_TRUE(stop_sample.ok());
+    EXPECT_GE(stop_sample.sample.data_ns, 7'000'000'000u) << "stamped at the run's end in lab time";
+    EXPECT_LE(stop_sample.sample.data_ns, 9'000'000'000u) << "not the wall clock";
     EXPECT_TRUE(rec.store->find("fsmStatus", "5")) << "the state machine's status is recorded";
     // The lab clock's stop (a SystemTrigger, a type without a Header) is recorded, not skipped.
     const auto trigger = rec.store->find("systemTrigger", "");
@@ -125,6 +134,7 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     const std::string dom = rendered_dom(out + "/report.html");
     EXPECT_NE(dom.find("<body data-images=\"6\" data-images-loaded=\"6\""), std::string::npos) << dom.substr(0, 2000);
     EXPECT_NE(dom.find("<h1>Run corridor</h1>"), std::string::npos);
+    EXPECT_NE(dom.find("cpm history --file recording.db"), std::string::npos) << "the report names the file to ask";
     EXPECT_NE(dom.find("vehicleState"), std::string::npos) << "the topics table";
     const auto figures = summary_of(out)["report"];
     EXPECT_GT(figures["cars"]["5"]["driven_m"].get<double>(), 1.0) << figures.dump(2);
@@ -256,6 +266,29 @@ TEST(LabRun, CtrlCStopsEverythingAndLeavesAReadableRecording)
 #endif
     EXPECT_GT(rec.store->info(*car)->samples_total, at_least);
     EXPECT_EQ(summary_of(out)["interrupted"], true);
+}
+
+TEST(LabRun, CtrlCInSimulatedTimeSaysHowMuchLabTimeRanAndWhyTheRunEndedEarly)
+{
+    TempDir dir;
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "1000s", "--out", out, "--monitor", "off"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("processes on domain") != std::string::npos; }, 30s)) << run.errors();
+    std::this_thread::sleep_for(3s);
+    run.kill(SIGINT);
+    EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
+    const auto summary = summary_of(out);
+    EXPECT_EQ(summary["interrupted"], true);
+    EXPECT_GT(summary["lab_time_s"].get<double>(), 0.5) << "the lab clock ran for 3 s of real time\n" << summary.dump(2);
+    EXPECT_LT(summary["lab_time_s"].get<double>(), 1000.0);
+    const std::regex said("corridor was stopped: ([0-9.]+) s of lab time");
+    std::smatch m;
+    const std::string output = run.output();
+    ASSERT_TRUE(std::regex_search(output, m, said)) << output;
+    EXPECT_GT(std::stod(m[1]), 0.5) << output;
+    std::ifstream page(out + "/report.html");
+    const std::string html((std::istreambuf_iterator<char>(page)), std::istreambuf_iterator<char>());
+    EXPECT_NE(html.find("did not end well: it was stopped (Ctrl-C or SIGTERM) before its end"), std::string::npos) << html.substr(0, 3000);
 }
 
 TEST(LabRun, AWrongScenarioStartsNothing)
