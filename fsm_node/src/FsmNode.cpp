@@ -155,7 +155,7 @@ struct FsmNode::Impl
         stamp_message(s, now, 0);
         s.state_id(machine->active().id());
         s.state_type(machine->active().type());
-        s.entered_ns(static_cast<uint64_t>(machine->entered_t() * 1e9));
+        s.entered_ns(entered_ns);
         s.last_transition_id(machine->last_transition());
         (void)status.write(s);
     }
@@ -189,6 +189,7 @@ struct FsmNode::Impl
                                            topics::stop_request.reader};
     std::string stale_reason;
     uint64_t last_range_stamp = 0, last_stop_sent = 0;
+    uint64_t entered_ns = 0;  ///< when the active state was entered, lab time
     int last_state = -1;
 };
 
@@ -238,6 +239,9 @@ bool FsmNode::Impl::tick()
     const Inputs in = inputs_from(state.sample, range.sample, markers_fresh ? &seen.sample : nullptr, double(now) * 1e-9);
     const int ticked_state = machine->active().id();
     auto out = machine->tick(in, dt);
+    // The machine keeps its times as seconds in a double (256 ns steps at today's wall clock):
+    // the state's entry is kept here as the tick's integer time.
+    if (machine->entered_t() == in.t) entered_ns = now;
     report.add(in, ticked_state);
     if (machine->active().id() != last_state) {
         if (last_state >= 0) {

@@ -34,6 +34,7 @@ struct Drive
     std::vector<VehicleObservation> track;
     std::vector<VehicleCommandDirect> commands;
     std::vector<int> states;
+    std::vector<FsmStatus> statuses;
     std::string output;
 
     /// Ground truth: the right ranger's distance to the first leg's right wall (y = -0.6).
@@ -67,7 +68,10 @@ Drive drive(const std::string& machine, const std::string& tick = "timer")
     auto collect = [&] {
         for (auto& o : observations.take()) run.track.push_back(o);
         for (auto& c : commands.take()) run.commands.push_back(c);
-        for (auto& s : status.take()) run.states.push_back(s.state_id());
+        for (auto& s : status.take()) {
+            run.states.push_back(s.state_id());
+            run.statuses.push_back(s);
+        }
     };
     const bool stopped = cpm_test::wait_until([&] {
         collect();
@@ -96,6 +100,11 @@ TEST_P(FsmNodeTicking, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCorn
 {
     const Drive run = drive("corridor.json", GetParam());
     EXPECT_EQ(run.states, (std::vector<int>{0, 1, 2, 3})) << run.output;
+    // Each state is announced on the tick that entered it: entered_ns is that tick's time to the
+    // nanosecond (wall clock here, ~1.8e18 ns: a double of seconds would round it to 256 ns).
+    for (const auto& s : run.statuses) {
+        EXPECT_EQ(s.entered_ns(), s.header().create_stamp().nanoseconds()) << "state " << s.state_id();
+    }
     EXPECT_NE(run.output.find("ended in state 3 (Stop)"), std::string::npos) << run.output;
     // --report: the distance, the turn, and each wall-following state's measured deviation from
     // its clearance (the ranger's, niche and corner included: the median is the held line).
