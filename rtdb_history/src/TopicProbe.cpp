@@ -97,6 +97,14 @@ struct TopicProbe::Impl : public dds::DomainParticipantListener  // a DataReader
             s.payload = std::move(raw.bytes);
             s.source_ns = source_time_ns(info);
             s.received_ns = get_time_ns();
+            if (info.instance_handle.isDefined()) {
+                static const char* const kHex = "0123456789abcdef";
+                for (size_t i = 0; i < 16; ++i) {
+                    const auto b = info.instance_handle.value[i];
+                    s.instance += kHex[b >> 4];
+                    s.instance += kHex[b & 15];
+                }
+            }
             std::lock_guard lock(samples_mutex);
             samples.push_back(std::move(s));
             arrived.notify_all();

@@ -11,6 +11,8 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include <atomic>
@@ -151,7 +153,7 @@ namespace {
 class StateWriter
 {
 public:
-    explicit StateWriter(const std::string& topic) : writer_(topic), thread_([this] { run(); }) {}
+    explicit StateWriter(const std::string& topic, std::vector<uint8_t> ids = {3}) : ids_(std::move(ids)), writer_(topic), thread_([this] { run(); }) {}
     ~StateWriter()
     {
         stop_ = true;
@@ -162,15 +164,18 @@ private:
     void run()
     {
         VehicleState s;
-        s.vehicle_id(3);
         for (int i = 0; !stop_; ++i) {
-            s.pose().x(0.25);
-            s.speed(1.5);
-            cpm::stamp_message(s, cpm::get_time_ns(), 0);
-            (void)writer_.write(s);
+            for (uint8_t id : ids_) {
+                s.vehicle_id(id);
+                s.pose().x(0.25);
+                s.speed(1.5);
+                cpm::stamp_message(s, cpm::get_time_ns(), 0);
+                (void)writer_.write(s);
+            }
             std::this_thread::sleep_for(20ms);
         }
     }
+    std::vector<uint8_t> ids_;
     cpm::Writer<VehicleState> writer_;
     std::atomic<bool> stop_{false};
     std::thread thread_;
@@ -235,6 +240,40 @@ TEST(CpmTopic, ListInfoEchoAndHzSeeATopicFromDiscoveryAlone)
     auto nobody = run_cpm({"topic", "echo", cpm_test::unique_topic("nobody"), "--wait", "300ms"});
     EXPECT_EQ(nobody.wait(20s), 1);
     EXPECT_THAT(nobody.errors(), HasSubstr("no writer of topic"));
+}
+
+TEST(CpmTopic, HzOfAKeyedTopicIsPerKeyThenEveryKeyTogether)
+{
+    cpm_test::test_domain_id();
+    const std::string topic = cpm_test::unique_topic("twoCars");
+    StateWriter writer(topic, {3, 4});  // both cars in the same loop: every period two samples at once
+
+    auto hz = run_cpm({"topic", "hz", topic, "--json", "--duration", "2500ms"});
+    ASSERT_EQ(hz.wait(20s), 0) << hz.errors();
+    std::map<std::string, nlohmann::json> last;  // the last report of each key, and of all ("instances")
+    std::istringstream reports(hz.output());
+    for (std::string l; std::getline(reports, l);) {
+        auto j = nlohmann::json::parse(l);
+        last[j.contains("key") ? j["key"].get<std::string>() : "all " + std::to_string(j["instances"].get<int>())] = j;
+    }
+    ASSERT_EQ(last.size(), 3u) << hz.output();
+    ASSERT_TRUE(last.count("3") && last.count("4") && last.count("all 2")) << hz.output();
+    for (const char* key : {"3", "4"}) {
+        const auto& r = last[key];
+        EXPECT_EQ(r["topic"], topic);
+        EXPECT_GT(r["rate_hz"].get<double>(), 10.0) << r.dump();
+        EXPECT_LT(r["rate_hz"].get<double>(), 60.0) << r.dump();
+        EXPECT_GT(r["min_s"].get<double>(), 0.005) << "one car's samples are a period apart, not the two cars' 0 s: " << r.dump();
+    }
+    EXPECT_NEAR(last["all 2"]["rate_hz"].get<double>(), last["3"]["rate_hz"].get<double>() + last["4"]["rate_hz"].get<double>(),
+                0.2 * last["all 2"]["rate_hz"].get<double>())
+        << "together they are the sum";
+
+    auto one = run_cpm({"topic", "hz", topic, "--key", "4", "--duration", "1500ms"});
+    ASSERT_EQ(one.wait(20s), 0) << one.errors();
+    EXPECT_THAT(one.output(), HasSubstr(topic + "/4"));
+    EXPECT_THAT(one.output(), Not(HasSubstr(topic + "/3")));
+    EXPECT_THAT(one.output(), Not(HasSubstr("all ")));
 }
 
 TEST(CpmPrograms, BadFlagsAndFilesOfEveryProgramAreNamedWithTheRightExitCode)

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <deque>
+#include <map>
 #include <optional>
 #include <thread>
 
@@ -42,10 +43,12 @@ const char* kEchoHelp =
     "wait for a writer (default 5s; exit code 1 when none appears).\n";
 
 const char* kHzHelp =
-    "usage: cpm topic hz TOPIC [--window N] [--duration DURATION] [--json] [--wait DURATION] [--dds_domain N]\n"
+    "usage: cpm topic hz TOPIC [--key K] [--window N] [--duration DURATION] [--json] [--wait DURATION] [--dds_domain N]\n"
     "\n"
     "The rate a topic's samples arrive at here, once a second over the last N arrivals (default\n"
     "1000): mean rate, and the mean, min, max and standard deviation of the period between them.\n"
+    "A keyed topic (vehicleState: one instance per car) is measured per key, then all keys\n"
+    "together; --key K: only that key (a vehicle id, as cpm history list prints keys).\n"
     "Stops after --duration, else on Ctrl-C. --json: one object per report.\n";
 
 struct Common
@@ -199,55 +202,108 @@ int topic_echo(const std::vector<std::string>& args)
     return 0;
 }
 
+/// The periods between arrivals: their mean, spread and extremes.
+struct Periods
+{
+    double mean = 0, sd = 0, lo = 0, hi = 0;
+    size_t window = 0;
+};
+
+Periods periods_of(const std::deque<uint64_t>& arrivals)
+{
+    Periods p;
+    p.window = arrivals.size();
+    std::vector<double> periods;
+    for (size_t i = 1; i < arrivals.size(); ++i) periods.push_back(double(arrivals[i] - arrivals[i - 1]) / 1e9);
+    if (periods.empty()) return p;
+    for (double d : periods) p.mean += d;
+    p.mean /= double(periods.size());
+    double var = 0;
+    for (double d : periods) var += (d - p.mean) * (d - p.mean);
+    p.sd = std::sqrt(var / double(periods.size()));
+    p.lo = *std::min_element(periods.begin(), periods.end());
+    p.hi = *std::max_element(periods.begin(), periods.end());
+    return p;
+}
+
 int topic_hz(const std::vector<std::string>& args)
 {
-    const auto parsed =
-        parse_args(args, {{"--json", false}, {"--window", true}, {"--duration", true}, {"--wait", true}}, "cpm topic hz");
+    const auto parsed = parse_args(args, {{"--json", false}, {"--window", true}, {"--duration", true}, {"--wait", true}, {"--key", true}},
+                                   "cpm topic hz");
     const std::string topic = only_positional(parsed, "cpm topic hz", "topic");
     const size_t window = size_t(cpm::cli::parse_integer("--window", parsed.get("--window", "1000"), 2, 1'000'000));
     const uint64_t duration_ns = parsed.has("--duration") ? parse_duration("--duration", parsed.get("--duration")) : UINT64_MAX;
     const auto wait = milliseconds_of(parsed, "--wait", "5s");
+    const bool json = parsed.has("--json");
     cpm::rtdb::TopicProbe probe;
     if (!subscribed(probe, "cpm topic hz", topic, wait)) return 1;
+    const auto info = find_topic(probe, topic);
+    const bool keyed = info && info->keyed;
+    const std::string type = info ? info->type_name : "";
+    if (parsed.has("--key") && !keyed) {
+        std::fprintf(stderr, "cpm topic hz: --key: topic '%s' (%s) has no key; its rate is one\n", topic.c_str(), type.c_str());
+        return 2;
+    }
+    const auto* types = cpm::rtdb::IdlDecoder::lab_types();
+    // An instance by its key as cpm prints it (the vehicle id), or by DDS's hash for a type cpm
+    // does not know.
+    auto key_of = [&](const cpm::rtdb::ProbeSample& s) -> std::string {
+        if (!keyed) return "";
+        if (types && types->knows(type)) {
+            if (auto k = types->key_text(type, s.payload.data(), s.payload.size())) return *k;
+        }
+        return "#" + s.instance;
+    };
     cpm::cli::stop_on_signals();
-    std::deque<uint64_t> arrivals;
+    std::map<std::string, std::deque<uint64_t>> arrivals;  // by key; "" for an unkeyed topic
+    std::deque<uint64_t> all;
     uint64_t total = 0;
     const auto start = std::chrono::steady_clock::now();
     auto next_report = start + std::chrono::seconds(1);
     auto elapsed_ns = [&] {
         return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
     };
+    auto report = [&](const std::string& key, const Periods& p, const char* label) {
+        const double rate = p.mean > 0 ? 1 / p.mean : 0.0;
+        if (json) {
+            nlohmann::json j{{"topic", topic}, {"rate_hz", rate}, {"mean_s", p.mean}, {"min_s", p.lo}, {"max_s", p.hi},
+                             {"std_s", p.sd}, {"window", p.window}};
+            if (keyed) j[label] = std::string(label) == "instances" ? nlohmann::json(std::stoul(key)) : nlohmann::json(key);
+            if (!keyed || std::string(label) == "instances") j["samples"] = total;
+            std::printf("%s\n", j.dump().c_str());
+        } else if (!keyed) {
+            std::printf("average rate: %.3f Hz\n  period mean: %.4f s  min: %.4f s  max: %.4f s  std dev: %.5f s  window: %zu\n", rate, p.mean,
+                        p.lo, p.hi, p.sd, p.window);
+        } else {
+            std::printf("%-24s %9.3f Hz  period mean %.4f s  min %.4f s  max %.4f s  std dev %.5f s  window %zu\n",
+                        (std::string(label) == "instances" ? "all " + key + " keys" : topic + "/" + key).c_str(), rate, p.mean, p.lo,
+                        p.hi, p.sd, p.window);
+        }
+    };
     while (!cpm::cli::stop_requested() && elapsed_ns() < duration_ns) {
         for (const auto& s : probe.take(std::chrono::milliseconds(50))) {
-            arrivals.push_back(s.received_ns);
+            const std::string key = key_of(s);
+            if (parsed.has("--key") && key != parsed.get("--key")) continue;
+            auto& mine = arrivals[key];
+            mine.push_back(s.received_ns);
+            if (mine.size() > window) mine.pop_front();
+            all.push_back(s.received_ns);
+            if (all.size() > window) all.pop_front();
             ++total;
-            if (arrivals.size() > window) arrivals.pop_front();
         }
         if (std::chrono::steady_clock::now() < next_report) continue;
         next_report += std::chrono::seconds(1);
-        if (arrivals.size() < 2) {
-            if (!parsed.has("--json")) std::printf("no samples of '%s' yet\n", topic.c_str());
+        if (all.size() < 2) {
+            if (!json) std::printf("no samples of '%s'%s yet\n", topic.c_str(), parsed.has("--key") ? (" key " + parsed.get("--key")).c_str() : "");
             continue;
         }
-        std::vector<double> periods;
-        for (size_t i = 1; i < arrivals.size(); ++i) periods.push_back(double(arrivals[i] - arrivals[i - 1]) * 1e-9);
-        double mean = 0, var = 0;
-        for (double p : periods) mean += p;
-        mean /= double(periods.size());
-        for (double p : periods) var += (p - mean) * (p - mean);
-        const double sd = std::sqrt(var / double(periods.size()));
-        const double lo = *std::min_element(periods.begin(), periods.end());
-        const double hi = *std::max_element(periods.begin(), periods.end());
-        if (parsed.has("--json")) {
-            std::printf("%s\n", nlohmann::json{{"topic", topic}, {"rate_hz", mean > 0 ? 1 / mean : 0.0}, {"mean_s", mean},
-                                               {"min_s", lo}, {"max_s", hi}, {"std_s", sd}, {"window", arrivals.size()},
-                                               {"samples", total}}
-                                    .dump()
-                                    .c_str());
-        } else {
-            std::printf("average rate: %.3f Hz\n  period mean: %.4f s  min: %.4f s  max: %.4f s  std dev: %.5f s  window: %zu\n",
-                        mean > 0 ? 1 / mean : 0.0, mean, lo, hi, sd, arrivals.size());
+        // A keyed topic per key (two cars at 50 Hz are two 50 Hz instances, not one at 100 Hz),
+        // then every key together.
+        for (const auto& [key, times] : arrivals) {
+            if (times.size() >= 2) report(key, periods_of(times), "key");
         }
+        if (keyed && !parsed.has("--key")) report(std::to_string(arrivals.size()), periods_of(all), "instances");
+        if (keyed && !json) std::printf("\n");
         std::fflush(stdout);
     }
     return 0;

@@ -34,6 +34,7 @@ struct ProbeSample
     std::vector<uint8_t> payload;
     uint64_t source_ns = 0;    ///< the writer's source timestamp
     uint64_t received_ns = 0;  ///< when this process took it (cpm::get_time_ns)
+    std::string instance;      ///< the DDS instance handle as hex (the key's hash); "" for an unkeyed topic
 };
 
 /// A participant of its own that listens to discovery from its first moment. Not thread-safe:
