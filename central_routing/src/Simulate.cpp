@@ -101,6 +101,8 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
     out.vehicles = ids.size();
     out.duration_s = options.duration;
     out.min_distance_m = std::numeric_limits<double>::infinity();
+    // The farthest point of a body from its reference point (the rear axle's centre).
+    const double reach = std::max(std::hypot(f.length - f.rear_overhang, f.width / 2), std::hypot(f.rear_overhang, f.width / 2));
     const size_t n = ids.size();
     std::vector<double> start_s(n), standing_since(n, 0), last_s(n), last_v(n, 0);
     std::vector<int> zone(n, -1);
@@ -147,7 +149,10 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
             for (size_t i = 0; i < n; ++i) {
                 for (size_t j = i + 1; j < n; ++j) {
                     const Pose &a = now[i].pose, &b = now[j].pose;
-                    if (std::hypot(a.x - b.x, a.y - b.y) > 1.0) {
+                    // Bodies at least this far apart: a pair that can neither touch nor come
+                    // closer than the closest pair yet is not measured (every pair is, once).
+                    const double apart = std::hypot(a.x - b.x, a.y - b.y) - 2 * reach;
+                    if (apart > 0 && apart >= out.min_distance_m) {
                         overlapping[i][j] = false;
                         continue;
                     }

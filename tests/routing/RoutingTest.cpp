@@ -199,6 +199,25 @@ TEST(Planner, FourCarsReachingTheCentralIntersectionTogetherAllGetThrough)
     }
 }
 
+TEST(Simulate, TheSmallestDistanceIsMeasuredHoweverFarApartTheCarsStay)
+{
+    // Two cars on opposite sides of the map, 0.1 s: they never come within a metre of each
+    // other, and the summary still names how far apart their bodies were (once: "inf").
+    const auto graph = load_lane_graph_or_throw(kIntersection);
+    Planner planner(graph, {});
+    planner.add_car(1, {2.43, 1.82 - 0.45 - 0.33, M_PI / 2});
+    planner.add_car(2, {2.43 + 0.45 + 0.33, 2.18, M_PI});  // northbound and westbound, 1.4 m apart
+    const Pose a = planner.sample(1, 0).pose, b = planner.sample(2, 0).pose;
+    const double at_start = footprint_distance(planner.options().footprint, a, b);
+    ASSERT_GT(std::hypot(a.x - b.x, a.y - b.y), 1.0);
+    SimulationOptions options;
+    options.duration = 0.1;
+    const auto summary = simulate(planner, options);
+    ASSERT_TRUE(std::isfinite(summary.min_distance_m));
+    EXPECT_LE(summary.min_distance_m, at_start + 1e-9);
+    EXPECT_GT(summary.min_distance_m, at_start - 0.05) << "0.1 s of driving";
+}
+
 TEST(Planner, ACarStoppedInItsLaneIsWaitedForNotDrivenInto)
 {
     const auto graph = load_lane_graph_or_throw(kRing);
