@@ -2,6 +2,8 @@
 
 #include <cpm/CommandLine.hpp>
 #include <cpm/timer_ids.hpp>
+#include <cpm/vehicle/FirmwareSim.hpp>
+#include <cpm/vehicle/World.hpp>
 
 #include <yaml-cpp/yaml.h>
 
@@ -160,6 +162,56 @@ private:
     std::string file_;
     std::vector<std::string> errors_;
 };
+
+/// Each car's place at the start in the world: inside its walls, its body clear of them and of
+/// every other car's (a typo in start: would otherwise run, and end "ok").
+void check_starts(Checker& c, const Scenario& s, const YAML::Node& vehicles)
+{
+    vehicle::World world;
+    try {
+        world = vehicle::World::load(s.world);
+    } catch (const std::exception& e) {
+        c.error(vehicles, "world", e.what());
+        return;
+    }
+    const vehicle::VehicleParameters body;
+    std::vector<std::vector<vehicle::Segment>> outlines;
+    for (size_t i = 0; i < s.vehicles.size(); ++i) {
+        const auto& v = s.vehicles[i];
+        const YAML::Node at = vehicles[i]["start"] ? vehicles[i]["start"] : vehicles[i];
+        const std::string p = "vehicles[" + std::to_string(i) + "].start";
+        char where[96];
+        std::snprintf(where, sizeof where, "car %d at (%.3g, %.3g)", v.id, v.x, v.y);
+        outlines.push_back(vehicle::FirmwareSim::body_outline(body, {v.x, v.y, v.yaw}));
+        if (!world.walls().empty()) {
+            // Enclosed: a wall in every direction. A car outside the map sees open space somewhere.
+            for (int k = 0; k < 8; ++k) {
+                const double angle = k * M_PI / 4;
+                if (world.cast_ray(v.x, v.y, angle, 1e6) < 1e6) continue;
+                c.error(at, p, std::string(where) + " is outside the world's walls (" + fs::path(s.world).filename().string() +
+                                   "): no wall at all toward " + std::to_string(k * 45) + "°");
+                break;
+            }
+        }
+        if (const auto* w = world.wall_hit(outlines.back())) {
+            char wall[96];
+            std::snprintf(wall, sizeof wall, "[%g, %g, %g, %g]", w->x1, w->y1, w->x2, w->y2);
+            c.error(at, p, std::string(where) + ": its body crosses the wall " + wall + " at the start");
+        }
+        for (size_t j = 0; j < i; ++j) {
+            bool overlap = false;
+            for (const auto& a : outlines[i]) {
+                for (const auto& b : outlines[j]) overlap = overlap || vehicle::segments_intersect(a, b);
+            }
+            // One body wholly inside the other crosses none of its sides: their centres then coincide closely.
+            overlap = overlap || std::hypot(v.x - s.vehicles[j].x, v.y - s.vehicles[j].y) < body.width / 2;
+            if (overlap) {
+                c.error(at, p, std::string(where) + ": its body overlaps car " + std::to_string(s.vehicles[j].id) + "'s (vehicles[" +
+                                   std::to_string(j) + "].start) at the start");
+            }
+        }
+    }
+}
 
 }  // namespace
 
@@ -322,10 +374,13 @@ Scenario load_scenario(const std::string& path)
             if (!m["port"]) c.error(m, "monitor", "port is missing");
             else if (auto port = c.integer(m["port"], "monitor.port", 1, 65535)) s.monitor_port = int(*port);
             if (m["allow_stop"]) s.monitor_allow_stop = c.boolean(m["allow_stop"], "monitor.allow_stop").value_or(false);
+        } else if (m.IsScalar() && (m.Scalar() == "off" || m.Scalar() == "false" || m.Scalar() == "none")) {
+            s.monitor_port.reset();  // as --monitor off
         } else if (auto port = c.integer(m, "monitor", 1, 65535)) {
             s.monitor_port = int(*port);
         }
     }
+    if (c.errors().empty() && !s.world.empty() && !s.routing.enabled) check_starts(c, s, vehicles);
     if (!c.errors().empty()) throw ScenarioError(c.errors());
     return s;
 }

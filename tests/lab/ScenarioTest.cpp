@@ -106,6 +106,12 @@ TEST(Scenario, AMonitorIsAPortOrAPortWithItsStopButtons)
     const auto plan = plan_run(s, {.bin_dir = bin, .run_dir = "/runs/m", .domain = 3});
     ASSERT_EQ(plan[1].name, "monitor");
     EXPECT_NE(std::find(plan[1].argv.begin(), plan[1].argv.end(), "--allow-stop"), plan[1].argv.end());
+    // None, as with --monitor off.
+    for (const char* off : {"off", "false", "none"}) {
+        const Scenario none = load_scenario(dir.write("off.yaml", "name: m\nduration: 5s\nworld: map.json\nvehicles: [{id: 2}]\nmonitor: " +
+                                                                      std::string(off) + "\n"));
+        EXPECT_FALSE(none.monitor_port) << off;
+    }
     const std::string bad = dir.write("b.yaml", "name: b\nduration: 5s\nworld: map.json\nvehicles: [{id: 2}]\n"
                                                 "monitor: {port: 70000, stop: yes}\n");
     try {
@@ -224,6 +230,25 @@ TEST(Scenario, InSimulatedTimeACarsCameraAndItsMarkerFinderTickOnTheLabClock)
     EXPECT_EQ(real[2].timer, "firmware_sim_6,vehicle_bridge_6");
     EXPECT_EQ(real[3].timer, "");
     EXPECT_EQ(std::find(real[3].argv.begin(), real[3].argv.end(), "--simulated_time"), real[3].argv.end());
+}
+
+TEST(Scenario, StartsOutsideTheWallsOnAWallOrOnAnotherCarAreRefusedNamingTheCars)
+{
+    TempDir dir;
+    const std::string world = std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json";
+    const std::string file = dir.write("starts.yaml", "name: s\nduration: 5s\nworld: " + world +
+                                                          "\nvehicles:\n"
+                                                          "  - {id: 5, start: [0.0, -0.01, 0]}\n"
+                                                          "  - {id: 6, start: [0.1, -0.01, 0]}\n"    // 0.1 m behind a 0.4 m car
+                                                          "  - {id: 7, start: [50, 50, 0]}\n"        // far outside the corridor
+                                                          "  - {id: 8, start: [3.0, -0.55, 0]}\n"    // across the niche's wall
+                                                          "  - {id: 9, start: [4.0, 0.2, 0]}\n");   // clear: no error
+    const auto errors = errors_of(file);
+    ASSERT_EQ(errors.size(), 3u) << ::testing::PrintToString(errors);
+    EXPECT_EQ(errors[0], file + ":6: vehicles[1].start: car 6 at (0.1, -0.01): its body overlaps car 5's (vehicles[0].start) at the start");
+    EXPECT_EQ(errors[1].rfind(file + ":7: vehicles[2].start: car 7 at (50, 50) is outside the world's walls (corridor.json)", 0), 0u)
+        << errors[1];
+    EXPECT_EQ(errors[2], file + ":8: vehicles[3].start: car 8 at (3, -0.55): its body crosses the wall [3.3, -0.85, 3.3, -0.6] at the start");
 }
 
 TEST(Scenario, AFileThatIsNotYamlOrNotThereIsNamed)

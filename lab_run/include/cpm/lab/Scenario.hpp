@@ -21,7 +21,7 @@
 //   security: ../lab-sec            # a secured lab (a folder from `cpm security init`): each
 //                                   # process runs as a node of its own, allowed the topics it uses
 //   monitor: 8080                   # cpm monitor on this port while the run lasts, or
-//                                   # {port: 8080, allow_stop: true} for its stop buttons
+//                                   # {port: 8080, allow_stop: true} for its stop buttons; off: none
 //
 // load_scenario reports every error at once, each with the file, line and YAML path
 // ("corridor.yaml:12: vehicles[1].id: 5 is given twice (also vehicles[0])").
