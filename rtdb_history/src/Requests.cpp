@@ -1,6 +1,7 @@
 #include <cpm/rtdb/Requests.hpp>
 
 #include <regex>
+#include <set>
 #include <stdexcept>
 
 namespace cpm::rtdb {
@@ -41,8 +42,20 @@ HistorySample to_wire(const StoredSample& s, Status status)
 Oid object_named(const Store& store, const std::string& topic, const std::string& key)
 {
     auto oid = store.find(topic, key);
-    if (!oid) throw UnknownObject("no object '" + topic + (key.empty() ? "" : "/" + key) + "' (not recorded, or purged after its window)");
-    return *oid;
+    if (oid) return *oid;
+    if (key.empty()) {
+        // A keyed topic asked without its key: say so, with the keys it has.
+        std::set<std::string> keys;
+        for (const auto& o : store.search({.kind = ObjectKind::instance})) {
+            if (o.topic == topic && !o.key.empty()) keys.insert(o.key);
+        }
+        if (!keys.empty()) {
+            std::string list;
+            for (const auto& k : keys) list += (list.empty() ? "" : ", ") + k;
+            throw UnknownObject("topic '" + topic + "' is keyed: ask for one key (--key K), one of " + list);
+        }
+    }
+    throw UnknownObject("no object '" + topic + (key.empty() ? "" : "/" + key) + "' (not recorded, or purged after its window)");
 }
 
 /// The request's object: its oid, else its topic and key.

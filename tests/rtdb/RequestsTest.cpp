@@ -79,6 +79,13 @@ TEST(HistoryRequests, MalformedRequestsGetAnErrorNamingWhatIsWrong)
     auto unknown = answer(f.store, rq);
     EXPECT_EQ(unknown.status(), "unknown_object");
     EXPECT_NE(unknown.error().find("no object 'vehicleState/9'"), std::string::npos) << unknown.error();
+    // A keyed topic asked without its key: its keys, not "never recorded".
+    f.store.add_object({.topic = "vehicleState", .key = "12", .type_name = "VehicleState", .created_ts = 1});
+    rq.key("");
+    const auto keyless = answer(f.store, rq);
+    EXPECT_EQ(keyless.status(), "unknown_object");
+    EXPECT_EQ(keyless.error(), "topic 'vehicleState' is keyed: ask for one key (--key K), one of 12, 3");
+    rq.key("9");
     rq.kind("search");
     rq.name_regex("(open");
     auto regex = answer(f.store, rq);
