@@ -1,5 +1,7 @@
 #include <cpm/aruco/Camera.hpp>
 
+#include <cpm/read_text_file.hpp>
+
 #include <cpm/Error.hpp>
 
 #include <opencv2/core/persistence.hpp>
@@ -58,9 +60,7 @@ std::vector<double> matrix(const YAML::Node& root, const std::string& path, cons
 
 Camera Camera::load(const std::string& path)
 {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) fail(path, "cannot read the camera file");
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string text = read_text_file(path, "camera file");  // names a directory or a missing file
     // Read with yaml-cpp, not OpenCV's FileStorage: OpenCV 4.6's reader loops forever on some
     // malformed files (found by fuzzing). OpenCV writes a first line "%YAML:1.0", which is not
     // standard YAML: it is dropped.

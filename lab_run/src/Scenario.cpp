@@ -1,6 +1,8 @@
 #include <cpm/lab/Scenario.hpp>
 
 #include <cpm/CommandLine.hpp>
+#include <cpm/Error.hpp>
+#include <cpm/read_text_file.hpp>
 #include <cpm/timer_ids.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
 #include <cpm/vehicle/World.hpp>
@@ -121,6 +123,10 @@ public:
         if (!t) return "";
         const fs::path p = fs::path(*t).is_absolute() ? fs::path(*t) : fs::path(dir) / *t;
         std::error_code ec;
+        if (fs::is_directory(p, ec)) {
+            error(n, path, what + " '" + *t + "' is a directory (" + p.lexically_normal().string() + "), not a file");
+            return "";
+        }
         if (!fs::is_regular_file(p, ec)) {
             error(n, path, what + " '" + *t + "' does not exist (looked for " + p.lexically_normal().string() + ")");
             return "";
@@ -225,9 +231,9 @@ Scenario load_scenario(const std::string& path)
     if (s.dir.empty()) s.dir = ".";
     YAML::Node root;
     try {
-        root = YAML::LoadFile(path);
-    } catch (const YAML::BadFile&) {
-        throw ScenarioError({path + ": cannot read the file"});
+        root = YAML::Load(read_text_file(path, "scenario file"));
+    } catch (const cpm::Error& e) {
+        throw ScenarioError({e.what()});
     } catch (const YAML::Exception& e) {
         throw ScenarioError({path + ":" + std::to_string(e.mark.line + 1) + ": not YAML: " + e.msg});
     }

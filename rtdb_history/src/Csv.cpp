@@ -141,9 +141,9 @@ ImportReport import(std::istream& in, const std::string& source, const std::stri
     std::vector<std::string> header;
     size_t line_no = 0;
     try {
-        if (!read_record(in, header, line_no)) throw std::invalid_argument(source + ": empty (the first line names the columns)");
+        if (!read_record(in, header, line_no)) throw std::invalid_argument("empty (the first line names the columns)");
     } catch (const std::invalid_argument& e) {
-        throw std::invalid_argument(source + ":" + e.what());
+        throw std::invalid_argument(source + ": " + e.what());
     }
     // Which columns are which; a field column must be one of the type's fields.
     std::map<std::string, size_t> named;

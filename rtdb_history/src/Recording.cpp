@@ -9,6 +9,7 @@
 
 #include "Sqlite.hpp"
 
+#include <filesystem>
 #include <limits>
 #include <stdexcept>
 #include <sys/resource.h>
@@ -44,6 +45,12 @@ const char* const kSchema =
 sqlite3* open_recording_file(const std::string& path, std::map<std::string, std::string>& meta)
 {
     if (!file_exists(path)) throw std::runtime_error("recording " + path + ": no such file");
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec)) {
+        const bool run = std::filesystem::is_regular_file(std::filesystem::path(path) / "recording.db", ec);
+        throw std::runtime_error("recording " + path + ": it is a directory" +
+                                 (run ? " (a run's folder? its recording is " + (std::filesystem::path(path) / "recording.db").string() + ")" : ""));
+    }
     sqlite3* db = nullptr;
     // Read-write when it may (a recording left with its WAL beside it is then read whole), else
     // read-only; nothing is changed either way.

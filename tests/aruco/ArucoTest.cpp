@@ -93,7 +93,7 @@ TEST(ArucoCamera, FileRoundTripAndErrorsNamingTheField)
     EXPECT_NEAR(back.mount.pitch, 0.1, 1e-12);
     EXPECT_NEAR(back.mount.y, 0.02, 1e-12);
 
-    EXPECT_EQ(error_of([] { Camera::load("/nonexistent/cam.yaml"); }), "/nonexistent/cam.yaml: cannot read the camera file");
+    EXPECT_EQ(error_of([] { Camera::load("/nonexistent/cam.yaml"); }), "/nonexistent/cam.yaml: cannot open the camera file: no such file");
     const std::string no_mount = temp_file("nomount.yaml",
                                            "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n"
                                            "camera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n  data: [500, 0, 320, 0, 500, 240, 0, 0, 1]\n"

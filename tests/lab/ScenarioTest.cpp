@@ -260,7 +260,7 @@ TEST(Scenario, AFileThatIsNotYamlOrNotThereIsNamed)
     EXPECT_EQ(errors[0].rfind(broken + ":3: not YAML", 0), 0u) << errors[0];
     errors = errors_of(dir.path / "none.yaml");
     ASSERT_EQ(errors.size(), 1u);
-    EXPECT_EQ(errors[0], (dir.path / "none.yaml").string() + ": cannot read the file");
+    EXPECT_EQ(errors[0], (dir.path / "none.yaml").string() + ": cannot open the scenario file: no such file");
 }
 
 TEST(Scenario, AMissingProgramIsNamedBeforeAnythingStarts)

@@ -181,6 +181,13 @@ TEST(Csv, ImportNamesEveryRowThatDoesNotParseAndWritesNothing)
         EXPECT_EQ(std::string(e.what()), "w.csv:1: column 2 'wheels' is no field of VehicleState");
     }
     EXPECT_FALSE(fs::exists(out));
+    std::istringstream empty("");
+    try {
+        (void)csv::import(empty, "empty.csv", "vehicleState", "VehicleState", types(), out);
+        FAIL();
+    } catch (const std::invalid_argument& e) {
+        EXPECT_EQ(std::string(e.what()), "empty.csv: empty (the first line names the columns)") << "the file named once";
+    }
 }
 
 TEST(Csv, ImportedRowsAnswerAsSamplesOfTheirKeys)

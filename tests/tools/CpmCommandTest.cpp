@@ -316,3 +316,25 @@ TEST(CpmPrograms, BadFlagsAndFilesOfEveryProgramAreNamedWithTheRightExitCode)
     }
     std::remove(file.c_str());
 }
+
+TEST(CpmPrograms, AFolderGivenForAFileIsNamedAsAFolder)
+{
+    cpm_test::test_domain_id();
+    const std::string dir = CPM_SOURCE_DIR "/scenarios/labs";
+    const std::vector<std::pair<std::vector<std::string>, std::string>> cases{
+        {{"lab", "check", dir}, dir + ": cannot read it as the scenario file: it is a directory"},
+        {{"aruco", "detect", "x.png", "--camera", dir}, dir + ": cannot read it as the camera file: it is a directory"},
+        {{"history", "--file", dir, "latest", "--topic", "vehicleState"}, "recording " + dir + ": it is a directory"},
+        {{"dump", "--file", dir}, "recording " + dir + ": it is a directory"},
+        {{"play", dir}, "recording " + dir + ": it is a directory"},
+        {{"record", "import", dir, "--topic", "t", "--type", "VehicleState", "--out", "/tmp/never.db"},
+         dir + ": cannot read it as the CSV file: it is a directory"},
+    };
+    for (const auto& [args, message] : cases) {
+        auto p = run_cpm(args);
+        EXPECT_EQ(p.wait(20s), 1) << args[0] << " " << args[1] << "\n" << p.errors();
+        EXPECT_THAT(p.errors(), HasSubstr(message)) << args[0] << " " << args[1];
+        EXPECT_THAT(p.errors(), Not(HasSubstr("underflow"))) << args[0] << " " << args[1];
+        EXPECT_THAT(p.errors(), Not(HasSubstr("disk I/O"))) << args[0] << " " << args[1];
+    }
+}

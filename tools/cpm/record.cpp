@@ -6,6 +6,7 @@
 #include <cpm/Error.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/read_text_file.hpp>
 #include <cpm/rtdb/Csv.hpp>
 #include <cpm/rtdb/HistoryService.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
@@ -19,6 +20,7 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <sstream>
 #include <thread>
 #include <unistd.h>
 
@@ -57,8 +59,7 @@ int import_command(const std::vector<std::string>& args)
     const auto* types = cpm::rtdb::IdlDecoder::lab_types();
     if (!types) throw cpm::Error(command + ": cannot find the lab's IDL files (set CPM_IDL_DIR)");
     if (!types->knows(parsed.get("--type"))) throw UsageError(command + ": --type '" + parsed.get("--type") + "' is not one of cpm's types");
-    std::ifstream in(csv_file);
-    if (!in) throw cpm::Error(command + ": cannot read " + csv_file);
+    std::istringstream in(cpm::read_text_file(csv_file, "CSV file"));  // names a directory or a missing file
     try {
         const auto r = cpm::rtdb::csv::import(in, csv_file, parsed.get("--topic"), parsed.get("--type"), *types, parsed.get("--out"));
         std::printf("%s: %llu samples of %llu objects\n", parsed.get("--out").c_str(), (unsigned long long)r.rows,
