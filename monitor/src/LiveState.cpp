@@ -90,6 +90,14 @@ void LiveState::on_history_status(const HistoryStatus& h, uint64_t now_ns)
     ++version_;
 }
 
+std::vector<uint8_t> LiveState::car_ids() const
+{
+    std::lock_guard lock(mutex_);
+    std::vector<uint8_t> ids;
+    for (const auto& [id, c] : cars_) ids.push_back(id);
+    return ids;
+}
+
 void LiveState::count(const std::string& topic, size_t n, uint64_t now_ns)
 {
     std::lock_guard lock(mutex_);

@@ -261,6 +261,16 @@ struct Monitor::Impl
             reply_error(res, 400, "$.vehicle_id: " + std::to_string(id) + " is out of range (1..255, or 0 for every car)");
             return;
         }
+        if (id != 0) {
+            const auto seen = state.car_ids();
+            if (std::find(seen.begin(), seen.end(), uint8_t(id)) == seen.end()) {
+                std::string list;
+                for (auto c : seen) list += (list.empty() ? "" : ", ") + std::to_string(c);
+                reply_error(res, 404, "$.vehicle_id: no car " + std::to_string(id) + " in this lab (cars: " + (list.empty() ? "none yet" : list) +
+                                          "; 0 stops every car)");
+                return;
+            }
+        }
         StopRequest s;
         s.vehicle_id(uint8_t(id));
         stamp_message(s, get_time_ns(), 0);
@@ -309,6 +319,21 @@ struct Monitor::Impl
             if (no_parameters(req, res)) stream(res);
         });
         server.Post("/api/stop", [this](const httplib::Request& req, httplib::Response& res) { stop_request(req, res); });
+        // A path that exists answers another method with 405 and what it allows, not 404.
+        auto not_allowed = [](const char* allow) {
+            return [allow](const httplib::Request& req, httplib::Response& res) {
+                res.set_header("Allow", allow);
+                reply_error(res, 405, req.method + " " + req.path + ": not allowed here (" + allow + " is)");
+            };
+        };
+        server.Get("/api/stop", not_allowed("POST"));
+        for (const char* path : {"/api/state", "/api/world", "/api/plots", "/api/stream", "/api/stop"}) {
+            const char* allow = std::string(path) == "/api/stop" ? "POST" : "GET";
+            if (std::string(allow) == "GET") server.Post(path, not_allowed(allow));
+            server.Put(path, not_allowed(allow));
+            server.Delete(path, not_allowed(allow));
+            server.Patch(path, not_allowed(allow));
+        }
         server.set_error_handler([](const httplib::Request& req, httplib::Response& res) {
             if (!res.body.empty()) return;
             if (res.status == 404) {

@@ -193,6 +193,16 @@ TEST_F(MonitorServer, BadRequestsAreAnsweredWithWhatIsWrong)
     EXPECT_EQ(stop->status, 403) << "stopping is off unless asked for";
     EXPECT_NE(stop->body.find("--allow-stop"), std::string::npos) << stop->body;
     EXPECT_EQ(monitor->stats().stops_sent, 0u);
+    // A path that exists, asked with another method: 405 and what it allows.
+    auto wrong = http.Get("/api/stop");
+    ASSERT_TRUE(wrong);
+    EXPECT_EQ(wrong->status, 405) << wrong->body;
+    EXPECT_EQ(wrong->get_header_value("Allow"), "POST");
+    wrong = http.Delete("/api/state");
+    ASSERT_TRUE(wrong);
+    EXPECT_EQ(wrong->status, 405) << wrong->body;
+    EXPECT_EQ(wrong->get_header_value("Allow"), "GET");
+    EXPECT_NE(wrong->body.find("DELETE /api/state"), std::string::npos) << wrong->body;
 
     // Not HTTP at all: a 400, and the server goes on serving.
     const int fd = send_raw(monitor->port(), "HELLO THERE\r\n\r\n");
@@ -222,6 +232,17 @@ TEST_F(MonitorServer, AStopIsSentOnlyWhenAllowedAndOnlyForAValidCar)
     }
     EXPECT_EQ(monitor->stats().stops_sent, 0u);
     ASSERT_TRUE(wait_until([&] { return stops.matched_publications() > 0; }, 10s));
+    // A car the lab does not have: 404, naming the cars it has.
+    cpm::Writer<VehicleState> states(participant(), t::vehicle_state.name, t::vehicle_state.writer);
+    ASSERT_TRUE(wait_until([&] {
+        (void)states.write(car_state(5, 1, 0, 0));
+        return find_car(get_json(http, "/api/state"), 5) != nullptr;
+    }, 10s, 50ms));
+    auto none = http.Post("/api/stop", R"({"vehicle_id": 99})", "application/json");
+    ASSERT_TRUE(none);
+    EXPECT_EQ(none->status, 404) << none->body;
+    EXPECT_NE(none->body.find("no car 99 in this lab (cars: 5;"), std::string::npos) << none->body;
+    EXPECT_EQ(monitor->stats().stops_sent, 0u);
     auto r = http.Post("/api/stop", R"({"vehicle_id": 5})", "application/json");
     ASSERT_TRUE(r);
     EXPECT_EQ(r->status, 200) << r->body;

@@ -62,6 +62,8 @@ public:
     nlohmann::json plots(uint64_t now_ns) const;
     /// Rises with every sample taken in; a server sends a new snapshot only when it has risen.
     uint64_t version() const;
+    /// The ids of the cars seen so far, in order.
+    std::vector<uint8_t> car_ids() const;
 
 private:
     struct PlotPoint
