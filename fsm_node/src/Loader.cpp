@@ -94,7 +94,8 @@ bool check_parameters(Context& ctx, const json& element, const std::string& path
         }
     }
     for (const auto& p : info.parameters) {
-        if (params.contains(p.name) || p.kind == "machine" || p.kind == "file") continue;
+        // Given but wrong is said above, once.
+        if (params.contains(p.name) || element.contains(p.name) || p.kind == "machine" || p.kind == "file") continue;
         if (p.fallback.empty()) {
             ctx.error(path, info.type + " needs parameter \"" + p.name + "\" (" + p.meaning + ")");
             ok = false;

@@ -55,7 +55,9 @@ TEST(FsmLoader, ReportsEveryErrorAtOnceWithItsJsonPath)
                         {"id": 1, "type": "Finished", "from": 4, "to": 1},
                         {"id": 2, "type": "ArucoGateFound", "from": 1, "to": 4},
                         {"id": 3, "type": "Teleport", "from": 1, "to": 4},
-                        {"id": 4, "type": "Timeout", "from": 1, "to": 4}]})",
+                        {"id": 4, "type": "Timeout", "from": 1, "to": 4},
+                        {"id": 5, "type": "SensorLevel", "from": 1, "to": 4, "sensor": "back", "level": 0.5},
+                        {"id": 6, "type": "Timeout", "from": 1, "to": 4, "seconds": -1}]})",
                          "car.json");
     EXPECT_FALSE(sut.ok());
     EXPECT_FALSE(sut.machine);
@@ -74,7 +76,12 @@ TEST(FsmLoader, ReportsEveryErrorAtOnceWithItsJsonPath)
     EXPECT_TRUE(has(e, "car.json: $.transitions[3]", "ArucoGateFound into state 4 (Idle), which cannot take a target")) << all(e);
     EXPECT_TRUE(has(e, "car.json: $.transitions[4].type", "unknown transition type \"Teleport\"")) << all(e);
     EXPECT_TRUE(has(e, "car.json: $.transitions[5]", "Timeout needs parameter \"seconds\"")) << all(e);
-    EXPECT_EQ(e.size(), 14u) << all(e);
+    // A parameter given but wrong is said once, not also as missing.
+    EXPECT_TRUE(has(e, "car.json: $.transitions[6].sensor", "got \"back\"")) << all(e);
+    EXPECT_FALSE(has(e, "car.json: $.transitions[6]", "needs parameter \"sensor\"")) << all(e);
+    EXPECT_TRUE(has(e, "car.json: $.transitions[7].seconds", "got -1")) << all(e);
+    EXPECT_FALSE(has(e, "car.json: $.transitions[7]", "needs parameter \"seconds\"")) << all(e);
+    EXPECT_EQ(e.size(), 16u) << all(e);
 }
 
 TEST(FsmLoader, MissingRootAndBadJsonAreNamed)
