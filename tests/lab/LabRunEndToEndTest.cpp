@@ -169,6 +169,18 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
     EXPECT_NE(run.errors().find("fsm_5 killed by SIGKILL during the run"), std::string::npos) << run.errors();
     EXPECT_NE(run.errors().find("fsm_node: vehicle 5"), std::string::npos) << "the end of its log is shown\n" << run.errors();
+    {
+        std::ifstream log(out + "/fsm_5.log");
+        std::string line, last;
+        while (std::getline(log, line)) {
+            if (!line.empty()) last = line;
+        }
+        ASSERT_FALSE(last.empty());
+        const std::string said = run.errors();
+        size_t times = 0;
+        for (auto at = said.find(last); at != std::string::npos; at = said.find(last, at + 1)) ++times;
+        EXPECT_EQ(times, 1u) << "the end of its log is shown once\n" << said;
+    }
     const auto summary = summary_of(out);
     EXPECT_EQ(summary["ok"], false);
     EXPECT_NE(summary["error"].get<std::string>().find("fsm_5"), std::string::npos);

@@ -193,7 +193,8 @@ int lab_run(const std::vector<std::string>& args)
         status = 1;
     }
     for (const auto& p : r.processes) {
-        if (p.failed) std::fprintf(stderr, "%s: %s %s%s\n%s", command.c_str(), p.name.c_str(), p.how.c_str(),
+        // The process the run ended for is told below, with the end of its log.
+        if (p.failed && r.error.rfind(p.name + " ", 0) != 0) std::fprintf(stderr, "%s: %s %s%s\n%s", command.c_str(), p.name.c_str(), p.how.c_str(),
                                    p.restarts ? (" (restarted " + std::to_string(p.restarts) + " times)").c_str() : "", p.last_lines.c_str());
     }
     if (!r.error.empty()) std::fprintf(stderr, "%s: the run ended early: %s\n", command.c_str(), r.error.c_str());
