@@ -111,6 +111,10 @@ Report make_report(const std::string& run_dir)
         throw std::runtime_error("gnuplot is not installed (Debian package gnuplot-nox; ./lab installs it)");
     }
     const auto rec = rtdb::load_recording(recording);
+    if (rec.samples == 0) {
+        // Nothing to draw: say why instead of handing gnuplot empty data ("x range is invalid").
+        throw std::runtime_error(recording + " holds no samples" + (rec.warning.empty() ? "" : ": " + rec.warning));
+    }
     const rtdb::IdlDecoder* types = rec.types ? rec.types.get() : rtdb::IdlDecoder::lab_types();
     if (!types) throw std::runtime_error(recording + " carries no IDL and none is installed");
     nlohmann::json summary = read_json((dir / "summary.json").string());
@@ -396,7 +400,8 @@ Report make_report(const std::string& run_dir)
       << "<h1>Run " << html_escape(name) << "</h1>\n<p>" << html_escape(summary.value("time", std::string("?"))) << " time, "
       << fixed(summary.value("lab_time_s", 0.0), 1) << " s of lab time in " << fixed(summary.value("real_s", 0.0), 1) << " s; "
       << (summary.value("ok", false) ? "every process ran its time" : "<span class=\"bad\">the run did not end well: " + html_escape(why_not_ok(summary)) + "</span>")
-      << ". Recording: <code>recording.db</code> (" << rec.samples << " samples; ask it with <code>cpm history --file recording.db</code>).</p>\n";
+      << ". Recording: <code>recording.db</code> (" << rec.samples << " samples; ask it with <code>cpm history --file recording.db</code>)"
+      << (rec.warning.empty() ? std::string() : "; <span class=\"bad\">" + html_escape(rec.warning) + "</span>") << ".</p>\n";
     const bool with_gates = world && !world->gates().empty();
     h << "<h2>Cars</h2>\n<table><tr><th>car</th><th>driven (m)</th><th>top speed (m/s)</th><th>least clearance to a wall (m)</th><th>last state</th>"
       << (with_gates ? "<th>gates passed</th>" : "") << "</tr>\n";

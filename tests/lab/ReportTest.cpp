@@ -93,3 +93,27 @@ TEST(Report, JudgesTheWorldsGatesOnEachCarsTruePath)
     EXPECT_NEAR(report.figures["topics"]["vehicleObservation"]["rate_hz"].get<double>(), 100, 3) << "two cars at 50 Hz of lab time";
     EXPECT_FALSE(report.figures["topics"]["vehicleObservation"].contains("delay_ms_p50"));
 }
+
+TEST(Report, ARecordingWithoutSamplesOrDamagedIsNamedNotHandedToGnuplot)
+{
+    cpm_test::TempDir dir;
+    {
+        rtdb::RecordingWriter writer(dir.file("recording.db"), {.name = "cut"});
+        writer.close();
+    }
+    std::ofstream(dir.file("summary.json")) << nlohmann::json{{"name", "cut"}, {"ok", true}}.dump();
+    auto error_of = [&] {
+        try {
+            (void)lab::make_report(dir.path.string());
+        } catch (const std::exception& e) {
+            return std::string(e.what());
+        }
+        return std::string("no error");
+    };
+    const std::string empty = error_of();
+    EXPECT_NE(empty.find(dir.file("recording.db") + " holds no samples"), std::string::npos) << empty;
+    fs::resize_file(dir.file("recording.db"), 4096);  // cut short, as by a full disk or a kill
+    const std::string cut = error_of();
+    EXPECT_NE(cut.find(dir.file("recording.db")), std::string::npos) << cut;
+    for (const auto& e : {empty, cut}) EXPECT_EQ(e.find("gnuplot"), std::string::npos) << e;
+}
