@@ -5,10 +5,12 @@
 #include <cpm/rtdb/IdlDecoder.hpp>
 #include <cpm/rtdb/Requests.hpp>
 #include <cpm/Error.hpp>
+#include <cpm/CommandLine.hpp>
 #include <cpm/HistoryClient.hpp>
 
 #include "Sqlite.hpp"
 
+#include <cctype>
 #include <filesystem>
 #include <limits>
 #include <stdexcept>
@@ -427,14 +429,66 @@ LoadedRecording load_recording(const std::string& path)
     return out;
 }
 
-std::pair<uint64_t, uint64_t> recording_span(const std::string& path)
+namespace {
+
+/// The samples with a create_stamp (not the source timestamp of a type without a Header).
+constexpr const char* kStamped = "FROM samples s JOIN objects o ON o.oid = s.oid WHERE o.data_time = 'create_stamp'";
+
+/// Data times below this are a lab clock's (from 0), not the wall clock of a recording that began at `started_ns`.
+uint64_t lab_clock_limit(uint64_t started_ns) { return started_ns / 2; }
+
+}  // namespace
+
+RunClock recording_clock(const std::string& path)
 {
     std::map<std::string, std::string> meta;
     std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_recording_file(path, meta), sqlite3_close);
-    const uint64_t start = std::strtoull(meta["started_ns"].c_str(), nullptr, 10);
-    if (meta.count("ended_ns")) return {start, std::strtoull(meta["ended_ns"].c_str(), nullptr, 10)};
-    Statement newest(db.get(), "SELECT max(commit_ns) FROM samples");
-    return {start, newest.step() == SQLITE_ROW ? newest.u64(0) : start};
+    RunClock c;
+    c.started_ns = std::strtoull(meta["started_ns"].c_str(), nullptr, 10);
+    if (meta.count("ended_ns")) {
+        c.ended_ns = std::strtoull(meta["ended_ns"].c_str(), nullptr, 10);
+    } else {
+        Statement newest(db.get(), "SELECT max(commit_ns) FROM samples");
+        c.ended_ns = newest.step() == SQLITE_ROW ? newest.u64(0) : c.started_ns;
+    }
+    // A simulated run's lab clock starts at 0: its data times lie decades before the commits. A
+    // service beside it (the history's own status) may stamp with the wall clock: the lab clock's
+    // span is that of the stamps before the recording started.
+    Statement data(db.get(), (std::string("SELECT min(s.data_ns), max(s.data_ns), count(*) ") + kStamped + " AND s.data_ns < ?").c_str());
+    data.bind(1, lab_clock_limit(c.started_ns));
+    Statement all(db.get(), (std::string("SELECT min(s.data_ns), max(s.data_ns), count(*) ") + kStamped).c_str());
+    if (data.step() == SQLITE_ROW && data.u64(2) > 0) {
+        c.lab_clock = true;
+        c.data_first_ns = data.u64(0);
+        c.data_last_ns = data.u64(1);
+    } else if (all.step() == SQLITE_ROW && all.u64(2) > 0) {
+        c.data_first_ns = all.u64(0);
+        c.data_last_ns = all.u64(1);
+    } else {
+        c.data_first_ns = c.started_ns;
+        c.data_last_ns = c.ended_ns;
+    }
+    return c;
+}
+
+bool is_time_into_run(const std::string& text)
+{
+    return !text.empty() && std::isdigit(static_cast<unsigned char>(text[0])) && text.find_first_not_of("0123456789") != std::string::npos &&
+           text.find_first_of("-:") == std::string::npos;
+}
+
+uint64_t recording_time(const std::string& path, const RunClock& clock, const std::string& flag, const std::string& text, bool by_data)
+{
+    if (!is_time_into_run(text)) return cpm::cli::parse_time(flag, text, by_data ? clock.data_last_ns : clock.ended_ns);
+    const uint64_t data = (clock.lab_clock ? 0 : clock.started_ns) + cpm::cli::parse_duration(flag, text);
+    if (by_data) return data;
+    // A commit time: that of the first stamped sample at or after it on the run's clock.
+    std::map<std::string, std::string> meta;
+    std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_recording_file(path, meta), sqlite3_close);
+    Statement first(db.get(), (std::string("SELECT min(s.commit_ns) ") + kStamped + " AND s.data_ns >= ? AND s.data_ns < ?").c_str());
+    first.bind(1, data).bind(2, clock.lab_clock ? lab_clock_limit(clock.started_ns) : uint64_t(INT64_MAX));
+    if (first.step() == SQLITE_ROW && !first.null(0)) return first.u64(0);
+    return clock.lab_clock ? clock.ended_ns + 1 : data;  // past the run's end
 }
 
 namespace {

@@ -38,6 +38,7 @@ public:
     }
     int step() { return sqlite3_step(s_); }
     uint64_t u64(int col) const { return static_cast<uint64_t>(sqlite3_column_int64(s_, col)); }
+    bool null(int col) const { return sqlite3_column_type(s_, col) == SQLITE_NULL; }
     std::string text(int col) const
     {
         const auto* t = sqlite3_column_text(s_, col);

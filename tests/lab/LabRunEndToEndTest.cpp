@@ -152,6 +152,29 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     Process nothing({built_program("cpm"), "lab", "report", dir.file("none")});
     EXPECT_EQ(nothing.wait(30s), 1);
     EXPECT_NE(nothing.errors().find("no run folder " + dir.file("none")), std::string::npos) << nothing.errors();
+
+    // Times into the run are lab time in every verb: 8 s of lab time took about a second here.
+    const std::string recording = out + "/recording.db";
+    Process at({built_program("cpm"), "history", "--file", recording, "at", "--topic", "vehicleState", "--key", "5", "--time", "5s", "--by",
+                "data", "--json"});
+    ASSERT_EQ(at.wait(30s), 0) << at.errors();
+    const auto at_5s = nlohmann::json::parse(at.output())["data_ns"].get<uint64_t>();
+    EXPECT_LE(at_5s, 5'000'000'000u);
+    EXPECT_GT(at_5s, 4'950'000'000u) << "the car's state at 5 s of lab time";
+    Process last_second({built_program("cpm"), "history", "--file", recording, "range", "--topic", "vehicleState", "--key", "5", "--from", "-1s",
+                  "--to", "now", "--by", "data", "--json"});
+    ASSERT_EQ(last_second.wait(30s), 0) << "the last second of lab time, not of the wall clock\n" << last_second.errors();
+    const std::string last_out = last_second.output();
+    EXPECT_GE(std::count(last_out.begin(), last_out.end(), '\n'), 45) << "50 Hz";
+    Process play({built_program("cpm"), "play", recording, "--from", "2s", "--to", "4s", "--topics", "vehicleState", "--wait-for-readers", "0s"});
+    ASSERT_EQ(play.wait(60s), 0) << play.errors();
+    const auto played = nlohmann::json::parse(play.output())["published"].get<int>();
+    EXPECT_NEAR(played, 100, 5) << "2 s of lab time at 50 Hz";
+    Process beyond({built_program("cpm"), "play", recording, "--from", "50s", "--wait-for-readers", "0s"});
+    EXPECT_EQ(beyond.wait(60s), 1) << "a span with nothing in it is said";
+    EXPECT_NE(beyond.errors().find("nothing of " + recording + " lies in the span asked for (--from 50s; its lab clock runs from 0 to 8.0 s)"),
+              std::string::npos)
+        << beyond.errors();
 }
 
 TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)

@@ -102,6 +102,7 @@ TEST(CpmCommand, EveryHistoryVerbNamesWhatIsMissingOrWrongBeforeAskingTheService
         {{"history", "snapshot", "--time", "now"}, "cpm history snapshot: --objects TOPIC[/KEY],... is required"},
         {{"history", "snapshot", "--time", "now", "--objects", "a,,b"}, "cpm history snapshot: --objects: empty item in 'a,,b'"},
         {{"history", "changes"}, "cpm history changes: --since T is required"},
+        {{"history", "at", "--topic", "vehicleState", "--time", "20s"}, "cpm history at: --time: '20s' is a time into a run, which only a recording has (--file)"},
         {{"history", "teleport"}, "cpm: unknown command 'cpm history teleport' (see cpm history --help)"},
         {{"dump", "--alive", "now"}, "cpm dump: unexpected argument 'now'"},
     };

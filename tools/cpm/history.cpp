@@ -56,6 +56,9 @@ const char* const kHistoryHelp =
     "--key: a vehicle id, or the key as `cpm history list` prints it. Times: nanoseconds,\n"
     "ISO-8601 UTC (2026-11-23T14:05:00.25Z) or relative to now (-2s). --by commit (default):\n"
     "when the service received it; data: the sample's create_stamp.\n"
+    "With --file, also a time into the run (20s, 1.5s): on the run's own clock, lab time in a\n"
+    "simulated run (20s: 20 s of lab time) and since its start in a real one; -2s and now count\n"
+    "back from the end of the clock --by names (the lab clock's end with --by data).\n"
     "Output: a table, or one JSON object per line (--json) with every field of a cpm type\n"
     "decoded; a type cpm does not know is shown with its stamps and payload_base64.\n"
     "Exit code 0 when the answer is ok; 1 with the status (not_found, evicted, not_yet, timeout,\n"
@@ -96,7 +99,21 @@ struct Source
     std::shared_ptr<const cpm::rtdb::LoadedRecording> recording;
 
     /// A time flag's value (see cpm::cli::parse_time) against this source's now.
-    uint64_t time(const std::string& flag, const std::string& text) const { return cpm::cli::parse_time(flag, text, now); }
+    std::string file;                 ///< the recording, or "" for the live service
+    cpm::rtdb::RunClock clock;        ///< the recording's clocks
+
+    /// A time flag's value: against a recording, on the clock the query goes by (see
+    /// cpm::rtdb::recording_time: "20s" is 20 s into the run, lab time in a simulated one); live,
+    /// against now.
+    uint64_t time(const std::string& flag, const std::string& text, bool by_data = false) const
+    {
+        if (!file.empty()) return cpm::rtdb::recording_time(file, clock, flag, text, by_data);
+        if (cpm::rtdb::is_time_into_run(text)) {
+            throw UsageError(flag + ": '" + text + "' is a time into a run, which only a recording has (--file); live, ask -" + text +
+                             " (before now) or give an absolute time");
+        }
+        return cpm::cli::parse_time(flag, text, now);
+    }
     const cpm::rtdb::IdlDecoder& decoder() const
     {
         if (recording && recording->types) return *recording->types;
@@ -122,6 +139,13 @@ Source open_source(const std::string& file, const std::string& command)
     if (!s.recording->warning.empty()) std::fprintf(stderr, "%s: %s\n", command.c_str(), s.recording->warning.c_str());
     s.client = std::make_unique<cpm::HistoryClient>(cpm::rtdb::recording_backend(s.recording));
     s.now = s.recording->ended_ns;
+    s.file = file;
+    try {
+        s.clock = cpm::rtdb::recording_clock(file);
+    } catch (const std::runtime_error& e) {  // damaged beyond its samples: the loaded part's span
+        s.clock.started_ns = s.recording->started_ns;
+        s.clock.ended_ns = s.clock.data_last_ns = s.recording->ended_ns;
+    }
     return s;
 }
 
@@ -295,7 +319,11 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
                                         {"--json", false}},
                                        command);
     const Source source = open_source(file, command);
-    auto parse_time = [&](const std::string& flag, const std::string& text) { return source.time(flag, text); };
+    const bool by_data = parsed.get("--by", "commit") == "data";
+    // Objects' times (created, deleted) are the service's: --since and --alive-at go by commit.
+    auto parse_time = [&](const std::string& flag, const std::string& text) {
+        return source.time(flag, text, by_data && flag != "--since" && flag != "--alive-at");
+    };
     // The verbs are the request kinds, but for two spelled as a person types them.
     const std::string kind_name = verb == "wait" ? "wait_next" : verb == "wait-object" ? "wait_object" : verb;
     const auto kind = cpm::history::kind_from(kind_name);

@@ -144,8 +144,9 @@ const char* const kPlayHelp =
     "payloads and stamps as recorded, in the order they were received and with their original\n"
     "spacing divided by --rate (2: twice as fast). Types cpm does not know are replayed too.\n"
     "Run fsm_node, cpm monitor or cpm record against a recorded drive this way.\n"
-    "--from/--to: a span of the run, as a time into it (5s, 90s), a time relative to its end\n"
-    "(-10s) or an absolute time (ns, ISO-8601). --topics: only these (`*`, `?` match); by default\n"
+    "--from/--to: a span of the run, as a time into it on the run's own clock (5s, 90s: lab time\n"
+    "in a simulated run, as cpm history --file takes it), a time relative to its end (-10s) or\n"
+    "an absolute time (ns, ISO-8601); a span with nothing in it is an error. --topics: only these (`*`, `?` match); by default\n"
     "every topic but the control plane (historyRequest, historyReply, historyStatus,\n"
     "systemTrigger, readyStatus, parameter, parameterRequest), which --topics may name.\n"
     "Waits up to --wait-for-readers for each topic to have a reader, then plays; prints what it\n"
@@ -172,25 +173,18 @@ int play_command(const std::vector<std::string>& args)
         for (const auto& t : split_list("--exclude", parsed.get("--exclude"))) options.exclude.push_back(cpm::cli::glob_regex(t));
     }
     if (parsed.has("--wait-for-readers")) options.wait_for_readers_ns = parse_duration("--wait-for-readers", parsed.get("--wait-for-readers"));
-    // The span: needs the run's start and end, from the file.
-    std::pair<uint64_t, uint64_t> span{0, 0};
-    if (parsed.has("--from") || parsed.has("--to")) {
+    // The span, as commit times (what play goes by): needs the run's clocks, from the file.
+    cpm::rtdb::RunClock clock;
+    const bool span = parsed.has("--from") || parsed.has("--to");
+    if (span) {
         try {
-            span = cpm::rtdb::recording_span(file);
+            clock = cpm::rtdb::recording_clock(file);
         } catch (const std::runtime_error& e) {
             throw cpm::Error(command + ": " + e.what());
         }
     }
-    auto when = [&](const std::string& flag) -> uint64_t {
-        const std::string text = parsed.get(flag);
-        if (!text.empty() && std::isdigit(static_cast<unsigned char>(text[0])) && text.find_first_not_of("0123456789") != std::string::npos &&
-            text.find('-') == std::string::npos) {
-            return span.first + parse_duration(flag, text);  // 5s: into the run
-        }
-        return cpm::cli::parse_time(flag, text, span.second);
-    };
-    if (parsed.has("--from")) options.from_ns = when("--from");
-    if (parsed.has("--to")) options.to_ns = when("--to");
+    if (parsed.has("--from")) options.from_ns = cpm::rtdb::recording_time(file, clock, "--from", parsed.get("--from"), false);
+    if (parsed.has("--to")) options.to_ns = cpm::rtdb::recording_time(file, clock, "--to", parsed.get("--to"), false);
     if (options.to_ns < options.from_ns) throw UsageError(command + ": --to is before --from");
 
     cpm::cli::stop_on_signals();
@@ -220,6 +214,18 @@ int play_command(const std::vector<std::string>& args)
                              {"late_p99_ms", stats.late_p99_ns * 1e-6},
                              {"late_max_ms", stats.late_max_ns * 1e-6}};
     std::printf("%s\n", out.dump().c_str());
+    if (stats.published == 0 && stats.failed == 0 && !cpm::cli::stop_requested()) {
+        std::string asked;
+        for (const char* flag : {"--from", "--to"}) {
+            if (parsed.has(flag)) asked += (asked.empty() ? "" : " ") + std::string(flag) + " " + parsed.get(flag);
+        }
+        char runs[160];
+        std::snprintf(runs, sizeof runs, "%s %.1f s", clock.lab_clock ? "its lab clock runs from 0 to" : "it lasts",
+                      double(clock.lab_clock ? clock.data_last_ns : clock.ended_ns - clock.started_ns) / 1e9);
+        std::fprintf(stderr, "%s: nothing of %s lies in the span asked for (%s; %s)\n", command.c_str(), file.c_str(),
+                     asked.empty() ? "the whole run" : asked.c_str(), runs);
+        return 1;
+    }
     return stats.failed ? 1 : 0;
 }
 

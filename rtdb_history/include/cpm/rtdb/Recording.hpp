@@ -114,9 +114,25 @@ struct LoadedRecording
 /// SQLite, no cpm tables); a file damaged part way loads up to the damage (see warning).
 LoadedRecording load_recording(const std::string& path);
 
-/// A recording's start and end (of one never closed: its newest commit) without loading it.
+/// A recording's clocks, read without loading it. Commits are the recorder's wall clock; data
+/// times (create_stamp) are the run's own clock: the lab's, from 0, in a simulated run.
+struct RunClock
+{
+    uint64_t started_ns = 0, ended_ns = 0;         ///< by commit: the start, the end (or newest commit)
+    uint64_t data_first_ns = 0, data_last_ns = 0;  ///< the data times of its stamped samples
+    bool lab_clock = false;                        ///< data times are a simulated lab clock from 0
+};
 /// Throws as load_recording.
-std::pair<uint64_t, uint64_t> recording_span(const std::string& path);
+RunClock recording_clock(const std::string& path);
+
+/// A time flag's value (`--time`, `--from`, …) against a recording, as a commit time, or a data
+/// time when `by_data`: a time into the run on its own clock ("20s": lab time in a simulated
+/// run, since the start in a real one), relative to its end ("-2s", "now": the end of the clock
+/// asked for), or absolute (ns, ISO-8601). Throws cpm::cli::UsageError naming the flag.
+uint64_t recording_time(const std::string& path, const RunClock& clock, const std::string& flag, const std::string& text, bool by_data);
+
+/// Whether `text` is a time into a run ("20s", "1.5s", "90s": a duration without a sign).
+bool is_time_into_run(const std::string& text);
 
 /// A HistoryClient's backend answering from a loaded recording as the live service answers
 /// (the kinds that wait answer at once: nothing new comes to a finished run).
