@@ -61,3 +61,40 @@ if grep -E "(fastdds|fastrtps)/" "$work/headers.txt"; then
   exit 1
 fi
 echo "light: $(grep -c '^\.' "$work/headers.txt") headers read, none of Fast DDS"
+
+# Every exported target links from an outside project: one small program each, which includes
+# its public header and calls into its library, so that the package declares every public
+# dependency (a missing find_dependency fails here at configure time).
+mkdir -p "$work/each"
+each() {  # TARGET HEADER STATEMENT
+  cat > "$work/each/$1.cpp" <<CPP
+#include <$2>
+int main(int argc, char**) { if (argc > 5) { $3; } return 0; }
+CPP
+  echo "add_executable(use_$1 $1.cpp)" >> "$work/each/CMakeLists.txt"
+  echo "target_link_libraries(use_$1 PRIVATE cpm::$1)" >> "$work/each/CMakeLists.txt"
+}
+cat > "$work/each/CMakeLists.txt" <<'CMAKE'
+cmake_minimum_required(VERSION 3.16)
+project(each_target LANGUAGES CXX)
+set(CMAKE_CXX_STANDARD 20)
+find_package(cpm REQUIRED)
+CMAKE
+each idl VehicleState.h 'VehicleState s; return s.vehicle_id()'
+each cpm cpm/get_time_ns.hpp 'return int(cpm::get_time_ns() % 2)'
+each rtdb cpm/rtdb/Recording.hpp 'return int(cpm::rtdb::load_recording("x").samples)'
+each lab cpm/lab/Scenario.hpp 'return int(cpm::lab::load_scenario("x").vehicles.size())'
+each monitor cpm/monitor/Monitor.hpp 'return int(cpm::monitor::listen_problem("127.0.0.1", 1).size())'
+each vehicle cpm/vehicle/World.hpp 'return int(cpm::vehicle::World::load("x").walls().size())'
+each aruco cpm/aruco/Camera.hpp 'return int(cpm::aruco::Camera::load("x").width)'
+each aruco_node cpm/aruco/ArucoNode.hpp 'std::string why; return int(cpm::aruco::frame_image(CameraFrame{}, cpm::aruco::Camera{}, why).cols)'
+each fsm cpm/fsm/Loader.hpp 'return int(cpm::fsm::load_file("x").errors.size())'
+each fsm_node cpm/fsm/FsmNode.hpp 'return int(cpm::fsm::inputs_from(VehicleState{}, RangeSensors{}, nullptr, 0).t)'
+each routing cpm/routing/Conflicts.hpp 'return int(cpm::routing::footprint_distance({}, {}, {}))'
+each routing_node cpm/routing/RoutingNode.hpp 'cpm::routing::RoutingNode node(cpm::routing::LaneGraph{}, {}); return 0'
+targets=$(grep -c '^add_executable' "$work/each/CMakeLists.txt")
+exported=$(grep -c '^add_library(cpm::' "$work/prefix/lib/cmake/cpm/cpmTargets.cmake")
+[ "$targets" -eq "$exported" ] || { echo "$exported targets are exported, $targets tried here: add the new one"; exit 1; }
+cmake -S "$work/each" -B "$work/each/build" -G Ninja -DCMAKE_PREFIX_PATH="$work/prefix" > "$work/each.log" 2>&1 \
+  && cmake --build "$work/each/build" >> "$work/each.log" 2>&1 || { echo "an exported target does not link from outside:"; cat "$work/each.log"; exit 1; }
+echo "every exported target ($targets) builds into a program outside this tree"
