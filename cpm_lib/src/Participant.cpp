@@ -1,5 +1,7 @@
 #include "ParticipantCore.hpp"
 
+#include "DiscoveryListener.hpp"
+
 #include <cpm/Error.hpp>
 #include <cpm/init.hpp>
 
@@ -258,7 +260,8 @@ ParticipantCore::ParticipantCore(const ParticipantOptions& options)
     }
     std::optional<DeadPortsHeld> dead_ports;
     if (options.shared_memory) dead_ports.emplace(domain_id_);
-    participant_ = factory_->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, options.discovery_listener,
+    if (options.on_discovery) discovery_ = std::make_unique<DiscoveryListener>(options.on_discovery);
+    participant_ = factory_->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, discovery_.get(),
                                                 dds::StatusMask::none());
     dead_ports.reset();
     if (participant_ == nullptr) {

@@ -15,6 +15,7 @@
 
 namespace eprosima::fastdds::dds {
 class DomainParticipant;
+class DomainParticipantListener;
 class Publisher;
 class Subscriber;
 class Topic;
@@ -67,6 +68,7 @@ private:
     };
     std::map<std::string, TopicUse> topics_;
     std::optional<security::NodeFiles> security_;
+    std::unique_ptr<eprosima::fastdds::dds::DomainParticipantListener> discovery_;  ///< outlives participant_
 };
 
 /// Throws cpm::Error, naming the topic, when a secured participant may not have this endpoint:

@@ -9,7 +9,6 @@
 #include "RawType.hpp"
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
-#include <fastdds/dds/domain/DomainParticipantListener.hpp>
 #include <fastdds/dds/subscriber/DataReader.hpp>
 #include <fastdds/dds/subscriber/DataReaderListener.hpp>
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
@@ -74,7 +73,7 @@ struct Skipped
 
 }  // namespace
 
-struct Ingest::Impl : public dds::DomainParticipantListener
+struct Ingest::Impl
 {
     /// One recorded topic: a raw reader on the recording participant.
     struct TopicRec : public dds::DataReaderListener
@@ -118,11 +117,11 @@ struct Ingest::Impl : public dds::DomainParticipantListener
     {
         recorder_options = options.participant.value_or(ParticipantOptions::from_init());
         recorder_options.name = (recorder_options.name.empty() ? std::string("cpm_history") : recorder_options.name) + "_recorder";
-        recorder_options.discovery_listener = this;
+        recorder_options.on_discovery = [this](const DiscoveryEvent& e) { on_discovery(e); };
         open();
     }
 
-    ~Impl() override
+    ~Impl()
     {
         close_readers(topics);
         close();
@@ -181,30 +180,19 @@ struct Ingest::Impl : public dds::DomainParticipantListener
         events_cv.notify_one();
     }
 
-    void on_participant_discovery(dds::DomainParticipant*, rtps::ParticipantDiscoveryInfo&& info) override
+    void on_discovery(const DiscoveryEvent& d)
     {
         Event e{};
-        e.guid = info.info.m_guid;
-        e.name = info.info.m_participantName.to_string();
-        switch (info.status) {
-        case rtps::ParticipantDiscoveryInfo::DISCOVERED_PARTICIPANT: e.kind = Event::process_found; break;
-        case rtps::ParticipantDiscoveryInfo::REMOVED_PARTICIPANT:
-        case rtps::ParticipantDiscoveryInfo::DROPPED_PARTICIPANT: e.kind = Event::process_gone; break;
+        e.guid = fast_dds_guid(d);
+        switch (d.kind) {
+        case DiscoveryEvent::Kind::participant_found: e.kind = Event::process_found; break;
+        case DiscoveryEvent::Kind::participant_gone: e.kind = Event::process_gone; break;
+        case DiscoveryEvent::Kind::writer_found: e.kind = Event::writer_found; break;
+        case DiscoveryEvent::Kind::writer_gone: e.kind = Event::writer_gone; break;
         default: return;
         }
-        push(std::move(e));
-    }
-
-    void on_publisher_discovery(dds::DomainParticipant*, rtps::WriterDiscoveryInfo&& info) override
-    {
-        Event e{};
-        e.guid = info.info.guid();
-        e.writer = raw_endpoint(info.info);
-        switch (info.status) {
-        case rtps::WriterDiscoveryInfo::DISCOVERED_WRITER: e.kind = Event::writer_found; break;
-        case rtps::WriterDiscoveryInfo::REMOVED_WRITER: e.kind = Event::writer_gone; break;
-        default: return;
-        }
+        e.name = d.participant_name;
+        e.writer = raw_endpoint(d);
         push(std::move(e));
     }
 

@@ -5,6 +5,7 @@
 // is computed from the @key members exactly as DDS does (XTypes 1.3 §7.6.8: big-endian CDR,
 // MD5 when the key may exceed 16 bytes), so it equals the writer's own; for an unknown type
 // it is the octet right after a 16-byte Header (a lab type's vehicle_id).
+#include <cpm/Discovery.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
@@ -109,14 +110,16 @@ struct RawEndpoint
     bool keyed = false, reliable = false, transient_local = false;
 };
 
-/// From a WriterProxyData or ReaderProxyData (discovery's view of an endpoint).
-template <class ProxyData>
-RawEndpoint raw_endpoint(const ProxyData& info)
+/// A discovered writer or reader as a raw endpoint.
+inline RawEndpoint raw_endpoint(const DiscoveryEvent& e) { return {e.topic, e.type_name, e.keyed, e.reliable, e.transient_local}; }
+
+/// A discovery event's GUID as Fast DDS's.
+inline eprosima::fastrtps::rtps::GUID_t fast_dds_guid(const DiscoveryEvent& e)
 {
-    namespace dds = eprosima::fastdds::dds;
-    return {info.topicName().to_string(), info.typeName().to_string(), info.topicKind() == eprosima::fastrtps::rtps::WITH_KEY,
-            info.m_qos.m_reliability.kind == dds::RELIABLE_RELIABILITY_QOS,
-            info.m_qos.m_durability.kind != dds::VOLATILE_DURABILITY_QOS};
+    eprosima::fastrtps::rtps::GUID_t g;
+    std::memcpy(g.guidPrefix.value, e.guid.data(), 12);
+    std::memcpy(g.entityId.value, e.guid.data() + 12, 4);
+    return g;
 }
 
 /// Registers the raw type under `type_name` in the participant unless a type of that name is

@@ -7,7 +7,7 @@
 #include "RawType.hpp"
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
-#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
 #include <fastdds/dds/subscriber/DataReader.hpp>
 #include <fastdds/dds/subscriber/DataReaderListener.hpp>
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
@@ -33,7 +33,7 @@ struct Seen : RawEndpoint
 
 }  // namespace
 
-struct TopicProbe::Impl : public dds::DomainParticipantListener  // a DataReaderListener too
+struct TopicProbe::Impl : public dds::DataReaderListener
 {
     // Discovery, filled by Fast DDS's threads.
     mutable std::mutex discovery_mutex;
@@ -52,39 +52,25 @@ struct TopicProbe::Impl : public dds::DomainParticipantListener  // a DataReader
     dds::Topic* topic = nullptr;
     dds::DataReader* reader = nullptr;
 
-    void on_participant_discovery(dds::DomainParticipant*, rtps::ParticipantDiscoveryInfo&& info) override
+    void on_discovery(const DiscoveryEvent& e)
     {
         std::lock_guard lock(discovery_mutex);
-        const auto prefix = info.info.m_guid.guidPrefix;
-        if (info.status == rtps::ParticipantDiscoveryInfo::DISCOVERED_PARTICIPANT) {
-            participant_names[prefix] = info.info.m_participantName.to_string();
-        } else if (info.status == rtps::ParticipantDiscoveryInfo::REMOVED_PARTICIPANT ||
-                   info.status == rtps::ParticipantDiscoveryInfo::DROPPED_PARTICIPANT) {
-            participant_names.erase(prefix);
-            std::erase_if(endpoints, [&](const auto& e) { return e.first.guidPrefix == prefix; });
-        }
-    }
-
-    template <class Info>
-    void endpoint(const rtps::GUID_t& guid, const Info& info, bool is_writer, bool gone)
-    {
-        std::lock_guard lock(discovery_mutex);
-        if (gone) {
-            endpoints.erase(guid);
+        const rtps::GUID_t guid = fast_dds_guid(e);
+        switch (e.kind) {
+        case DiscoveryEvent::Kind::participant_found: participant_names[guid.guidPrefix] = e.participant_name; return;
+        case DiscoveryEvent::Kind::participant_gone:
+            participant_names.erase(guid.guidPrefix);
+            std::erase_if(endpoints, [&](const auto& p) { return p.first.guidPrefix == guid.guidPrefix; });
             return;
+        case DiscoveryEvent::Kind::writer_gone:
+        case DiscoveryEvent::Kind::reader_gone: endpoints.erase(guid); return;
+        default:  // found or changed
+            Seen seen;
+            static_cast<RawEndpoint&>(seen) = raw_endpoint(e);
+            seen.is_writer = e.kind == DiscoveryEvent::Kind::writer_found || e.kind == DiscoveryEvent::Kind::writer_changed;
+            endpoints[guid] = seen;
+            discovered.notify_all();
         }
-        endpoints[guid] = {raw_endpoint(info), is_writer};
-        discovered.notify_all();
-    }
-
-    void on_publisher_discovery(dds::DomainParticipant*, rtps::WriterDiscoveryInfo&& info) override
-    {
-        endpoint(info.info.guid(), info.info, true, info.status == rtps::WriterDiscoveryInfo::REMOVED_WRITER);
-    }
-
-    void on_subscriber_discovery(dds::DomainParticipant*, rtps::ReaderDiscoveryInfo&& info) override
-    {
-        endpoint(info.info.guid(), info.info, false, info.status == rtps::ReaderDiscoveryInfo::REMOVED_READER);
     }
 
     void on_data_available(dds::DataReader* r) override
@@ -122,7 +108,7 @@ TopicProbe::TopicProbe(const ParticipantOptions& options) : impl_(std::make_uniq
 {
     ParticipantOptions o = options;
     if (o.name.empty()) o.name = "cpm_topic_probe";
-    o.discovery_listener = impl_.get();
+    o.on_discovery = [impl = impl_.get()](const DiscoveryEvent& e) { impl->on_discovery(e); };
     impl_->participant = std::make_unique<Participant>(o);
 }
 
@@ -135,7 +121,7 @@ TopicProbe::~TopicProbe()
     }
     if (impl_->subscriber) p->delete_subscriber(impl_->subscriber);
     if (impl_->topic) p->delete_topic(impl_->topic);
-    p->set_listener(nullptr);
+    // Discovery calls on into impl_ until its participant, the first of its members to go, is gone.
 }
 
 std::vector<std::string> TopicProbe::participants() const

@@ -102,19 +102,13 @@ TEST(Participant, APeerKilledIsDroppedWhenItsShorterLeaseRunsOut)
     // A participant's lease (--dds_lease) is how long the others wait for it once it falls
     // silent; the default is 10 s. A reader process with a 1.5 s lease, killed with SIGKILL,
     // is dropped within a few seconds.
-    struct Drops : fdds::DomainParticipantListener
-    {
-        void on_participant_discovery(fdds::DomainParticipant*, rtps::ParticipantDiscoveryInfo&& info) override
-        {
-            if (info.status != rtps::ParticipantDiscoveryInfo::DROPPED_PARTICIPANT &&
-                info.status != rtps::ParticipantDiscoveryInfo::REMOVED_PARTICIPANT)
-                return;
-            if (info.info.m_participantName.to_string() == "reliable_reader") dropped_at.store(std::chrono::steady_clock::now());
-        }
-        std::atomic<std::chrono::steady_clock::time_point> dropped_at{};
-    } drops;
+    std::atomic<std::chrono::steady_clock::time_point> dropped_at{};
     cpm::ParticipantOptions options = cpm_test::isolated_options();
-    options.discovery_listener = &drops;
+    options.on_discovery = [&](const cpm::DiscoveryEvent& e) {
+        if (e.kind == cpm::DiscoveryEvent::Kind::participant_gone && e.participant_name == "reliable_reader") {
+            dropped_at.store(std::chrono::steady_clock::now());
+        }
+    };
     const std::string topic = cpm_test::unique_topic("vehicleState");
     cpm::Participant participant(options);
     cpm::Writer<VehicleState> writer(participant, topic, {.reliable = true});
@@ -122,9 +116,9 @@ TEST(Participant, APeerKilledIsDroppedWhenItsShorterLeaseRunsOut)
     ASSERT_TRUE(writer.wait_for_matched(1, 10000ms));
     const auto killed = std::chrono::steady_clock::now();
     reader.kill(SIGKILL);
-    ASSERT_TRUE(cpm_test::wait_until([&] { return drops.dropped_at.load() > killed; }, 10000ms))
+    ASSERT_TRUE(cpm_test::wait_until([&] { return dropped_at.load() > killed; }, 10000ms))
         << "not dropped within the default lease";
-    const double after = std::chrono::duration<double>(drops.dropped_at.load() - killed).count();
+    const double after = std::chrono::duration<double>(dropped_at.load() - killed).count();
     std::printf("dropped %.2f s after the kill\n", after);
     EXPECT_LT(after, 5.0) << "a 1.5 s lease";
     EXPECT_TRUE(cpm_test::wait_until([&] { return writer.matched_subscriptions() == 0; }, 2000ms)) << "its reader still matched";

@@ -1,4 +1,5 @@
 #pragma once
+#include <cpm/Discovery.hpp>
 #include <cpm/Error.hpp>
 
 #include <chrono>
@@ -8,7 +9,6 @@
 
 namespace eprosima::fastdds::dds {
 class DomainParticipant;
-class DomainParticipantListener;
 }  // namespace eprosima::fastdds::dds
 
 namespace cpm {
@@ -36,9 +36,9 @@ struct ParticipantOptions
     /// A node's security folder (cpm security add-node): the participant joins a secured lab
     /// with that node's identity and permissions. Empty: unsecured.
     std::string security;
-    /// Told of every participant, writer and reader discovered from the first moment (its
-    /// discovery callbacks only; it must outlive the participant). For tools such as cpm_history.
-    eprosima::fastdds::dds::DomainParticipantListener* discovery_listener = nullptr;
+    /// Told of every participant, writer and reader found, changed or gone, from the first
+    /// moment (see DiscoveryCallback for its thread). For tools such as cpm_history.
+    DiscoveryCallback on_discovery;
 
     /// The options given by cpm::init (or the environment).
     static ParticipantOptions from_init();
