@@ -5,7 +5,7 @@
 // At the end, against the targets:
 //   - every process's RSS flat after the warm-up (the first two minutes: the history fills its
 //     60 s window first): growth < 5 %;
-//   - no file descriptor and no /dev/shm growth after the warm-up;
+//   - no file descriptor and no /dev/shm growth after the warm-up, nothing left there after the run;
 //   - missed deadlines < 1 % of the timers' ticks (the simulator's 250 Hz, the planner's 2.5 Hz);
 //   - no sample of a reliable topic lost (the recording's per-object counts of samples sent and
 //     never received), none dropped by the recording.
@@ -127,6 +127,7 @@ int main(int argc, char** argv)
     bench::print_machine("ten simulated cars, central_routing (400 ms), cpm_history recording every topic, monitor, parameter "
                          "server; real time, " + std::to_string(minutes) + " min, domain " + domain);
     const std::string out = (dir / "run").string();
+    const auto shm_before = shm_usage();  // what the run must leave as it found it
     cpm::ChildProcess lab({.argv = {bin + "/cpm", "lab", "run", (dir / "soak.yaml").string(), "--out", out, "--dds_domain", domain},
                            .stdout_path = (dir / "lab.out").string(),
                            .stderr_path = (dir / "lab.err").string()});
@@ -206,6 +207,10 @@ int main(int argc, char** argv)
         if (!o.is_object() || o.value("is_process", false)) continue;
         lost_by_topic[o.value("topic", "")] += o.value("samples_lost", uint64_t(0));
     }
+    // Every process of the run and the command above have ended: their shared memory must be gone.
+    const auto shm_after = shm_usage();
+    std::printf("/dev/shm: %d files %.1f MiB before the run, %d files %.1f MiB after its processes ended\n", shm_before.first,
+                shm_before.second / (1024.0 * 1024.0), shm_after.first, shm_after.second / (1024.0 * 1024.0));
     uint64_t reliable_lost = 0, best_effort_lost = 0;
     for (const auto& [topic, lost] : lost_by_topic) {
         const auto* spec = cpm::topics::find(topic);
@@ -229,6 +234,8 @@ int main(int argc, char** argv)
     target("no fd growth", fd_growth <= 0, "max +" + std::to_string(fd_growth));
     target("no /dev/shm growth", rows[last].shm_files <= rows[warm].shm_files,
            std::to_string(rows[warm].shm_files) + " -> " + std::to_string(rows[last].shm_files) + " files");
+    target("nothing left in /dev/shm after the run", shm_after.first <= shm_before.first,
+           std::to_string(shm_before.first) + " -> " + std::to_string(shm_after.first) + " files");
     std::snprintf(buf, sizeof buf, "%.3f %%", missed_pct);
     target("missed deadlines < 1 %", missed_pct < 1.0, buf);
     target("no reliable sample lost", reliable_lost == 0 && dropped == 0, std::to_string(reliable_lost) + " lost, " + std::to_string(dropped) + " dropped");
