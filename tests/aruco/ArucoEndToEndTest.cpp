@@ -193,7 +193,7 @@ TEST(ArucoEndToEnd, BadInputAtStartIsNamedWithANonZeroExit)
     // A missing camera file, a camera file without a field, an unknown dictionary.
     auto [c1, e1] = run({node, "--vehicle_id", "5", "--camera", "/nonexistent/cam.yaml"});
     EXPECT_NE(c1, 0);
-    EXPECT_NE(e1.find("/nonexistent/cam.yaml: cannot read the camera file"), std::string::npos) << e1;
+    EXPECT_NE(e1.find("/nonexistent/cam.yaml: cannot open the camera file: no such file"), std::string::npos) << e1;
     const auto partial = (dir / "partial.yaml").string();
     std::ofstream(partial) << "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n";
     auto [c2, e2] = run({node, "--vehicle_id", "5", "--camera", partial});
