@@ -3,6 +3,7 @@
 #include "log_internal.hpp"
 
 #include <cstring>
+#include <optional>
 #include <sstream>
 
 namespace cpm::detail {
@@ -32,19 +33,24 @@ std::vector<std::string> locator_texts(const List& locators)
     return out;
 }
 
-/// A writer's or reader's topic, type and the QoS others match against.
+}  // namespace
+
+/// A writer's or reader's event (none for statuses cpm does not act on): its topic, type and
+/// the QoS others match against.
 template <class ProxyData>
-void endpoint(DiscoveryEvent& e, const ProxyData& info)
+void DiscoveryListener::tell_endpoint(const ProxyData& info, std::optional<DiscoveryEvent::Kind> kind)
 {
+    if (!kind) return;
+    DiscoveryEvent e;
+    e.kind = *kind;
     e.guid = guid_bytes(info.guid());
     e.topic = info.topicName().to_string();
     e.type_name = info.typeName().to_string();
     e.keyed = info.topicKind() == rtps::WITH_KEY;
     e.reliable = info.m_qos.m_reliability.kind == dds::RELIABLE_RELIABILITY_QOS;
     e.transient_local = info.m_qos.m_durability.kind != dds::VOLATILE_DURABILITY_QOS;
+    tell(e);
 }
-
-}  // namespace
 
 void DiscoveryListener::tell(const DiscoveryEvent& e) noexcept
 {
@@ -78,28 +84,22 @@ void DiscoveryListener::on_participant_discovery(dds::DomainParticipant*, rtps::
 
 void DiscoveryListener::on_publisher_discovery(dds::DomainParticipant*, rtps::WriterDiscoveryInfo&& info)
 {
-    DiscoveryEvent e;
-    switch (info.status) {
-    case rtps::WriterDiscoveryInfo::DISCOVERED_WRITER: e.kind = DiscoveryEvent::Kind::writer_found; break;
-    case rtps::WriterDiscoveryInfo::CHANGED_QOS_WRITER: e.kind = DiscoveryEvent::Kind::writer_changed; break;
-    case rtps::WriterDiscoveryInfo::REMOVED_WRITER: e.kind = DiscoveryEvent::Kind::writer_gone; break;
-    default: return;
-    }
-    endpoint(e, info.info);
-    tell(e);
+    using W = rtps::WriterDiscoveryInfo;
+    using K = DiscoveryEvent::Kind;
+    tell_endpoint(info.info, info.status == W::DISCOVERED_WRITER    ? std::optional(K::writer_found)
+                             : info.status == W::CHANGED_QOS_WRITER ? std::optional(K::writer_changed)
+                             : info.status == W::REMOVED_WRITER     ? std::optional(K::writer_gone)
+                                                                    : std::nullopt);
 }
 
 void DiscoveryListener::on_subscriber_discovery(dds::DomainParticipant*, rtps::ReaderDiscoveryInfo&& info)
 {
-    DiscoveryEvent e;
-    switch (info.status) {
-    case rtps::ReaderDiscoveryInfo::DISCOVERED_READER: e.kind = DiscoveryEvent::Kind::reader_found; break;
-    case rtps::ReaderDiscoveryInfo::CHANGED_QOS_READER: e.kind = DiscoveryEvent::Kind::reader_changed; break;
-    case rtps::ReaderDiscoveryInfo::REMOVED_READER: e.kind = DiscoveryEvent::Kind::reader_gone; break;
-    default: return;
-    }
-    endpoint(e, info.info);
-    tell(e);
+    using R = rtps::ReaderDiscoveryInfo;
+    using K = DiscoveryEvent::Kind;
+    tell_endpoint(info.info, info.status == R::DISCOVERED_READER    ? std::optional(K::reader_found)
+                             : info.status == R::CHANGED_QOS_READER ? std::optional(K::reader_changed)
+                             : info.status == R::REMOVED_READER     ? std::optional(K::reader_gone)
+                                                                    : std::nullopt);
 }
 
 }  // namespace cpm::detail

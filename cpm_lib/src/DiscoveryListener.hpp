@@ -4,6 +4,8 @@
 
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
 
+#include <optional>
+
 namespace cpm::detail {
 
 class DiscoveryListener final : public eprosima::fastdds::dds::DomainParticipantListener
@@ -17,6 +19,8 @@ public:
 
 private:
     void tell(const DiscoveryEvent& e) noexcept;
+    template <class ProxyData>
+    void tell_endpoint(const ProxyData& info, std::optional<DiscoveryEvent::Kind> kind);
     DiscoveryCallback callback_;
 };
 
