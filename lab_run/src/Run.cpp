@@ -4,6 +4,7 @@
 #include <cpm/ChildProcess.hpp>
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/ProcessGroup.hpp>
 #include <cpm/Security.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/Timer.hpp>
@@ -28,12 +29,12 @@
 #include <csignal>
 #include <cstdlib>
 #include <ctime>
-#include <deque>
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <sys/file.h>
 #include <thread>
@@ -56,20 +57,6 @@ std::string utc_now_compact()
     return b;
 }
 
-/// The last `n` lines of a file.
-std::string tail(const std::string& path, size_t n)
-{
-    std::ifstream in(path);
-    std::deque<std::string> lines;
-    for (std::string line; std::getline(in, line);) {
-        lines.push_back(line);
-        if (lines.size() > n) lines.pop_front();
-    }
-    std::string out;
-    for (const auto& l : lines) out += "    " + l + "\n";
-    return out;
-}
-
 /// The last line of a file that is a JSON object (a cpm program's statistics at its end).
 nlohmann::json last_json(const std::string& path)
 {
@@ -84,16 +71,6 @@ nlohmann::json last_json(const std::string& path)
     }
     return found;
 }
-
-struct Node
-{
-    ProcessPlan plan;
-    std::string log;
-    std::optional<ChildProcess> child;
-    int restarts = 0;
-    std::optional<ExitStatus> end;
-    bool died = false;  ///< ended badly while the run went on
-};
 
 /// The domain, claimed for the run: no other cpm lab run on this host has it (a lock file held
 /// while the run lasts), and discovery sees nobody on it. Throws std::runtime_error naming who
@@ -178,19 +155,19 @@ private:
     AsyncReader<Log> log_;
 };
 
-void start(Node& n, int domain, const std::string& qos, bool append)
+/// The run's spec of a planned process: its log in the run's folder, the run's domain and QoS.
+ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, int domain, const std::string& qos)
 {
-    if (append) std::ofstream(n.log, std::ios::app) << "\n--- restarted by cpm lab run ---\n";
-    std::vector<std::string> env{"CPM_DOMAIN_ID=" + std::to_string(domain)};
-    if (!qos.empty()) env.push_back(std::string(kQosOverridesVariable) + "=" + qos);
-    n.child.emplace(ProcessOptions{.argv = n.plan.argv,
-                                   .env = env,
-                                   .stdout_path = n.log,
-                                   .stderr_path = n.log,
-                                   .append_output = append,
-                                   .own_process_group = true,
-                                   .die_with_parent = true});
-    n.end.reset();
+    ProcessSpec spec{.name = p.name,
+                     .argv = p.argv,
+                     .env = {"CPM_DOMAIN_ID=" + std::to_string(domain)},
+                     .log = (dir / (p.name + ".log")).string(),
+                     .restart = p.restart,
+                     .stop_order = p.stop_order,
+                     // The history closes the recording on its way out: it may take a while.
+                     .stop_grace = std::chrono::seconds(p.name == "cpm_history" ? 30 : 5)};
+    if (!qos.empty()) spec.env.push_back(std::string(kQosOverridesVariable) + "=" + qos);
+    return spec;
 }
 
 }  // namespace
@@ -245,31 +222,33 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     HistoryClient history(participant, std::chrono::milliseconds(2000));
     RunWatch watch(participant);
 
-    std::vector<Node> nodes;
-    for (const auto& p : plan) nodes.push_back({p, (dir / (p.name + ".log")).string()});
+    // Every process of the run, supervised together and stopped in order on every way out.
+    ProcessGroup group;
+    std::set<std::string> died;  ///< ended badly while the run went on
+    const std::string& history_name = plan[0].name;
 
     // The history first, so that the recording holds the run from its first sample.
-    start(nodes[0], settings.domain, qos, false);
+    (void)group.start(spec_of(plan[0], dir, settings.domain, qos));
     bool history_up = false;
     const auto history_deadline = Clock::now() + std::chrono::seconds(15);
-    while (!history_up && Clock::now() < history_deadline && !o.stop() && nodes[0].child->running()) {
+    while (!history_up && Clock::now() < history_deadline && !o.stop() && group.find(history_name)->running()) {
         try {
             history_up = history.request(HistoryClient::make(history::Kind::list, "", "")).status() == "ok";
         } catch (const std::exception&) {
         }
     }
     if (!history_up) {
-        result.error = "the history service did not answer within 15 s; the end of its log:\n" + tail(nodes[0].log, 10);
+        result.error = "the history service did not answer within 15 s; the end of its log:\n" + group.tail(history_name);
     }
-    for (size_t i = 1; i < nodes.size() && result.error.empty(); ++i) start(nodes[i], settings.domain, qos, false);
-    say("cpm lab run: " + s.name + ": " + std::to_string(nodes.size()) + " processes on domain " + std::to_string(settings.domain) +
+    for (size_t i = 1; i < plan.size() && result.error.empty(); ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos));
+    say("cpm lab run: " + s.name + ": " + std::to_string(plan.size()) + " processes on domain " + std::to_string(settings.domain) +
         ", logs and recording in " + dir.string());
 
     // The clock: simulated time driven through the timers' ticks on a thread of its own; real
     // time started together a second ahead when a node waits for the start.
     std::vector<std::string> timers;
-    for (const auto& n : nodes) {
-        std::stringstream list(n.plan.timer);
+    for (const auto& p : plan) {
+        std::stringstream list(p.timer);
         for (std::string t; std::getline(list, t, ',');) timers.push_back(t);
     }
     TimeMaster master(participant);
@@ -306,20 +285,19 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
             result.interrupted = true;
             break;
         }
-        for (auto& n : nodes) {
-            if (!n.child || n.end || n.child->running()) continue;
-            n.end = n.child->ended();
-            // Exit code 0 is a node that is done: an fsm_node whose machine reached a stop state,
-            // the nodes the simulated clock stopped at its end.
-            if (n.end && n.end->ok()) continue;
-            if (n.plan.restart) {
-                ++n.restarts;
-                say("cpm lab run: " + n.plan.name + " " + n.end->describe() + "; restarting it (restart: true)");
-                start(n, settings.domain, qos, true);
+        // Exit code 0 is a node that is done: an fsm_node whose machine reached a stop state,
+        // the nodes the simulated clock stopped at its end.
+        for (const auto& e : group.poll()) {
+            if (e.end.ok()) continue;
+            if (e.restarted) {
+                say("cpm lab run: " + e.name + " " + e.end.describe() + "; restarting it (restart: true)");
                 continue;
             }
-            n.died = true;
-            result.error = n.plan.name + " " + n.end->describe() + " during the run; the end of its log (" + n.log + "):\n" + tail(n.log, 10);
+            died.insert(e.name);
+            if (result.error.empty()) {
+                result.error = e.name + " " + e.end.describe() + " during the run; the end of its log (" + (dir / (e.name + ".log")).string() +
+                               "):\n" + group.tail(e.name);
+            }
         }
         if (!result.error.empty()) break;
         const bool simulated = settings.time == TimeMode::simulated;
@@ -359,33 +337,27 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     (void)stops.write(all);
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     master.stop_all();
-    std::vector<Node*> order;
-    for (auto& n : nodes) order.push_back(&n);
-    std::stable_sort(order.begin(), order.end(), [](const Node* a, const Node* b) { return a->plan.stop_order < b->plan.stop_order; });
-    for (Node* n : order) {
-        if (!n->child || n->end) continue;
-        n->child->signal(SIGINT);
-        n->end = n->child->wait(std::chrono::seconds(n->plan.name == "cpm_history" ? 30 : 5));
-        if (!n->end) n->end = n->child->stop(std::chrono::seconds(2));
-    }
+    (void)group.stop_all();
     if (clock.joinable()) clock.join();
     result.real_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
 
     nlohmann::json processes = nlohmann::json::array();
-    for (auto& n : nodes) {
-        ProcessEnd e{n.plan.name, n.end ? n.end->describe() : "never started"};
+    for (const auto& p : plan) {
+        const auto end = group.end_of(p.name);
+        const bool started = group.find(p.name) != nullptr;
+        ProcessEnd e{p.name, end ? end->describe() : "never started"};
         // Stopped by the run: SIGINT's exit code 0, or ended by SIGINT/SIGTERM, is a clean end.
-        const bool clean = n.end && (n.end->ok() || n.end->signal == SIGINT || n.end->signal == SIGTERM);
-        e.failed = n.died || (n.child && !clean);
-        e.restarts = n.restarts;
-        if (e.failed) e.last_lines = tail(n.log, 10);
-        processes.push_back({{"name", e.name}, {"argv", n.plan.argv}, {"end", e.how}, {"failed", e.failed}, {"restarts", e.restarts},
-                             {"log", fs::path(n.log).filename().string()}});
+        const bool clean = end && (end->ok() || end->signal == SIGINT || end->signal == SIGTERM);
+        e.failed = died.count(p.name) > 0 || (started && !clean);
+        e.restarts = group.restarts_of(p.name);
+        if (e.failed) e.last_lines = group.tail(p.name);
+        processes.push_back({{"name", e.name}, {"argv", p.argv}, {"end", e.how}, {"failed", e.failed}, {"restarts", e.restarts},
+                             {"log", p.name + ".log"}});
         result.processes.push_back(e);
     }
     result.ok = result.error.empty() && !result.interrupted &&
                 std::none_of(result.processes.begin(), result.processes.end(), [](const ProcessEnd& e) { return e.failed; });
-    const auto recorded = last_json(nodes[0].log);
+    const auto recorded = last_json((dir / (history_name + ".log")).string());
     nlohmann::json summary{{"name", s.name},
                            {"scenario", fs::absolute(s.file).string()},
                            {"time", settings.time == TimeMode::simulated ? "simulated" : "real"},

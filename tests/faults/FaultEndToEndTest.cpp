@@ -17,6 +17,7 @@
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm/ProcessGroup.hpp>
 
 #include "SimTrace.hpp"
 #include <cpm_test/TempDir.hpp>
@@ -120,7 +121,8 @@ private:
     std::shared_ptr<void> reader_;
 };
 
-/// A lab of named processes, each started again with the arguments it first had.
+/// A lab of named processes (one cpm::ProcessGroup, as a lab run has), each started again with
+/// the arguments it first had; each one's stdout and stderr in its log.
 class Lab
 {
 public:
@@ -129,32 +131,45 @@ public:
 
     void start(const std::string& name, std::vector<std::string> argv)
     {
-        argv_[name] = std::move(argv);
-        restart(name);
+        (void)group_.start({.name = name, .argv = std::move(argv), .env = kLease, .log = tmp.file(name + ".log")});
     }
-    void restart(const std::string& name) { nodes_[name] = std::make_unique<Process>(argv_.at(name), kLease); }
-    Process& operator[](const std::string& name) { return *nodes_.at(name); }
+    void restart(const std::string& name) { (void)group_.restart(name); }
+    cpm::ChildProcess& operator[](const std::string& name) { return *group_.find(name); }
+    /// Everything it wrote since it was last started (a restart appends to its log).
+    std::string output(const std::string& name) const
+    {
+        const std::string all = group_.log_text(name);
+        const std::string mark = "\n--- restarted ---\n";
+        const auto at = all.rfind(mark);
+        return at == std::string::npos ? all : all.substr(at + mark.size());
+    }
+    /// Its exit code once it ended within `timeout`, else -1 (also when a signal ended it).
+    int wait(const std::string& name, std::chrono::milliseconds timeout)
+    {
+        const auto end = group_.find(name)->wait(timeout);
+        return end && end->signal == 0 ? end->code : -1;
+    }
     /// kill -9; the time of the kill.
     uint64_t kill9(const std::string& name)
     {
         const uint64_t t = cpm::get_time_ns();
-        nodes_.at(name)->kill(SIGKILL);
-        nodes_.at(name)->wait(5s);
+        group_.find(name)->signal(SIGKILL);
+        (void)group_.find(name)->wait(5s);
         return t;
     }
     /// The processes other than `except` that are no longer running, with their output.
     std::string ended_others(const std::string& except)
     {
         std::string out;
-        for (auto& [name, p] : nodes_) {
-            if (name != except && p->wait(0ms) != -1) out += name + " ended:\n" + p->output() + p->errors() + "\n";
+        for (const auto& name : group_.names()) {
+            if (name != except && group_.find(name)->ended()) out += name + " ended:\n" + output(name) + "\n";
         }
         return out;
     }
-    std::string logs()
+    std::string logs() const
     {
         std::string out;
-        for (auto& [name, p] : nodes_) out += "--- " + name + ":\n" + p->output().substr(0, 2000) + p->errors() + "\n";
+        for (const auto& name : group_.names()) out += "--- " + name + ":\n" + group_.tail(name, 30) + "\n";
         return out;
     }
     /// Restarts `name` and returns the seconds until `works` holds (checked every 5 ms; 10 s at most).
@@ -170,8 +185,7 @@ public:
     }
 
 private:
-    std::map<std::string, std::vector<std::string>> argv_;
-    std::map<std::string, std::unique_ptr<Process>> nodes_;
+    cpm::ProcessGroup group_;  // last: stopped before the folder of its logs goes
 };
 
 /// Every process object the history holds, for a failure's message: "name (alive|deleted)".
@@ -217,8 +231,8 @@ protected:
         lab.start("param", {built_program("cpm"), "param", "serve", lab.tmp.write("params.json", R"({"before": 1})")});
         lab.start("sim", {built_program("firmware_sim"), "--vehicle_id", "6", "--map", kMap, "--start", "0,0,0.3", "--link", link,
                           "--trace-pwm"});
-        ASSERT_TRUE(cpm_test::wait_until([&] { return lab["sim"].output().find("device: ") != std::string::npos; }, 10s))
-            << lab["sim"].errors();
+        ASSERT_TRUE(cpm_test::wait_until([&] { return lab.output("sim").find("device: ") != std::string::npos; }, 10s))
+            << lab.output("sim");
         lab.start("bridge", {built_program("vehicle_bridge"), "--vehicle_id", "6", "--device", link, "--start", "0,0,0.3"});
         lab.start("camera", {built_program("camera_sim"), "--vehicle_id", "6", "--camera", kCamera, "--map", kMap, "--rate", "20"});
         lab.start("aruco", {built_program("aruco_node"), "--vehicle_id", "6", "--camera", kCamera, "--world", kMap});
@@ -229,7 +243,7 @@ protected:
         // history holds the car's state and its markers (the kill tests ask it for both).
         ASSERT_TRUE(cpm_test::wait_until(
             [&] {
-                const auto pwm = pwm_after(lab["sim"], 0);
+                const auto pwm = pwm_after(lab.output("sim"), 0);
                 return !pwm.empty() && pwm.back().second == 1 && markers.first_after(0) &&
                        history->latest("vehicleState", "6").status() == "ok" &&
                        history->latest("arucoMarkers", "6").status() == "ok";
@@ -271,13 +285,13 @@ protected:
     /// What the watchdogs did after a kill: the first brake (mode 0) after t, in seconds after t.
     double brake_after(uint64_t t)
     {
-        EXPECT_TRUE(cpm_test::wait_until([&] { return first_mode_after(lab["sim"], t, 0) != 0; }, 3s));
-        const uint64_t braked = first_mode_after(lab["sim"], t, 0);
+        EXPECT_TRUE(cpm_test::wait_until([&] { return first_mode_after(lab.output("sim"), t, 0) != 0; }, 3s));
+        const uint64_t braked = first_mode_after(lab.output("sim"), t, 0);
         return braked != 0 ? double(braked - t) * 1e-9 : 1e9;
     }
 
     /// The car drives forward on commands written after t.
-    bool drives_after(uint64_t t) { return first_mode_after(lab["sim"], t, 1) != 0; }
+    bool drives_after(uint64_t t) { return first_mode_after(lab.output("sim"), t, 1) != 0; }
 };
 
 TEST_F(CarLab, KillingTheStateMachineBrakesTheCarWithinTheCommandsFreshnessAndItsRestartDrivesAgain)
@@ -388,7 +402,7 @@ TEST_F(CarLab, KillingTheParameterServerKeepsTheLabAndItsRestartAnswersRequests)
 
 TEST_F(CarLab, KillingTheMonitorKeepsTheLabAndItsRestartServesTheSamePortAgain)
 {
-    ASSERT_TRUE(cpm_test::wait_until([&] { return monitor_shows_car(0); }, 10s)) << lab["monitor"].errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] { return monitor_shows_car(0); }, 10s)) << lab.output("monitor");
     const uint64_t killed = lab.kill9("monitor");
     std::this_thread::sleep_for(1s);
     EXPECT_GT(commands.count_between(killed, cpm::get_time_ns()), 20u) << "the machine goes on";
@@ -474,14 +488,14 @@ TEST_F(RoutedLab, KillingTheTimeMasterLeavesTheTimersRunningAndItsRestartCanStop
     EXPECT_EQ(lab.ended_others("clock"), "");
     // Started again with the same arguments it finds the running planner's timer and starts it
     // (a start a running timer ignores); Ctrl-C then stops every timer, the planner's too.
-    EXPECT_LT(lab.restart_until("clock", [&](uint64_t) { return lab["clock"].output().find("all 1 nodes ready") != std::string::npos; }), kRestartBound);
+    EXPECT_LT(lab.restart_until("clock", [&](uint64_t) { return lab.output("clock").find("all 1 nodes ready") != std::string::npos; }), kRestartBound);
     // The history marks the killed master dead (a process named "cpm", the only one that ended).
     EXPECT_TRUE(cpm_test::wait_until([&] { return process_objects(*history, "cpm").second >= 1; }, 20s, 200ms))
         << process_list(*history);
     EXPECT_EQ(lab.ended_others(""), "");
-    lab["clock"].kill(SIGINT);
-    EXPECT_EQ(lab["clock"].wait(10s), 0) << lab["clock"].output() << lab["clock"].errors();
-    EXPECT_EQ(lab["routing"].wait(10s), 0) << "the restarted clock's stop ends the planner\n" << lab.logs();
+    lab["clock"].signal(SIGINT);
+    EXPECT_EQ(lab.wait("clock", 10s), 0) << lab.output("clock");
+    EXPECT_EQ(lab.wait("routing", 10s), 0) << "the restarted clock's stop ends the planner\n" << lab.logs();
 }
 
 }  // namespace

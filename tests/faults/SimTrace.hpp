@@ -15,10 +15,10 @@ inline const std::string kRoot = CPM_SOURCE_DIR;
 
 /// The firmware simulator's `pwm T MODE PWM` trace after time t: (time, mode); mode 0 brake,
 /// 1 forward, 2 reverse.
-inline std::vector<std::pair<uint64_t, int>> pwm_after(const cpm_test::Process& sim, uint64_t t)
+inline std::vector<std::pair<uint64_t, int>> pwm_after(const std::string& sim_output, uint64_t t)
 {
     std::vector<std::pair<uint64_t, int>> out;
-    std::istringstream in(sim.output());
+    std::istringstream in(sim_output);
     for (std::string word; in >> word;) {
         if (word != "pwm") continue;
         unsigned long long time = 0;
@@ -30,11 +30,13 @@ inline std::vector<std::pair<uint64_t, int>> pwm_after(const cpm_test::Process& 
 }
 
 /// The first time after t the motor was in `mode`, or 0.
-inline uint64_t first_mode_after(const cpm_test::Process& sim, uint64_t t, int mode)
+inline uint64_t first_mode_after(const std::string& sim_output, uint64_t t, int mode)
 {
-    for (const auto& [time, m] : pwm_after(sim, t))
+    for (const auto& [time, m] : pwm_after(sim_output, t))
         if (m == mode) return time;
     return 0;
 }
+inline std::vector<std::pair<uint64_t, int>> pwm_after(const cpm_test::Process& sim, uint64_t t) { return pwm_after(sim.output(), t); }
+inline uint64_t first_mode_after(const cpm_test::Process& sim, uint64_t t, int mode) { return first_mode_after(sim.output(), t, mode); }
 
 }  // namespace cpm_faults

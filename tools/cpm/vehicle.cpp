@@ -2,6 +2,7 @@
 #include "Command.hpp"
 
 #include <cpm/ChildProcess.hpp>
+#include <cpm/ProcessGroup.hpp>
 #include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/aruco/Camera.hpp>
@@ -15,7 +16,6 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
-#include <deque>
 #include <cstdio>
 #include <string>
 #include <thread>
@@ -93,12 +93,16 @@ int vehicle_sim(const std::vector<std::string>& args)
         }
     }
 
-    // One name a child: "firmware_sim 3", "vehicle_bridge 3". A deque: references stay valid.
-    std::deque<std::pair<std::string, cpm::ChildProcess>> children;
+    // One name a child: "firmware_sim 3", "vehicle_bridge 3". Bridges are stopped first, so that
+    // none of them reports its simulator's end as a lost link.
+    cpm::ProcessGroup children;
     auto launch = [&](const std::string& name, std::vector<std::string> argv, bool capture) -> cpm::ChildProcess& {
         argv.insert(argv.end(), parsed.init_args.begin(), parsed.init_args.end());
-        children.emplace_back(name, cpm::ChildProcess({.argv = std::move(argv), .capture_stdout = capture, .die_with_parent = true}));
-        return children.back().second;
+        const bool bridge = name.rfind("vehicle_bridge", 0) == 0;
+        // In this command's process group: whoever stops or freezes it (Ctrl-C, Ctrl-Z, a lab
+        // run, SIGSTOP) reaches its cars too.
+        return children.start(
+            {.name = name, .argv = std::move(argv), .capture_stdout = capture, .stop_order = bridge ? 0 : 1, .own_process_group = false});
     };
     cpm::cli::stop_on_signals();
     std::vector<std::thread> copiers;
@@ -110,22 +114,11 @@ int vehicle_sim(const std::vector<std::string>& args)
             for (auto& t : threads) t.join();
         }
     } join_copiers{copiers};
-    // Children are stopped on every way out: bridges first, so that none of them reports its
-    // simulator's end as a lost link.
+    // Children are stopped on every way out, before their output copiers are joined.
     struct StopInOrder
     {
-        decltype(children)& all;
-        ~StopInOrder()
-        {
-            for (bool bridges : {true, false}) {
-                for (auto& [name, child] : all) {
-                    if ((name.rfind("vehicle_bridge", 0) == 0) == bridges) child.signal(SIGTERM);
-                }
-                for (auto& [name, child] : all) {
-                    if ((name.rfind("vehicle_bridge", 0) == 0) == bridges) child.stop(std::chrono::seconds(5));
-                }
-            }
-        }
+        cpm::ProcessGroup& all;
+        ~StopInOrder() { (void)all.stop_all(); }
     } stop_in_order{children};
 
     const std::string firmware_sim = cpm::sibling_executable("firmware_sim");
@@ -203,14 +196,12 @@ int vehicle_sim(const std::vector<std::string>& args)
     }
     int exit_code = 0;
     for (bool ended = false; !cpm::cli::stop_requested() && !ended;) {
-        for (auto& [name, child] : children) {
-            if (auto end = child.ended()) {
-                // Exit 0 unasked: the lab's clock stopped the timers (cpm lab clock), a normal end.
-                std::fprintf(stderr, "cpm vehicle sim: %s %s%s; stopping the others\n", name.c_str(), end->describe().c_str(),
-                             end->ok() ? " (the lab's clock stopped it)" : "");
-                if (!end->ok()) exit_code = 1;
-                ended = true;
-            }
+        for (const auto& e : children.poll()) {
+            // Exit 0 unasked: the lab's clock stopped the timers (cpm lab clock), a normal end.
+            std::fprintf(stderr, "cpm vehicle sim: %s %s%s; stopping the others\n", e.name.c_str(), e.end.describe().c_str(),
+                         e.end.ok() ? " (the lab's clock stopped it)" : "");
+            if (!e.end.ok()) exit_code = 1;
+            ended = true;
         }
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }

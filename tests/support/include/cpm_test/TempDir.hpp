@@ -3,6 +3,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 namespace cpm_test {
@@ -25,6 +26,12 @@ struct TempDir
     {
         std::ofstream(path / name) << text;
         return file(name);
+    }
+    /// The text of `name` in the folder; "" while it does not exist.
+    std::string read(const std::string& name) const
+    {
+        std::ifstream in(path / name);
+        return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
     }
 };
 

@@ -1,0 +1,107 @@
+#pragma once
+// cpm::ProcessGroup — the processes of one job (a lab run, `cpm vehicle sim`, a test) supervised
+// together: each started from a spec, its end noticed and restarted when the spec says so, all
+// stopped in their stop order on every way out, a log's last lines for messages.
+//
+//   cpm::ProcessGroup group;
+//   group.start({.name = "firmware_sim 3", .argv = {...}, .capture_stdout = true, .stop_order = 2});
+//   group.start({.name = "vehicle_bridge 3", .argv = {...}, .log = "bridge.log", .restart = true, .stop_order = 1});
+//   for (;;) for (const auto& e : group.poll()) { ... e.name, e.end.describe(), e.restarted ... }
+//   group.stop_all();   // bridges (order 1) first, then the simulators; also by the destructor
+//
+// Not thread-safe: one thread owns the group.
+#include <cpm/ChildProcess.hpp>
+
+#include <chrono>
+#include <deque>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace cpm {
+
+/// One process of a group.
+struct ProcessSpec
+{
+    std::string name;               ///< unique in the group: "fsm_5", "vehicle_bridge 3"
+    std::vector<std::string> argv;  ///< argv[0]: the program's path
+    std::vector<std::string> env;   ///< added to the environment, "NAME=value"
+    std::string log;                ///< its stdout and stderr go to this file; "": this process's own
+    bool capture_stdout = false;    ///< read it with read_line() (then only stderr goes to the log)
+    bool restart = false;           ///< started again (log appended to) when it ends other than with exit 0
+    int stop_order = 0;             ///< stopped in ascending order; equal orders together
+    /// In a process group of its own, so that a signal reaches what it starts too. false: it
+    /// shares this process's group, and a signal to that group (Ctrl-C, Ctrl-Z, a supervisor's
+    /// SIGSTOP) reaches it as it reaches this process.
+    bool own_process_group = true;
+    /// How long it may take to end on SIGINT before SIGTERM and SIGKILL follow.
+    std::chrono::milliseconds stop_grace{5000};
+    /// Where it runs: "" is this host. Another host (over ssh) is not supported yet: start()
+    /// refuses it by name.
+    std::string host;
+};
+
+/// A process of the group that ended.
+struct ProcessEvent
+{
+    std::string name;
+    ExitStatus end;
+    bool restarted = false;  ///< its spec said restart, and it was started again
+    int restarts = 0;        ///< times it has been restarted so far
+};
+
+class ProcessGroup
+{
+public:
+    ProcessGroup() = default;
+    /// Stops every process still running, in stop order.
+    ~ProcessGroup();
+    ProcessGroup(const ProcessGroup&) = delete;
+    ProcessGroup& operator=(const ProcessGroup&) = delete;
+
+    /// Starts a process (in its own process group unless its spec says otherwise), ended with
+    /// this process if it dies. Throws cpm::Error naming the spec when its name is taken,
+    /// its host is not this one, or the program cannot be started.
+    ChildProcess& start(ProcessSpec spec);
+    /// The processes that ended since the last call, each once; those whose spec says restart
+    /// (and that did not exit 0) are started again before this returns.
+    std::vector<ProcessEvent> poll();
+    /// Stops it if it runs (as stop_all does), then starts it again with its spec, its log
+    /// appended to. Throws cpm::Error for a name not in the group.
+    ChildProcess& restart(const std::string& name);
+    /// Stops every process still running: SIGINT to each of the lowest stop order, waits up to
+    /// each one's grace, then SIGTERM and SIGKILL; then the next order. Returns every process's
+    /// end (of those that ended before too), in start order.
+    std::vector<ProcessEvent> stop_all();
+
+    /// The process by name, or nullptr.
+    ChildProcess* find(const std::string& name);
+    /// How it ended, once it has (from poll or stop_all).
+    std::optional<ExitStatus> end_of(const std::string& name) const;
+    int restarts_of(const std::string& name) const;
+    /// The last `n` lines of its log, each indented by four spaces ("" without a log).
+    std::string tail(const std::string& name, size_t n = 10) const;
+    /// Its whole log so far ("" without a log).
+    std::string log_text(const std::string& name) const;
+    /// The names, in start order.
+    std::vector<std::string> names() const;
+
+private:
+    struct Member
+    {
+        ProcessSpec spec;
+        std::optional<ChildProcess> child;
+        std::optional<ExitStatus> end;
+        int restarts = 0;
+    };
+    Member* member(const std::string& name);
+    const Member* member(const std::string& name) const;
+    void launch(Member& m, bool again);
+    static void stop(Member& m);
+    std::deque<Member> members_;  // a deque: references to members stay valid
+};
+
+/// The last `n` lines of a text file, each indented by four spaces.
+std::string tail_of_file(const std::string& path, size_t n);
+
+}  // namespace cpm
