@@ -1,6 +1,7 @@
 // Central routing: planning time per cycle against the number of cars, start-up, and traffic
 // through the central intersection for the cooperative planner against cpm_lab's scheme
 // (fixed priority by id, speed capping, no stopping; --mode cpm_lab), same map, seeds, margin.
+#include <cpm/percentile.hpp>
 #include <cpm/routing/Simulate.hpp>
 
 #include "bench_common.hpp"
@@ -11,6 +12,7 @@
 #include <string>
 
 using namespace cpm::routing;
+using cpm::percentile;
 
 namespace {
 

@@ -1,6 +1,8 @@
 #include <cpm/routing/RoutingNode.hpp>
 #include <cpm/routing/Simulate.hpp>
 
+#include <cpm/percentile.hpp>
+
 #include <cpm/Error.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/MultiVehicleReader.hpp>

@@ -1,5 +1,7 @@
 #include <cpm/routing/Simulate.hpp>
 
+#include <cpm/percentile.hpp>
+
 #include <cpm/Error.hpp>
 
 #include <nlohmann/json.hpp>
@@ -16,13 +18,6 @@ namespace {
 double round_to(double v, double unit) { return std::round(v / unit) * unit; }
 
 }  // namespace
-
-double percentile(std::vector<double> values, double p)
-{
-    if (values.empty()) return 0;
-    std::sort(values.begin(), values.end());
-    return values[std::min(values.size() - 1, size_t(p * double(values.size() - 1) + 0.5))];
-}
 
 std::string SimulationSummary::to_json() const
 {

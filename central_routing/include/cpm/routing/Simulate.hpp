@@ -58,9 +58,6 @@ struct SimulationSummary
 /// With `anywhere`, zones too (for loads the map cannot hold outside them).
 std::vector<Pose> spread_cars(const ConflictTable& table, size_t n, uint64_t seed, double gap = 0.1, bool anywhere = false);
 
-/// The value below which a fraction p (0..1) of `values` lies (nearest rank); 0 when empty.
-double percentile(std::vector<double> values, double p);
-
 /// The conflict zone nearest the middle of the map (the central intersection of a lab map).
 size_t central_zone(const ConflictTable& table);
 
