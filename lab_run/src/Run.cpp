@@ -32,6 +32,7 @@
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <set>
@@ -170,6 +171,182 @@ ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, int domain, const
     return spec;
 }
 
+/// The lab's clock for one run: simulated time driven through the timers' ticks on a thread of
+/// its own, or real time (started together a second ahead when a planner waits for the start).
+class LabClock
+{
+public:
+    LabClock(Participant& participant, const RunSettings& settings) : master_(participant), settings_(settings) {}
+    ~LabClock() { join(); }
+    LabClock(const LabClock&) = delete;
+    LabClock& operator=(const LabClock&) = delete;
+
+    /// Starts it; an error message when it cannot start ("" when it did).
+    std::string start(const std::vector<std::string>& timers, bool wait_for_planner)
+    {
+        real_start_ = cpm::get_time_ns();
+        if (simulated()) {
+            thread_ = std::thread([this, timers] {
+                try {
+                    master_.run_simulated(timers, settings_.duration_ns);
+                    until_ = settings_.duration_ns;
+                } catch (const std::exception& e) {
+                    error_ = e.what();
+                }
+                done_ = true;
+            });
+        } else if (wait_for_planner) {
+            try {
+                real_start_ = master_.start_real_time({timer_ids::central_routing}, std::chrono::milliseconds(1000), std::chrono::seconds(30));
+            } catch (const std::exception& e) {
+                return std::string("the lab clock could not start: ") + e.what();
+            }
+        }
+        return "";
+    }
+    bool simulated() const { return settings_.time == TimeMode::simulated; }
+    /// Lab time now: the simulated clock's last step, or real time since the start.
+    uint64_t now() const
+    {
+        if (simulated()) return done_ && error_.empty() ? until_.load() : master_.simulated_now();
+        const uint64_t t = cpm::get_time_ns();  // once: two reads in one expression may come in either order
+        return std::min(settings_.duration_ns, t - std::min(t, real_start_));
+    }
+    /// Whether the run's duration has passed; `error` says why a simulated clock stopped early.
+    bool ended(std::string& error) const
+    {
+        if (!simulated()) return now() >= settings_.duration_ns;
+        if (done_ && !error_.empty()) error = "the simulated clock stopped: " + error_;
+        return done_;
+    }
+    /// Stops every timer of the lab and waits for a simulated clock's thread.
+    void stop()
+    {
+        master_.stop_all();
+        join();
+    }
+
+private:
+    void join()
+    {
+        if (thread_.joinable()) thread_.join();
+    }
+    TimeMaster master_;
+    const RunSettings& settings_;
+    std::thread thread_;
+    std::atomic<bool> done_{false};
+    std::atomic<uint64_t> until_{0};
+    std::string error_;  // written by the thread before done_
+    uint64_t real_start_ = 0;
+};
+
+/// Until the run's time is up, it is stopped (Ctrl-C), or a process dies: a process that
+/// ends with code 0 is done (an fsm_node whose machine stopped, a node the simulated clock
+/// stopped at its end), one whose scenario says restart is started again, any other ends the run
+/// with the end of its log. Prints `progress()` every second on a terminal, every 10 s else.
+void supervise(ProcessGroup& group, std::set<std::string>& died, RunResult& result, const LabClock& clock,
+               const std::function<std::string()>& progress, const RunOptions& o, const fs::path& dir)
+{
+    const bool tty = o.progress && ::isatty(::fileno(o.progress));
+    auto last_progress = Clock::now();
+    while (result.error.empty()) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        if (o.stop()) {
+            result.interrupted = true;
+            break;
+        }
+        for (const auto& e : group.poll()) {
+            if (e.end.ok()) continue;
+            if (e.restarted) {
+                if (o.progress) std::fprintf(o.progress, "cpm lab run: %s %s; restarting it (restart: true)\n", e.name.c_str(), e.end.describe().c_str());
+                continue;
+            }
+            died.insert(e.name);
+            if (result.error.empty()) {
+                result.error = e.name + " " + e.end.describe() + " during the run; the end of its log (" + (dir / (e.name + ".log")).string() +
+                               "):\n" + group.tail(e.name);
+            }
+        }
+        if (!result.error.empty() || clock.ended(result.error)) break;
+        if (o.progress && Clock::now() - last_progress >= std::chrono::seconds(tty ? 1 : 10)) {
+            last_progress = Clock::now();
+            std::fprintf(o.progress, tty ? "\r%s   " : "%s\n", progress().c_str());
+            std::fflush(o.progress);
+        }
+    }
+    if (tty) std::fprintf(o.progress, "\n");
+}
+
+/// The node ids of every planned process's timers.
+std::vector<std::string> timers_of(const std::vector<ProcessPlan>& plan)
+{
+    std::vector<std::string> timers;
+    for (const auto& p : plan) {
+        std::stringstream list(p.timer);
+        for (std::string t; std::getline(list, t, ',');) timers.push_back(t);
+    }
+    return timers;
+}
+
+/// The history first, so that the recording holds the run from its first sample, then the rest.
+/// An error message when the history does not answer ("" when all started).
+std::string start_processes(ProcessGroup& group, const std::vector<ProcessPlan>& plan, const fs::path& dir, const RunSettings& settings,
+                            const std::string& qos, HistoryClient& history, const std::function<bool()>& stop)
+{
+    const std::string& history_name = plan[0].name;
+    (void)group.start(spec_of(plan[0], dir, settings.domain, qos));
+    bool up = false;
+    const auto deadline = Clock::now() + std::chrono::seconds(15);
+    while (!up && Clock::now() < deadline && !stop() && group.find(history_name)->running()) {
+        try {
+            up = history.request(HistoryClient::make(history::Kind::list, "", "")).status() == "ok";
+        } catch (const std::exception&) {
+        }
+    }
+    if (!up) return "the history service did not answer within 15 s; the end of its log:\n" + group.tail(history_name);
+    for (size_t i = 1; i < plan.size(); ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos));
+    return "";
+}
+
+/// The run's claim on its folder: made, the scenario copied in; a secured lab's nodes issued
+/// (each allowed the topics its process uses, for two days; a node of the same name is an
+/// earlier run's whose folder had the same name: issued again). The run's own security folder.
+std::string prepare_folder(const Scenario& s, const RunSettings& settings, const std::vector<ProcessPlan>& plan, const fs::path& dir)
+{
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec) throw std::runtime_error("cannot make the run's folder " + dir.string() + ": " + ec.message());
+    fs::copy_file(s.file, dir / "scenario.yaml", fs::copy_options::overwrite_existing, ec);
+    if (s.security.empty()) return "";
+    auto issue = [&](const std::string& name, const ProcessPlan& p) {
+        fs::remove_all(fs::path(s.security) / "nodes" / name);
+        return security::add_node(s.security, name, {p.publish, p.subscribe, 2});
+    };
+    const std::string own = issue(security_node_name(settings, "cpm_lab_run"), lab_run_process());
+    for (const auto& p : plan) (void)issue(fs::path(p.security_node).filename().string(), p);
+    return own;
+}
+
+/// Every planned process's end for the summary: failed when it died during the run or did not
+/// end cleanly on the run's stop (SIGINT's exit code 0, or ended by SIGINT/SIGTERM).
+nlohmann::json process_ends(const std::vector<ProcessPlan>& plan, const ProcessGroup& group, const std::set<std::string>& died,
+                            RunResult& result)
+{
+    nlohmann::json processes = nlohmann::json::array();
+    for (const auto& p : plan) {
+        const auto end = group.end_of(p.name);
+        ProcessEnd e{p.name, end ? end->describe() : "never started"};
+        const bool clean = end && (end->ok() || end->signal == SIGINT || end->signal == SIGTERM);
+        e.failed = died.count(p.name) > 0 || (end && !clean);
+        e.restarts = group.restarts_of(p.name);
+        if (e.failed) e.last_lines = group.tail(p.name);
+        processes.push_back({{"name", e.name}, {"argv", p.argv}, {"end", e.how}, {"failed", e.failed}, {"restarts", e.restarts},
+                             {"log", p.name + ".log"}});
+        result.processes.push_back(e);
+    }
+    return processes;
+}
+
 }  // namespace
 
 RunResult run_lab(const Scenario& s, const RunOptions& o)
@@ -193,171 +370,53 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     po.name = "cpm_lab_run";
     po.shared_memory = false;  // short-lived beside many processes: UDP loopback (see cpm history)
     const DomainClaim claim(settings.domain, po);
-
-    fs::create_directories(dir, ec);
-    if (ec) throw std::runtime_error("cannot make the run's folder " + dir.string() + ": " + ec.message());
-    fs::copy_file(s.file, dir / "scenario.yaml", fs::copy_options::overwrite_existing, ec);
-    // A secured lab: the run's own nodes, each allowed the topics its process uses, for two days.
-    // A node of the same name is an earlier run's whose folder had the same name (and is gone
-    // now, or this one could not start): issued again.
-    if (!s.security.empty()) {
-        auto issue = [&](const std::string& name, const ProcessPlan& p) {
-            fs::remove_all(fs::path(s.security) / "nodes" / name);
-            return security::add_node(s.security, name, {p.publish, p.subscribe, 2});
-        };
-        po.security = issue(security_node_name(settings, "cpm_lab_run"), lab_run_process());
-        for (const auto& p : plan) (void)issue(fs::path(p.security_node).filename().string(), p);
-    }
+    po.security = prepare_folder(s, settings, plan, dir);
 
     RunResult result;
     result.dir = dir.string();
     auto say = [&](const std::string& line) {
         if (o.progress) std::fprintf(o.progress, "%s\n", line.c_str());
     };
-    const bool tty = o.progress && ::isatty(::fileno(o.progress));
     const auto t0 = Clock::now();
-
     Participant participant(po);
     Writer<StopRequest> stops(participant, topics::stop_request.name, topics::stop_request.writer);
     HistoryClient history(participant, std::chrono::milliseconds(2000));
     RunWatch watch(participant);
+    LabClock clock(participant, settings);
+    ProcessGroup group;          // every process of the run, stopped in order on every way out
+    std::set<std::string> died;  // ended badly while the run went on
 
-    // Every process of the run, supervised together and stopped in order on every way out.
-    ProcessGroup group;
-    std::set<std::string> died;  ///< ended badly while the run went on
-    const std::string& history_name = plan[0].name;
-
-    // The history first, so that the recording holds the run from its first sample.
-    (void)group.start(spec_of(plan[0], dir, settings.domain, qos));
-    bool history_up = false;
-    const auto history_deadline = Clock::now() + std::chrono::seconds(15);
-    while (!history_up && Clock::now() < history_deadline && !o.stop() && group.find(history_name)->running()) {
-        try {
-            history_up = history.request(HistoryClient::make(history::Kind::list, "", "")).status() == "ok";
-        } catch (const std::exception&) {
-        }
-    }
-    if (!history_up) {
-        result.error = "the history service did not answer within 15 s; the end of its log:\n" + group.tail(history_name);
-    }
-    for (size_t i = 1; i < plan.size() && result.error.empty(); ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos));
+    result.error = start_processes(group, plan, dir, settings, qos, history, o.stop);
     say("cpm lab run: " + s.name + ": " + std::to_string(plan.size()) + " processes on domain " + std::to_string(settings.domain) +
         ", logs and recording in " + dir.string());
-
-    // The clock: simulated time driven through the timers' ticks on a thread of its own; real
-    // time started together a second ahead when a node waits for the start.
-    std::vector<std::string> timers;
-    for (const auto& p : plan) {
-        std::stringstream list(p.timer);
-        for (std::string t; std::getline(list, t, ',');) timers.push_back(t);
-    }
-    TimeMaster master(participant);
-    std::atomic<bool> clock_done{false};
-    std::atomic<uint64_t> simulated_until{0};
-    std::string clock_error;
-    std::thread clock;
-    uint64_t real_start = cpm::get_time_ns();
-    if (result.error.empty()) {
-        if (settings.time == TimeMode::simulated) {
-            clock = std::thread([&] {
-                try {
-                    master.run_simulated(timers, settings.duration_ns);
-                    simulated_until = settings.duration_ns;
-                } catch (const std::exception& e) {
-                    clock_error = e.what();
-                }
-                clock_done = true;
-            });
-        } else if (s.routing.enabled) {
-            try {
-                real_start = master.start_real_time({timer_ids::central_routing}, std::chrono::milliseconds(1000), std::chrono::seconds(30));
-            } catch (const std::exception& e) {
-                result.error = std::string("the lab clock could not start: ") + e.what();
-            }
-        }
-    }
-
-    // Supervise: a node that dies is restarted when its scenario says so, else the run ends.
-    auto last_progress = Clock::now();
-    while (result.error.empty()) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-        if (o.stop()) {
-            result.interrupted = true;
-            break;
-        }
-        // Exit code 0 is a node that is done: an fsm_node whose machine reached a stop state,
-        // the nodes the simulated clock stopped at its end.
-        for (const auto& e : group.poll()) {
-            if (e.end.ok()) continue;
-            if (e.restarted) {
-                say("cpm lab run: " + e.name + " " + e.end.describe() + "; restarting it (restart: true)");
-                continue;
-            }
-            died.insert(e.name);
-            if (result.error.empty()) {
-                result.error = e.name + " " + e.end.describe() + " during the run; the end of its log (" + (dir / (e.name + ".log")).string() +
-                               "):\n" + group.tail(e.name);
-            }
-        }
-        if (!result.error.empty()) break;
-        const bool simulated = settings.time == TimeMode::simulated;
-        const uint64_t now = cpm::get_time_ns();  // once: two reads in one expression may come in either order
-        const uint64_t lab_now = simulated ? 0 : now - std::min(now, real_start);
-        if (simulated && clock_done) {
-            if (!clock_error.empty()) result.error = "the simulated clock stopped: " + clock_error;
-            break;
-        }
-        if (!simulated && lab_now >= settings.duration_ns) break;
-        if (Clock::now() - last_progress >= std::chrono::seconds(tty ? 1 : 10) && o.progress) {
-            last_progress = Clock::now();
-            const double real = std::chrono::duration<double>(Clock::now() - t0).count();
-            char line[240];
-            const uint64_t shown = simulated ? master.simulated_now() : lab_now;
-            std::snprintf(line, sizeof line, "lab time %.1f / %.1f s%s, %zu car(s), %llu missed deadline(s), %llu samples recorded",
-                          double(shown) * 1e-9, double(settings.duration_ns) * 1e-9,
-                          simulated ? (" (simulated, " + std::to_string(int(real)) + " s real)").c_str() : "", s.vehicles.size(),
-                          (unsigned long long)watch.missed(), (unsigned long long)watch.recorded());
-            std::fprintf(o.progress, tty ? "\r%s   " : "%s\n", line);
-            std::fflush(o.progress);
-        }
-    }
-    if (tty) std::fprintf(o.progress, "\n");
-    const uint64_t end_ns = cpm::get_time_ns();
-    // A simulated run stopped early ran until the lab clock's last step.
-    const bool simulated = settings.time == TimeMode::simulated;
-    result.lab_time_ns = simulated ? (clock_done && clock_error.empty() ? simulated_until.load() : master.simulated_now())
-                                   : std::min(settings.duration_ns, end_ns - std::min(end_ns, real_start));
+    if (result.error.empty()) result.error = clock.start(timers_of(plan), s.routing.enabled);
+    supervise(group, died, result, clock, [&] {
+        const double real = std::chrono::duration<double>(Clock::now() - t0).count();
+        char line[240];
+        std::snprintf(line, sizeof line, "lab time %.1f / %.1f s%s, %zu car(s), %llu missed deadline(s), %llu samples recorded",
+                      double(clock.now()) * 1e-9, double(settings.duration_ns) * 1e-9,
+                      clock.simulated() ? (" (simulated, " + std::to_string(int(real)) + " s real)").c_str() : "", s.vehicles.size(),
+                      (unsigned long long)watch.missed(), (unsigned long long)watch.recorded());
+        return std::string(line);
+    }, o, dir);
+    result.lab_time_ns = clock.now();
 
     // The end, in order: every car told to stop, the timers stopped, then the processes that
     // command the cars, the cars, and the history last (it closes the recording). The stop is
     // stamped on the run's one clock: lab time in a simulated run, as every other sample.
     StopRequest all;
     all.vehicle_id(0);
-    cpm::stamp_message(all, simulated ? master.simulated_now() : cpm::get_time_ns(), 0);
+    cpm::stamp_message(all, clock.simulated() ? clock.now() : cpm::get_time_ns(), 0);
     (void)stops.write(all);
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    master.stop_all();
+    clock.stop();
     (void)group.stop_all();
-    if (clock.joinable()) clock.join();
     result.real_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
 
-    nlohmann::json processes = nlohmann::json::array();
-    for (const auto& p : plan) {
-        const auto end = group.end_of(p.name);
-        const bool started = group.find(p.name) != nullptr;
-        ProcessEnd e{p.name, end ? end->describe() : "never started"};
-        // Stopped by the run: SIGINT's exit code 0, or ended by SIGINT/SIGTERM, is a clean end.
-        const bool clean = end && (end->ok() || end->signal == SIGINT || end->signal == SIGTERM);
-        e.failed = died.count(p.name) > 0 || (started && !clean);
-        e.restarts = group.restarts_of(p.name);
-        if (e.failed) e.last_lines = group.tail(p.name);
-        processes.push_back({{"name", e.name}, {"argv", p.argv}, {"end", e.how}, {"failed", e.failed}, {"restarts", e.restarts},
-                             {"log", p.name + ".log"}});
-        result.processes.push_back(e);
-    }
+    const nlohmann::json processes = process_ends(plan, group, died, result);
     result.ok = result.error.empty() && !result.interrupted &&
                 std::none_of(result.processes.begin(), result.processes.end(), [](const ProcessEnd& e) { return e.failed; });
-    const auto recorded = last_json((dir / (history_name + ".log")).string());
+    const auto recorded = last_json((dir / (plan[0].name + ".log")).string());
     nlohmann::json summary{{"name", s.name},
                            {"scenario", fs::absolute(s.file).string()},
                            {"time", settings.time == TimeMode::simulated ? "simulated" : "real"},
