@@ -347,6 +347,35 @@ nlohmann::json process_ends(const std::vector<ProcessPlan>& plan, const ProcessG
     return processes;
 }
 
+/// summary.json in the run's folder: the run, its processes, and the history's own counts (the
+/// last JSON line of its log).
+void write_summary(const Scenario& s, const RunSettings& settings, const std::string& qos, const RunResult& result,
+                   const nlohmann::json& processes, const RunWatch& watch, const std::string& history_log)
+{
+    const auto recorded = last_json(history_log);
+    nlohmann::json summary{{"name", s.name},
+                           {"scenario", fs::absolute(s.file).string()},
+                           {"time", settings.time == TimeMode::simulated ? "simulated" : "real"},
+                           {"domain", settings.domain},
+                           {"duration_s", double(settings.duration_ns) / 1e9},  // not * 1e-9: 15.000000000000002
+                           {"lab_time_s", double(result.lab_time_ns) / 1e9},
+                           {"real_s", result.real_seconds},
+                           {"ok", result.ok},
+                           {"interrupted", result.interrupted},
+                           {"error", result.error},
+                           {"vehicles", s.vehicles.size()},
+                           {"world", s.world},
+                           {"lanes", s.lanes},
+                           {"processes", processes},
+                           {"missed_deadlines", watch.missed()},
+                           // The recording's own final count; the history's last status while it lasts.
+                           {"samples_recorded", recorded.contains("recording") ? recorded["recording"].value("written", watch.recorded())
+                                                                               : watch.recorded()},
+                           {"qos", qos.empty() ? nlohmann::json::object() : nlohmann::json::parse(qos)},
+                           {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()}};
+    std::ofstream(fs::path(settings.run_dir) / "summary.json") << summary.dump(2) << "\n";
+}
+
 }  // namespace
 
 RunResult run_lab(const Scenario& s, const RunOptions& o)
@@ -416,28 +445,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     const nlohmann::json processes = process_ends(plan, group, died, result);
     result.ok = result.error.empty() && !result.interrupted &&
                 std::none_of(result.processes.begin(), result.processes.end(), [](const ProcessEnd& e) { return e.failed; });
-    const auto recorded = last_json((dir / (plan[0].name + ".log")).string());
-    nlohmann::json summary{{"name", s.name},
-                           {"scenario", fs::absolute(s.file).string()},
-                           {"time", settings.time == TimeMode::simulated ? "simulated" : "real"},
-                           {"domain", settings.domain},
-                           {"duration_s", double(settings.duration_ns) / 1e9},  // not * 1e-9: 15.000000000000002
-                           {"lab_time_s", double(result.lab_time_ns) / 1e9},
-                           {"real_s", result.real_seconds},
-                           {"ok", result.ok},
-                           {"interrupted", result.interrupted},
-                           {"error", result.error},
-                           {"vehicles", s.vehicles.size()},
-                           {"world", s.world},
-                           {"lanes", s.lanes},
-                           {"processes", processes},
-                           {"missed_deadlines", watch.missed()},
-                           // The recording's own final count; the history's last status while it lasts.
-                           {"samples_recorded", recorded.contains("recording") ? recorded["recording"].value("written", watch.recorded())
-                                                                               : watch.recorded()},
-                           {"qos", qos.empty() ? nlohmann::json::object() : nlohmann::json::parse(qos)},
-                           {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()}};
-    std::ofstream(dir / "summary.json") << summary.dump(2) << "\n";
+    write_summary(s, settings, qos, result, processes, watch, (dir / (plan[0].name + ".log")).string());
     return result;
 }
 
