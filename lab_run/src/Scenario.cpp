@@ -25,8 +25,14 @@ namespace fs = std::filesystem;
 namespace {
 
 /// What a simulated car's processes (firmware_sim, vehicle_bridge) write and read.
+// What a car's processes publish and read (their security grants): the cars of one simulator
+// and bridge process (`cpm vehicle sim`, under routing), or a car's simulator, bridge and camera.
 const std::vector<std::string> kCarPublishes{"vehicleState", "vehicleObservation", "rangeSensors"};
 const std::vector<std::string> kCarSubscribes{"vehicleCommand*", "stopRequest", "vehicleObservation"};
+const std::vector<std::string> kSimPublishes{"vehicleObservation"};
+const std::vector<std::string> kSimSubscribes{"vehicleObservation"};  // the other cars, for its rangers
+const std::vector<std::string> kBridgePublishes{"vehicleState", "rangeSensors"};
+const std::vector<std::string> kBridgeSubscribes{"vehicleCommand*", "stopRequest", "vehicleObservation"};
 
 std::string join(const std::vector<std::string>& errors)
 {
@@ -465,16 +471,23 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
                         restart, 5, timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first),
                         kCarPublishes, kCarSubscribes});
     } else {
+        // Each car's simulator, bridge and camera supervised by the run itself: one that dies is
+        // restarted alone (restart: true), the bridge finding its simulator's new pty by the link
+        // in the run's folder. Stopped bridge first, so that it never reports a lost link.
         for (const auto& v : s.vehicles) {
             const std::string id = std::to_string(v.id);
-            std::vector<std::string> argv{program("cpm"), "vehicle", "sim", "--id", id, "--map", s.world, "--start",
-                                          number(v.x) + "," + number(v.y) + "," + number(v.yaw)};
-            if (!v.camera.empty()) argv.insert(argv.end(), {"--camera", v.camera});
-            std::vector<std::string> publish = kCarPublishes;
-            if (!v.camera.empty()) publish.push_back("cameraFrame");
-            std::string timers = timer_ids::firmware_sim(v.id) + "," + timer_ids::vehicle_bridge(v.id);
-            if (!v.camera.empty() && simulated) timers += "," + timer_ids::camera_sim(v.id);  // in real time it starts at once
-            plan.push_back({"car_" + id, with_common(argv), v.restart, 5, timers, publish, kCarSubscribes});
+            const std::string start = number(v.x) + "," + number(v.y) + "," + number(v.yaw);
+            const std::string link = (fs::path(r.run_dir) / ("car_" + id + ".tty")).string();
+            plan.push_back({"sim_" + id,
+                            with_common({program("firmware_sim"), "--vehicle_id", id, "--map", s.world, "--start", start, "--link", link}),
+                            v.restart, 6, timer_ids::firmware_sim(v.id), kSimPublishes, kSimSubscribes});
+            plan.push_back({"bridge_" + id, with_common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}),
+                            v.restart, 5, timer_ids::vehicle_bridge(v.id), kBridgePublishes, kBridgeSubscribes});
+            if (v.camera.empty()) continue;
+            // In real time the camera starts at once; on the simulated clock it ticks with the car.
+            plan.push_back({"camera_" + id,
+                            with_common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s.world, "--rate", "30"}),
+                            v.restart, 4, simulated ? timer_ids::camera_sim(v.id) : "", {"cameraFrame"}, {"vehicleObservation"}});
         }
     }
     for (const auto& v : s.vehicles) {

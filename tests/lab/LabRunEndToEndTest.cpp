@@ -78,13 +78,13 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "8s", "--out", out, "--monitor", "off"});
     ASSERT_EQ(run.wait(90s), 0) << run.output() << run.errors();
     EXPECT_NE(run.output().find("corridor ran: 8.0 s of lab time"), std::string::npos) << run.output();
-    for (const char* f : {"cpm_history.log", "car_5.log", "fsm_5.log", "recording.db", "summary.json", "scenario.yaml"}) {
+    for (const char* f : {"cpm_history.log", "sim_5.log", "bridge_5.log", "fsm_5.log", "recording.db", "summary.json", "scenario.yaml"}) {
         EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f;
     }
     const auto summary = summary_of(out);
     EXPECT_EQ(summary["ok"], true) << summary.dump(2);
     EXPECT_EQ(summary["name"], "corridor");
-    ASSERT_EQ(summary["processes"].size(), 3u);
+    ASSERT_EQ(summary["processes"].size(), 4u);  // history, simulator, bridge, state machine
     for (const auto& p : summary["processes"]) EXPECT_EQ(p["failed"], false) << p.dump();
     EXPECT_EQ(summary["recording"]["dropped"], 0) << summary.dump(2);
 
@@ -381,7 +381,7 @@ TEST(LabRun, ASecuredLabRunsEachProcessAsItsOwnNodeAndAStrangerSeesNothing)
 
     // Every process ran as a node of its own, issued by the run, and the secured history
     // recorded the car.
-    for (const char* node : {"run-cpm_lab_run", "run-cpm_history", "run-car_5", "run-fsm_5"})
+    for (const char* node : {"run-cpm_lab_run", "run-cpm_history", "run-sim_5", "run-bridge_5", "run-fsm_5"})
         EXPECT_TRUE(fs::exists(fs::path(lab) / "nodes" / node / "permissions.p7s")) << node;
     const auto summary = summary_of(out);
     EXPECT_EQ(summary["ok"], true) << summary.dump(2);

@@ -46,7 +46,8 @@ std::string fake_bin(const TempDir& dir, const std::vector<std::string>& program
 TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
 {
     TempDir dir;
-    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "fsm_node", "aruco_node", "central_routing"});
+    const std::string bin =
+        fake_bin(dir, {"cpm", "cpm_history", "fsm_node", "aruco_node", "central_routing", "firmware_sim", "vehicle_bridge", "camera_sim"});
     const Scenario corridor = load_scenario(labs("corridor.yaml"));
     EXPECT_EQ(corridor.name, "corridor");
     EXPECT_EQ(corridor.time, TimeMode::simulated);
@@ -56,18 +57,27 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
     EXPECT_DOUBLE_EQ(corridor.vehicles[0].y, -0.01);
     EXPECT_EQ(corridor.world, fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string());
     auto plan = plan_run(corridor, {.bin_dir = bin, .run_dir = "/runs/x", .domain = 7, .time = TimeMode::simulated});
-    ASSERT_EQ(plan.size(), 4u);
+    ASSERT_EQ(plan.size(), 5u);
     EXPECT_EQ(plan[0].name, "cpm_history");
     // The monitor (monitor: 8080) comes before the cars, so that it shows the run from its start.
     EXPECT_EQ(plan[1].name, "monitor");
     EXPECT_EQ(std::vector<std::string>(plan[1].argv.begin() + 1, plan[1].argv.end()),
               (std::vector<std::string>{"monitor", "--port", "8080", "--world", corridor.world, "--dds_domain", "7"}));
-    EXPECT_EQ(plan[2].name, "car_5");
-    EXPECT_EQ(plan[3].name, "fsm_5");
-    // The state machine follows the simulated clock with the car: the clock waits for both.
-    EXPECT_EQ(plan[3].argv.back(), "--simulated_time");
-    EXPECT_EQ(plan[3].timer, "fsm_node_5");
-    EXPECT_EQ(plan[2].timer, "firmware_sim_5,vehicle_bridge_5");
+    // The car's simulator and bridge, each supervised by the run, joined by a link in its folder.
+    EXPECT_EQ(plan[2].name, "sim_5");
+    EXPECT_EQ(std::vector<std::string>(plan[2].argv.begin() + 1, plan[2].argv.end()),
+              (std::vector<std::string>{"--vehicle_id", "5", "--map", corridor.world, "--start", "0,-0.01,0", "--link", "/runs/x/car_5.tty",
+                                        "--dds_domain", "7", "--simulated_time"}));
+    EXPECT_EQ(plan[3].name, "bridge_5");
+    EXPECT_EQ(std::vector<std::string>(plan[3].argv.begin() + 1, plan[3].argv.begin() + 5),
+              (std::vector<std::string>{"--vehicle_id", "5", "--device", "/runs/x/car_5.tty"}));
+    EXPECT_LT(plan[3].stop_order, plan[2].stop_order) << "the bridge stops before its simulator";
+    EXPECT_EQ(plan[4].name, "fsm_5");
+    // The state machine follows the simulated clock with the car: the clock waits for all three.
+    EXPECT_EQ(plan[4].argv.back(), "--simulated_time");
+    EXPECT_EQ(plan[4].timer, "fsm_node_5");
+    EXPECT_EQ(plan[2].timer, "firmware_sim_5");
+    EXPECT_EQ(plan[3].timer, "vehicle_bridge_5");
     EXPECT_NE(std::find(plan[0].argv.begin(), plan[0].argv.end(), "/runs/x/recording.db"), plan[0].argv.end());
     for (const auto& p : plan) {
         auto d = std::find(p.argv.begin(), p.argv.end(), "--dds_domain");
@@ -77,8 +87,9 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
 
     const Scenario gates = load_scenario(labs("gates.yaml"));
     plan = plan_run(gates, {.bin_dir = bin, .run_dir = "/runs/g"});
-    ASSERT_EQ(plan.size(), 5u);
-    EXPECT_EQ(plan[3].name, "aruco_6");
+    ASSERT_EQ(plan.size(), 7u);
+    EXPECT_EQ(plan[4].name, "camera_6");
+    EXPECT_EQ(plan[5].name, "aruco_6");
     EXPECT_EQ(gates.record.exclude, std::vector<std::string>{"cameraFrame"});
 
     const Scenario crossing = load_scenario(labs("intersection.yaml"));
@@ -98,7 +109,7 @@ TEST(Scenario, AMonitorIsAPortOrAPortWithItsStopButtons)
 {
     TempDir dir;
     dir.write("map.json", "{\"walls\": []}");
-    const std::string bin = fake_bin(dir, {"cpm_history", "cpm"});
+    const std::string bin = fake_bin(dir, {"cpm_history", "cpm", "firmware_sim", "vehicle_bridge"});
     Scenario s = load_scenario(dir.write("m.yaml", "name: m\nduration: 5s\nworld: map.json\nvehicles: [{id: 2}]\n"
                                                    "monitor: {port: 9000, allow_stop: true}\n"));
     EXPECT_EQ(s.monitor_port, std::optional<int>(9000));
@@ -146,8 +157,8 @@ TEST(Scenario, QosOverridesAndAParameterFileReachEveryNode)
     EXPECT_EQ(applied.history_depth, 4);
     EXPECT_FALSE(cpm::overridden(cpm::ReaderOptions{}, "rangeSensors", back).reliable) << "other topics keep their own";
 
-    const auto plan = plan_run(s, {.bin_dir = fake_bin(dir, {"cpm_history", "cpm"}), .run_dir = "/runs/q", .domain = 3});
-    ASSERT_EQ(plan.size(), 3u);
+    const auto plan = plan_run(s, {.bin_dir = fake_bin(dir, {"cpm_history", "cpm", "firmware_sim", "vehicle_bridge"}), .run_dir = "/runs/q", .domain = 3});
+    ASSERT_EQ(plan.size(), 4u);  // history, parameters, the car's simulator and bridge
     EXPECT_EQ(plan[1].name, "parameters");
     EXPECT_EQ(std::vector<std::string>(plan[1].argv.begin() + 1, plan[1].argv.end()),
               (std::vector<std::string>{"param", "serve", s.parameters, "--dds_domain", "3"}));
@@ -215,21 +226,21 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
 TEST(Scenario, InSimulatedTimeACarsCameraAndItsMarkerFinderTickOnTheLabClock)
 {
     TempDir dir;
-    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "fsm_node", "aruco_node"});
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "fsm_node", "aruco_node", "firmware_sim", "vehicle_bridge", "camera_sim"});
     const Scenario gates = load_scenario(labs("gates.yaml"));
     const auto plan = plan_run(gates, {.bin_dir = bin, .run_dir = "/runs/g", .domain = 4, .time = TimeMode::simulated});
-    ASSERT_EQ(plan.size(), 5u);
-    EXPECT_EQ(plan[2].name, "car_6");
-    EXPECT_EQ(plan[2].argv.back(), "--simulated_time");
-    EXPECT_EQ(plan[2].timer, "firmware_sim_6,vehicle_bridge_6,camera_sim_6");
-    EXPECT_EQ(plan[3].name, "aruco_6");
-    EXPECT_EQ(plan[3].argv.back(), "--simulated_time");
-    EXPECT_EQ(plan[3].timer, "aruco_node_6");
-    // In real time the marker finder takes each frame as it comes: no timer for the clock.
+    ASSERT_EQ(plan.size(), 7u);
+    EXPECT_EQ(plan[4].name, "camera_6");
+    EXPECT_EQ(plan[4].argv.back(), "--simulated_time");
+    EXPECT_EQ(plan[4].timer, "camera_sim_6");
+    EXPECT_EQ(plan[5].name, "aruco_6");
+    EXPECT_EQ(plan[5].argv.back(), "--simulated_time");
+    EXPECT_EQ(plan[5].timer, "aruco_node_6");
+    // In real time the camera and the marker finder take each frame as it comes: no timer for the clock.
     const auto real = plan_run(gates, {.bin_dir = bin, .run_dir = "/runs/g", .domain = 4});
-    EXPECT_EQ(real[2].timer, "firmware_sim_6,vehicle_bridge_6");
-    EXPECT_EQ(real[3].timer, "");
-    EXPECT_EQ(std::find(real[3].argv.begin(), real[3].argv.end(), "--simulated_time"), real[3].argv.end());
+    EXPECT_EQ(real[4].timer, "");
+    EXPECT_EQ(real[5].timer, "");
+    EXPECT_EQ(std::find(real[5].argv.begin(), real[5].argv.end(), "--simulated_time"), real[5].argv.end());
 }
 
 TEST(Scenario, StartsOutsideTheWallsOnAWallOrOnAnotherCarAreRefusedNamingTheCars)
@@ -266,7 +277,7 @@ TEST(Scenario, AFileThatIsNotYamlOrNotThereIsNamed)
 TEST(Scenario, AMissingProgramIsNamedBeforeAnythingStarts)
 {
     TempDir dir;
-    const std::string bin = fake_bin(dir, {"cpm", "cpm_history"});
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "firmware_sim", "vehicle_bridge", "camera_sim"});
     const Scenario s = load_scenario(labs("gates.yaml"));
     try {
         (void)plan_run(s, {.bin_dir = bin, .run_dir = "/r"});
@@ -300,19 +311,24 @@ TEST(Scenario, ASecuredLabRunsEachProcessAsANodeAllowedTheTopicsItUses)
         dir.write("s.yaml", "name: s\nduration: 5s\nworld: map.json\nsecurity: lab-sec\nvehicles: [{id: 2, fsm: map.json}]\n");
     const Scenario s = load_scenario(file);
     EXPECT_EQ(s.security, fs::weakly_canonical(dir.path / "lab-sec").string());
-    const auto plan = plan_run(s, {.bin_dir = fake_bin(dir, {"cpm_history", "cpm", "fsm_node"}), .run_dir = "/runs/s-1", .domain = 3});
-    ASSERT_EQ(plan.size(), 3u);
+    const auto plan = plan_run(s, {.bin_dir = fake_bin(dir, {"cpm_history", "cpm", "fsm_node", "firmware_sim", "vehicle_bridge"}),
+                                   .run_dir = "/runs/s-1", .domain = 3});
+    ASSERT_EQ(plan.size(), 4u);
     for (const auto& p : plan) {
         const std::string node = s.security + "/nodes/s-1-" + p.name;
         EXPECT_EQ(p.security_node, node);
         ASSERT_GE(p.argv.size(), 2u);
         EXPECT_EQ(std::vector<std::string>(p.argv.end() - 2, p.argv.end()), (std::vector<std::string>{"--security", node})) << p.name;
     }
-    EXPECT_EQ(plan[1].name, "car_2");
-    EXPECT_EQ(plan[1].publish, (std::vector<std::string>{"vehicleState", "vehicleObservation", "rangeSensors"}));
-    EXPECT_EQ(plan[1].subscribe, (std::vector<std::string>{"vehicleCommand*", "stopRequest", "vehicleObservation"}));
-    EXPECT_EQ(plan[2].name, "fsm_2");
-    EXPECT_EQ(plan[2].publish, (std::vector<std::string>{"vehicleCommandDirect", "fsmStatus", "stopRequest"}));
+    // The simulator and the bridge, each allowed only what it uses.
+    EXPECT_EQ(plan[1].name, "sim_2");
+    EXPECT_EQ(plan[1].publish, (std::vector<std::string>{"vehicleObservation"}));
+    EXPECT_EQ(plan[1].subscribe, (std::vector<std::string>{"vehicleObservation"}));
+    EXPECT_EQ(plan[2].name, "bridge_2");
+    EXPECT_EQ(plan[2].publish, (std::vector<std::string>{"vehicleState", "rangeSensors"}));
+    EXPECT_EQ(plan[2].subscribe, (std::vector<std::string>{"vehicleCommand*", "stopRequest", "vehicleObservation"}));
+    EXPECT_EQ(plan[3].name, "fsm_2");
+    EXPECT_EQ(plan[3].publish, (std::vector<std::string>{"vehicleCommandDirect", "fsmStatus", "stopRequest"}));
 
     // A folder that is not a lab's is named with what to do.
     const auto errors = errors_of(dir.write("bad.yaml", "name: b\nduration: 5s\nworld: map.json\nsecurity: map.json\nvehicles: [{id: 2}]\n"));
