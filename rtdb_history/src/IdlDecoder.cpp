@@ -1,5 +1,7 @@
 #include <cpm/rtdb/IdlDecoder.hpp>
 
+#include <cpm/base64.hpp>
+
 #include <cpm/read_text_file.hpp>
 
 #include <algorithm>
@@ -654,19 +656,7 @@ nlohmann::json describe(const IdlDecoder* types, const std::string& type_name, c
     return {{"payload_base64", base64(payload)}};
 }
 
-std::string base64(const std::vector<uint8_t>& b)
-{
-    static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    std::string out;
-    for (size_t i = 0; i < b.size(); i += 3) {
-        const uint32_t v = uint32_t(b[i]) << 16 | (i + 1 < b.size() ? uint32_t(b[i + 1]) << 8 : 0) | (i + 2 < b.size() ? b[i + 2] : 0);
-        out += t[v >> 18 & 63];
-        out += t[v >> 12 & 63];
-        out += i + 1 < b.size() ? t[v >> 6 & 63] : '=';
-        out += i + 2 < b.size() ? t[v & 63] : '=';
-    }
-    return out;
-}
+std::string base64(const std::vector<uint8_t>& bytes) { return cpm::base64_encode(bytes); }
 
 const IdlDecoder* IdlDecoder::lab_types()
 {

@@ -1,5 +1,7 @@
 #include <cpm_test/Browser.hpp>
 
+#include <cpm/base64.hpp>
+
 #include <csignal>
 #include <cstdlib>
 #include <fcntl.h>
@@ -16,24 +18,6 @@ namespace cpm_test {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-std::string base64_decode(const std::string& in)
-{
-    static const std::string chars = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    std::string out;
-    int bits = 0, value = 0;
-    for (char c : in) {
-        const auto p = chars.find(c);
-        if (p == std::string::npos) continue;  // '=' and line breaks
-        value = (value << 6) | int(p);
-        bits += 6;
-        if (bits >= 8) {
-            bits -= 8;
-            out.push_back(char((value >> bits) & 0xff));
-        }
-    }
-    return out;
-}
 
 }  // namespace
 
@@ -162,7 +146,10 @@ bool Browser::wait_for(const std::string& expression, std::chrono::milliseconds 
 void Browser::screenshot(const std::string& path)
 {
     const auto r = call("Page.captureScreenshot", {{"format", "png"}});
-    std::ofstream(path, std::ios::binary) << base64_decode(r.at("data").get<std::string>());
+    std::ofstream(path, std::ios::binary) << [&] {
+        const auto bytes = cpm::base64_decode(r.at("data").get<std::string>());
+        return std::string(bytes.begin(), bytes.end());
+    }();
 }
 
 }  // namespace cpm_test

@@ -87,7 +87,7 @@ private:
 
 /// describe() with the lab's IDL when there is one (`types` may be null: then the bytes).
 nlohmann::json describe(const IdlDecoder* types, const std::string& type_name, const std::vector<uint8_t>& payload);
-/// RFC 4648 base64 of the bytes, with padding.
+/// RFC 4648 base64 of the bytes, with padding (cpm::base64_encode).
 std::string base64(const std::vector<uint8_t>& bytes);
 
 }  // namespace cpm::rtdb
