@@ -19,6 +19,7 @@
 #include <openssl/crypto.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -272,12 +273,21 @@ ParticipantCore::ParticipantCore(const ParticipantOptions& options)
                                                     "expired certificate, files of another lab, a signature that does not "
                                                     "verify; see its log above)"));
     }
-    if (!options.security.empty()) security_ = security::node_files(options.security);
+    // Past this point a failure deletes the participant before the listener it calls goes.
+    auto undo = [&] {
+        participant_->delete_contained_entities();
+        factory_->delete_participant(participant_);
+    };
+    try {
+        if (!options.security.empty()) security_ = security::node_files(options.security);
+    } catch (...) {
+        undo();
+        throw;
+    }
     publisher_ = participant_->create_publisher(dds::PUBLISHER_QOS_DEFAULT);
     subscriber_ = participant_->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
     if (publisher_ == nullptr || subscriber_ == nullptr) {
-        participant_->delete_contained_entities();
-        factory_->delete_participant(participant_);
+        undo();
         throw Error("cannot create the DDS publisher/subscriber on domain " + std::to_string(domain_id_));
     }
 }
@@ -357,6 +367,10 @@ Participant::~Participant() = default;
 Participant::Participant(Participant&&) noexcept = default;
 Participant& Participant::operator=(Participant&&) noexcept = default;
 
+namespace {
+std::atomic<bool> default_participant_gone{false};
+}
+
 Participant& Participant::default_participant()
 {
     // Destroyed at exit, so that Fast DDS unlinks its shared-memory segment and port files
@@ -364,6 +378,12 @@ Participant& Participant::default_participant()
     // Readers and writers in static objects that outlive it hold the participant's core, which
     // goes with the last of them.
     static Participant instance(ParticipantOptions::from_init());
+    // Registered after the instance exists, so this runs before it is destroyed: from then on a
+    // first use (a static destructor's or another thread's first log message) is refused, not a
+    // use of a destroyed object.
+    static const bool registered = std::atexit([] { default_participant_gone.store(true); }) == 0;
+    (void)registered;
+    if (default_participant_gone.load()) throw Error("the process is exiting: its default participant is gone");
     return instance;
 }
 

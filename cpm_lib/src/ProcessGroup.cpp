@@ -84,10 +84,15 @@ std::vector<ProcessEvent> ProcessGroup::poll()
         m.end = end;
         ProcessEvent e{m.spec.name, *end, false, m.restarts};
         if (m.spec.restart && !end->ok()) {
-            ++m.restarts;
-            launch(m, true);
-            e.restarted = true;
-            e.restarts = m.restarts;
+            try {
+                launch(m, true);
+                ++m.restarts;
+                e.restarted = true;
+                e.restarts = m.restarts;
+            } catch (const std::exception& ex) {  // told as an end that was not restarted, with why
+                m.end = end;
+                if (!m.spec.log.empty()) std::ofstream(m.spec.log, std::ios::app) << "--- cannot restart it: " << ex.what() << " ---\n";
+            }
         }
         events.push_back(std::move(e));
     }
@@ -108,8 +113,8 @@ ChildProcess& ProcessGroup::restart(const std::string& name)
         m->child->signal(SIGINT);
         stop(*m);
     }
-    ++m->restarts;
     launch(*m, true);
+    ++m->restarts;
     return *m->child;
 }
 

@@ -22,8 +22,8 @@ public:
     public:
         explicit Use(UntilExit& owner) : owner_(owner)
         {
-            owner_.users_.fetch_add(1, std::memory_order_acq_rel);
-            object_ = owner_.object_.load(std::memory_order_acquire);
+            owner_.users_.fetch_add(1);  // seq_cst, as below: each side must see the other's write
+            object_ = owner_.object_.load();
         }
         ~Use() { owner_.users_.fetch_sub(1, std::memory_order_acq_rel); }
         Use(const Use&) = delete;
@@ -53,11 +53,11 @@ private:
     void close()
     {
         closed_.store(true, std::memory_order_release);
-        T* object = object_.exchange(nullptr, std::memory_order_acq_rel);
+        T* object = object_.exchange(nullptr);
         // A call that took the object before the exchange finishes first (a write takes
         // microseconds); a thread stuck in one for a second is left the object, leaked.
         const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
-        while (users_.load(std::memory_order_acquire) > 0) {
+        while (users_.load() > 0) {
             if (std::chrono::steady_clock::now() > deadline) return;
             std::this_thread::sleep_for(std::chrono::milliseconds(1));
         }

@@ -177,7 +177,7 @@ class LabClock
 {
 public:
     LabClock(Participant& participant, const RunSettings& settings) : master_(participant), settings_(settings) {}
-    ~LabClock() { join(); }
+    ~LabClock() { stop(); }  // also when the run unwinds: a simulated clock's thread waits for its timers otherwise
     LabClock(const LabClock&) = delete;
     LabClock& operator=(const LabClock&) = delete;
 
@@ -222,6 +222,8 @@ public:
     /// Stops every timer of the lab and waits for a simulated clock's thread.
     void stop()
     {
+        if (stopped_) return;
+        stopped_ = true;
         master_.stop_all();
         join();
     }
@@ -238,6 +240,7 @@ private:
     std::atomic<uint64_t> until_{0};
     std::string error_;  // written by the thread before done_
     uint64_t real_start_ = 0;
+    bool stopped_ = false;
 };
 
 /// Until the run's time is up, it is stopped (Ctrl-C), or a process dies: a process that

@@ -457,11 +457,13 @@ RunClock recording_clock(const std::string& path)
     Statement data(db.get(), (std::string("SELECT min(s.data_ns), max(s.data_ns), count(*) ") + kStamped + " AND s.data_ns < ?").c_str());
     data.bind(1, lab_clock_limit(c.started_ns));
     Statement all(db.get(), (std::string("SELECT min(s.data_ns), max(s.data_ns), count(*) ") + kStamped).c_str());
-    if (data.step() == SQLITE_ROW && data.u64(2) > 0) {
+    const bool have_all = all.step() == SQLITE_ROW && all.u64(2) > 0;
+    // Most stamps on a lab clock: a real run's stray unset create_stamp (0) does not make it one.
+    if (data.step() == SQLITE_ROW && data.u64(2) > 0 && have_all && data.u64(2) * 2 > all.u64(2)) {
         c.lab_clock = true;
         c.data_first_ns = data.u64(0);
         c.data_last_ns = data.u64(1);
-    } else if (all.step() == SQLITE_ROW && all.u64(2) > 0) {
+    } else if (have_all) {
         c.data_first_ns = all.u64(0);
         c.data_last_ns = all.u64(1);
     } else {
@@ -480,8 +482,11 @@ bool is_time_into_run(const std::string& text)
 uint64_t recording_time(const std::string& path, const RunClock& clock, const std::string& flag, const std::string& text, bool by_data)
 {
     if (!is_time_into_run(text)) return cpm::cli::parse_time(flag, text, by_data ? clock.data_last_ns : clock.ended_ns);
-    const uint64_t data = (clock.lab_clock ? 0 : clock.started_ns) + cpm::cli::parse_duration(flag, text);
+    const uint64_t data = std::min<uint64_t>((clock.lab_clock ? 0 : clock.started_ns) + cpm::cli::parse_duration(flag, text), INT64_MAX);
     if (by_data) return data;
+    // At or before the first stamp: the recording's start (samples without a stamp, state sent
+    // before the first one, are in the run too).
+    if (data <= clock.data_first_ns) return clock.started_ns;
     // A commit time: that of the first stamped sample at or after it on the run's clock.
     std::map<std::string, std::string> meta;
     std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_recording_file(path, meta), sqlite3_close);

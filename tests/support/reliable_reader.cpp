@@ -1,9 +1,11 @@
 // A test helper: a reliable, keep-all VehicleState reader in its own process that prints
-// "matched" once a writer matched, then takes (and acknowledges) whatever arrives until killed.
+// "matched" once a writer matched, then takes (and acknowledges) whatever arrives until stopped
+// (SIGINT/SIGTERM end it cleanly: its shared memory goes with it).
 //   reliable_reader TOPIC                (domain from CPM_DOMAIN_ID)
 //   reliable_reader TOPIC --expect N     counts samples whose pose.x is their number 0, 1, 2, …:
 //       once N have arrived (or nothing came for 10 s) prints one JSON line
 //       {"received":…,"in_order":…,"gaps":…,"duplicates":…} and exits (0 when all N came in order)
+#include <cpm/CommandLine.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/init.hpp>
 
@@ -21,6 +23,7 @@ int main(int argc, char** argv)
         return 2;
     }
     cpm::init(argc, argv);
+    cpm::cli::stop_on_signals();
     long long expect = -1;
     for (int i = 2; i + 1 < argc; ++i)
         if (std::strcmp(argv[i], "--expect") == 0) expect = std::atoll(argv[i + 1]);
@@ -29,11 +32,12 @@ int main(int argc, char** argv)
     options.keep_all = true;
     cpm::ReaderAbstract<VehicleState> reader(argv[1], options);
     if (!reader.wait_for_matched(1, std::chrono::seconds(20))) return 3;
+    if (cpm::cli::stop_requested()) return 0;
     std::printf("matched\n");
     std::fflush(stdout);
     long long received = 0, next = 0, gaps = 0, duplicates = 0;
     auto quiet_since = std::chrono::steady_clock::now();
-    for (;;) {
+    while (!cpm::cli::stop_requested()) {
         if (reader.wait_for_data(std::chrono::milliseconds(100))) {
             for (const auto& s : reader.take()) {
                 ++received;

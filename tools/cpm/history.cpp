@@ -478,7 +478,9 @@ int export_command(const std::vector<std::string>& args, const std::string& file
             rq.t1(to);
             rq.limit(100000);
             const HistoryReply reply = source.client->request(rq);
-            if (reply.status() != "ok" && reply.status() != "not_found" && reply.status() != "not_yet" && reply.status() != "evicted") {
+            // partial: the live window dropped the oldest; export writes what is held, as a recording would.
+            if (reply.status() != "ok" && reply.status() != "partial" && reply.status() != "not_found" && reply.status() != "not_yet" &&
+                reply.status() != "evicted") {
                 std::fprintf(stderr, "%s: %s%s%s: %s %s\n", command.c_str(), topic.c_str(), key.empty() ? "" : "/", key.c_str(), reply.status().c_str(),
                              reply.error().c_str());
                 return 1;

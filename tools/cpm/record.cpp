@@ -219,6 +219,12 @@ int play_command(const std::vector<std::string>& args)
         for (const char* flag : {"--from", "--to"}) {
             if (parsed.has(flag)) asked += (asked.empty() ? "" : " ") + std::string(flag) + " " + parsed.get(flag);
         }
+        if (!span) {
+            try {
+                clock = cpm::rtdb::recording_clock(file);
+            } catch (const std::runtime_error&) {
+            }
+        }
         char runs[160];
         std::snprintf(runs, sizeof runs, "%s %.1f s", clock.lab_clock ? "its lab clock runs from 0 to" : "it lasts",
                       double(clock.lab_clock ? clock.data_last_ns : clock.ended_ns - clock.started_ns) / 1e9);

@@ -37,7 +37,9 @@ struct ParticipantOptions
     /// with that node's identity and permissions. Empty: unsecured.
     std::string security;
     /// Told of every participant, writer and reader found, changed or gone, from the first
-    /// moment (see DiscoveryCallback for its thread). For tools such as cpm_history.
+    /// moment (see DiscoveryCallback for its thread). For tools such as cpm_history. It is
+    /// called until the participant is deleted, which is when its last reader or writer goes:
+    /// what it refers to must live that long.
     DiscoveryCallback on_discovery;
 
     /// The options given by cpm::init (or the environment).
@@ -58,7 +60,9 @@ public:
     Participant& operator=(const Participant&) = delete;
 
     /// The process-wide participant that readers and writers use when none is given;
-    /// created on first use from cpm::init's settings. Thread-safe.
+    /// created on first use from cpm::init's settings. Thread-safe. Deleted at exit (Fast DDS
+    /// then removes its shared memory) once the last reader or writer on it is gone; asked for
+    /// while the process exits, throws cpm::Error.
     static Participant& default_participant();
 
     int domain_id() const;
