@@ -358,6 +358,12 @@ TEST(HistoryServiceRange, ASpanReachingPastTheWindowSaysPartialAndExitsOneUnless
     }();
     EXPECT_EQ(held_code, 0) << held_err;
     EXPECT_EQ(std::count(held_out.begin(), held_out.end(), '\n'), 5) << held_out;
+
+    // Export writes what the live window holds (it pages through ranges that answer partial).
+    Process csv({built_program("cpm"), "history", "export", "--topic", "shortLived", "--csv"});
+    EXPECT_EQ(csv.wait(30s), 0) << csv.errors();
+    const std::string rows = csv.output();
+    EXPECT_EQ(std::count(rows.begin(), rows.end(), '\n'), 1 + 5) << "a header and the five held\n" << rows;
 }
 
 TEST_F(HistoryService, DisposedAndDeadWritersObjectsAreMarkedDeletedAndStayReadable)
