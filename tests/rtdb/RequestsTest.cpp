@@ -163,6 +163,19 @@ TEST(HistoryRequests, AClientAnswersFromAStoreThroughItsBackend)
     auto range = client.range<VehicleState>("vehicleState", 3, 100, 300);
     ASSERT_EQ(range.size(), 2u);
     EXPECT_DOUBLE_EQ(range[1].sample.speed(), 2.0);
+    auto whole = client.range_of<VehicleState>("vehicleState", 3, 100, 301);
+    EXPECT_TRUE(whole.complete()) << whole.status;
+    auto cut = client.range_of<VehicleState>("vehicleState", 3, 100, 301, cpm::HistoryBy::commit, 2);
+    EXPECT_TRUE(cut.truncated);
+    EXPECT_FALSE(cut.complete());
+    EXPECT_EQ(cut.samples.size(), 2u);
+    // The oldest evicted: a span reaching back to it says it is partial, with what is held.
+    store.expire(100 + Retention{}.window_ns + 1);
+    auto partial = client.range_of<VehicleState>("vehicleState", 3, 0, 301);
+    EXPECT_EQ(partial.status, cpm::history::Status::partial);
+    EXPECT_FALSE(partial.complete());
+    ASSERT_EQ(partial.samples.size(), 2u);
+    EXPECT_TRUE(partial.samples[0].ok()) << "each sample held is itself ok";
     // A payload that is not the type asked for is an error, not a zeroed sample.
     auto wrong = client.latest<Parameter>("vehicleState", 3);
     EXPECT_EQ(wrong.status, cpm::history::Status::error);

@@ -24,6 +24,7 @@
 #include <memory>
 #include <string>
 #include <type_traits>
+#include <vector>
 
 namespace cpm {
 
@@ -35,6 +36,20 @@ struct [[nodiscard]] HistoryResult
     uint64_t commit_ns = 0, data_ns = 0, valid_after_ns = 0, source_ns = 0;
     T sample{};
     bool ok() const { return status == history::Status::ok; }
+};
+
+/// A range's answer, whole: its samples and whether they are all the span asked for.
+template <class T>
+struct [[nodiscard]] HistoryRange
+{
+    /// ok; partial: the span reached back past the window, the samples are what is held;
+    /// not_found, evicted, not_yet, unknown_object, error (then no samples).
+    history::Status status = history::Status::error;
+    std::string error;
+    std::vector<HistoryResult<T>> samples;  ///< oldest first
+    bool truncated = false;                 ///< more matched than the limit: the oldest are here
+    uint64_t lost = 0;                      ///< samples never received between the first and the last
+    bool complete() const { return status == history::Status::ok && !truncated; }
 };
 
 using HistoryBy = history::By;
@@ -117,18 +132,30 @@ public:
         rq.timeout_ns(static_cast<uint64_t>(timeout.count()));
         return decoded<T>(request(rq));
     }
-    /// Samples with time in [t0, t1), oldest first.
+    /// Samples with time in [t0, t1), oldest first, with whether that is the whole span
+    /// (partial: part of it was evicted; truncated: cut at the limit).
     template <class T, class Key>
-    std::vector<HistoryResult<T>> range(const std::string& topic, const Key& key, uint64_t t0, uint64_t t1,
-                                        HistoryBy by = HistoryBy::commit, uint32_t limit = 1000)
+    HistoryRange<T> range_of(const std::string& topic, const Key& key, uint64_t t0, uint64_t t1, HistoryBy by = HistoryBy::commit,
+                             uint32_t limit = 1000)
     {
         auto rq = make(history::Kind::range, topic, key_text(key), t0, by);
         rq.t1(t1);
         rq.limit(limit);
-        auto reply = request(rq);
-        std::vector<HistoryResult<T>> out;
-        for (const auto& s : reply.samples()) out.push_back(decode<T>(s, reply));
+        const auto reply = request(rq);
+        HistoryRange<T> out;
+        out.status = status_of(reply.status(), out.error);
+        if (out.error.empty()) out.error = reply.error();
+        out.truncated = reply.truncated();
+        out.lost = reply.lost();
+        for (const auto& s : reply.samples()) out.samples.push_back(decode<T>(s, reply));
         return out;
+    }
+    /// The samples of range_of alone (whether the span was whole is not told: use range_of).
+    template <class T, class Key>
+    std::vector<HistoryResult<T>> range(const std::string& topic, const Key& key, uint64_t t0, uint64_t t1,
+                                        HistoryBy by = HistoryBy::commit, uint32_t limit = 1000)
+    {
+        return range_of<T>(topic, key, t0, t1, by, limit).samples;
     }
 
     /// Decodes a stored payload (CDR encapsulation included) as T.
