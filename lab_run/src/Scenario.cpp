@@ -225,6 +225,127 @@ void check_starts(Checker& c, const Scenario& s, const YAML::Node& vehicles)
     }
 }
 
+/// The cars: each one's id (once), start, camera, state machine and restart.
+void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicles, Scenario& s)
+{
+    if (!vehicles) c.error(root, "vehicles", "missing (a list of cars, each with an id)");
+    else if (!vehicles.IsSequence() || vehicles.size() == 0) c.error(vehicles, "vehicles", "expected a list of at least one car");
+    else {
+        std::map<int, size_t> seen;
+        for (size_t i = 0; i < vehicles.size(); ++i) {
+            const YAML::Node v = vehicles[i];
+            const std::string p = "vehicles[" + std::to_string(i) + "]";
+            if (!v.IsMap()) {
+                c.error(v, p, "expected a map (id, start, camera, fsm, restart)");
+                continue;
+            }
+            c.keys(v, p, {"id", "start", "camera", "fsm", "restart"});
+            VehicleSpec spec;
+            if (!v["id"]) c.error(v, p + ".id", "missing");
+            else if (auto id = c.integer(v["id"], p + ".id", 1, 255)) {
+                spec.id = int(*id);
+                auto [it, fresh] = seen.emplace(spec.id, i);
+                if (!fresh) c.error(v["id"], p + ".id", std::to_string(spec.id) + " is given twice (also vehicles[" + std::to_string(it->second) + "])");
+            }
+            if (v["start"]) {
+                const YAML::Node st = v["start"];
+                if (!st.IsSequence() || st.size() != 3) c.error(st, p + ".start", "expected [x, y, yaw] in metres and radians");
+                else {
+                    const auto x = c.number(st[0], p + ".start[0]"), y = c.number(st[1], p + ".start[1]"), yaw = c.number(st[2], p + ".start[2]");
+                    if (x && y && yaw) std::tie(spec.x, spec.y, spec.yaw) = std::tuple(*x, *y, *yaw);
+                }
+            }
+            if (v["camera"]) spec.camera = c.file(v["camera"], p + ".camera", s.dir, "camera file");
+            if (v["fsm"]) spec.fsm = c.file(v["fsm"], p + ".fsm", s.dir, "state machine");
+            if (v["restart"]) spec.restart = c.boolean(v["restart"], p + ".restart").value_or(false);
+            if (v["camera"] && !root["world"]) c.error(v["camera"], p + ".camera", "a camera needs the world's markers: give world");
+            s.vehicles.push_back(spec);
+        }
+    }
+
+}
+
+/// central_routing: enabled, seed, period, restart, and what it asks of the cars.
+void read_routing(Checker& c, const YAML::Node& root, const YAML::Node& vehicles, Scenario& s)
+{
+    if (const YAML::Node r = root["routing"]) {
+        if (!r.IsMap()) c.error(r, "routing", "expected a map (enabled, seed, period, restart)");
+        else {
+            c.keys(r, "routing", {"enabled", "seed", "period", "restart"});
+            if (r["enabled"]) s.routing.enabled = c.boolean(r["enabled"], "routing.enabled").value_or(false);
+            if (r["seed"]) s.routing.seed = uint64_t(c.integer(r["seed"], "routing.seed", 0, 1ll << 53).value_or(1));
+            if (r["period"]) {
+                if (auto d = c.duration(r["period"], "routing.period")) {
+                    if (*d % 50'000'000ull) c.error(r["period"], "routing.period", "must be a multiple of 50ms");
+                    else s.routing.period_ns = *d;
+                }
+            }
+            if (r["restart"]) s.routing.restart = c.boolean(r["restart"], "routing.restart").value_or(false);
+            if (s.routing.enabled) {
+                if (!root["lanes"]) c.error(r, "routing.enabled", "central routing needs a lane graph: give lanes");
+                for (size_t i = 0; vehicles.IsSequence() && i < vehicles.size(); ++i) {
+                    const std::string p = "vehicles[" + std::to_string(i) + "]";
+                    if (!vehicles[i].IsMap()) continue;  // said above
+                    if (vehicles[i]["fsm"]) c.error(vehicles[i]["fsm"], p + ".fsm", "a car either follows its fsm or central routing, not both");
+                    if (vehicles[i]["start"]) c.error(vehicles[i]["start"], p + ".start", "with routing the cars are spread over the lanes; leave start out");
+                }
+                std::vector<int> ids;
+                for (const auto& v : s.vehicles) ids.push_back(v.id);
+                std::sort(ids.begin(), ids.end());
+                const bool valid = !ids.empty() && ids.front() > 0 && std::adjacent_find(ids.begin(), ids.end()) == ids.end();  // else said above
+                if (valid && ids.back() - ids.front() + 1 != int(ids.size())) {
+                    c.error(vehicles, "vehicles", "with routing the cars run in one simulator and need consecutive ids (e.g. 1, 2, 3)");
+                }
+            }
+        }
+    }
+}
+
+/// The run's QoS overrides, what it records and its monitor.
+void read_run_options(Checker& c, const YAML::Node& root, Scenario& s)
+{
+    if (const YAML::Node q = root["qos"]) {
+        if (!q.IsMap()) c.error(q, "qos", "expected a map of topic: {reliable, transient_local, history_depth}");
+        else {
+            for (const auto& kv : q) {
+                const std::string topic = kv.first.as<std::string>("");
+                const std::string p = "qos." + topic;
+                if (!kv.second.IsMap()) {
+                    c.error(kv.second, p, "expected a map (reliable, transient_local, history_depth)");
+                    continue;
+                }
+                c.keys(kv.second, p, {"reliable", "transient_local", "history_depth"});
+                QosOverride o;
+                if (kv.second["reliable"]) o.reliable = c.boolean(kv.second["reliable"], p + ".reliable");
+                if (kv.second["transient_local"]) o.transient_local = c.boolean(kv.second["transient_local"], p + ".transient_local");
+                if (kv.second["history_depth"]) {
+                    if (auto d = c.integer(kv.second["history_depth"], p + ".history_depth", 1, 100000)) o.history_depth = int(*d);
+                }
+                s.qos[topic] = o;
+            }
+        }
+    }
+    if (const YAML::Node r = root["record"]) {
+        if (!r.IsMap()) c.error(r, "record", "expected a map (topics, exclude)");
+        else {
+            c.keys(r, "record", {"topics", "exclude"});
+            if (r["topics"]) s.record.topics = c.patterns(r["topics"], "record.topics");
+            if (r["exclude"]) s.record.exclude = c.patterns(r["exclude"], "record.exclude");
+        }
+    }
+    if (const YAML::Node m = root["monitor"]) {
+        if (m.IsMap()) {
+            c.keys(m, "monitor", {"port", "allow_stop"});
+            if (!m["port"]) c.error(m, "monitor", "port is missing");
+            else if (auto port = c.integer(m["port"], "monitor.port", 1, 65535)) s.monitor_port = int(*port);
+            if (m["allow_stop"]) s.monitor_allow_stop = c.boolean(m["allow_stop"], "monitor.allow_stop").value_or(false);
+        } else if (m.IsScalar() && (m.Scalar() == "off" || m.Scalar() == "false" || m.Scalar() == "none")) {
+            s.monitor_port.reset();  // as --monitor off
+        } else if (auto port = c.integer(m, "monitor", 1, 65535)) {
+            s.monitor_port = int(*port);
+        }
+    }
+}
 }  // namespace
 
 ScenarioError::ScenarioError(std::vector<std::string> errors) : std::runtime_error(join(errors)), errors_(std::move(errors)) {}
@@ -283,115 +404,11 @@ Scenario load_scenario(const std::string& path)
     }
 
     const YAML::Node vehicles = root["vehicles"];
-    if (!vehicles) c.error(root, "vehicles", "missing (a list of cars, each with an id)");
-    else if (!vehicles.IsSequence() || vehicles.size() == 0) c.error(vehicles, "vehicles", "expected a list of at least one car");
-    else {
-        std::map<int, size_t> seen;
-        for (size_t i = 0; i < vehicles.size(); ++i) {
-            const YAML::Node v = vehicles[i];
-            const std::string p = "vehicles[" + std::to_string(i) + "]";
-            if (!v.IsMap()) {
-                c.error(v, p, "expected a map (id, start, camera, fsm, restart)");
-                continue;
-            }
-            c.keys(v, p, {"id", "start", "camera", "fsm", "restart"});
-            VehicleSpec spec;
-            if (!v["id"]) c.error(v, p + ".id", "missing");
-            else if (auto id = c.integer(v["id"], p + ".id", 1, 255)) {
-                spec.id = int(*id);
-                auto [it, fresh] = seen.emplace(spec.id, i);
-                if (!fresh) c.error(v["id"], p + ".id", std::to_string(spec.id) + " is given twice (also vehicles[" + std::to_string(it->second) + "])");
-            }
-            if (v["start"]) {
-                const YAML::Node st = v["start"];
-                if (!st.IsSequence() || st.size() != 3) c.error(st, p + ".start", "expected [x, y, yaw] in metres and radians");
-                else {
-                    const auto x = c.number(st[0], p + ".start[0]"), y = c.number(st[1], p + ".start[1]"), yaw = c.number(st[2], p + ".start[2]");
-                    if (x && y && yaw) std::tie(spec.x, spec.y, spec.yaw) = std::tuple(*x, *y, *yaw);
-                }
-            }
-            if (v["camera"]) spec.camera = c.file(v["camera"], p + ".camera", s.dir, "camera file");
-            if (v["fsm"]) spec.fsm = c.file(v["fsm"], p + ".fsm", s.dir, "state machine");
-            if (v["restart"]) spec.restart = c.boolean(v["restart"], p + ".restart").value_or(false);
-            if (v["camera"] && !root["world"]) c.error(v["camera"], p + ".camera", "a camera needs the world's markers: give world");
-            s.vehicles.push_back(spec);
-        }
-    }
-
-    if (const YAML::Node r = root["routing"]) {
-        if (!r.IsMap()) c.error(r, "routing", "expected a map (enabled, seed, period, restart)");
-        else {
-            c.keys(r, "routing", {"enabled", "seed", "period", "restart"});
-            if (r["enabled"]) s.routing.enabled = c.boolean(r["enabled"], "routing.enabled").value_or(false);
-            if (r["seed"]) s.routing.seed = uint64_t(c.integer(r["seed"], "routing.seed", 0, 1ll << 53).value_or(1));
-            if (r["period"]) {
-                if (auto d = c.duration(r["period"], "routing.period")) {
-                    if (*d % 50'000'000ull) c.error(r["period"], "routing.period", "must be a multiple of 50ms");
-                    else s.routing.period_ns = *d;
-                }
-            }
-            if (r["restart"]) s.routing.restart = c.boolean(r["restart"], "routing.restart").value_or(false);
-            if (s.routing.enabled) {
-                if (!root["lanes"]) c.error(r, "routing.enabled", "central routing needs a lane graph: give lanes");
-                for (size_t i = 0; vehicles.IsSequence() && i < vehicles.size(); ++i) {
-                    const std::string p = "vehicles[" + std::to_string(i) + "]";
-                    if (!vehicles[i].IsMap()) continue;  // said above
-                    if (vehicles[i]["fsm"]) c.error(vehicles[i]["fsm"], p + ".fsm", "a car either follows its fsm or central routing, not both");
-                    if (vehicles[i]["start"]) c.error(vehicles[i]["start"], p + ".start", "with routing the cars are spread over the lanes; leave start out");
-                }
-                std::vector<int> ids;
-                for (const auto& v : s.vehicles) ids.push_back(v.id);
-                std::sort(ids.begin(), ids.end());
-                const bool valid = !ids.empty() && ids.front() > 0 && std::adjacent_find(ids.begin(), ids.end()) == ids.end();  // else said above
-                if (valid && ids.back() - ids.front() + 1 != int(ids.size())) {
-                    c.error(vehicles, "vehicles", "with routing the cars run in one simulator and need consecutive ids (e.g. 1, 2, 3)");
-                }
-            }
-        }
-    }
+    read_vehicles(c, root, vehicles, s);
+    read_routing(c, root, vehicles, s);
     if (!s.routing.enabled && !root["world"]) c.error(root, "world", "missing (the map the cars drive in)");
 
-    if (const YAML::Node q = root["qos"]) {
-        if (!q.IsMap()) c.error(q, "qos", "expected a map of topic: {reliable, transient_local, history_depth}");
-        else {
-            for (const auto& kv : q) {
-                const std::string topic = kv.first.as<std::string>("");
-                const std::string p = "qos." + topic;
-                if (!kv.second.IsMap()) {
-                    c.error(kv.second, p, "expected a map (reliable, transient_local, history_depth)");
-                    continue;
-                }
-                c.keys(kv.second, p, {"reliable", "transient_local", "history_depth"});
-                QosOverride o;
-                if (kv.second["reliable"]) o.reliable = c.boolean(kv.second["reliable"], p + ".reliable");
-                if (kv.second["transient_local"]) o.transient_local = c.boolean(kv.second["transient_local"], p + ".transient_local");
-                if (kv.second["history_depth"]) {
-                    if (auto d = c.integer(kv.second["history_depth"], p + ".history_depth", 1, 100000)) o.history_depth = int(*d);
-                }
-                s.qos[topic] = o;
-            }
-        }
-    }
-    if (const YAML::Node r = root["record"]) {
-        if (!r.IsMap()) c.error(r, "record", "expected a map (topics, exclude)");
-        else {
-            c.keys(r, "record", {"topics", "exclude"});
-            if (r["topics"]) s.record.topics = c.patterns(r["topics"], "record.topics");
-            if (r["exclude"]) s.record.exclude = c.patterns(r["exclude"], "record.exclude");
-        }
-    }
-    if (const YAML::Node m = root["monitor"]) {
-        if (m.IsMap()) {
-            c.keys(m, "monitor", {"port", "allow_stop"});
-            if (!m["port"]) c.error(m, "monitor", "port is missing");
-            else if (auto port = c.integer(m["port"], "monitor.port", 1, 65535)) s.monitor_port = int(*port);
-            if (m["allow_stop"]) s.monitor_allow_stop = c.boolean(m["allow_stop"], "monitor.allow_stop").value_or(false);
-        } else if (m.IsScalar() && (m.Scalar() == "off" || m.Scalar() == "false" || m.Scalar() == "none")) {
-            s.monitor_port.reset();  // as --monitor off
-        } else if (auto port = c.integer(m, "monitor", 1, 65535)) {
-            s.monitor_port = int(*port);
-        }
-    }
+    read_run_options(c, root, s);
     if (c.errors().empty() && !s.world.empty() && !s.routing.enabled) check_starts(c, s, vehicles);
     if (!c.errors().empty()) throw ScenarioError(c.errors());
     return s;

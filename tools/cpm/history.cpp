@@ -295,34 +295,21 @@ void print_samples(const HistoryReply& reply, bool json, const cpm::rtdb::IdlDec
     }
 }
 
-int history_command(const std::string& verb, const std::vector<std::string>& args, const std::string& file)
+/// The verbs that answer with objects, not samples.
+bool about_objects(const std::string& verb) { return verb == "list" || verb == "search" || verb == "wait-object" || verb == "changes"; }
+
+/// The request a verb's flags ask for, against the source's clocks. Throws UsageError naming a
+/// missing or wrong flag.
+HistoryRequest request_of(const std::string& verb, const cpm::cli::ParsedArgs& parsed, const Source& source)
 {
     const std::string command = "cpm history " + verb;
-    auto parsed = cpm::cli::parse_flags(args,
-                                       {{"--topic", true},
-                                        {"--key", true},
-                                        {"--oid", true},
-                                        {"--time", true},
-                                        {"--by", true},
-                                        {"--from", true},
-                                        {"--to", true},
-                                        {"--timeout", true},
-                                        {"--limit", true},
-                                        {"--objects", true},
-                                        {"--name", true},
-                                        {"--type", true},
-                                        {"--parent", true},
-                                        {"--creator", true},
-                                        {"--alive-at", true},
-                                        {"--since", true},
-                                        {"--partial-ok", false},
-                                        {"--json", false}},
-                                       command);
-    const Source source = open_source(file, command);
     const bool by_data = parsed.get("--by", "commit") == "data";
     // Objects' times (created, deleted) are the service's: --since and --alive-at go by commit.
-    auto parse_time = [&](const std::string& flag, const std::string& text) {
-        return source.time(flag, text, by_data && flag != "--since" && flag != "--alive-at");
+    auto parse_time = [&](const std::string& flag) {
+        return source.time(flag, parsed.get(flag), by_data && flag != "--since" && flag != "--alive-at");
+    };
+    auto require = [&](const char* flag, const std::string& what) {
+        if (!parsed.has(flag)) throw UsageError(command + ": " + what);
     };
     // The verbs are the request kinds, but for two spelled as a person types them.
     const std::string kind_name = verb == "wait" ? "wait_next" : verb == "wait-object" ? "wait_object" : verb;
@@ -332,52 +319,46 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
     if (!by) throw UsageError(command + ": --by '" + parsed.get("--by") + "': expected commit or data");
     HistoryRequest rq = cpm::HistoryClient::make(*kind, parsed.get("--topic"), parsed.get("--key"), 0, *by);
     if (parsed.has("--oid")) rq.oid(parse_oid("--oid", parsed.get("--oid")));
-    const bool about_objects = verb == "list" || verb == "search" || verb == "wait-object" || verb == "changes";
-    const bool object_query = !about_objects && verb != "snapshot";
-    if (object_query && rq.topic().empty() && !rq.oid()) throw UsageError(command + ": --topic NAME (and --key K) is required");
-    const bool timed = verb == "at" || verb == "older" || verb == "younger" || verb == "snapshot";
-    if (timed) {
-        if (!parsed.has("--time")) throw UsageError(command + ": --time T is required (ns, ISO-8601 or relative such as -2s)");
-        rq.t0(parse_time("--time", parsed.get("--time")));
+    if (!about_objects(verb) && verb != "snapshot" && rq.topic().empty() && !rq.oid()) {
+        throw UsageError(command + ": --topic NAME (and --key K) is required");
+    }
+    if (verb == "at" || verb == "older" || verb == "younger" || verb == "snapshot") {
+        require("--time", "--time T is required (ns, ISO-8601 or relative such as -2s)");
+        rq.t0(parse_time("--time"));
     }
     if (verb == "range") {
         if (!parsed.has("--from") || !parsed.has("--to")) throw UsageError(command + ": --from T and --to T are required");
-        rq.t0(parse_time("--from", parsed.get("--from")));
-        rq.t1(parse_time("--to", parsed.get("--to")));
+        rq.t0(parse_time("--from"));
+        rq.t1(parse_time("--to"));
         if (rq.t1() < rq.t0()) throw UsageError(command + ": --to is before --from");
     }
-    if (verb == "wait" || verb == "successor") rq.t0(parsed.has("--time") ? parse_time("--time", parsed.get("--time")) : source.now);
+    if (verb == "wait" || verb == "successor") rq.t0(parsed.has("--time") ? parse_time("--time") : source.now);
     if (verb == "changes") {
-        if (!parsed.has("--since")) throw UsageError(command + ": --since T is required");
-        rq.t0(parse_time("--since", parsed.get("--since")));
+        require("--since", "--since T is required");
+        rq.t0(parse_time("--since"));
     }
     if (parsed.has("--timeout")) rq.timeout_ns(cpm::cli::parse_duration("--timeout", parsed.get("--timeout")));
     else if (verb == "wait" || verb == "successor" || verb == "wait-object") rq.timeout_ns(10'000'000'000ull);
     if (parsed.has("--limit")) rq.limit(uint32_t(cpm::cli::parse_integer("--limit", parsed.get("--limit"), 1, 100000)));
     if (verb == "snapshot") {
-        if (!parsed.has("--objects")) throw UsageError(command + ": --objects TOPIC[/KEY],... is required");
+        require("--objects", "--objects TOPIC[/KEY],... is required");
         for (const auto& o : cpm::cli::split_list("--objects", parsed.get("--objects"))) rq.objects().push_back(o);
     }
     rq.name_regex(parsed.get("--name"));
     rq.type_name(parsed.get("--type"));
     if (parsed.has("--parent")) rq.parent(parse_oid("--parent", parsed.get("--parent")));
     rq.creator(parsed.get("--creator"));
-    if (parsed.has("--alive-at")) rq.alive_at(parse_time("--alive-at", parsed.get("--alive-at")));
+    if (parsed.has("--alive-at")) rq.alive_at(parse_time("--alive-at"));
+    return rq;
+}
 
-    const HistoryReply reply = source.client->request(rq);
-    const bool json = parsed.has("--json");
-    const auto status = cpm::history::status_from(reply.status()).value_or(cpm::history::Status::error);
-    if (status == cpm::history::Status::error || status == cpm::history::Status::unknown_object) {
-        std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(),
-                     status == cpm::history::Status::error ? "the service refused the request: " : "", reply.error().c_str());
-        return 1;
-    }
-    if (verb == "changes") print_changes(reply, json, rq.t0(), source.now);
-    else if (about_objects) print_objects(reply, json, source.now);
-    else print_samples(reply, json, source.decoder());
+/// The end of an answer that is not the whole span asked for says so, on stderr and on stdout
+/// (a script reading --json sees it as the last line), with how to get the rest.
+void say_incomplete(const std::string& verb, const HistoryRequest& rq, const HistoryReply& reply, bool json)
+{
+    if (reply.samples().empty()) return;
     const std::string object = rq.topic().empty() ? "" : rq.topic() + (rq.key().empty() ? "" : "/" + rq.key());
-    // The end of an answer that is not the whole span asked for says so, on stdout too (a script
-    // reading --json sees it as the last line), and how to get the rest.
+    const bool by_data = rq.by() == "data";
     auto closing_line = [&](const std::string& said, nlohmann::json line) {
         std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(), object.empty() ? "" : (object + ": ").c_str(), said.c_str());
         if (!json) {
@@ -388,26 +369,52 @@ int history_command(const std::string& verb, const std::vector<std::string>& arg
         line["message"] = said;
         std::printf("%s\n", line.dump().c_str());
     };
-    if (status == cpm::history::Status::partial && verb == "range" && !reply.samples().empty()) {
+    if (reply.status() == "partial" && verb == "range") {
         const auto& first = reply.samples().front();
-        const uint64_t first_held = rq.by() == "data" ? first.data_ns() : first.commit_ns();
+        const uint64_t first_held = by_data ? first.data_ns() : first.commit_ns();
         closing_line("partial: the span's start (" + cpm::cli::format_time(rq.t0(), 9) + ") is older than what the history holds; the samples " +
                          "shown start at " + cpm::cli::format_time(first_held, 9) + " (--partial-ok: take what is held, exit 0)",
                      {{"status", "partial"}, {"from_ns", rq.t0()}, {"first_held_ns", first_held}});
     }
-    if (reply.truncated() && !reply.samples().empty()) {
+    if (reply.truncated()) {
         const auto& last = reply.samples().back();
-        const uint64_t next = rq.by() == "data" ? last.data_ns() : last.commit_ns() + 1;
+        const uint64_t next = by_data ? last.data_ns() : last.commit_ns() + 1;
         closing_line("cut at --limit " + std::to_string(reply.samples().size()) + ": more samples matched; the oldest are shown. The rest: --from " +
-                         std::to_string(next) + (rq.by() == "data" ? " (repeats the samples of that data time)" : "") + ", or a larger --limit",
+                         std::to_string(next) + (by_data ? " (repeats the samples of that data time)" : "") + ", or a larger --limit",
                      {{"status", "truncated"}, {"limit", reply.samples().size()}, {"next_from_ns", next}});
     }
+}
+
+int history_command(const std::string& verb, const std::vector<std::string>& args, const std::string& file)
+{
+    const std::string command = "cpm history " + verb;
+    auto parsed = cpm::cli::parse_flags(args,
+                                       {{"--topic", true},   {"--key", true},     {"--oid", true},      {"--time", true},
+                                        {"--by", true},      {"--from", true},    {"--to", true},       {"--timeout", true},
+                                        {"--limit", true},   {"--objects", true}, {"--name", true},     {"--type", true},
+                                        {"--parent", true},  {"--creator", true}, {"--alive-at", true}, {"--since", true},
+                                        {"--partial-ok", false}, {"--json", false}},
+                                       command);
+    const Source source = open_source(file, command);
+    const HistoryRequest rq = request_of(verb, parsed, source);
+    const HistoryReply reply = source.client->request(rq);
+    const bool json = parsed.has("--json");
+    const auto status = cpm::history::status_from(reply.status()).value_or(cpm::history::Status::error);
+    if (status == cpm::history::Status::error || status == cpm::history::Status::unknown_object) {
+        std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(),
+                     status == cpm::history::Status::error ? "the service refused the request: " : "", reply.error().c_str());
+        return 1;
+    }
+    if (verb == "changes") print_changes(reply, json, rq.t0(), source.now);
+    else if (about_objects(verb)) print_objects(reply, json, source.now);
+    else print_samples(reply, json, source.decoder());
+    say_incomplete(verb, rq, reply, json);
     if (reply.lost() > 0)
         std::fprintf(stderr, "cpm history %s: %llu samples between the first and the last shown never reached the service\n",
                      verb.c_str(), (unsigned long long)reply.lost());
     if (status == cpm::history::Status::partial && verb == "range") return parsed.has("--partial-ok") ? 0 : 1;
     if (status != cpm::history::Status::ok) {
-        const std::string what = object.empty() ? "" : object + ": ";
+        const std::string what = rq.topic().empty() ? "" : rq.topic() + (rq.key().empty() ? "" : "/" + rq.key()) + ": ";
         std::fprintf(stderr, "cpm history %s: %s%s\n", verb.c_str(), what.c_str(), reply.status().c_str());
         if (json && reply.samples().empty()) {
             nlohmann::json miss{{"status", reply.status()}};
