@@ -3,6 +3,7 @@
 #include <cpm/read_text_file.hpp>
 
 #include <cpm/Error.hpp>
+#include <cpm/checkers/YamlChecker.hpp>
 
 #include <opencv2/core/persistence.hpp>
 #include <yaml-cpp/yaml.h>
@@ -15,81 +16,96 @@
 namespace cpm::aruco {
 namespace {
 
-[[noreturn]] void fail(const std::string& path, const std::string& what) { throw Error(path + ": " + what); }
+using Checker = checkers::YamlChecker;
 
-double number(const YAML::Node& root, const std::string& path, const char* name)
+/// The field `name`, a finite number; 0 with an error said when it is not.
+double number(Checker& c, const YAML::Node& root, const char* name)
 {
     const YAML::Node n = root[name];
-    if (!n) fail(path, std::string("missing field ") + name);
-    double v = 0;
-    if (!n.IsScalar() || !YAML::convert<double>::decode(n, v)) fail(path, std::string(name) + ": expected a number");
-    if (!std::isfinite(v)) fail(path, std::string(name) + ": expected a finite number");
-    return v;
+    if (!n) {
+        c.error("", std::string("missing field ") + name);
+        return 0;
+    }
+    return c.number(n, name).value_or(0);
 }
 
-/// An opencv-matrix (rows, cols, dt, data) of rows × cols values (or cols × rows).
-std::vector<double> matrix(const YAML::Node& root, const std::string& path, const char* name, int rows, int cols)
+/// An opencv-matrix (rows, cols, dt, data) of rows × cols values (or cols × rows); empty with an
+/// error said when it is not.
+std::vector<double> matrix(Checker& c, const YAML::Node& root, const char* name, int rows, int cols)
 {
     const YAML::Node n = root[name];
-    if (!n) fail(path, std::string("missing field ") + name);
-    if (!n.IsMap() || !n["rows"] || !n["cols"] || !n["data"] || !n["rows"].IsScalar() || !n["cols"].IsScalar() || !n["data"].IsSequence())
-        fail(path, std::string(name) + ": expected an opencv-matrix (rows, cols, dt, data)");
-    long long r = 0, c = 0;
-    if (!YAML::convert<long long>::decode(n["rows"], r) || !YAML::convert<long long>::decode(n["cols"], c))
-        fail(path, std::string(name) + ": expected an opencv-matrix (rows, cols, dt, data)");
-    if (r * c != rows * cols || r <= 0 || c <= 0) {
-        fail(path, std::string(name) + ": expected " + std::to_string(rows) + "×" + std::to_string(cols) + " values, got " +
-                       std::to_string(r) + "×" + std::to_string(c));
+    if (!n) {
+        c.error("", std::string("missing field ") + name);
+        return {};
+    }
+    long long r = 0, k = 0;
+    if (!n.IsMap() || !n["rows"] || !n["cols"] || !n["data"] || !n["data"].IsSequence() || !n["rows"].IsScalar() ||
+        !n["cols"].IsScalar() || !YAML::convert<long long>::decode(n["rows"], r) || !YAML::convert<long long>::decode(n["cols"], k)) {
+        c.error(n, name, "expected an opencv-matrix (rows, cols, dt, data)");
+        return {};
+    }
+    if (r * k != rows * cols || r <= 0 || k <= 0) {
+        c.error(n, name, "expected " + std::to_string(rows) + "×" + std::to_string(cols) + " values, got " + std::to_string(r) + "×" + std::to_string(k));
+        return {};
     }
     const YAML::Node data = n["data"];
     if (data.size() != size_t(rows * cols)) {
-        fail(path, std::string(name) + ": data holds " + std::to_string(data.size()) + " values, rows × cols is " +
-                       std::to_string(rows * cols));
+        c.error(data, name, "data holds " + std::to_string(data.size()) + " values, rows × cols is " + std::to_string(rows * cols));
+        return {};
     }
     std::vector<double> out;
     for (size_t i = 0; i < data.size(); ++i) {
-        double v = 0;
-        if (!data[i].IsScalar() || !YAML::convert<double>::decode(data[i], v)) fail(path, std::string(name) + ": value " + std::to_string(i) + " is not a number");
-        if (!std::isfinite(v)) fail(path, std::string(name) + ": value " + std::to_string(i) + " is not finite");
-        out.push_back(v);
+        const auto v = c.number(data[i], std::string(name) + ".data[" + std::to_string(i) + "]");
+        if (!v) return {};
+        out.push_back(*v);
     }
     return out;
+}
+
+/// The file's text as yaml-cpp reads it, or an error said.
+YAML::Node parse(Checker& c, std::string text)
+{
+    // Read with yaml-cpp, not OpenCV's FileStorage: OpenCV 4.6's reader loops forever on some
+    // malformed files (found by fuzzing). OpenCV writes a first line "%YAML:1.0", which is not
+    // standard YAML: it is dropped.
+    if (text.rfind("%YAML", 0) == 0) text.erase(0, text.find('\n') == std::string::npos ? text.size() : text.find('\n'));
+    try {
+        YAML::Node root = YAML::Load(text);
+        if (root.IsMap()) return root;
+        c.error("", "not an OpenCV FileStorage YAML file (expected a map of fields: image_width, image_height, camera_matrix, ...)");
+    } catch (const YAML::Exception& e) {
+        c.error("", "not an OpenCV FileStorage YAML file (line " + std::to_string(e.mark.line + 2) + ": " + e.msg + ")");
+    }
+    return {};
 }
 
 }  // namespace
 
 Camera Camera::load(const std::string& path)
 {
-    std::string text = read_text_file(path, "camera file");  // names a directory or a missing file
-    // Read with yaml-cpp, not OpenCV's FileStorage: OpenCV 4.6's reader loops forever on some
-    // malformed files (found by fuzzing). OpenCV writes a first line "%YAML:1.0", which is not
-    // standard YAML: it is dropped.
-    if (text.rfind("%YAML", 0) == 0) text.erase(0, text.find('\n') == std::string::npos ? text.size() : text.find('\n'));
-    YAML::Node root;
-    try {
-        root = YAML::Load(text);
-    } catch (const YAML::Exception& e) {
-        fail(path, "not an OpenCV FileStorage YAML file (line " + std::to_string(e.mark.line + 2) + ": " + e.msg + ")");
-    }
-    if (!root.IsMap()) fail(path, "not an OpenCV FileStorage YAML file (expected a map of fields: image_width, image_height, camera_matrix, ...)");
+    Checker check(path);
+    const YAML::Node root = parse(check, read_text_file(path, "camera file"));  // names a directory or a missing file
+    check.throw_if_errors();
     Camera c;
-    double w = number(root, path, "image_width"), h = number(root, path, "image_height");
-    if (w < 16 || h < 16 || w > 8192 || h > 8192 || w != std::floor(w) || h != std::floor(h)) {
-        fail(path, "image_width and image_height must be whole numbers of pixels, 16..8192");
+    const double w = number(check, root, "image_width"), h = number(check, root, "image_height");
+    if (check.ok() && (w < 16 || h < 16 || w > 8192 || h > 8192 || w != std::floor(w) || h != std::floor(h))) {
+        check.error("", "image_width and image_height must be whole numbers of pixels, 16..8192");
     }
     c.width = int(w);
     c.height = int(h);
-    const auto k = matrix(root, path, "camera_matrix", 3, 3);
-    c.camera_matrix = cv::Matx33d(k.data());
-    if (c.fx() <= 0 || c.fy() <= 0) fail(path, "camera_matrix: the focal lengths fx, fy must be > 0");
-    const auto d = matrix(root, path, "distortion_coefficients", 1, 5);
-    for (int i = 0; i < 5; ++i) c.distortion[i] = d[size_t(i)];
-    c.mount.x = number(root, path, "mount_x");
-    c.mount.y = number(root, path, "mount_y");
-    c.mount.z = number(root, path, "mount_z");
-    c.mount.yaw = number(root, path, "mount_yaw");
-    c.mount.pitch = number(root, path, "mount_pitch");
-    if (std::abs(c.mount.pitch) >= M_PI / 2) fail(path, "mount_pitch: must be within ±90°");
+    if (const auto k = matrix(check, root, "camera_matrix", 3, 3); !k.empty()) {
+        c.camera_matrix = cv::Matx33d(k.data());
+        if (c.fx() <= 0 || c.fy() <= 0) check.error(root["camera_matrix"], "camera_matrix", "the focal lengths fx, fy must be > 0");
+    }
+    const auto d = matrix(check, root, "distortion_coefficients", 1, 5);
+    for (size_t i = 0; i < d.size(); ++i) c.distortion[int(i)] = d[i];
+    c.mount.x = number(check, root, "mount_x");
+    c.mount.y = number(check, root, "mount_y");
+    c.mount.z = number(check, root, "mount_z");
+    c.mount.yaw = number(check, root, "mount_yaw");
+    c.mount.pitch = number(check, root, "mount_pitch");
+    if (std::abs(c.mount.pitch) >= M_PI / 2) check.error(root["mount_pitch"], "mount_pitch", "must be within ±90°");
+    check.throw_if_errors();
     return c;
 }
 

@@ -1,6 +1,7 @@
 #include <cpm/routing/LaneGraph.hpp>
 
 #include <cpm/Error.hpp>
+#include <cpm/checkers/JsonChecker.hpp>
 #include <cpm/read_text_file.hpp>
 
 #include <nlohmann/json.hpp>
@@ -21,34 +22,14 @@ constexpr double kEndTolerance = 0.01;   // m: an edge's ends must meet its node
 constexpr double kMaxSpacing = 0.05;     // m between consecutive points
 
 /// Collects errors as `SOURCE: PATH: message`.
-struct Checker
+struct Checker : checkers::JsonChecker
 {
-    std::string source;
-    std::vector<std::string> errors;
-    void error(const std::string& path, const std::string& message) { errors.push_back(source + ": " + path + ": " + message); }
-
+    using JsonChecker::JsonChecker;
     bool number(const json& parent, const std::string& path, const char* key, double& out)
     {
-        if (!parent.contains(key)) {
-            error(path, std::string("missing \"") + key + "\"");
-            return false;
-        }
-        const json& v = parent[key];
-        if (!v.is_number() || !std::isfinite(v.get<double>())) {
-            error(path + "." + key, "expected a finite number, got " + v.dump());
-            return false;
-        }
-        out = v.get<double>();
-        return true;
-    }
-
-    void only_members(const json& object, const std::string& path, std::initializer_list<const char*> known)
-    {
-        for (auto it = object.begin(); it != object.end(); ++it) {
-            if (std::none_of(known.begin(), known.end(), [&](const char* k) { return it.key() == k; })) {
-                error(path + "." + it.key(), "unknown member");
-            }
-        }
+        const auto v = number_member(parent, path, key);
+        if (v) out = *v;
+        return v.has_value();
     }
 };
 
@@ -103,20 +84,10 @@ void check_topology(const LaneGraph& g, const json& doc, Checker& c)
 
 GraphLoad parse_lane_graph(const std::string& json_text, const std::string& source)
 {
-    GraphLoad result;
-    Checker c{source, {}};
-    json doc;
-    try {
-        doc = json::parse(json_text);
-    } catch (const json::exception& e) {
-        result.errors.push_back(source + ": not valid JSON (" + e.what() + ")");
-        return result;
-    }
-    if (!doc.is_object()) {
-        result.errors.push_back(source + ": $: expected an object with lane_width, nodes and edges");
-        return result;
-    }
-    c.only_members(doc, "$", {"lane_width", "nodes", "edges"});
+    Checker c(source);
+    const json doc = c.parse(json_text).value_or(json());
+    if (!c.ok() || !c.object(doc, "$", "an object with lane_width, nodes and edges")) return c.result<LaneGraph>(std::nullopt);
+    c.keys(doc, "$", {"lane_width", "nodes", "edges"});
     LaneGraph g;
     if (c.number(doc, "$", "lane_width", g.lane_width) && g.lane_width <= 0) {
         c.error("$.lane_width", "must be positive, got " + doc["lane_width"].dump());
@@ -132,7 +103,7 @@ GraphLoad parse_lane_graph(const std::string& json_text, const std::string& sour
                 c.error(path, "expected {\"id\", \"x\", \"y\", \"yaw\"}");
                 continue;
             }
-            c.only_members(n, path, {"id", "x", "y", "yaw"});
+            c.keys(n, path, {"id", "x", "y", "yaw"});
             LaneNode node;
             const bool id_ok = n.contains("id") && n["id"].is_number_integer() && n["id"].get<int64_t>() >= std::numeric_limits<int>::min() &&
                                n["id"].get<int64_t>() <= std::numeric_limits<int>::max();
@@ -161,7 +132,7 @@ GraphLoad parse_lane_graph(const std::string& json_text, const std::string& sour
                 c.error(path, "expected {\"from\", \"to\", \"points\"}");
                 continue;
             }
-            c.only_members(e, path, {"from", "to", "points"});
+            c.keys(e, path, {"from", "to", "points"});
             LaneEdge edge;
             bool ends_known = true;
             for (const char* end : {"from", "to"}) {
@@ -220,19 +191,15 @@ GraphLoad parse_lane_graph(const std::string& json_text, const std::string& sour
             g.edges.push_back(edge);
         }
     }
-    if (c.errors.empty()) check_topology(g, doc, c);
-    if (!c.errors.empty()) {
-        result.errors = std::move(c.errors);
-        return result;
-    }
+    if (c.ok()) check_topology(g, doc, c);
+    if (!c.ok()) return c.result<LaneGraph>(std::nullopt);
     g.successors.resize(g.edges.size());
     for (size_t i = 0; i < g.edges.size(); ++i) {
         for (size_t j = 0; j < g.edges.size(); ++j) {
             if (g.edges[j].from == g.edges[i].to) g.successors[i].push_back(j);
         }
     }
-    result.graph = std::move(g);
-    return result;
+    return c.result<LaneGraph>(std::move(g));
 }
 
 GraphLoad load_lane_graph(const std::string& path)
@@ -242,7 +209,7 @@ GraphLoad load_lane_graph(const std::string& path)
         text = cpm::read_text_file(path, "lane graph");
     } catch (const cpm::Error& e) {
         GraphLoad failed;
-        failed.errors.push_back(e.what());
+        failed.errors.push_back({"", e.what()});
         return failed;
     }
     return parse_lane_graph(text, path);
@@ -250,11 +217,7 @@ GraphLoad load_lane_graph(const std::string& path)
 
 LaneGraph load_lane_graph_or_throw(const std::string& path)
 {
-    auto loaded = load_lane_graph(path);
-    if (loaded.ok()) return std::move(*loaded.graph);
-    std::string all;
-    for (const auto& e : loaded.errors) all += (all.empty() ? "" : "\n") + e;
-    throw cpm::Error(all);
+    return load_lane_graph(path).take_or_throw();
 }
 
 Pose LaneGraph::pose_at(size_t edge, double s) const

@@ -55,12 +55,12 @@ int run(int argc, char** argv)
     options.wait_for_start = !parsed.has("--no-wait-for-start");
     auto loaded = cpm::routing::load_lane_graph(parsed.get("--lanes"));
     if (!loaded.ok()) {
-        for (const auto& e : loaded.errors) std::fprintf(stderr, "central_routing: error: %s\n", e.c_str());
+        for (const auto& e : loaded.errors) std::fprintf(stderr, "central_routing: error: %s\n", e.text().c_str());
         std::fprintf(stderr, "central_routing: %zu error(s) in %s; not started\n", loaded.errors.size(), parsed.get("--lanes").c_str());
         return 1;
     }
     cpm::init(argc, argv);
-    cpm::routing::RoutingNode node(*loaded.graph, options);
+    cpm::routing::RoutingNode node(*loaded.value, options);
     return cpm::cli::run_node(node);
 }
 

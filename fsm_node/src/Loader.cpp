@@ -24,16 +24,25 @@ namespace {
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-const std::set<std::string> kTopLevel{"root", "states", "transitions", "tick_period", "throttle_per_speed", "name"};
+const std::vector<std::string> kTopLevel{"root", "states", "transitions", "tick_period", "throttle_per_speed", "name"};
 
 struct Context
 {
     std::string source;              // file name for diagnostics
     fs::path base_dir;               // nested files are relative to it
     std::vector<std::string> stack;  // files being loaded (cycle check)
-    LoadResult* out;
-    void error(const std::string& path, const std::string& message) { out->errors.push_back({source + ": " + path, message}); }
-    void warning(const std::string& path, const std::string& message) { out->warnings.push_back({source + ": " + path, message}); }
+    Checker* check;                  // one for the machine and its nested files: each finding names its file
+    void error(const std::string& path, const std::string& message) { check->error(source + ": " + path, message); }
+    void warning(const std::string& path, const std::string& message) { check->warning(source + ": " + path, message); }
+    /// `key` at `path` is none of `known`: named, with the one meant when it is close.
+    std::string unknown(const std::string& what, const std::string& key, const std::vector<std::string>& known) const
+    {
+        std::string list;
+        for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+        const auto meant = did_you_mean(key, known);
+        return "unknown " + what + (meant ? " (did you mean \"" + *meant + "\"?)" : std::string()) +
+               (list.empty() ? " (it takes none)" : " (known: " + list + ")");
+    }
 };
 
 std::string kind_error(const std::string& kind)
@@ -75,9 +84,9 @@ bool check_parameters(Context& ctx, const json& element, const std::string& path
         if (structural.count(it.key())) continue;
         auto p = std::find_if(info.parameters.begin(), info.parameters.end(), [&](auto& q) { return q.name == it.key(); });
         if (p == info.parameters.end()) {
-            std::string known;
-            for (auto& q : info.parameters) known += (known.empty() ? "" : ", ") + q.name;
-            ctx.error(path + "." + it.key(), "unknown parameter of " + info.type + (known.empty() ? " (it takes none)" : " (known: " + known + ")"));
+            std::vector<std::string> known;
+            for (auto& q : info.parameters) known.push_back(q.name);
+            ctx.error(path + "." + it.key(), ctx.unknown("parameter of " + info.type, it.key(), known));
             ok = false;
         } else if (!kind_ok(p->kind, it.value())) {
             ctx.error(path + "." + it.key(), kind_error(p->kind) + ", got " + it.value().dump());
@@ -138,9 +147,9 @@ const Factory* find_factory(Context& ctx, const std::vector<Factory>& factories,
     for (const auto& f : factories) {
         if (f.info.type == type) return &f;
     }
-    std::string known;
-    for (const auto& f : factories) known += (known.empty() ? "" : ", ") + f.info.type;
-    ctx.error(path + ".type", "unknown " + what + " type \"" + type + "\" (known: " + known + ")");
+    std::vector<std::string> known;
+    for (const auto& f : factories) known.push_back(f.info.type);
+    ctx.error(path + ".type", ctx.unknown(what + " type \"" + type + "\"", type, known));
     return nullptr;
 }
 
@@ -174,20 +183,20 @@ std::unique_ptr<Machine> load_nested(Context& ctx, const json& e, const std::str
         ctx.error(path + ".file", err.what());
         return nullptr;
     }
-    Context inner{file.string(), file.parent_path(), ctx.stack, ctx.out};
+    Context inner{file.string(), file.parent_path(), ctx.stack, ctx.check};
     inner.stack.push_back(canonical);
     return load_machine(inner, nested, "$");
 }
 
 std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::string& at)
 {
-    const size_t errors_before = ctx.out->errors.size();
+    const size_t errors_before = ctx.check->errors().size();
     if (!j.is_object()) {
         ctx.error(at, "expected an object with \"root\", \"states\" and \"transitions\"");
         return nullptr;
     }
     for (auto it = j.begin(); it != j.end(); ++it) {
-        if (!kTopLevel.count(it.key())) ctx.error(at + "." + it.key(), "unknown member (known: root, states, transitions, tick_period, throttle_per_speed, name)");
+        if (std::find(kTopLevel.begin(), kTopLevel.end(), it.key()) == kTopLevel.end()) ctx.error(at + "." + it.key(), ctx.unknown("member", it.key(), kTopLevel));
     }
     detail::Settings settings;
     if (j.contains("tick_period")) {
@@ -312,7 +321,7 @@ std::unique_ptr<Machine> load_machine(Context& ctx, const json& j, const std::st
             }
         }
     }
-    if (ctx.out->errors.size() != errors_before || !root) return nullptr;
+    if (ctx.check->errors().size() != errors_before || !root) return nullptr;
     return std::make_unique<Machine>(std::move(states), std::move(transitions), *root);
 }
 
@@ -332,8 +341,11 @@ LoadResult check_text(const std::string& text, const std::string& source, const 
         result.errors.push_back({source, std::string("not valid JSON (") + e.what() + ")"});
         return result;
     }
-    Context ctx{source, base_dir, std::move(stack), &result};
+    Checker check("");
+    Context ctx{source, base_dir, std::move(stack), &check};
     auto machine = load_machine(ctx, j, "$");
+    result.errors = check.errors();
+    result.warnings = check.warnings();
     if (result.errors.empty()) result.machine = std::move(machine);
     result.json = text;
     return result;

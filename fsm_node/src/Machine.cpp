@@ -9,7 +9,7 @@ Machine::Machine(std::vector<std::unique_ptr<State>> states, std::vector<std::un
     : states_(std::move(states)), transitions_(std::move(transitions)), root_(root)
 {
     active_ = state_by_id(root);
-    if (!active_) throw std::invalid_argument("fsm: the root state " + std::to_string(root) + " does not exist");
+    if (!active_) throw cpm::Error("fsm: the root state " + std::to_string(root) + " does not exist");
 }
 
 State* Machine::state_by_id(int id) const

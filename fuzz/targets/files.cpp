@@ -37,9 +37,9 @@ CPM_FUZZ_TARGET(lane_graph)
 {
     const auto load = cpm::routing::parse_lane_graph(cpm::fuzz::text(data, size), "fuzz_lanes.json");
     cpm::fuzz::expect(load.ok() == load.errors.empty(), "a lane graph with errors, or none without");
-    for (const auto& e : load.errors) cpm::fuzz::expect(e.find("fuzz_lanes.json") != std::string::npos, "an error that does not name the file");
-    if (load.ok() && !load.graph->nodes.empty() && !load.graph->edges.empty()) {
-        const auto& g = *load.graph;
+    for (const auto& e : load.errors) cpm::fuzz::expect(e.text().find("fuzz_lanes.json") != std::string::npos, "an error that does not name the file");
+    if (load.ok() && !load.value->nodes.empty() && !load.value->edges.empty()) {
+        const auto& g = *load.value;
         (void)g.shortest_path(0, g.nodes.size() - 1);
         (void)g.pose_at(0, g.edges[0].length() / 2);
         (void)g.project(g.pose_at(g.edges.size() - 1, 0));

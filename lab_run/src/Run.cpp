@@ -85,7 +85,7 @@ public:
         fd_ = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
         if (fd_ >= 0 && ::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
             ::close(fd_);
-            throw std::runtime_error("domain " + std::to_string(domain) + " is taken by another cpm lab run on this host (" + lock +
+            throw cpm::Error("domain " + std::to_string(domain) + " is taken by another cpm lab run on this host (" + lock +
                                      " is locked); give this one another domain (domain: in the scenario, or --dds_domain)");
         }
         rtdb::TopicProbe probe(options);
@@ -98,7 +98,7 @@ public:
             std::string names;
             for (const auto& n : others) names += (names.empty() ? "" : ", ") + n;
             if (fd_ >= 0) ::close(fd_);
-            throw std::runtime_error("domain " + std::to_string(domain) + " is in use by " + std::to_string(others.size()) +
+            throw cpm::Error("domain " + std::to_string(domain) + " is in use by " + std::to_string(others.size()) +
                                      " participant(s): " + names + "; stop them or give this run another domain (domain: in the scenario, "
                                      "or --dds_domain)");
         }
@@ -318,7 +318,7 @@ std::string prepare_folder(const Scenario& s, const RunSettings& settings, const
 {
     std::error_code ec;
     fs::create_directories(dir, ec);
-    if (ec) throw std::runtime_error("cannot make the run's folder " + dir.string() + ": " + ec.message());
+    if (ec) throw cpm::Error("cannot make the run's folder " + dir.string() + ": " + ec.message());
     fs::copy_file(s.file, dir / "scenario.yaml", fs::copy_options::overwrite_existing, ec);
     if (s.security.empty()) return "";
     auto issue = [&](const std::string& name, const ProcessPlan& p) {
@@ -390,7 +390,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     settings.duration_ns = o.duration_ns.value_or(s.duration_ns);
     const fs::path dir = fs::absolute(o.out_dir.empty() ? fs::path("runs") / (s.name + "-" + utc_now_compact()) : fs::path(o.out_dir));
     std::error_code ec;
-    if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) throw std::runtime_error("the run's folder " + dir.string() + " exists and is not empty");
+    if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) throw cpm::Error("the run's folder " + dir.string() + " exists and is not empty");
     settings.run_dir = dir.string();
     const auto plan = plan_run(s, settings);  // names a missing program before anything starts
 

@@ -2,6 +2,7 @@
 
 #include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
+#include <cpm/checkers/YamlChecker.hpp>
 #include <cpm/read_text_file.hpp>
 #include <cpm/timer_ids.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
@@ -34,146 +35,20 @@ const std::vector<std::string> kSimSubscribes{"vehicleObservation"};  // the oth
 const std::vector<std::string> kBridgePublishes{"vehicleState", "rangeSensors"};
 const std::vector<std::string> kBridgeSubscribes{"vehicleCommand*", "stopRequest", "vehicleObservation"};
 
-std::string join(const std::vector<std::string>& errors)
-{
-    std::string out;
-    for (const auto& e : errors) out += (out.empty() ? "" : "\n") + e;
-    return out;
-}
+using Checker = checkers::YamlChecker;
 
-/// Collects a file's errors with their line and YAML path.
-class Checker
+std::vector<std::string> patterns(Checker& c, const YAML::Node& n, const std::string& path)
 {
-public:
-    explicit Checker(std::string file) : file_(std::move(file)) {}
-
-    void error(const YAML::Node& at, const std::string& path, const std::string& message)
-    {
-        const int line = at.IsDefined() ? at.Mark().line + 1 : 0;
-        errors_.push_back(file_ + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " + (path.empty() ? "" : path + ": ") + message);
-    }
-    /// Every key of a map must be one of `known`; says which one was meant when it is close.
-    void keys(const YAML::Node& map, const std::string& path, const std::vector<std::string>& known)
-    {
-        for (const auto& kv : map) {
-            const std::string key = kv.first.as<std::string>("");
-            if (std::find(known.begin(), known.end(), key) != known.end()) continue;
-            std::string hint;
-            for (const auto& k : known) {
-                if (close(key, k)) hint = " (did you mean '" + k + "'?)";
-            }
-            std::string all;
-            for (const auto& k : known) all += (all.empty() ? "" : ", ") + k;
-            error(kv.first, path.empty() ? key : path + "." + key, "unknown key" + hint + "; known: " + all);
-        }
-    }
-    std::optional<std::string> text(const YAML::Node& n, const std::string& path)
-    {
-        if (!n.IsScalar()) {
-            error(n, path, "expected a text");
-            return std::nullopt;
-        }
-        return n.as<std::string>();
-    }
-    std::optional<double> number(const YAML::Node& n, const std::string& path)
-    {
-        double v = 0;
-        if (!n.IsScalar() || !YAML::convert<double>::decode(n, v) || !std::isfinite(v)) {
-            error(n, path, "'" + (n.IsScalar() ? n.as<std::string>() : std::string("…")) + "' is not a finite number");
-            return std::nullopt;
-        }
-        return v;
-    }
-    std::optional<long long> integer(const YAML::Node& n, const std::string& path, long long min, long long max)
-    {
-        long long v = 0;
-        if (!n.IsScalar() || !YAML::convert<long long>::decode(n, v)) {
-            error(n, path, "'" + (n.IsScalar() ? n.as<std::string>() : std::string("…")) + "' is not a whole number");
-            return std::nullopt;
-        }
-        if (v < min || v > max) {
-            error(n, path, std::to_string(v) + " is out of range (" + std::to_string(min) + " to " + std::to_string(max) + ")");
-            return std::nullopt;
-        }
-        return v;
-    }
-    std::optional<bool> boolean(const YAML::Node& n, const std::string& path)
-    {
-        bool v = false;
-        if (!n.IsScalar() || !YAML::convert<bool>::decode(n, v)) {
-            error(n, path, "expected true or false");
-            return std::nullopt;
-        }
-        return v;
-    }
-    std::optional<uint64_t> duration(const YAML::Node& n, const std::string& path)
-    {
-        const auto t = text(n, path);
-        if (!t) return std::nullopt;
-        try {
-            const uint64_t d = cpm::cli::parse_duration(path, *t);
-            if (d == 0) {
-                error(n, path, "must be longer than 0");
-                return std::nullopt;
-            }
-            return d;
-        } catch (const std::exception&) {
-            error(n, path, "'" + *t + "' is not a duration (a number with ns, us, ms, s, m or h: 30s, 400ms)");
-            return std::nullopt;
-        }
-    }
-    /// A file named relative to the scenario's folder, which must exist.
-    std::string file(const YAML::Node& n, const std::string& path, const std::string& dir, const std::string& what)
-    {
-        const auto t = text(n, path);
-        if (!t) return "";
-        const fs::path p = fs::path(*t).is_absolute() ? fs::path(*t) : fs::path(dir) / *t;
-        std::error_code ec;
-        if (fs::is_directory(p, ec)) {
-            error(n, path, what + " '" + *t + "' is a directory (" + p.lexically_normal().string() + "), not a file");
-            return "";
-        }
-        if (!fs::is_regular_file(p, ec)) {
-            error(n, path, what + " '" + *t + "' does not exist (looked for " + p.lexically_normal().string() + ")");
-            return "";
-        }
-        return fs::weakly_canonical(p).string();
-    }
-    std::vector<std::string> patterns(const YAML::Node& n, const std::string& path)
-    {
-        std::vector<std::string> out;
-        if (!n.IsSequence()) {
-            error(n, path, "expected a list of topic patterns, e.g. [\"*\"]");
-            return out;
-        }
-        for (size_t i = 0; i < n.size(); ++i) {
-            if (auto t = text(n[i], path + "[" + std::to_string(i) + "]")) out.push_back(*t);
-        }
+    std::vector<std::string> out;
+    if (!n.IsSequence()) {
+        c.error(n, path, "expected a list of topic patterns, e.g. [\"*\"]");
         return out;
     }
-    const std::vector<std::string>& errors() const { return errors_; }
-
-private:
-    /// One edit apart (a letter wrong, missing, extra or two swapped).
-    static bool close(const std::string& a, const std::string& b)
-    {
-        if (a == b) return false;
-        const size_t n = a.size(), m = b.size();
-        std::vector<std::vector<size_t>> d(n + 1, std::vector<size_t>(m + 1));
-        for (size_t i = 0; i <= n; ++i) d[i][0] = i;
-        for (size_t j = 0; j <= m; ++j) d[0][j] = j;
-        for (size_t i = 1; i <= n; ++i) {
-            for (size_t j = 1; j <= m; ++j) {
-                d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1])});
-                if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1]) d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
-            }
-        }
-        return d[n][m] <= (std::max(n, m) > 4 ? 2u : 1u);
+    for (size_t i = 0; i < n.size(); ++i) {
+        if (auto t = c.text(n[i], path + "[" + std::to_string(i) + "]")) out.push_back(*t);
     }
-
-    std::string file_;
-    std::vector<std::string> errors_;
-};
+    return out;
+}
 
 /// Each car's place at the start in the world: inside its walls, its body clear of them and of
 /// every other car's (a typo in start: would otherwise run, and end "ok").
@@ -329,8 +204,8 @@ void read_run_options(Checker& c, const YAML::Node& root, Scenario& s)
         if (!r.IsMap()) c.error(r, "record", "expected a map (topics, exclude)");
         else {
             c.keys(r, "record", {"topics", "exclude"});
-            if (r["topics"]) s.record.topics = c.patterns(r["topics"], "record.topics");
-            if (r["exclude"]) s.record.exclude = c.patterns(r["exclude"], "record.exclude");
+            if (r["topics"]) s.record.topics = patterns(c, r["topics"], "record.topics");
+            if (r["exclude"]) s.record.exclude = patterns(c, r["exclude"], "record.exclude");
         }
     }
     if (const YAML::Node m = root["monitor"]) {
@@ -348,8 +223,6 @@ void read_run_options(Checker& c, const YAML::Node& root, Scenario& s)
 }
 }  // namespace
 
-ScenarioError::ScenarioError(std::vector<std::string> errors) : std::runtime_error(join(errors)), errors_(std::move(errors)) {}
-
 Scenario load_scenario(const std::string& path)
 {
     Scenario s;
@@ -360,12 +233,12 @@ Scenario load_scenario(const std::string& path)
     try {
         root = YAML::Load(read_text_file(path, "scenario file"));
     } catch (const cpm::Error& e) {
-        throw ScenarioError({e.what()});
+        throw ScenarioError(std::vector<Diagnostic>{{"", e.what()}});
     } catch (const YAML::Exception& e) {
-        throw ScenarioError({path + ":" + std::to_string(e.mark.line + 1) + ": not YAML: " + e.msg});
+        throw ScenarioError(std::vector<Diagnostic>{{path + ":" + std::to_string(e.mark.line + 1), "not YAML: " + e.msg}});
     }
     Checker c(path);
-    if (!root.IsMap()) throw ScenarioError({path + ": expected a map of keys (name, time, duration, world, vehicles, ...)"});
+    if (!root.IsMap()) throw ScenarioError(std::vector<Diagnostic>{{path, "expected a map of keys (name, time, duration, world, vehicles, ...)"}});
     c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor",
                     "parameters", "security"});
 
@@ -409,8 +282,8 @@ Scenario load_scenario(const std::string& path)
     if (!s.routing.enabled && !root["world"]) c.error(root, "world", "missing (the map the cars drive in)");
 
     read_run_options(c, root, s);
-    if (c.errors().empty() && !s.world.empty() && !s.routing.enabled) check_starts(c, s, vehicles);
-    if (!c.errors().empty()) throw ScenarioError(c.errors());
+    if (c.ok() && !s.world.empty() && !s.routing.enabled) check_starts(c, s, vehicles);
+    if (!c.ok()) throw ScenarioError(c.errors());
     return s;
 }
 
@@ -536,8 +409,8 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         }
     }
     if (!missing.empty()) {
-        std::vector<std::string> errors;
-        for (const auto& m : missing) errors.push_back(s.file + ": the run needs " + m + ", which does not exist (build it: ./lab build)");
+        std::vector<Diagnostic> errors;
+        for (const auto& m : missing) errors.push_back({s.file, "the run needs " + m + ", which does not exist (build it: ./lab build)"});
         throw ScenarioError(errors);
     }
     return plan;

@@ -103,7 +103,11 @@ TEST(ArucoCamera, FileRoundTripAndErrorsNamingTheField)
     const std::string short_k = temp_file("shortk.yaml",
                                           "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n"
                                           "camera_matrix: !!opencv-matrix\n  rows: 2\n  cols: 2\n  dt: d\n  data: [500, 0, 0, 500]\n");
-    EXPECT_EQ(error_of([&] { Camera::load(short_k); }), short_k + ": camera_matrix: expected 3×3 values, got 2×2");
+    // Every error at once, each with its line.
+    EXPECT_EQ(error_of([&] { Camera::load(short_k); }),
+              short_k + ":5: camera_matrix: expected 3×3 values, got 2×2\n" + short_k + ": missing field distortion_coefficients\n" +
+                  short_k + ": missing field mount_x\n" + short_k + ": missing field mount_y\n" + short_k + ": missing field mount_z\n" +
+                  short_k + ": missing field mount_yaw\n" + short_k + ": missing field mount_pitch");
     const std::string not_yaml = temp_file("garbage.yaml", "this is { not yaml");
     EXPECT_NE(error_of([&] { Camera::load(not_yaml); }).find(not_yaml + ": not an OpenCV FileStorage YAML file"), std::string::npos);
     for (const auto& p : {path, no_mount, short_k, not_yaml}) std::filesystem::remove(p);

@@ -62,7 +62,7 @@ TEST(FsmLoader, ReportsEveryErrorAtOnceWithItsJsonPath)
     EXPECT_FALSE(sut.ok());
     EXPECT_FALSE(sut.machine);
     const auto& e = sut.errors;
-    EXPECT_TRUE(has(e, "car.json: $.states[0].type", "unknown state type \"FolowWall\"")) << all(e);
+    EXPECT_TRUE(has(e, "car.json: $.states[0].type", "unknown state type \"FolowWall\" (did you mean \"FollowWall\"?)")) << all(e);
     EXPECT_TRUE(has(e, "car.json: $.states[1].speed", "expected a number, got \"fast\"")) << all(e);
     EXPECT_TRUE(has(e, "car.json: $.states[1].colour", "unknown parameter of Motor")) << all(e);
     EXPECT_TRUE(has(e, "car.json: $.states[2].id", "duplicate state id 1")) << all(e);

@@ -19,7 +19,7 @@ const std::string kRing = kRoot + "/scenarios/lanes/ring.json";
 bool has_error(const GraphLoad& loaded, const std::string& part)
 {
     for (const auto& e : loaded.errors) {
-        if (e.find(part) != std::string::npos) return true;
+        if (e.text().find(part) != std::string::npos) return true;
     }
     return false;
 }
@@ -27,7 +27,7 @@ bool has_error(const GraphLoad& loaded, const std::string& part)
 std::string all_errors(const GraphLoad& loaded)
 {
     std::string all;
-    for (const auto& e : loaded.errors) all += e + "\n";
+    for (const auto& e : loaded.errors) all += e.text() + "\n";
     return all;
 }
 
@@ -77,8 +77,8 @@ TEST(LaneGraph, EveryErrorIsReportedAtOnceWithItsJsonPath)
                   {"from": 2, "to": 1, "points": [[1.0, 0.02], [0.96, 0.0], [0.88, 0.0], [0.0, 0.0]]}]})";
     const auto loaded = parse_lane_graph(text, "bad.json");
     EXPECT_FALSE(loaded.ok());
-    EXPECT_TRUE(has_error(loaded, "bad.json: $.colour: unknown member")) << all_errors(loaded);
-    EXPECT_TRUE(has_error(loaded, "bad.json: $.nodes[1].z: unknown member")) << all_errors(loaded);
+    EXPECT_TRUE(has_error(loaded, "bad.json: $.colour: unknown key")) << all_errors(loaded);
+    EXPECT_TRUE(has_error(loaded, "bad.json: $.nodes[1].z: unknown key")) << all_errors(loaded);
     EXPECT_TRUE(has_error(loaded, "bad.json: $.edges[0].to: node 99 does not exist")) << all_errors(loaded);
     EXPECT_TRUE(has_error(loaded, "bad.json: $.edges[1].points[0]: starts 0.020 m from its node 2")) << all_errors(loaded);
     EXPECT_TRUE(has_error(loaded, "bad.json: $.edges[1].points[2]: 0.080 m from the point before it")) << all_errors(loaded);
@@ -105,7 +105,7 @@ TEST(LaneGraph, AFileThatIsNotJsonOrNotThereIsNamed)
     EXPECT_TRUE(has_error(parse_lane_graph("{\"nodes\": [", "cut.json"), "cut.json: not valid JSON"));
     const auto missing = load_lane_graph("/nonexistent/lanes.json");
     ASSERT_FALSE(missing.ok());
-    EXPECT_NE(missing.errors[0].find("/nonexistent/lanes.json"), std::string::npos) << missing.errors[0];
+    EXPECT_NE(missing.errors[0].text().find("/nonexistent/lanes.json"), std::string::npos) << missing.errors[0].text();
     EXPECT_THROW(load_lane_graph_or_throw("/nonexistent/lanes.json"), cpm::Error);
 }
 

@@ -1,4 +1,4 @@
-#include <cpm/Error.hpp>
+#include <cpm/Diagnostics.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
 
 #include <gtest/gtest.h>
@@ -95,15 +95,25 @@ TEST(VehicleParameters, FileErrorsNameTheMember)
         VehicleParameters::parse(R"({"wheelbase": 0.3, "wheel_base": 1})", "car.json");
         FAIL() << "no error";
     } catch (const cpm::Error& e) {
-        EXPECT_NE(std::string(e.what()).find("car.json: unknown member \"wheel_base\""), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("car.json: $.wheel_base: unknown key (did you mean 'wheelbase'?)"), std::string::npos) << e.what();
     }
     try {
         VehicleParameters::parse(R"({"max_speed": "fast"})", "car.json");
         FAIL() << "no error";
     } catch (const cpm::Error& e) {
-        EXPECT_NE(std::string(e.what()).find("max_speed: expected a number"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("car.json: $.max_speed: expected a finite number, got \"fast\""), std::string::npos) << e.what();
     }
     EXPECT_THROW(VehicleParameters::parse(R"({"physics_rate": 100})", "car.json"), cpm::Error);
+    // Every error at once, not the first only.
+    try {
+        VehicleParameters::parse(R"({"max_speed": -1, "widht": 0.1, "ultrasonic_left": [0, 0]})", "car.json");
+        FAIL() << "no error";
+    } catch (const cpm::FileError& e) {
+        ASSERT_EQ(e.diagnostics().size(), 3u) << e.what();
+        EXPECT_EQ(e.diagnostics()[0].text(), "car.json: $.max_speed: -1 is out of range [0.01, inf]");
+        EXPECT_EQ(e.diagnostics()[1].text(), "car.json: $.ultrasonic_left: expected [x, y, yaw], got [0,0]");
+        EXPECT_NE(e.diagnostics()[2].text().find("car.json: $.widht: unknown key (did you mean 'width'?)"), std::string::npos);
+    }
 }
 
 TEST(World, MapErrorsNameTheFileAndJsonPath)
@@ -116,11 +126,19 @@ TEST(World, MapErrorsNameTheFileAndJsonPath)
         }
         return std::string("no error");
     };
-    EXPECT_EQ(message(R"({"walls": [[0,0,1,0], [1,2,3]]})"), "map.json: walls[1]: expected [x1, y1, x2, y2], got [1,2,3]");
-    EXPECT_EQ(message(R"({"walls": [[0,0,"a",0]]})"), "map.json: walls[0][2]: expected a number, got \"a\"");
-    EXPECT_EQ(message(R"({"markers": [{"id": 1, "x": 0, "y": 0}]})"), "map.json: markers[0].yaw: missing");
-    EXPECT_EQ(message(R"({"wall": []})"), "map.json: wall: unknown member (known: walls, markers, gates)");
+    EXPECT_EQ(message(R"({"walls": [[0,0,1,0], [1,2,3]]})"), "map.json: $.walls[1]: expected [x1, y1, x2, y2], got [1,2,3]");
+    EXPECT_EQ(message(R"({"walls": [[0,0,"a",0]]})"), "map.json: $.walls[0][2]: expected a finite number, got \"a\"");
+    EXPECT_EQ(message(R"({"markers": [{"id": 1, "x": 0, "y": 0}]})"), "map.json: $.markers[0]: missing \"yaw\"");
+    EXPECT_EQ(message(R"({"wall": []})"), "map.json: $.wall: unknown key (did you mean 'walls'?); known: walls, markers, gates");
     EXPECT_NE(message("{").find("map.json: not valid JSON"), std::string::npos);
+    // Every error of the file at once, in the order of the file.
+    EXPECT_EQ(message(R"({"walls": [[0,0,0,0]], "markers": [{"id": 1, "x": 0, "y": 0, "yaw": 0, "size": -1},
+                                  {"id": 2, "x": 0, "y": 0, "yaw": 0}, {"id": 2, "x": 1, "y": 0, "yaw": 0}],
+                       "gates": [{"left": 2, "right": 7}]})"),
+              "map.json: $.walls[0]: a wall of zero length\n"
+              "map.json: $.markers[0].size: must be > 0\n"
+              "map.json: $.markers[2].id: id 2 is used twice\n"
+              "map.json: $.gates[0].right: no marker has id 7");
 }
 
 TEST(World, ShippedCorridorLoads)

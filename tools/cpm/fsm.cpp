@@ -4,13 +4,39 @@
 #include <cpm/fsm/Loader.hpp>
 #include <cpm/fsm/Render.hpp>
 
+#include <cpm/ChildProcess.hpp>
+#include <cpm/Error.hpp>
+
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <stdexcept>
-#include <sys/wait.h>
+#include <unistd.h>
 
 namespace cpm::tools {
 namespace {
+
+/// Graphviz's dot on `dot_text`, writing `out` (no shell: the name is passed as it is).
+void run_dot(const std::string& dot_text, const std::string& format, const std::string& out)
+{
+    std::string dot;
+    for (const char* dir : {"/usr/bin", "/usr/local/bin", "/bin"}) {
+        if (dot.empty() && ::access((std::string(dir) + "/dot").c_str(), X_OK) == 0) dot = std::string(dir) + "/dot";
+    }
+    if (dot.empty()) throw cpm::Error("cannot run Graphviz's dot (install the Debian package graphviz)");
+    char input[] = "/tmp/cpm_fsm_XXXXXX";
+    const int fd = ::mkstemp(input);
+    if (fd < 0) throw cpm::Error(std::string("cannot make a temporary file for dot: ") + std::strerror(errno));
+    ::close(fd);
+    std::ofstream(input) << dot_text;
+    cpm::ChildProcess child({.argv = {dot, "-T" + format, "-o", out, input}});
+    const auto end = child.wait(std::chrono::seconds(60));
+    ::unlink(input);
+    if (!end || !end->ok()) {
+        throw cpm::Error("Graphviz's dot failed writing " + out + " (" + (end ? end->describe() : std::string("no end in 60 s")) + ")");
+    }
+}
 
 const char* kFsmCheckHelp =
     "usage: cpm fsm check FILE.json\n"
@@ -78,13 +104,7 @@ int fsm_render(const std::vector<std::string>& args)
     if (format == "dot") {
         std::ofstream(out) << result.dot;
     } else {
-        const std::string command = "dot -T" + format + " -o '" + out + "'";
-        FILE* pipe = popen(command.c_str(), "w");
-        if (!pipe) throw std::runtime_error("cannot run Graphviz's dot (install the Debian package graphviz)");
-        std::fputs(result.dot.c_str(), pipe);
-        const int status = pclose(pipe);
-        if (status != 0) throw std::runtime_error("Graphviz's dot failed (exit " + std::to_string(WEXITSTATUS(status)) +
-                                                  "; is the Debian package graphviz installed?)");
+        run_dot(result.dot, format, out);
     }
     std::printf("%s: wrote %s\n", file.c_str(), out.c_str());
     return 0;

@@ -118,7 +118,7 @@ struct Source
     {
         if (recording && recording->types) return *recording->types;
         const auto* types = cpm::rtdb::IdlDecoder::lab_types();
-        if (!types) throw std::runtime_error("cannot find the lab's IDL files (set CPM_IDL_DIR)");
+        if (!types) throw cpm::Error("cannot find the lab's IDL files (set CPM_IDL_DIR)");
         return *types;
     }
 };

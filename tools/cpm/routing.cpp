@@ -63,12 +63,12 @@ const char* kWatchHelp =
 std::optional<cpm::routing::LaneGraph> load_graph(const std::string& file)
 {
     auto loaded = cpm::routing::load_lane_graph(file);
-    for (const auto& e : loaded.errors) std::fprintf(stderr, "error: %s\n", e.c_str());
+    for (const auto& e : loaded.errors) std::fprintf(stderr, "error: %s\n", e.text().c_str());
     if (!loaded.ok()) {
         std::fprintf(stderr, "%s: %zu error(s)\n", file.c_str(), loaded.errors.size());
         return std::nullopt;
     }
-    return std::move(*loaded.graph);
+    return std::move(*loaded.value);
 }
 
 int routing_check(const std::vector<std::string>& args)

@@ -49,9 +49,9 @@ VehicleParameters VehicleParameters::parse(const std::string& json_text, const s
     for (size_t i = 0; i < 3; ++i) {
         members.triple(std::string("ultrasonic_") + names[i], p.ultrasonic[i].x, p.ultrasonic[i].y, p.ultrasonic[i].yaw);
     }
+    members.require(p.physics_rate >= p.state_rate, "physics_rate must be >= state_rate");
+    members.require(p.ultrasonic_min_range < p.ultrasonic_max_range, "ultrasonic_min_range must be < ultrasonic_max_range");
     members.finish();
-    if (p.physics_rate < p.state_rate) throw Error(source + ": physics_rate must be >= state_rate");
-    if (p.ultrasonic_min_range >= p.ultrasonic_max_range) throw Error(source + ": ultrasonic_min_range must be < ultrasonic_max_range");
     return p;
 }
 

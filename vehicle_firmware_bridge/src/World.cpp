@@ -4,107 +4,124 @@
 
 #include "json_members.hpp"
 
+#include <cpm/checkers/JsonChecker.hpp>
+
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <initializer_list>
+#include <optional>
 
 namespace cpm::vehicle {
 namespace {
 
 using nlohmann::json;
 
-[[noreturn]] void fail(const std::string& source, const std::string& where, const std::string& what)
-{
-    throw Error(source + ": " + where + ": " + what);
-}
+using Checker = checkers::JsonChecker;
 
-double number_at(const json& j, const std::string& source, const std::string& where)
+/// A wall [x1, y1, x2, y2] of non-zero length.
+std::optional<Segment> read_wall(Checker& c, const json& w, const std::string& at)
 {
-    if (!j.is_number()) fail(source, where, "expected a number, got " + j.dump());
-    double v = j.get<double>();
-    if (!std::isfinite(v)) fail(source, where, "expected a finite number");
-    return v;
-}
-
-/// Fails on a member of `object` that is not one of `known` (listed in the message).
-void only_members(const json& object, std::initializer_list<const char*> known, const std::string& source, const std::string& where)
-{
-    for (auto it = object.begin(); it != object.end(); ++it) {
-        bool ok = false;
-        for (auto* k : known) ok = ok || it.key() == k;
-        if (ok) continue;
-        std::string list;
-        for (auto* k : known) list += (list.empty() ? "" : ", ") + std::string(k);
-        fail(source, where.empty() ? it.key() : where + "." + it.key(), "unknown member (known: " + list + ")");
+    if (!w.is_array() || w.size() != 4) {
+        c.error(at, "expected [x1, y1, x2, y2], got " + w.dump());
+        return std::nullopt;
     }
+    double v[4];
+    bool ok = true;
+    for (size_t k = 0; k < 4; ++k) {
+        const auto n = c.number(w[k], Checker::item(at, k));
+        ok = ok && n;
+        v[k] = n.value_or(0);
+    }
+    if (!ok) return std::nullopt;
+    if (v[0] == v[2] && v[1] == v[3]) {
+        c.error(at, "a wall of zero length");
+        return std::nullopt;
+    }
+    return Segment{v[0], v[1], v[2], v[3]};
 }
 
-std::vector<Segment> parse_walls(const json& walls, const std::string& source)
+std::vector<Segment> read_walls(Checker& c, const json& walls)
 {
-    if (!walls.is_array()) fail(source, "walls", "expected an array of [x1, y1, x2, y2]");
     std::vector<Segment> out;
+    if (!c.array(walls, "$.walls", "an array of [x1, y1, x2, y2]")) return out;
     for (size_t i = 0; i < walls.size(); ++i) {
-        std::string where = "walls[" + std::to_string(i) + "]";
-        const json& w = walls[i];
-        if (!w.is_array() || w.size() != 4) fail(source, where, "expected [x1, y1, x2, y2], got " + w.dump());
-        Segment s{number_at(w[0], source, where + "[0]"), number_at(w[1], source, where + "[1]"),
-                  number_at(w[2], source, where + "[2]"), number_at(w[3], source, where + "[3]")};
-        if (s.x1 == s.x2 && s.y1 == s.y2) fail(source, where, "a wall of zero length");
-        out.push_back(s);
+        if (auto s = read_wall(c, walls[i], Checker::item("$.walls", i))) out.push_back(*s);
     }
     return out;
 }
 
-std::vector<Marker> parse_markers(const json& markers, const std::string& source)
+std::optional<Marker> read_marker(Checker& c, const json& m, const std::string& at)
 {
-    if (!markers.is_array()) fail(source, "markers", "expected an array of {\"id\", \"x\", \"y\", \"yaw\", \"size\"}");
+    if (!c.object(m, at, "an object {\"id\", \"x\", \"y\", \"yaw\", \"size\", \"z\"}")) return std::nullopt;
+    c.keys(m, at, {"id", "x", "y", "yaw", "size", "z"});
+    Marker marker;
+    const size_t before = c.errors().size();
+    if (!m.contains("id")) c.error(at, "missing \"id\"");
+    else if (auto id = c.integer(m["id"], Checker::member(at, "id"))) marker.id = int(*id);
+    for (auto [name, field] : {std::pair{"x", &marker.x}, {"y", &marker.y}, {"yaw", &marker.yaw}}) {
+        *field = c.number_member(m, at, name).value_or(0);
+    }
+    if (m.contains("size")) marker.size = c.number(m["size"], Checker::member(at, "size")).value_or(marker.size);
+    if (marker.size <= 0) c.error(Checker::member(at, "size"), "must be > 0");
+    if (m.contains("z")) marker.z = c.number(m["z"], Checker::member(at, "z")).value_or(marker.z);
+    if (marker.size > 0 && marker.z - marker.size / 2 < 0) {
+        c.error(Checker::member(at, "z"), "the marker's lower edge is below the floor (z < size / 2)");
+    }
+    if (c.errors().size() != before) return std::nullopt;
+    return marker;
+}
+
+std::vector<Marker> read_markers(Checker& c, const json& markers)
+{
     std::vector<Marker> out;
+    if (!c.array(markers, "$.markers", "an array of {\"id\", \"x\", \"y\", \"yaw\", \"size\"}")) return out;
     for (size_t i = 0; i < markers.size(); ++i) {
-        std::string where = "markers[" + std::to_string(i) + "]";
-        const json& m = markers[i];
-        if (!m.is_object()) fail(source, where, "expected an object, got " + m.dump());
-        only_members(m, {"id", "x", "y", "yaw", "size", "z"}, source, where);
-        Marker marker;
-        if (!m.contains("id") || !m["id"].is_number_integer()) fail(source, where + ".id", "expected an integer id");
-        marker.id = m["id"].get<int>();
-        for (auto [name, field] : {std::pair{"x", &marker.x}, {"y", &marker.y}, {"yaw", &marker.yaw}}) {
-            if (!m.contains(name)) fail(source, where + "." + name, "missing");
-            *field = number_at(m[name], source, where + "." + name);
-        }
-        if (m.contains("size")) marker.size = number_at(m["size"], source, where + ".size");
-        if (marker.size <= 0) fail(source, where + ".size", "must be > 0");
-        if (m.contains("z")) marker.z = number_at(m["z"], source, where + ".z");
-        if (marker.z - marker.size / 2 < 0) fail(source, where + ".z", "the marker's lower edge is below the floor (z < size / 2)");
-        for (const Marker& other : out) {
-            if (other.id == marker.id) fail(source, where + ".id", "id " + std::to_string(marker.id) + " is used twice");
-        }
-        out.push_back(marker);
+        const std::string at = Checker::item("$.markers", i);
+        auto marker = read_marker(c, markers[i], at);
+        if (!marker) continue;
+        const bool twice = std::any_of(out.begin(), out.end(), [&](const Marker& o) { return o.id == marker->id; });
+        if (twice) c.error(Checker::member(at, "id"), "id " + std::to_string(marker->id) + " is used twice");
+        else out.push_back(*marker);
     }
     return out;
 }
 
-std::vector<Gate> parse_gates(const json& gates, const std::vector<Marker>& markers, const std::string& source)
+std::optional<Gate> read_gate(Checker& c, const json& g, const std::string& at, const std::vector<Marker>& markers)
 {
-    if (!gates.is_array()) fail(source, "gates", "expected an array of {\"left\": ID, \"right\": ID}");
-    std::vector<Gate> out;
-    for (size_t i = 0; i < gates.size(); ++i) {
-        std::string where = "gates[" + std::to_string(i) + "]";
-        const json& g = gates[i];
-        if (!g.is_object()) fail(source, where, "expected an object, got " + g.dump());
-        only_members(g, {"left", "right"}, source, where);
-        Gate gate;
-        for (auto [name, field] : {std::pair{"left", &gate.left}, {"right", &gate.right}}) {
-            if (!g.contains(name) || !g[name].is_number_integer()) fail(source, where + "." + name, "expected a marker id");
-            *field = g[name].get<int>();
-            bool known = false;
-            for (const Marker& m : markers) known = known || m.id == *field;
-            if (!known) fail(source, where + "." + name, "no marker has id " + std::to_string(*field));
+    if (!c.object(g, at, "an object {\"left\": ID, \"right\": ID}")) return std::nullopt;
+    c.keys(g, at, {"left", "right"});
+    Gate gate;
+    bool ok = true;
+    for (auto [name, field] : {std::pair{"left", &gate.left}, {"right", &gate.right}}) {
+        const std::string p = Checker::member(at, name);
+        const auto id = g.contains(name) ? c.integer(g[name], p) : std::nullopt;
+        if (!g.contains(name)) c.error(p, "missing (a marker id)");
+        if (!id) {
+            ok = false;
+            continue;
         }
-        if (gate.left == gate.right) fail(source, where, "left and right are the same marker");
-        out.push_back(gate);
+        *field = int(*id);
+        if (std::none_of(markers.begin(), markers.end(), [&](const Marker& m) { return m.id == *field; })) {
+            c.error(p, "no marker has id " + std::to_string(*field));
+            ok = false;
+        }
+    }
+    if (ok && gate.left == gate.right) {
+        c.error(at, "left and right are the same marker");
+        ok = false;
+    }
+    return ok ? std::optional<Gate>(gate) : std::nullopt;
+}
+
+std::vector<Gate> read_gates(Checker& c, const json& gates, const std::vector<Marker>& markers)
+{
+    std::vector<Gate> out;
+    if (!c.array(gates, "$.gates", "an array of {\"left\": ID, \"right\": ID}")) return out;
+    for (size_t i = 0; i < gates.size(); ++i) {
+        if (auto g = read_gate(c, gates[i], Checker::item("$.gates", i), markers)) out.push_back(*g);
     }
     return out;
 }
@@ -143,17 +160,16 @@ World World::load(const std::string& path)
 
 World World::parse(const std::string& json_text, const std::string& source)
 {
-    json j;
-    try {
-        j = json::parse(json_text);
-    } catch (const json::exception& e) {
-        throw Error(source + ": not valid JSON (" + e.what() + ")");
-    }
-    if (!j.is_object()) fail(source, "$", "expected an object with \"walls\", \"markers\" and \"gates\"");
-    only_members(j, {"walls", "markers", "gates"}, source, "");
-    std::vector<Segment> walls = j.contains("walls") ? parse_walls(j["walls"], source) : std::vector<Segment>{};
-    std::vector<Marker> markers = j.contains("markers") ? parse_markers(j["markers"], source) : std::vector<Marker>{};
-    std::vector<Gate> gates = j.contains("gates") ? parse_gates(j["gates"], markers, source) : std::vector<Gate>{};
+    Checker c(source);
+    const auto j = c.parse(json_text);
+    c.throw_if_errors();
+    if (!c.object(*j, "$", "an object with \"walls\", \"markers\" and \"gates\"")) c.throw_if_errors();
+    c.keys(*j, "$", {"walls", "markers", "gates"});
+    const json none = json::array();
+    std::vector<Segment> walls = read_walls(c, j->value("walls", none));
+    std::vector<Marker> markers = read_markers(c, j->value("markers", none));
+    std::vector<Gate> gates = read_gates(c, j->value("gates", none), markers);
+    c.throw_if_errors();
     return World(std::move(walls), std::move(markers), std::move(gates));
 }
 

@@ -1,18 +1,13 @@
 #pragma once
 // Reads a flat JSON object of named numbers for parameter and calibration files: every
-// member must be known, of the right type and within its bounds; errors name file and member.
-#include <cpm/Error.hpp>
-
-#include <nlohmann/json.hpp>
-
-#include <cmath>
-#include <fstream>
+// member must be known, of the right type and within its bounds. finish() throws a
+// cpm::FileError with every error at once, each naming file and member.
+#include <cpm/checkers/JsonChecker.hpp>
 #include <cpm/read_text_file.hpp>
 
 #include <limits>
-#include <set>
-#include <sstream>
 #include <string>
+#include <vector>
 
 namespace cpm::vehicle {
 
@@ -21,65 +16,54 @@ using cpm::read_text_file;
 class JsonMembers
 {
 public:
-    JsonMembers(const std::string& json_text, std::string source) : source_(std::move(source))
+    JsonMembers(const std::string& json_text, std::string source) : check_(std::move(source))
     {
-        try {
-            json_ = nlohmann::json::parse(json_text);
-        } catch (const nlohmann::json::exception& e) {
-            throw Error(source_ + ": not valid JSON (" + e.what() + ")");
-        }
-        if (!json_.is_object()) throw Error(source_ + ": expected a JSON object of named values");
+        if (auto j = check_.parse(json_text)) json_ = std::move(*j);
+        check_.throw_if_errors();
+        if (!check_.object(json_, "$", "a JSON object of named values")) check_.throw_if_errors();
     }
 
     /// Sets `value` from member `name` when present; min/max are inclusive bounds.
-    void number(const std::string& name, double& value, double min,
-                double max = std::numeric_limits<double>::infinity())
+    void number(const std::string& name, double& value, double min, double max = std::numeric_limits<double>::infinity())
     {
-        known_.insert(name);
+        known_.push_back(name);
         if (!json_.contains(name)) return;
-        value = checked_number(json_[name], name);
-        if (value < min || value > max) {
-            throw Error(source_ + ": " + name + " = " + json_[name].dump() + " is out of range [" + std::to_string(min) +
-                        ", " + std::to_string(max) + "]");
-        }
+        if (auto v = check_.number(json_[name], "$." + name, min, max)) value = *v;
     }
 
     /// Sets three numbers from a member `name` that holds `[a, b, c]`.
     void triple(const std::string& name, double& a, double& b, double& c)
     {
-        known_.insert(name);
+        known_.push_back(name);
         if (!json_.contains(name)) return;
         const auto& j = json_[name];
-        if (!j.is_array() || j.size() != 3) throw Error(source_ + ": " + name + ": expected [x, y, yaw], got " + j.dump());
-        a = checked_number(j[0], name + "[0]");
-        b = checked_number(j[1], name + "[1]");
-        c = checked_number(j[2], name + "[2]");
+        if (!j.is_array() || j.size() != 3) {
+            check_.error("$." + name, "expected [x, y, yaw], got " + j.dump());
+            return;
+        }
+        double* out[] = {&a, &b, &c};
+        for (size_t i = 0; i < 3; ++i) {
+            if (auto v = check_.number(j[i], checkers::JsonChecker::item("$." + name, i))) *out[i] = *v;
+        }
     }
 
-    /// Throws when the object has a member nobody asked for (a typo would else go unnoticed).
-    void finish() const
+    /// A rule between members (e.g. min < max), checked once each is read.
+    void require(bool holds, const std::string& what)
     {
-        for (auto it = json_.begin(); it != json_.end(); ++it) {
-            if (!known_.count(it.key())) {
-                std::string list;
-                for (const auto& k : known_) list += (list.empty() ? "" : ", ") + k;
-                throw Error(source_ + ": unknown member \"" + it.key() + "\" (known: " + list + ")");
-            }
-        }
+        if (!holds) check_.error("$", what);
+    }
+
+    /// Throws with every error, including a member nobody asked for (a typo would else go unnoticed).
+    void finish()
+    {
+        check_.keys(json_, "$", known_);
+        check_.throw_if_errors();
     }
 
 private:
-    double checked_number(const nlohmann::json& j, const std::string& name) const
-    {
-        if (!j.is_number() || !std::isfinite(j.get<double>())) {
-            throw Error(source_ + ": " + name + ": expected a number, got " + j.dump());
-        }
-        return j.get<double>();
-    }
-
-    std::string source_;
+    checkers::JsonChecker check_;
     nlohmann::json json_;
-    std::set<std::string> known_;
+    std::vector<std::string> known_;
 };
 
 }  // namespace cpm::vehicle

@@ -1,4 +1,5 @@
 #pragma once
+#include <cpm/Diagnostics.hpp>
 // The lane graph central_routing plans on: nodes (junction poses) and directed edges (lane centre
 // lines as points at most 5 cm apart), loaded from JSON and checked (every error at once, each
 // with its JSON path), with the geometry the planner needs: arc length, pose at s, projection of
@@ -62,16 +63,11 @@ public:
 
 /// The outcome of loading: every error (`SOURCE: $.json.path: what is wrong`); a graph only when
 /// there is none.
-struct GraphLoad
-{
-    std::optional<LaneGraph> graph;
-    std::vector<std::string> errors;
-    bool ok() const { return graph.has_value(); }
-};
+using GraphLoad = cpm::LoadResult<LaneGraph>;
 
 GraphLoad parse_lane_graph(const std::string& json_text, const std::string& source);
 GraphLoad load_lane_graph(const std::string& path);
-/// As load_lane_graph, but throws cpm::Error listing every error.
+/// As load_lane_graph, but throws cpm::FileError listing every error.
 LaneGraph load_lane_graph_or_throw(const std::string& path);
 
 }  // namespace cpm::routing

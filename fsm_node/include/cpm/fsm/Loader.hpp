@@ -1,4 +1,5 @@
 #pragma once
+#include <cpm/Diagnostics.hpp>
 #include <cpm/fsm/Machine.hpp>
 
 #include <memory>
@@ -8,12 +9,7 @@
 namespace cpm::fsm {
 
 /// One finding of the check: where (file and JSON path, e.g. `car.json: $.states[2].p`) and what.
-struct Diagnostic
-{
-    std::string where;
-    std::string message;
-    std::string text() const { return where + ": " + message; }
-};
+using Diagnostic = cpm::Diagnostic;
 
 /// The outcome of loading: every error and warning at once; a machine only when no error.
 struct LoadResult

@@ -25,6 +25,7 @@
 //
 // load_scenario reports every error at once, each with the file, line and YAML path
 // ("corridor.yaml:12: vehicles[1].id: 5 is given twice (also vehicles[0])").
+#include <cpm/Diagnostics.hpp>
 #include <cpm/QosOverrides.hpp>
 
 #include <cstdint>
@@ -86,14 +87,11 @@ struct Scenario
 };
 
 /// Every error of a scenario file, one "FILE:LINE: PATH: message" each.
-class ScenarioError : public std::runtime_error
+class ScenarioError : public FileError
 {
 public:
-    explicit ScenarioError(std::vector<std::string> errors);
-    const std::vector<std::string>& errors() const { return errors_; }
-
-private:
-    std::vector<std::string> errors_;
+    using FileError::FileError;
+    std::vector<std::string> errors() const { return texts(); }
 };
 
 /// Reads and checks a scenario: unknown keys, wrong types and values, files that do not exist,
