@@ -8,6 +8,7 @@
 #include <cpm/MultiVehicleReader.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/timer_ids.hpp>
+#include <cpm/topics.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/stamp_message.hpp>
 
@@ -35,7 +36,7 @@ struct RoutingNode::Impl
     RoutingNodeOptions options;
     Planner planner;
     MultiVehicleReader<VehicleState> states;
-    Writer<VehicleCommandTrajectory> trajectories{"vehicleCommandTrajectory"};
+    Writer<VehicleCommandTrajectory> trajectories{topics::vehicle_command_trajectory.name, topics::vehicle_command_trajectory.writer};
     uint64_t t_first = 0;
     std::set<uint8_t> off_graph;  // cars reported as on no lane (reported again once they were placed)
     std::set<uint8_t> silent;     // planned cars whose state went stale
@@ -47,7 +48,7 @@ struct RoutingNode::Impl
     double min_distance = std::numeric_limits<double>::infinity();
 
     Impl(const LaneGraph& graph, RoutingNodeOptions o)
-        : options(std::move(o)), planner(graph, options.planner), states("vehicleState", options.vehicle_ids)
+        : options(std::move(o)), planner(graph, options.planner), states(topics::vehicle_state.name, options.vehicle_ids)
     {
     }
 

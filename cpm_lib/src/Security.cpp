@@ -1,5 +1,8 @@
 #include <cpm/Security.hpp>
 
+#include <cpm/nodes.hpp>
+#include <cpm/topics.hpp>
+
 #include <cpm/ChildProcess.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/read_text_file.hpp>
@@ -162,10 +165,10 @@ Grant with_history(const Grant& grant)
 {
     Grant out = grant;
     if (grant.subscribe.empty()) return out;
-    out.publish = with_builtin(out.publish, {"historyRequest"});
-    std::vector<std::string> replies{"historyReply"};
+    out.publish = with_builtin(out.publish, nodes::find("history_client").publish);
+    std::vector<std::string> replies{topics::history_reply.name};
     for (const auto& t : grant.subscribe) {
-        if (t.rfind("historyReply", 0) != 0) replies.push_back("historyReply/" + t);
+        if (!topics::is_history_control(t) && t.rfind(topics::history_reply.name, 0) != 0) replies.push_back(topics::history_reply_topic(t));
     }
     out.subscribe = with_builtin(out.subscribe, replies);
     return out;
@@ -217,18 +220,6 @@ std::string subject_of(const std::string& permissions_xml)
 }
 
 }  // namespace
-
-const std::vector<std::string>& builtin_publish()
-{
-    static const std::vector<std::string> topics{"log", "readyStatus", "parameterRequest"};
-    return topics;
-}
-
-const std::vector<std::string>& builtin_subscribe()
-{
-    static const std::vector<std::string> topics{"logLevel", "parameter", "systemTrigger"};
-    return topics;
-}
 
 void init_lab(const std::string& dir_text, int days)
 {
@@ -293,8 +284,8 @@ std::string add_node(const std::string& dir_text, const std::string& name, const
         <domains>
           <id_range><min>0</min><max>232</max></id_range>
         </domains>
-)" + topics_xml("publish", with_builtin(full.publish, builtin_publish())) +
-            topics_xml("subscribe", with_builtin(full.subscribe, builtin_subscribe())) + R"(      </allow_rule>
+)" + topics_xml("publish", with_builtin(full.publish, nodes::builtin_publish())) +
+            topics_xml("subscribe", with_builtin(full.subscribe, nodes::builtin_subscribe())) + R"(      </allow_rule>
       <default>DENY</default>
     </grant>
   </permissions>

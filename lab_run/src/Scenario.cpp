@@ -4,6 +4,7 @@
 #include <cpm/Error.hpp>
 #include <cpm/checkers/YamlChecker.hpp>
 #include <cpm/read_text_file.hpp>
+#include <cpm/nodes.hpp>
 #include <cpm/timer_ids.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
 #include <cpm/vehicle/World.hpp>
@@ -25,15 +26,14 @@ namespace fs = std::filesystem;
 
 namespace {
 
-/// What a simulated car's processes (firmware_sim, vehicle_bridge) write and read.
-// What a car's processes publish and read (their security grants): the cars of one simulator
-// and bridge process (`cpm vehicle sim`, under routing), or a car's simulator, bridge and camera.
-const std::vector<std::string> kCarPublishes{"vehicleState", "vehicleObservation", "rangeSensors"};
-const std::vector<std::string> kCarSubscribes{"vehicleCommand*", "stopRequest", "vehicleObservation"};
-const std::vector<std::string> kSimPublishes{"vehicleObservation"};
-const std::vector<std::string> kSimSubscribes{"vehicleObservation"};  // the other cars, for its rangers
-const std::vector<std::string> kBridgePublishes{"vehicleState", "rangeSensors"};
-const std::vector<std::string> kBridgeSubscribes{"vehicleCommand*", "stopRequest", "vehicleObservation"};
+/// A process running cpm's program `kind` (a row of cpm/nodes.hpp): what it writes and reads
+/// (its security grants), and its timer's id for the lab clock when `timed`.
+ProcessPlan process(std::string name, const char* kind, std::vector<std::string> argv, bool restart, int stop_order, int vehicle_id,
+                    bool timed = true)
+{
+    const auto& row = nodes::find(kind);
+    return {std::move(name), std::move(argv), restart, stop_order, timed && row.timer ? row.timer(vehicle_id) : "", row.publish, row.subscribe};
+}
 
 using Checker = checkers::YamlChecker;
 
@@ -297,11 +297,7 @@ std::string security_node_name(const RunSettings& settings, const std::string& p
 
 ProcessPlan lab_run_process()
 {
-    ProcessPlan p;
-    p.name = "cpm_lab_run";
-    p.publish = {"stopRequest", "systemTrigger"};
-    p.subscribe = {"log", "historyStatus", "readyStatus"};
-    return p;
+    return process("cpm_lab_run", "lab_run", {}, false, 0, 0);
 }
 
 std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
@@ -333,10 +329,9 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         if (t != "*") history.insert(history.end(), {"--include", cpm::cli::glob_regex(t)});
     }
     for (const auto& t : s.record.exclude) history.insert(history.end(), {"--exclude", cpm::cli::glob_regex(t)});
-    plan.push_back({"cpm_history", history, false, 9, "", {"historyReply*", "historyStatus"}, {"*"}});
+    plan.push_back(process("cpm_history", "cpm_history", history, false, 9, 0));
     if (!s.parameters.empty()) {
-        plan.push_back({"parameters", {program("cpm"), "param", "serve", s.parameters, "--dds_domain", domain}, false, 8, "", {"parameter"},
-                        {"parameterRequest"}});
+        plan.push_back(process("parameters", "parameter_server", {program("cpm"), "param", "serve", s.parameters, "--dds_domain", domain}, false, 8, 0));
     }
     if (s.monitor_port) {
         std::vector<std::string> argv{program("cpm"), "monitor", "--port", std::to_string(*s.monitor_port)};
@@ -344,9 +339,8 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         if (!s.lanes.empty()) argv.insert(argv.end(), {"--lanes", s.lanes});
         if (s.monitor_allow_stop) argv.push_back("--allow-stop");
         argv.insert(argv.end(), {"--dds_domain", domain});
-        std::vector<std::string> publish;
-        if (s.monitor_allow_stop) publish.push_back("stopRequest");
-        plan.push_back({"monitor", argv, false, 8, "", publish, {"*"}});
+        plan.push_back(process("monitor", "monitor", argv, false, 8, 0));
+        if (!s.monitor_allow_stop) plan.back().publish.clear();  // it writes stop requests only with --allow-stop
     }
 
     // The cars: with routing all in one simulator spread over the lanes, else one each.
@@ -355,11 +349,11 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         for (const auto& v : s.vehicles) first = std::min(first, v.id);
         bool restart = false;
         for (const auto& v : s.vehicles) restart = restart || v.restart;
-        plan.push_back({"cars",
-                        with_common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count", std::to_string(s.vehicles.size()),
-                                     "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed)}),
-                        restart, 5, timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first),
-                        kCarPublishes, kCarSubscribes});
+        plan.push_back(process("cars", "vehicle_sim",
+                               with_common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count",
+                                            std::to_string(s.vehicles.size()), "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed)}),
+                               restart, 5, first));
+        plan.back().timer = timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first);
     } else {
         // Each car's simulator, bridge and camera supervised by the run itself: one that dies is
         // restarted alone (restart: true), the bridge finding its simulator's new pty by the link
@@ -368,38 +362,39 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
             const std::string id = std::to_string(v.id);
             const std::string start = number(v.x) + "," + number(v.y) + "," + number(v.yaw);
             const std::string link = (fs::path(r.run_dir) / ("car_" + id + ".tty")).string();
-            plan.push_back({"sim_" + id,
-                            with_common({program("firmware_sim"), "--vehicle_id", id, "--map", s.world, "--start", start, "--link", link}),
-                            v.restart, 6, timer_ids::firmware_sim(v.id), kSimPublishes, kSimSubscribes});
-            plan.push_back({"bridge_" + id, with_common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}),
-                            v.restart, 5, timer_ids::vehicle_bridge(v.id), kBridgePublishes, kBridgeSubscribes});
+            plan.push_back(process("sim_" + id, "firmware_sim",
+                                   with_common({program("firmware_sim"), "--vehicle_id", id, "--map", s.world, "--start", start, "--link", link}),
+                                   v.restart, 6, v.id));
+            plan.push_back(process("bridge_" + id, "vehicle_bridge",
+                                   with_common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}), v.restart, 5,
+                                   v.id));
             if (v.camera.empty()) continue;
             // In real time the camera starts at once; on the simulated clock it ticks with the car.
-            plan.push_back({"camera_" + id,
-                            with_common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s.world, "--rate", "30"}),
-                            v.restart, 4, simulated ? timer_ids::camera_sim(v.id) : "", {"cameraFrame"}, {"vehicleObservation"}});
+            plan.push_back(process("camera_" + id, "camera_sim",
+                                   with_common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s.world, "--rate", "30"}),
+                                   v.restart, 4, v.id, simulated));
         }
     }
     for (const auto& v : s.vehicles) {
         if (v.camera.empty()) continue;
         const std::string id = std::to_string(v.id);
-        plan.push_back({"aruco_" + id, with_common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world}),
-                        v.restart, 3, simulated ? timer_ids::aruco_node(v.id) : "", {"arucoMarkers"}, {"cameraFrame"}});
+        plan.push_back(process("aruco_" + id, "aruco_node",
+                               with_common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world}), v.restart, 3,
+                               v.id, simulated));
     }
     if (s.routing.enabled) {
         std::string ids;
         for (const auto& v : s.vehicles) ids += (ids.empty() ? "" : ",") + std::to_string(v.id);
-        plan.push_back({"central_routing",
-                        with_common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed),
-                                     "--period", std::to_string(s.routing.period_ns / 1'000'000) + "ms"}),
-                        s.routing.restart, 1, timer_ids::central_routing, {"vehicleCommandTrajectory"}, {"vehicleState"}});
+        plan.push_back(process("central_routing", "central_routing",
+                               with_common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s.lanes, "--seed",
+                                            std::to_string(s.routing.seed), "--period", std::to_string(s.routing.period_ns / 1'000'000) + "ms"}),
+                               s.routing.restart, 1, 0));
     }
     for (const auto& v : s.vehicles) {
         if (v.fsm.empty()) continue;
         const std::string id = std::to_string(v.id);
-        plan.push_back({"fsm_" + id, with_common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}), v.restart, 1,
-                        timer_ids::fsm_node(v.id), {"vehicleCommandDirect", "fsmStatus", "stopRequest"},
-                        {"vehicleState", "rangeSensors", "arucoMarkers", "stopRequest"}});
+        plan.push_back(process("fsm_" + id, "fsm_node", with_common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}),
+                               v.restart, 1, v.id));
     }
     // A secured run: every process as a node of its own, allowed what it uses (issued by the run).
     if (!s.security.empty()) {

@@ -1,5 +1,7 @@
 #include <cpm/monitor/LiveState.hpp>
 
+#include <cpm/topics.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -134,9 +136,9 @@ template <class Car>
 std::optional<Placed> pose_of(const Car& c, uint64_t now_ns, double stale_after_s)
 {
     if (c.observed && (seconds(now_ns, c.observed_at_ns) <= stale_after_s || !c.state)) {
-        return Placed{*c.observed, "vehicleObservation", c.observed_stamp_ns};
+        return Placed{*c.observed, topics::vehicle_observation.name, c.observed_stamp_ns};
     }
-    if (c.state) return Placed{c.state->pose(), "vehicleState", c.state->header().create_stamp().nanoseconds()};
+    if (c.state) return Placed{c.state->pose(), topics::vehicle_state.name, c.state->header().create_stamp().nanoseconds()};
     return std::nullopt;
 }
 

@@ -1,6 +1,7 @@
 #include <cpm/rtdb/Player.hpp>
 
 #include <cpm/Error.hpp>
+#include <cpm/nodes.hpp>
 #include <cpm/topics.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 
@@ -25,16 +26,11 @@ namespace dds = eprosima::fastdds::dds;
 
 const std::vector<std::string>& control_topics()
 {
-    static const std::vector<std::string> topics = {"historyRequest", "historyReply", "historyStatus", "systemTrigger",
-                                                    "readyStatus",    "parameter",    "parameterRequest"};
+    static const std::vector<std::string> topics = nodes::control_topics();
     return topics;
 }
 
-bool is_control(const std::string& topic)
-{
-    const auto& c = control_topics();
-    return std::find(c.begin(), c.end(), topic) != c.end() || topics::is_history_control(topic);
-}
+bool is_control(const std::string& topic) { return nodes::matches(topic, control_topics()); }
 
 struct Player::Impl
 {

@@ -326,7 +326,8 @@ TEST(Scenario, ASecuredLabRunsEachProcessAsANodeAllowedTheTopicsItUses)
     EXPECT_EQ(plan[1].subscribe, (std::vector<std::string>{"vehicleObservation"}));
     EXPECT_EQ(plan[2].name, "bridge_2");
     EXPECT_EQ(plan[2].publish, (std::vector<std::string>{"vehicleState", "rangeSensors"}));
-    EXPECT_EQ(plan[2].subscribe, (std::vector<std::string>{"vehicleCommand*", "stopRequest", "vehicleObservation"}));
+    EXPECT_EQ(plan[2].subscribe, (std::vector<std::string>{"vehicleCommandDirect", "vehicleCommandSpeedCurvature", "vehicleCommandTrajectory",
+                                                           "vehicleCommandPathTracking", "stopRequest", "vehicleObservation"}));
     EXPECT_EQ(plan[3].name, "fsm_2");
     EXPECT_EQ(plan[3].publish, (std::vector<std::string>{"vehicleCommandDirect", "fsmStatus", "stopRequest"}));
 

@@ -2,6 +2,11 @@
 // cpm::security).
 #include "Command.hpp"
 
+#include <cpm/Diagnostics.hpp>
+#include <cpm/nodes.hpp>
+
+#include <algorithm>
+
 #include <cpm/Security.hpp>
 
 #include <cstdio>
@@ -22,7 +27,7 @@ const char* kInitHelp =
     "Then: cpm security add-node DIR NAME --publish ... --subscribe ...\n";
 
 const char* kAddNodeHelp =
-    "usage: cpm security add-node DIR NAME [--publish T1,T2,...] [--subscribe T3,...] [--days N]\n"
+    "usage: cpm security add-node DIR NAME [--kind KIND] [--publish T1,T2,...] [--subscribe T3,...] [--days N]\n"
     "\n"
     "Issues node NAME of the lab in DIR: a key, a certificate from the lab's identity CA and\n"
     "permissions signed by its permissions CA, into DIR/nodes/NAME/. Copy that folder (only that\n"
@@ -31,11 +36,14 @@ const char* kAddNodeHelp =
     "what each cpm process uses by itself: it publishes log, readyStatus and parameterRequest and\n"
     "subscribes logLevel, parameter and systemTrigger.\n"
     "\n"
+    "  --kind KIND         grant what cpm's program KIND uses (cpm_history, fsm_node, vehicle_bridge,\n"
+    "                      ...; a wrong one lists them all); --publish/--subscribe add to it\n"
     "  --publish T,...     topics it may write\n"
     "  --subscribe T,...   topics it may read (through the history service too)\n"
     "  --days N            validity of its certificate and permissions (default 3650)\n"
     "\n"
-    "Example: cpm security add-node lab viewer --subscribe vehicleState,vehicleObservation\n";
+    "Examples: cpm security add-node lab viewer --subscribe vehicleState,vehicleObservation\n"
+    "          cpm security add-node lab car3_fsm --kind fsm_node\n";
 
 int days_flag(const ParsedArgs& parsed, const std::string& command)
 {
@@ -57,9 +65,22 @@ int init(const std::vector<std::string>& args)
 int add_node(const std::vector<std::string>& args)
 {
     const std::string command = "cpm security add-node";
-    const auto parsed = parse_args(args, {{"--publish", true, true}, {"--subscribe", true, true}, {"--days", true}}, command);
+    const auto parsed = parse_args(args, {{"--kind", true}, {"--publish", true, true}, {"--subscribe", true, true}, {"--days", true}}, command);
     if (parsed.positional.size() != 2) throw UsageError(command + ": expected DIR NAME (the lab's security folder and the node's name)");
     cpm::security::Grant grant;
+    if (parsed.has("--kind")) {
+        const std::string kind = parsed.get("--kind");
+        const auto known = cpm::nodes::kinds();
+        if (std::find(known.begin(), known.end(), kind) == known.end()) {
+            std::string list;
+            for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+            const auto meant = cpm::did_you_mean(kind, known);
+            throw UsageError(command + ": --kind " + kind + ": no such program" + (meant ? " (did you mean " + *meant + "?)" : std::string()) +
+                             "; known: " + list);
+        }
+        grant.publish = cpm::nodes::find(kind).publish;
+        grant.subscribe = cpm::nodes::find(kind).subscribe;
+    }
     for (const auto& v : parsed.all("--publish")) {
         for (auto& t : split_list("--publish", v)) grant.publish.push_back(t);
     }

@@ -25,11 +25,6 @@ namespace cpm::security {
 /// cpm::Error when `dir` already holds a lab (keys are never overwritten) or openssl fails.
 void init_lab(const std::string& dir, int days = 3650);
 
-/// The topics every cpm process may use by itself (logging, parameters, readiness, the lab
-/// clock's start signal), granted to every node: what it publishes and what it subscribes.
-const std::vector<std::string>& builtin_publish();
-const std::vector<std::string>& builtin_subscribe();
-
 /// What one node may do. Topic names may use `*` and `?` (fnmatch patterns).
 struct Grant
 {

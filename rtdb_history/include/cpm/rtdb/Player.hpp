@@ -12,9 +12,10 @@
 
 namespace cpm::rtdb {
 
-/// The topics a replay leaves out unless named in PlayOptions::include: the history service's
-/// own requests and replies, and the lab's control plane (a replayed stop trigger or ready
-/// status would steer the live lab's timers; a replayed parameter request would be answered).
+/// The topics a replay leaves out unless named in PlayOptions::include (names and fnmatch
+/// patterns, the rows of cpm/nodes.hpp that steer the lab): the history service's own requests
+/// and replies, and the lab's control plane (a replayed stop trigger or ready status would steer
+/// the live lab's timers; a replayed parameter request would be answered).
 const std::vector<std::string>& control_topics();
 
 struct PlayOptions
