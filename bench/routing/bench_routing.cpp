@@ -93,7 +93,7 @@ int main(int argc, char** argv)
                 o.duration = 120;
                 o.start_gap = 0.5;
                 o.planner.seed = seed;
-                o.planner.mode = m == 0 ? Mode::Cooperative : Mode::CpmLab;
+                o.planner.mode = m == 0 ? Mode::cooperative : Mode::cpm_lab;
                 const auto s = simulate(graph, o);
                 through[m] += double(s.zone_entries[centre]) / (o.duration / 60.0) / 5;
                 delay[m] += s.mean_delay / 5;

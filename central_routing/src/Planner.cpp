@@ -21,12 +21,12 @@ constexpr double kBetter = 0.2;            // m more planned ahead: another way 
 
 std::optional<Mode> mode_from_string(const std::string& name)
 {
-    if (name == "cooperative") return Mode::Cooperative;
-    if (name == "cpm_lab") return Mode::CpmLab;
+    if (name == "cooperative") return Mode::cooperative;
+    if (name == "cpm_lab") return Mode::cpm_lab;
     return std::nullopt;
 }
 
-const char* to_string(Mode mode) { return mode == Mode::CpmLab ? "cpm_lab" : "cooperative"; }
+const char* to_string(Mode mode) { return mode == Mode::cpm_lab ? "cpm_lab" : "cooperative"; }
 
 /// One car: its route (edges with the odometer reading where each starts) and its plan (s and v
 /// at the planner's steps from plan_t0).
@@ -412,7 +412,7 @@ void Planner::Impl::plan_cooperative(Car& c)
     // speed, or speed up to v_max, until braking would stop it past the zone ahead, then brake.
     // Each is a rule of the state alone, so the next step of a safe way leads to a safe state:
     // the car always has a safe choice.
-    enum class Way { Brake, Hold, Go };
+    enum class Way { brake, hold, go };
     // Beyond the window, or past the end of a finite route: blocked at every step.
     const double last_s = std::min(c.ws.back(), route_end - 0.02);
     auto safe = [&](size_t k, double s, double v, Way way) {
@@ -420,8 +420,8 @@ void Planner::Impl::plan_cooperative(Car& c)
         // would find it (the nearest, the later one on a tie).
         size_t at = window_index(c, s);
         if (v < 1e-9 && !may_stand_at(s, at)) return false;  // it would stand, even for a moment, in a zone
-        const double cruise = way == Way::Go ? o.v_max : v;
-        bool braking = way == Way::Brake;
+        const double cruise = way == Way::go ? o.v_max : v;
+        bool braking = way == Way::brake;
         for (size_t m = k; m <= steps; ++m) {
             while (at + 1 < w && !(s - c.ws[at] < c.ws[at + 1] - s)) ++at;
             if (v == 0 && braking) return may_stand_at(s, at) && s <= last_s && last_blocked[at] < int(m);  // standing_free
@@ -448,7 +448,7 @@ void Planner::Impl::plan_cooperative(Car& c)
         for (double acc : candidates) {
             const double v1 = std::clamp(v + acc * dt, 0.0, o.v_max);
             const double s1 = s + (v + v1) / 2 * dt;
-            if (safe(k + 1, s1, v1, Way::Brake) || safe(k + 1, s1, v1, Way::Hold) || safe(k + 1, s1, v1, Way::Go)) {
+            if (safe(k + 1, s1, v1, Way::brake) || safe(k + 1, s1, v1, Way::hold) || safe(k + 1, s1, v1, Way::go)) {
                 on_fallback = on_fallback && std::abs(s1 - c.fs[k + 1]) < 1e-9 && std::abs(v1 - c.fv[k + 1]) < 1e-9;
                 ps.push_back(s1), pv.push_back(v1), taken = true;
                 break;
@@ -585,7 +585,7 @@ void Planner::Impl::plan_cycle(double t, const std::vector<CarState>& measured)
         }
         return;
     }
-    if (o.mode == Mode::Cooperative) {
+    if (o.mode == Mode::cooperative) {
         std::stable_sort(order.begin(), order.end(), [](const Car* a, const Car* b) {
             if (a->distrusted != b->distrusted) return b->distrusted;  // the distrusted plan last
             return a->key < b->key || (a->key == b->key && a->id < b->id);
@@ -595,9 +595,9 @@ void Planner::Impl::plan_cycle(double t, const std::vector<CarState>& measured)
         Car& c = *order[i];
         std::vector<const Car*> before(order.begin(), order.begin() + long(i));
         std::vector<const Car*> after;
-        if (o.mode == Mode::Cooperative) after.assign(order.begin() + long(i) + 1, order.end());
+        if (o.mode == Mode::cooperative) after.assign(order.begin() + long(i) + 1, order.end());
         mark_blocked(c, before, after);
-        if (o.mode == Mode::Cooperative) {
+        if (o.mode == Mode::cooperative) {
             plan_cooperative(c);
             try_other_ways(c, before, after);
         } else {

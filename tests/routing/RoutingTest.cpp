@@ -260,10 +260,10 @@ TEST(Planner, CpmLabModeGivesUpForGoodWhereTheCooperativePlannerKeepsDriving)
     options.vehicles = 6;
     options.duration = 60;
     options.start_gap = 0.5;
-    options.planner.mode = Mode::CpmLab;
+    options.planner.mode = Mode::cpm_lab;
     const auto baseline = simulate(graph, options);
     EXPECT_TRUE(baseline.stalled);  // it cannot stop to wait: an unavoidable conflict ends its planning
-    options.planner.mode = Mode::Cooperative;
+    options.planner.mode = Mode::cooperative;
     const auto ours = simulate(graph, options);
     EXPECT_FALSE(ours.stalled);
     EXPECT_EQ(ours.collisions, 0u);

@@ -127,21 +127,21 @@ TEST(BridgeCore, DirectBeatsSpeedCurvatureAndAStaleCommandIsIgnored)
     inputs.direct = fresh(direct(0.5, -1.0), now - 100'000'000, now);
     inputs.speed_curvature = fresh(speed_curvature(1.0, 0.5), now - 10'000'000, now);
     auto cycle = sut.on_state_packet(moving(1000, 0.5), now, inputs);
-    EXPECT_EQ(cycle.active, ActiveCommand::Direct);
-    EXPECT_EQ(cycle.command.motor_mode, MotorMode::Forward);
+    EXPECT_EQ(cycle.active, ActiveCommand::direct);
+    EXPECT_EQ(cycle.command.motor_mode, MotorMode::forward);
     EXPECT_EQ(cycle.command.motor_pwm, 500);
     EXPECT_EQ(cycle.command.servo_us, 1000);
     EXPECT_EQ(cycle.command.vehicle_id, kId);
 
     inputs.direct = fresh(direct(0.5, -1.0), now - kSecond, now);  // exactly 1 s old: stale
     cycle = sut.on_state_packet(moving(1020, 0.5), now, inputs);
-    EXPECT_EQ(cycle.active, ActiveCommand::SpeedCurvature);
+    EXPECT_EQ(cycle.active, ActiveCommand::speed_curvature);
     EXPECT_GT(cycle.command.servo_us, 1500);  // positive curvature turns left
 
     inputs.speed_curvature = fresh(speed_curvature(1.0, 0.5), now - 2 * kSecond, now);
     cycle = sut.on_state_packet(moving(1040, 0.5), now, inputs);
-    EXPECT_EQ(cycle.active, ActiveCommand::None);
-    EXPECT_EQ(cycle.command.motor_mode, MotorMode::Brake);
+    EXPECT_EQ(cycle.active, ActiveCommand::none);
+    EXPECT_EQ(cycle.command.motor_mode, MotorMode::brake);
 }
 
 TEST(BridgeCore, StopRequestBrakesUntilANewerCommandArrives)
@@ -152,11 +152,11 @@ TEST(BridgeCore, StopRequestBrakesUntilANewerCommandArrives)
     inputs.direct = fresh(direct(0.5, 0.0), now - 100'000'000, now);
     inputs.stop_request_ns = now - 50'000'000;
     auto cycle = sut.on_state_packet(moving(1000, 0.5), now, inputs);
-    EXPECT_EQ(cycle.active, ActiveCommand::Stopped);
-    EXPECT_EQ(cycle.command.motor_mode, MotorMode::Brake);
+    EXPECT_EQ(cycle.active, ActiveCommand::stopped);
+    EXPECT_EQ(cycle.command.motor_mode, MotorMode::brake);
     inputs.direct = fresh(direct(0.5, 0.0), now - 10'000'000, now);
     cycle = sut.on_state_packet(moving(1020, 0.5), now, inputs);
-    EXPECT_EQ(cycle.active, ActiveCommand::Direct);
+    EXPECT_EQ(cycle.active, ActiveCommand::direct);
 }
 
 TEST(BridgeCore, PublishesStateAndRangesInLabUnits)
@@ -298,23 +298,23 @@ TEST(BridgeCore, ANaNSpeedIsRefusedOnceAndTheNextValidCommandDrivesTheCar)
     for (int i = 0; i < 5; ++i, tick += 20, now += 20'000'000) {
         inputs.speed_curvature = fresh(speed_curvature(std::nan(""), 0.0), nan_created, now);
         auto cycle = sut.on_state_packet(moving(tick, 0.3), now, inputs);
-        refused += count(cycle, Anomaly::RefusedCommand);
+        refused += count(cycle, Anomaly::refused_command);
         if (i == 0) {
             ASSERT_EQ(cycle.notices.size(), 1u);
             EXPECT_NE(cycle.notices[0].message.find("speed = nan is not a finite number"), std::string::npos)
                 << cycle.notices[0].message;
         }
-        EXPECT_EQ(cycle.active, ActiveCommand::None);
-        EXPECT_EQ(cycle.command.motor_mode, MotorMode::Brake);
+        EXPECT_EQ(cycle.active, ActiveCommand::none);
+        EXPECT_EQ(cycle.command.motor_mode, MotorMode::brake);
         EXPECT_TRUE(std::isfinite(cycle.state.motor_throttle()));
     }
     EXPECT_EQ(refused, 1u);
-    EXPECT_EQ(sut.anomalies(Anomaly::RefusedCommand), 1u);
+    EXPECT_EQ(sut.anomalies(Anomaly::refused_command), 1u);
     // A valid command right after it is obeyed at once, with a finite, forward throttle.
     inputs.speed_curvature = fresh(speed_curvature(0.5, 0.0), now - 1'000'000, now);
     auto cycle = sut.on_state_packet(moving(tick, 0.3), now, inputs);
-    EXPECT_EQ(cycle.active, ActiveCommand::SpeedCurvature);
-    EXPECT_EQ(cycle.command.motor_mode, MotorMode::Forward);
+    EXPECT_EQ(cycle.active, ActiveCommand::speed_curvature);
+    EXPECT_EQ(cycle.command.motor_mode, MotorMode::forward);
     EXPECT_GT(cycle.command.motor_pwm, 100);
     EXPECT_TRUE(std::isfinite(cycle.state.motor_throttle()));
 }
@@ -348,8 +348,8 @@ TEST(BridgeCore, EveryCommandTypeRefusesNonFiniteAndOutOfRangeFieldsNamingThem)
     inputs.direct = fresh(direct(std::nan(""), 0), now - 1'000'000, now);
     inputs.speed_curvature = fresh(speed_curvature(0.5, 0.0), now - 10'000'000, now);
     auto cycle = sut.on_state_packet(moving(1000, 0.0), now, inputs);
-    EXPECT_EQ(cycle.active, ActiveCommand::SpeedCurvature);
-    ASSERT_EQ(count(cycle, Anomaly::RefusedCommand), 1u);
+    EXPECT_EQ(cycle.active, ActiveCommand::speed_curvature);
+    ASSERT_EQ(count(cycle, Anomaly::refused_command), 1u);
     EXPECT_NE(cycle.notices[0].message.find("direct command"), std::string::npos) << cycle.notices[0].message;
 }
 
@@ -380,14 +380,14 @@ TEST(BridgeCore, AControllerRestartRebasesTheOdometerAndKeepsThePose)
     p.tick = 20;  // the controller restarted: tick and odometer begin again
     p.odometer_steps = 6;
     auto cycle = sut.on_state_packet(p, now, {});
-    ASSERT_EQ(count(cycle, Anomaly::ControllerRestart), 1u);
+    ASSERT_EQ(count(cycle, Anomaly::controller_restart), 1u);
     EXPECT_NE(cycle.notices[0].message.find("tick 60980 -> 20"), std::string::npos) << cycle.notices[0].message;
     EXPECT_DOUBLE_EQ(sut.pose().x, x_before);  // not moved back by the 10 m the old count stood at
     p.tick += 20;
     p.odometer_steps = 12;
     sut.on_state_packet(p, now + 20'000'000, {});
     EXPECT_NEAR(sut.pose().x, x_before + 0.01, 1e-9);
-    EXPECT_EQ(sut.anomalies(Anomaly::ControllerRestart), 1u);
+    EXPECT_EQ(sut.anomalies(Anomaly::controller_restart), 1u);
 }
 
 TEST(BridgeCore, AnOdometerJumpOfKilometresIsIgnoredAndTheCountRebased)
@@ -399,7 +399,7 @@ TEST(BridgeCore, AnOdometerJumpOfKilometresIsIgnoredAndTheCountRebased)
     p.tick += 20;
     p.odometer_steps = 600 * 5000;  // 5 km in 20 ms
     auto cycle = sut.on_state_packet(p, kSecond + 20'000'000, {});
-    ASSERT_EQ(count(cycle, Anomaly::OdometerJump), 1u);
+    ASSERT_EQ(count(cycle, Anomaly::odometer_jump), 1u);
     EXPECT_NE(cycle.notices[0].message.find("odometer jumped by 5000.00 m in 20 ms"), std::string::npos)
         << cycle.notices[0].message;
     EXPECT_DOUBLE_EQ(cycle.state.odometer_distance(), 0.0);
@@ -421,7 +421,7 @@ TEST(BridgeCore, ABatteryReadingOfZeroVoltsIsNotPublished)
     p.battery_mv = 0;
     auto cycle = sut.on_state_packet(p, kSecond + 20'000'000, {});
     EXPECT_DOUBLE_EQ(cycle.state.battery_voltage(), 8.1);
-    ASSERT_EQ(count(cycle, Anomaly::BatteryOutOfRange), 1u);
+    ASSERT_EQ(count(cycle, Anomaly::battery_out_of_range), 1u);
     EXPECT_NE(cycle.notices[0].message.find("battery reads 0.000 V, outside [3, 20] V"), std::string::npos)
         << cycle.notices[0].message;
 }

@@ -44,7 +44,7 @@ TEST(VehicleModel, SpeedStepRespondsFirstOrderAfterTheInputDelay)
 {
     VehicleParameters p = noiseless();
     VehicleModel sut(p);
-    sut.command(0.0, MotorMode::Forward, 500, 1500);  // half PWM: 1.5 m/s target
+    sut.command(0.0, MotorMode::forward, 500, 1500);  // half PWM: 1.5 m/s target
     run_for(sut, p.input_delay - 0.004);
     EXPECT_EQ(sut.speed(), 0.0);
     run_for(sut, 0.004 + p.speed_time_constant);
@@ -58,11 +58,11 @@ TEST(VehicleModel, SpeedStepRespondsFirstOrderAfterTheInputDelay)
 TEST(VehicleModel, BrakingStopsTheCarAndReverseDrivesBackwards)
 {
     VehicleModel sut(noiseless());
-    sut.command(0.0, MotorMode::Reverse, 1000, 1500);
+    sut.command(0.0, MotorMode::reverse, 1000, 1500);
     run_for(sut, 2.0);
     EXPECT_NEAR(sut.speed(), -3.0, 0.01);
     EXPECT_LT(sut.distance(), 0);
-    sut.command(sut.time(), MotorMode::Brake, 0, 1500);
+    sut.command(sut.time(), MotorMode::brake, 0, 1500);
     run_for(sut, 0.6);
     EXPECT_NEAR(sut.speed(), 0.0, 0.01);
 }
@@ -71,7 +71,7 @@ TEST(VehicleModel, TurningCircleRadiusIsWheelbaseOverTanSteeringAngle)
 {
     VehicleParameters p = noiseless();
     VehicleModel sut(p);
-    sut.command(0.0, MotorMode::Forward, 300, 1750);  // half left: 0.2 rad
+    sut.command(0.0, MotorMode::forward, 300, 1750);  // half left: 0.2 rad
     run_for(sut, 3.0);
     double expected = p.wheelbase / std::tan(0.5 * p.max_steering_angle);
     // Over one more lap, the points lie on a circle: fit its centre as the mean.
@@ -185,7 +185,7 @@ TEST(FirmwareSim, OdometerCountsTicksPerMetre)
     VehicleParameters p = noiseless();
     FirmwareSim sut(p, World{}, {}, 4, 1);
     for (int i = 0; i < 20; ++i) {
-        send(sut, {uint32_t(i), 4, MotorMode::Forward, 400, 1500});
+        send(sut, {uint32_t(i), 4, MotorMode::forward, 400, 1500});
         run_for(sut, 0.1);
     }
     auto state = sut.make_state_packet();
@@ -198,19 +198,19 @@ TEST(FirmwareSim, OdometerCountsTicksPerMetre)
 TEST(FirmwareSim, WatchdogBrakesAfter250msWithoutAValidCommandAndResumes)
 {
     FirmwareSim sut(noiseless(), World{}, {}, 2, 1);
-    send(sut, {1, 2, MotorMode::Forward, 500, 1500});
+    send(sut, {1, 2, MotorMode::forward, 500, 1500});
     run_for(sut, 0.24);
     EXPECT_FALSE(sut.watchdog_active());
-    EXPECT_EQ(sut.model().motor_mode(), MotorMode::Forward);
+    EXPECT_EQ(sut.model().motor_mode(), MotorMode::forward);
     run_for(sut, 0.02);
     EXPECT_TRUE(sut.watchdog_active());
     run_for(sut, 0.05);
-    EXPECT_EQ(sut.model().motor_mode(), MotorMode::Brake);
+    EXPECT_EQ(sut.model().motor_mode(), MotorMode::brake);
     EXPECT_TRUE(sut.make_state_packet().status & kStatusWatchdogStop);
-    send(sut, {2, 2, MotorMode::Forward, 500, 1500});
+    send(sut, {2, 2, MotorMode::forward, 500, 1500});
     run_for(sut, 0.05);
     EXPECT_FALSE(sut.watchdog_active());
-    EXPECT_EQ(sut.model().motor_mode(), MotorMode::Forward);
+    EXPECT_EQ(sut.model().motor_mode(), MotorMode::forward);
     EXPECT_FALSE(sut.make_state_packet().status & kStatusWatchdogStop);
     EXPECT_EQ(sut.stats().watchdog_stops, 1u);
 }
@@ -218,16 +218,16 @@ TEST(FirmwareSim, WatchdogBrakesAfter250msWithoutAValidCommandAndResumes)
 TEST(FirmwareSim, BadCrcAndOtherVehiclesCommandsAreFlaggedAndIgnored)
 {
     FirmwareSim sut(noiseless(), World{}, {}, 2, 1);
-    auto frame = encode_frame(CommandPacket{1, 2, MotorMode::Forward, 500, 1500});
+    auto frame = encode_frame(CommandPacket{1, 2, MotorMode::forward, 500, 1500});
     frame[4] ^= 0x10;
     sut.receive(frame.data(), frame.size());
     EXPECT_TRUE(sut.make_state_packet().status & kStatusBadCrc);
-    send(sut, {2, 9, MotorMode::Forward, 500, 1500});
+    send(sut, {2, 9, MotorMode::forward, 500, 1500});
     auto state = sut.make_state_packet();
     EXPECT_FALSE(state.status & kStatusBadCrc);
     EXPECT_TRUE(state.status & kStatusWrongVehicle);
     run_for(sut, 0.1);
-    EXPECT_EQ(sut.model().motor_mode(), MotorMode::Brake);
+    EXPECT_EQ(sut.model().motor_mode(), MotorMode::brake);
     EXPECT_EQ(sut.stats().commands, 0u);
     EXPECT_EQ(sut.stats().wrong_vehicle, 1u);
     EXPECT_EQ(sut.stats().decoder.total(), 1u);
@@ -236,7 +236,7 @@ TEST(FirmwareSim, BadCrcAndOtherVehiclesCommandsAreFlaggedAndIgnored)
 TEST(FirmwareSim, ACarDrivingIntoAWallStopsAgainstItAndTheContactIsCountedOnce)
 {
     FirmwareSim sut(noiseless(), walls(), {0, 0, 0}, 3, 1);
-    CommandPacket full{1, 3, MotorMode::Forward, 1000, 1500};
+    CommandPacket full{1, 3, MotorMode::forward, 1000, 1500};
     for (int i = 0; i < 150; ++i) {  // 3 s at full throttle, commands at 50 Hz
         full.tick = uint32_t(i + 1);
         send(sut, full);
@@ -255,7 +255,7 @@ TEST(FirmwareSim, ACarDrivingIntoAWallStopsAgainstItAndTheContactIsCountedOnce)
     EXPECT_TRUE(sut.take_collisions().empty());
 
     // Backing away and driving in again is a second contact.
-    CommandPacket reverse{200, 3, MotorMode::Reverse, 300, 1500};
+    CommandPacket reverse{200, 3, MotorMode::reverse, 300, 1500};
     for (int i = 0; i < 50; ++i, ++reverse.tick) {
         send(sut, reverse);
         run_for(sut, 0.02);

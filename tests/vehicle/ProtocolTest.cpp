@@ -60,7 +60,7 @@ TEST(Protocol, StatePacketRoundTripsThroughAFrame)
 
 TEST(Protocol, CommandPacketRoundTripsThroughAFrame)
 {
-    CommandPacket command{0x01020304, 7, MotorMode::Reverse, 999, 1234};
+    CommandPacket command{0x01020304, 7, MotorMode::reverse, 999, 1234};
     FrameDecoder sut;
     auto packets = decode_all(sut, encode_frame(command));
     ASSERT_EQ(packets.size(), 1u);
@@ -69,7 +69,7 @@ TEST(Protocol, CommandPacketRoundTripsThroughAFrame)
 
 TEST(Protocol, FieldsAreLittleEndianAfterVersionAndKind)
 {
-    CommandPacket command{0x04030201, 7, MotorMode::Forward, 0x0302, 0x05DC};
+    CommandPacket command{0x04030201, 7, MotorMode::forward, 0x0302, 0x05DC};
     auto bytes = serialize(command);
     std::vector<uint8_t> expected{kProtocolVersion, 0x02, 0x01, 0x02, 0x03, 0x04, 7, 1, 0x02, 0x03, 0xDC, 0x05};
     EXPECT_EQ(bytes, expected);
@@ -77,7 +77,7 @@ TEST(Protocol, FieldsAreLittleEndianAfterVersionAndKind)
 
 TEST(Protocol, ParseRejectsWrongVersionKindLengthAndMotorMode)
 {
-    auto good = serialize(CommandPacket{1, 2, MotorMode::Brake, 0, 1500});
+    auto good = serialize(CommandPacket{1, 2, MotorMode::brake, 0, 1500});
     ASSERT_TRUE(parse(good.data(), good.size()));
     auto wrong_version = good;
     wrong_version[0] = kProtocolVersion + 1;

@@ -853,14 +853,14 @@ TEST_F(VehicleEndToEnd, CraftedFramesOnAPtyAreCheckedRebasedAndLoggedOnceASecond
         step(false);
     }
     const size_t commands_before_valid = controller.commands().size();
-    for (const auto& c : controller.commands()) ASSERT_EQ(c.motor_mode, cpm::vehicle::MotorMode::Brake);
+    for (const auto& c : controller.commands()) ASSERT_EQ(c.motor_mode, cpm::vehicle::MotorMode::brake);
     command.speed(0.5);
     auto after_valid = [&] {
         return std::vector<cpm::vehicle::CommandPacket>(controller.commands().begin() + long(commands_before_valid), controller.commands().end());
     };
     auto driving = [&] {
         const auto a = after_valid();
-        return !a.empty() && a.back().motor_mode == cpm::vehicle::MotorMode::Forward;
+        return !a.empty() && a.back().motor_mode == cpm::vehicle::MotorMode::forward;
     };
     // A period after another while the bridge answers (25 periods on an idle machine; the
     // deadline is for a busy one).
@@ -870,7 +870,7 @@ TEST_F(VehicleEndToEnd, CraftedFramesOnAPtyAreCheckedRebasedAndLoggedOnceASecond
         step(false);
     }
     ASSERT_FALSE(after_valid().empty()) << bridge.errors();
-    EXPECT_EQ(after_valid().back().motor_mode, cpm::vehicle::MotorMode::Forward);
+    EXPECT_EQ(after_valid().back().motor_mode, cpm::vehicle::MotorMode::forward);
     EXPECT_GT(after_valid().back().motor_pwm, 0);
 
     // The controller restarts (tick and odometer from zero), then an odometer jump of 5 km with

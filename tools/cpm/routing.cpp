@@ -152,7 +152,7 @@ int routing_simulate(const std::vector<std::string>& args)
     std::printf("distance            %.1f m in all, %.1f m per car\n", total, total / double(summary.vehicles));
     std::printf("throughput          %.1f cars/min through the busiest conflict zone\n", summary.throughput_per_min);
     std::printf("planning            p50 %.2f ms, p99 %.2f ms per cycle\n", summary.plan_ms_p50, summary.plan_ms_p99);
-    if (summary.stalled && options.planner.mode == cpm::routing::Mode::Cooperative) {
+    if (summary.stalled && options.planner.mode == cpm::routing::Mode::cooperative) {
         const double least = *std::min_element(summary.distance_m.begin(), summary.distance_m.end());
         std::printf("stalled: a car stood still for over 10 s. On a small map with many cars a car can wait\n"
                     "long for a zone the others' plans keep claiming; the car that drove least drove %.1f m\n"

@@ -83,10 +83,10 @@ std::string command_problem(const VehicleCommandPathTracking& command, const Cal
 const char* to_string(Anomaly anomaly)
 {
     switch (anomaly) {
-    case Anomaly::RefusedCommand: return "refused_commands";
-    case Anomaly::ControllerRestart: return "controller_restarts";
-    case Anomaly::OdometerJump: return "odometer_jumps";
-    case Anomaly::BatteryOutOfRange: return "battery_out_of_range";
+    case Anomaly::refused_command: return "refused_commands";
+    case Anomaly::controller_restart: return "controller_restarts";
+    case Anomaly::odometer_jump: return "odometer_jumps";
+    case Anomaly::battery_out_of_range: return "battery_out_of_range";
     }
     return "?";
 }
@@ -94,12 +94,12 @@ const char* to_string(Anomaly anomaly)
 const char* to_string(ActiveCommand command)
 {
     switch (command) {
-    case ActiveCommand::None: return "none";
-    case ActiveCommand::Stopped: return "stop_request";
-    case ActiveCommand::Direct: return "direct";
-    case ActiveCommand::SpeedCurvature: return "speed_curvature";
-    case ActiveCommand::Trajectory: return "trajectory";
-    case ActiveCommand::PathTracking: return "path_tracking";
+    case ActiveCommand::none: return "none";
+    case ActiveCommand::stopped: return "stop_request";
+    case ActiveCommand::direct: return "direct";
+    case ActiveCommand::speed_curvature: return "speed_curvature";
+    case ActiveCommand::trajectory: return "trajectory";
+    case ActiveCommand::path_tracking: return "path_tracking";
     }
     return "?";
 }
@@ -154,7 +154,7 @@ void BridgeCore::dead_reckon(const StatePacket& packet, uint64_t t_ns, double ti
         std::snprintf(message, sizeof message,
                       "odometer jumped by %.2f m in %.0f ms (at most %.2f m is possible): step ignored, odometer rebased",
                       ds, tick_dt * 1e3, ds_max);
-        notice(notices, Anomaly::OdometerJump, message);
+        notice(notices, Anomaly::odometer_jump, message);
         last_steps_.reset();
     }
     if (!last_steps_) {
@@ -223,7 +223,7 @@ bool BridgeCore::obeyable(const SampleResult<T>& command, ActiveCommand kind, co
     // The same sample stays the newest until another arrives: report it once.
     if (refused_stamp_[size_t(kind)] != created) {
         refused_stamp_[size_t(kind)] = created;
-        notice(notices, Anomaly::RefusedCommand,
+        notice(notices, Anomaly::refused_command,
                std::string("refused a ") + to_string(kind) + " command created at " + std::to_string(created) + ": " +
                    problem);
     }
@@ -233,35 +233,35 @@ bool BridgeCore::obeyable(const SampleResult<T>& command, ActiveCommand kind, co
 BridgeCore::Actuation BridgeCore::choose(const CommandInputs& in, uint64_t t_ns, double speed, double dt,
                                          ActiveCommand& active, std::vector<Notice>& notices)
 {
-    if (obeyable(in.direct, ActiveCommand::Direct, in, notices)) {
-        active = ActiveCommand::Direct;
+    if (obeyable(in.direct, ActiveCommand::direct, in, notices)) {
+        active = ActiveCommand::direct;
         Actuation a;
         a.throttle = in.direct.sample.motor_throttle();
         a.steering = in.direct.sample.steering_servo();
         a.brake = false;
         return a;
     }
-    if (obeyable(in.speed_curvature, ActiveCommand::SpeedCurvature, in, notices)) {
-        active = ActiveCommand::SpeedCurvature;
+    if (obeyable(in.speed_curvature, ActiveCommand::speed_curvature, in, notices)) {
+        active = ActiveCommand::speed_curvature;
         return drive({in.speed_curvature.sample.speed(), in.speed_curvature.sample.curvature()}, speed, dt);
     }
-    if (obeyable(in.trajectory, ActiveCommand::Trajectory, in, notices)) {
-        active = ActiveCommand::Trajectory;
+    if (obeyable(in.trajectory, ActiveCommand::trajectory, in, notices)) {
+        active = ActiveCommand::trajectory;
         uint64_t t_ref = t_ns + static_cast<uint64_t>(c_.lookahead_time * 1e9);
         if (auto reference = interpolate_trajectory(in.trajectory.sample.trajectory_points(), t_ref)) {
             return drive(track_trajectory(c_, *reference, pose_), speed, dt);
         }
         return drive({}, speed, dt);  // the trajectory does not cover now: stop
     }
-    if (obeyable(in.path_tracking, ActiveCommand::PathTracking, in, notices)) {
-        active = ActiveCommand::PathTracking;
+    if (obeyable(in.path_tracking, ActiveCommand::path_tracking, in, notices)) {
+        active = ActiveCommand::path_tracking;
         const auto& command = in.path_tracking.sample;
         if (auto request = track_path(c_, command.path(), command.speed(), pose_, speed)) {
             return drive(*request, speed, dt);
         }
         return drive({}, speed, dt);
     }
-    active = in.stop_request_ns ? ActiveCommand::Stopped : ActiveCommand::None;
+    active = in.stop_request_ns ? ActiveCommand::stopped : ActiveCommand::none;
     speed_controller_.reset();
     return {};
 }
@@ -275,7 +275,7 @@ double BridgeCore::plausible_battery(uint16_t battery_mv, std::vector<Notice>& n
                   "battery reads %.3f V, outside [%g, %g] V (a sensor fault): publishing the last plausible reading "
                   "(%.3f V) instead",
                   v, c_.battery_min_voltage, c_.battery_max_voltage, battery_v_);
-    notice(notices, Anomaly::BatteryOutOfRange, message);
+    notice(notices, Anomaly::battery_out_of_range, message);
     return battery_v_;
 }
 
@@ -285,9 +285,9 @@ CommandPacket BridgeCore::to_packet(const Actuation& a)
     packet.tick = ++command_tick_;
     packet.vehicle_id = vehicle_id_;
     if (a.brake || !std::isfinite(a.throttle) || !std::isfinite(a.steering)) {
-        packet.motor_mode = MotorMode::Brake;
+        packet.motor_mode = MotorMode::brake;
     } else {
-        packet.motor_mode = a.throttle >= 0 ? MotorMode::Forward : MotorMode::Reverse;
+        packet.motor_mode = a.throttle >= 0 ? MotorMode::forward : MotorMode::reverse;
         packet.motor_pwm = static_cast<uint16_t>(std::lround(std::min(std::abs(a.throttle), 1.0) * 1000));
     }
     double servo = c_.servo_centre_us + (std::isfinite(a.steering) ? a.steering : 0.0) * c_.servo_range_us;
@@ -304,7 +304,7 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     double dt = std::clamp(tick_dt, 1e-3, 0.1);
     BridgeCycle out;
     if (restarted) {
-        notice(out.notices, Anomaly::ControllerRestart,
+        notice(out.notices, Anomaly::controller_restart,
                "the controller restarted (tick " + std::to_string(*last_tick_) + " -> " + std::to_string(packet.tick) +
                    "): odometer and heading rebased, pose kept");
         last_steps_.reset();

@@ -72,8 +72,8 @@ void FirmwareSim::step()
     if (!watchdog_active_ && model_.time() - last_command_t_ > p_.watchdog_timeout) {
         watchdog_active_ = true;
         ++stats_.watchdog_stops;
-        motor_command_ = {MotorMode::Brake, 0};
-        model_.command(model_.time(), MotorMode::Brake, 0, 1500);
+        motor_command_ = {MotorMode::brake, 0};
+        model_.command(model_.time(), MotorMode::brake, 0, 1500);
     }
 }
 

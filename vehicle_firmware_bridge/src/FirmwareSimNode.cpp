@@ -62,7 +62,7 @@ struct Car
     std::unique_ptr<PseudoTerminal> pty;
     std::unique_ptr<SerialPort> port;
     std::string device;
-    std::pair<MotorMode, uint16_t> traced{MotorMode::Brake, 0};
+    std::pair<MotorMode, uint16_t> traced{MotorMode::brake, 0};
     bool host_silent = false;  ///< simulated time: the last state packet went unanswered
 };
 

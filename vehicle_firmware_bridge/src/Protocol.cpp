@@ -94,7 +94,7 @@ std::optional<CommandPacket> parse_command(ByteReader r)
     p.tick = r.get<uint32_t>();
     p.vehicle_id = r.get<uint8_t>();
     auto mode = r.get<uint8_t>();
-    if (mode > static_cast<uint8_t>(MotorMode::Reverse)) return std::nullopt;
+    if (mode > static_cast<uint8_t>(MotorMode::reverse)) return std::nullopt;
     p.motor_mode = static_cast<MotorMode>(mode);
     p.motor_pwm = r.get<uint16_t>();
     p.servo_us = r.get<uint16_t>();

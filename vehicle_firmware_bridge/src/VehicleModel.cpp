@@ -114,7 +114,7 @@ double VehicleModel::steering_for_servo(uint16_t servo_us) const
 
 double VehicleModel::motor_current() const
 {
-    if (applied_.mode == MotorMode::Brake) return p_.idle_current;
+    if (applied_.mode == MotorMode::brake) return p_.idle_current;
     return p_.idle_current + p_.current_per_speed * std::abs(v_);
 }
 
@@ -141,9 +141,9 @@ void VehicleModel::step(double dt)
     }
     double target_speed = 0, tau = p_.speed_time_constant;
     switch (applied_.mode) {
-    case MotorMode::Forward: target_speed = p_.max_speed * applied_.pwm / 1000.0; break;
-    case MotorMode::Reverse: target_speed = -p_.max_speed * applied_.pwm / 1000.0; break;
-    case MotorMode::Brake: tau = p_.brake_time_constant; break;
+    case MotorMode::forward: target_speed = p_.max_speed * applied_.pwm / 1000.0; break;
+    case MotorMode::reverse: target_speed = -p_.max_speed * applied_.pwm / 1000.0; break;
+    case MotorMode::brake: tau = p_.brake_time_constant; break;
     }
     // Exact discretisation of the first-order lags: stable for any dt.
     double v_old = v_;

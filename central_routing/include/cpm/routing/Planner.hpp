@@ -8,7 +8,7 @@
 // previous plans of the cars after it. Those previous plans were safe together and end at
 // standstill, so some safe profile always exists: the planner never gives up.
 //
-// Mode::CpmLab reproduces cpm_lab's central routing for comparison: fixed priority by ascending
+// Mode::cpm_lab reproduces cpm_lab's central routing for comparison: fixed priority by ascending
 // vehicle id, lower cars' speed capped (never below 0.5 m/s once moving) where they would meet a
 // higher car, and planning abandoned for good when a conflict is less than 240 ms away.
 #include <cpm/routing/Conflicts.hpp>
@@ -23,7 +23,7 @@
 
 namespace cpm::routing {
 
-enum class Mode { Cooperative, CpmLab };
+enum class Mode { cooperative, cpm_lab };
 
 /// "cooperative" or "cpm_lab"; nullopt for anything else.
 std::optional<Mode> mode_from_string(const std::string& name);
@@ -31,7 +31,7 @@ const char* to_string(Mode mode);
 
 struct PlannerOptions
 {
-    Mode mode = Mode::Cooperative;
+    Mode mode = Mode::cooperative;
     double v_max = 1.0;      ///< m/s
     double a_max = 0.8;      ///< m/s^2, accelerating and braking
     double horizon = 8.0;    ///< s: every plan ends at standstill within it
@@ -40,7 +40,7 @@ struct PlannerOptions
     double time_slack = 0.1; ///< s between one car leaving a place and another taking it
     Footprint footprint;     ///< the cars' bodies (Footprint::of(vehicle parameters))
     uint64_t seed = 1;       ///< the routes' random walks
-    double cpm_lab_v_min = 0.5;  ///< Mode::CpmLab: the least speed once moving
+    double cpm_lab_v_min = 0.5;  ///< Mode::cpm_lab: the least speed once moving
 };
 
 /// A car as measured: where it is and how fast it goes.
@@ -110,7 +110,7 @@ public:
     /// The smallest distance between two cars' bodies over the newest plans' steps (m).
     double min_planned_distance() const;
     ClosestPair closest_pair() const;
-    /// Mode::CpmLab: true once the planner gave up (a conflict it could not avoid).
+    /// Mode::cpm_lab: true once the planner gave up (a conflict it could not avoid).
     bool gave_up() const;
     /// Cars whose pose could not be found on their route when replanned; they keep their plan.
     const std::vector<std::string>& warnings() const;

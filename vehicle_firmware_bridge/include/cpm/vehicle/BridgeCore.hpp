@@ -34,7 +34,7 @@ struct CommandInputs
 };
 
 /// Which command drove a cycle.
-enum class ActiveCommand { None, Stopped, Direct, SpeedCurvature, Trajectory, PathTracking };
+enum class ActiveCommand { none, stopped, direct, speed_curvature, trajectory, path_tracking };
 const char* to_string(ActiveCommand command);
 
 /// Why a command cannot be obeyed: the first field that is NaN, infinite or out of range,
@@ -47,10 +47,10 @@ std::string command_problem(const VehicleCommandPathTracking& command, const Cal
 
 /// What the bridge noticed and did not take as given.
 enum class Anomaly {
-    RefusedCommand,     ///< a command with a non-finite or out-of-range field: not obeyed
-    ControllerRestart,  ///< the controller's tick went backwards: odometer and heading rebased
-    OdometerJump,       ///< an odometer step no car can drive in that time: ignored, rebased
-    BatteryOutOfRange,  ///< a battery reading outside the calibration's range: not published
+    refused_command,     ///< a command with a non-finite or out-of-range field: not obeyed
+    controller_restart,  ///< the controller's tick went backwards: odometer and heading rebased
+    odometer_jump,       ///< an odometer step no car can drive in that time: ignored, rebased
+    battery_out_of_range,  ///< a battery reading outside the calibration's range: not published
 };
 constexpr size_t kAnomalyKinds = 4;
 const char* to_string(Anomaly anomaly);
@@ -68,7 +68,7 @@ struct BridgeCycle
     VehicleState state;
     RangeSensors ranges;
     CommandPacket command;
-    ActiveCommand active = ActiveCommand::None;
+    ActiveCommand active = ActiveCommand::none;
     uint64_t measured_ns = 0;  ///< when the controller measured the state, in host time
     std::vector<Notice> notices;  ///< anomalies first seen in this cycle (a refused command once)
 };
@@ -132,7 +132,7 @@ private:
     std::optional<uint32_t> last_tick_;
     double distance_ = 0;
     uint32_t command_tick_ = 0;
-    ActiveCommand last_active_ = ActiveCommand::None;
+    ActiveCommand last_active_ = ActiveCommand::none;
     std::deque<Estimate> history_;
     uint64_t tick_epoch_ms_ = 0;  // controller ticks are 32-bit ms; they wrap after 49 days
     std::deque<std::pair<uint64_t, int64_t>> offsets_;  // (received, offset), offsets increasing

@@ -92,7 +92,7 @@ private:
     bool wrong_vehicle_ = false;
     bool answered_ = true;
     uint32_t command_tick_ = 0;
-    std::pair<MotorMode, uint16_t> motor_command_{MotorMode::Brake, 0};
+    std::pair<MotorMode, uint16_t> motor_command_{MotorMode::brake, 0};
     double imu_yaw_ = 0;
     double last_contact_t_ = -1e9;
     std::vector<Collision> collisions_;

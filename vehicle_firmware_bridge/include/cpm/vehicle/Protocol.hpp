@@ -20,7 +20,7 @@ enum StatusFlags : uint8_t {
     kStatusWrongVehicle = 1u << 2,   ///< the last command named another vehicle id (ignored)
 };
 
-enum class MotorMode : uint8_t { Brake = 0, Forward = 1, Reverse = 2 };
+enum class MotorMode : uint8_t { brake = 0, forward = 1, reverse = 2 };
 
 /// Controller → host, 50 Hz. Units as the firmware measures them.
 struct StatePacket
@@ -49,7 +49,7 @@ struct CommandPacket
 {
     uint32_t tick = 0;                 ///< the host's command counter (echoed in StatePacket)
     uint8_t vehicle_id = 0;            ///< the controller ignores commands for another id
-    MotorMode motor_mode = MotorMode::Brake;
+    MotorMode motor_mode = MotorMode::brake;
     uint16_t motor_pwm = 0;            ///< duty cycle in 1/1000 (0..1000)
     uint16_t servo_us = 1500;          ///< servo pulse width in µs (1000..2000, 1500 = straight)
     bool operator==(const CommandPacket&) const;

@@ -102,7 +102,7 @@ private:
     struct Input
     {
         double t = 0;
-        MotorMode mode = MotorMode::Brake;
+        MotorMode mode = MotorMode::brake;
         uint16_t pwm = 0;
         uint16_t servo_us = 1500;
     };
