@@ -239,10 +239,11 @@ namespace cpm::tools {
 
 std::vector<Command> aruco_commands()
 {
-    return {{"aruco", "detect", "find ArUco markers and their poses in images (the code aruco_node runs)", kDetectHelp.c_str(), aruco_detect},
-            {"aruco", "gates", "print each gate of a map as a car drives through it", kGatesHelp, aruco_gates},
-            {"camera", "render", "render one frame of the synthetic camera from a pose", kRenderHelp, camera_render},
-            {"camera", "calibrate", "calibrate a camera from ChArUco board photos", kCalibrateHelp, camera_calibrate}};
+    return {{.group = "aruco", .verb = "detect", .summary = "find ArUco markers and their poses in images (the code aruco_node runs)",
+             .help = kDetectHelp.c_str(), .run = aruco_detect},
+            {.group = "aruco", .verb = "gates", .summary = "print each gate of a map as a car drives through it", .help = kGatesHelp, .run = aruco_gates},
+            {.group = "camera", .verb = "render", .summary = "render one frame of the synthetic camera from a pose", .help = kRenderHelp, .run = camera_render},
+            {.group = "camera", .verb = "calibrate", .summary = "calibrate a camera from ChArUco board photos", .help = kCalibrateHelp, .run = camera_calibrate}};
 }
 
 }  // namespace cpm::tools

@@ -114,9 +114,9 @@ int fsm_render(const std::vector<std::string>& args)
 
 std::vector<Command> fsm_commands()
 {
-    return {{"fsm", "check", "check a state machine file (.json or UMLet .uxf): every error and warning", kFsmCheckHelp, fsm_check},
-            {"fsm", "convert", "print a UMLet drawing's state machine as JSON", kFsmConvertHelp, fsm_convert},
-            {"fsm", "render", "draw a state machine with Graphviz (-o OUT.svg|png|dot)", kFsmRenderHelp, fsm_render}};
+    return {{.group = "fsm", .verb = "check", .summary = "check a state machine file (.json or UMLet .uxf): every error and warning", .help = kFsmCheckHelp, .run = fsm_check},
+            {.group = "fsm", .verb = "convert", .summary = "print a UMLet drawing's state machine as JSON", .help = kFsmConvertHelp, .run = fsm_convert},
+            {.group = "fsm", .verb = "render", .summary = "draw a state machine with Graphviz (-o OUT.svg|png|dot)", .help = kFsmRenderHelp, .run = fsm_render}};
 }
 
 std::string only_positional(const cpm::cli::ParsedArgs& parsed, const std::string& command, const std::string& what)

@@ -547,9 +547,11 @@ int history_verb(const std::vector<std::string>& all)
 
 std::vector<Command> history_commands()
 {
-    return {{"history", "", "ask the history service about the recent past: list, search, latest, at, older, younger, range, "
-                            "wait, successor, snapshot, changes, wait-object", kHistoryHelp, history_verb},
-            {"dump", "", "one table of every object the history service holds", kDumpHelp, dump_command}};
+    return {{.group = "history", .verb = "",
+             .summary = "ask the history service about the recent past: list, search, latest, at, older, younger, range, "
+                        "wait, successor, snapshot, changes, wait-object",
+             .help = kHistoryHelp, .run = history_verb},
+            {.group = "dump", .verb = "", .summary = "one table of every object the history service holds", .help = kDumpHelp, .run = dump_command}};
 }
 
 }  // namespace cpm::tools

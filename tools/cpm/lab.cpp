@@ -230,11 +230,10 @@ int lab_report(const std::vector<std::string>& args)
 
 std::vector<Command> lab_commands()
 {
-    return {{"lab", "clock", "drive the lab's timers: a synchronised real-time start and stop, or a simulated clock", kClockHelp,
-             lab_clock},
-            {"lab", "check", "check a lab scenario file and show the processes a run of it starts", kLabCheckHelp, lab_check},
-            {"lab", "run", "run a lab scenario: every process started, supervised, recorded and stopped in order", kRunHelp, lab_run},
-            {"lab", "report", "draw a run's report (report.html with plots, summary.json) from its folder", kReportHelp, lab_report}};
+    return {{.group = "lab", .verb = "clock", .summary = "drive the lab's timers: a synchronised real-time start and stop, or a simulated clock", .help = kClockHelp, .run = lab_clock},
+            {.group = "lab", .verb = "check", .summary = "check a lab scenario file and show the processes a run of it starts", .help = kLabCheckHelp, .run = lab_check},
+            {.group = "lab", .verb = "run", .summary = "run a lab scenario: every process started, supervised, recorded and stopped in order", .help = kRunHelp, .run = lab_run},
+            {.group = "lab", .verb = "report", .summary = "draw a run's report (report.html with plots, summary.json) from its folder", .help = kReportHelp, .run = lab_report}};
 }
 
 }  // namespace cpm::tools

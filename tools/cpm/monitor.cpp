@@ -61,7 +61,7 @@ int monitor(const std::vector<std::string>& args)
 
 std::vector<Command> monitor_commands()
 {
-    return {{"monitor", "", "serve the lab live to a browser (map, cars, plots, topics, log)", kMonitorHelp, monitor}};
+    return {{.group = "monitor", .verb = "", .summary = "serve the lab live to a browser (map, cars, plots, topics, log)", .help = kMonitorHelp, .run = monitor}};
 }
 
 }  // namespace cpm::tools

@@ -36,7 +36,7 @@ int param_serve(const std::vector<std::string>& args)
 
 std::vector<Command> param_commands()
 {
-    return {{"param", "serve", "serve the parameters of a JSON file until Ctrl-C", kParamHelp, param_serve}};
+    return {{.group = "param", .verb = "serve", .summary = "serve the parameters of a JSON file until Ctrl-C", .help = kParamHelp, .run = param_serve}};
 }
 
 }  // namespace cpm::tools

@@ -239,9 +239,8 @@ int play_command(const std::vector<std::string>& args)
 
 std::vector<Command> record_commands()
 {
-    return {{"record", "", "record the domain into a recording file (cpm history --file and cpm play read it)", kRecordHelp,
-             record_command},
-            {"play", "", "publish a recording's samples again with their original spacing", kPlayHelp, play_command}};
+    return {{.group = "record", .verb = "", .summary = "record the domain into a recording file (cpm history --file and cpm play read it)", .help = kRecordHelp, .run = record_command},
+            {.group = "play", .verb = "", .summary = "publish a recording's samples again with their original spacing", .help = kPlayHelp, .run = play_command}};
 }
 
 }  // namespace cpm::tools

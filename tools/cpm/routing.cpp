@@ -230,10 +230,10 @@ int routing_watch(const std::vector<std::string>& args)
 
 std::vector<Command> routing_commands()
 {
-    return {{"routing", "check", "check a lane graph file and count its conflict zones", kRoutingCheckHelp, routing_check},
-            {"routing", "render", "draw a lane graph with its conflict zones (SVG or PNG)", kRenderHelp, routing_render},
-            {"routing", "simulate", "run the central planner against ideal cars and summarise", kSimulateHelp, routing_simulate},
-            {"routing", "watch", "watch the cars' true poses: distance driven, standstills, closest bodies", kWatchHelp, routing_watch}};
+    return {{.group = "routing", .verb = "check", .summary = "check a lane graph file and count its conflict zones", .help = kRoutingCheckHelp, .run = routing_check},
+            {.group = "routing", .verb = "render", .summary = "draw a lane graph with its conflict zones (SVG or PNG)", .help = kRenderHelp, .run = routing_render},
+            {.group = "routing", .verb = "simulate", .summary = "run the central planner against ideal cars and summarise", .help = kSimulateHelp, .run = routing_simulate},
+            {.group = "routing", .verb = "watch", .summary = "watch the cars' true poses: distance driven, standstills, closest bodies", .help = kWatchHelp, .run = routing_watch}};
 }
 
 }  // namespace cpm::tools

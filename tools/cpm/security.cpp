@@ -98,8 +98,8 @@ int add_node(const std::vector<std::string>& args)
 
 std::vector<Command> security_commands()
 {
-    return {{"security", "init", "make a secured lab's CAs and governance", kInitHelp, init},
-            {"security", "add-node", "issue a node's certificate and permissions", kAddNodeHelp, add_node}};
+    return {{.group = "security", .verb = "init", .summary = "make a secured lab's CAs and governance", .help = kInitHelp, .run = init},
+            {.group = "security", .verb = "add-node", .summary = "issue a node's certificate and permissions", .help = kAddNodeHelp, .run = add_node}};
 }
 
 }  // namespace cpm::tools

@@ -313,10 +313,10 @@ int topic_hz(const std::vector<std::string>& args)
 
 std::vector<Command> topic_commands()
 {
-    return {{"topic", "list", "every topic on the domain, from DDS discovery (no history service needed)", kListHelp, topic_list},
-            {"topic", "info", "a topic's type, writers and readers", kInfoHelp, topic_info},
-            {"topic", "echo", "print any topic's samples as they arrive, decoded field by field", kEchoHelp, topic_echo},
-            {"topic", "hz", "the rate a topic's samples arrive at: mean, min, max and std of the period", kHzHelp, topic_hz}};
+    return {{.group = "topic", .verb = "list", .summary = "every topic on the domain, from DDS discovery (no history service needed)", .help = kListHelp, .run = topic_list},
+            {.group = "topic", .verb = "info", .summary = "a topic's type, writers and readers", .help = kInfoHelp, .run = topic_info},
+            {.group = "topic", .verb = "echo", .summary = "print any topic's samples as they arrive, decoded field by field", .help = kEchoHelp, .run = topic_echo},
+            {.group = "topic", .verb = "hz", .summary = "the rate a topic's samples arrive at: mean, min, max and std of the period", .help = kHzHelp, .run = topic_hz}};
 }
 
 }  // namespace cpm::tools

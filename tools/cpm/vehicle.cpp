@@ -214,8 +214,7 @@ namespace cpm::tools {
 
 std::vector<Command> vehicle_commands()
 {
-    return {{"vehicle", "sim", "start simulated cars: firmware simulator + vehicle bridge over a pty", kVehicleSimHelp,
-             vehicle_sim}};
+    return {{.group = "vehicle", .verb = "sim", .summary = "start simulated cars: firmware simulator + vehicle bridge over a pty", .help = kVehicleSimHelp, .run = vehicle_sim}};
 }
 
 }  // namespace cpm::tools
