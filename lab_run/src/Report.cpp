@@ -1,6 +1,7 @@
 #include <cpm/lab/Report.hpp>
 
 #include <cpm/ChildProcess.hpp>
+#include <cpm/Error.hpp>
 #include <cpm/aruco/GateCourse.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 #include <cpm/vehicle/World.hpp>
@@ -99,24 +100,36 @@ std::string quoted(const std::string& s)
     return out + "\"";
 }
 
+/// The recording, or a cpm::Error with the reader's message.
+rtdb::LoadedRecording load(const std::string& path)
+{
+    try {
+        return rtdb::load_recording(path);
+    } catch (const Error&) {
+        throw;
+    } catch (const std::runtime_error& e) {
+        throw Error(e.what());
+    }
+}
+
 }  // namespace
 
 Report make_report(const std::string& run_dir)
 {
     const fs::path dir(run_dir);
-    if (!fs::is_directory(dir)) throw std::runtime_error("no run folder " + run_dir);
+    if (!fs::is_directory(dir)) throw Error("no run folder " + run_dir);
     const std::string recording = (dir / "recording.db").string();
-    if (!fs::exists(recording)) throw std::runtime_error(run_dir + " holds no recording.db");
+    if (!fs::exists(recording)) throw Error(run_dir + " holds no recording.db");
     if (::access("/usr/bin/gnuplot", X_OK) != 0) {
-        throw std::runtime_error("gnuplot is not installed (Debian package gnuplot-nox; ./lab installs it)");
+        throw Error("gnuplot is not installed (Debian package gnuplot-nox; ./lab installs it)");
     }
-    const auto rec = rtdb::load_recording(recording);
+    const auto rec = load(recording);
     if (rec.samples == 0) {
         // Nothing to draw: say why instead of handing gnuplot empty data ("x range is invalid").
-        throw std::runtime_error(recording + " holds no samples" + (rec.warning.empty() ? "" : ": " + rec.warning));
+        throw Error(recording + " holds no samples" + (rec.warning.empty() ? "" : ": " + rec.warning));
     }
     const rtdb::IdlDecoder* types = rec.types ? rec.types.get() : rtdb::IdlDecoder::lab_types();
-    if (!types) throw std::runtime_error(recording + " carries no IDL and none is installed");
+    if (!types) throw Error(recording + " carries no IDL and none is installed");
     nlohmann::json summary = read_json((dir / "summary.json").string());
     if (summary.is_null()) summary = nlohmann::json::object();
 
@@ -340,7 +353,7 @@ Report make_report(const std::string& run_dir)
     if (!end || !end->ok()) {
         std::ifstream log(plots / "gnuplot.log");
         const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
-        throw std::runtime_error("gnuplot failed on " + script + ": " + text);
+        throw Error("gnuplot failed on " + script + ": " + text);
     }
 
     // The figures as numbers.

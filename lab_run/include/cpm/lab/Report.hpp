@@ -20,8 +20,9 @@ struct Report
     nlohmann::json figures;           ///< what summary.json's "report" holds
 };
 
-/// Draws the report of the run in `run_dir`. Throws std::runtime_error naming what is missing
-/// (the folder, its recording, gnuplot) or what failed (gnuplot's own message).
+/// Draws the report of the run in `run_dir`. Throws cpm::Error naming what is missing (the
+/// folder, its recording, gnuplot), why the recording cannot be read, or what failed (gnuplot's
+/// own message).
 Report make_report(const std::string& run_dir);
 
 }  // namespace cpm::lab
