@@ -1,6 +1,9 @@
 #include <cpm/lab/Report.hpp>
 
+#include "PageTemplate.hpp"
+
 #include <cpm/ChildProcess.hpp>
+#include <cpm/Error.hpp>
 #include <cpm/aruco/GateCourse.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 #include <cpm/vehicle/World.hpp>
@@ -10,15 +13,12 @@
 #include <cpm/rtdb/Recording.hpp>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <map>
-#include <optional>
+#include <set>
 #include <sstream>
-#include <tuple>
 #include <unistd.h>
 
 namespace cpm::lab {
@@ -31,20 +31,18 @@ namespace {
 /// clock counts from 0 at the run's start.
 constexpr uint64_t kRealClockSince = 1'000'000'000'000'000'000ull;
 
-struct Point
-{
-    double t, x, y, yaw;
-};
+using Line = std::vector<std::pair<double, double>>;
 
-struct Car
-{
-    std::vector<Point> path;                                 ///< true pose (vehicleObservation), else its own estimate
-    std::vector<std::pair<double, double>> speed, steering;  ///< t, value
-    std::vector<std::pair<double, std::string>> states;      ///< t, FSM state entered
-    std::vector<std::pair<double, double>> clearance;        ///< t, m to the nearest wall
-};
+// ---- What the run's folder holds -------------------------------------------------------------
 
-using Segment = std::array<double, 4>;
+/// A run's folder, read for its report.
+struct RunFolder
+{
+    nlohmann::json summary;               ///< summary.json as it is; {} when missing or not JSON
+    RecordedRun recording;
+    std::optional<vehicle::World> world;  ///< read and checked once: its walls, markers and gates
+    std::vector<Line> lanes;              ///< the lane graph's edges
+};
 
 nlohmann::json read_json(const std::string& path)
 {
@@ -57,18 +55,107 @@ nlohmann::json read_json(const std::string& path)
     }
 }
 
-std::string html_escape(const std::string& s)
+/// The topics figures_of() reads the samples of, and the members of those samples it reads: the
+/// rest is dropped as the recording is read, so that a long run's samples fit in memory.
+bool read_for_figures(const std::string& topic)
 {
-    std::string out;
-    for (char c : s) {
-        if (c == '<') out += "&lt;";
-        else if (c == '>') out += "&gt;";
-        else if (c == '&') out += "&amp;";
-        else if (c == '"') out += "&quot;";
-        else out += c;
-    }
-    return out;
+    return topic == "vehicleObservation" || topic == "vehicleState" || topic == "fsmStatus" || topic == "log";
 }
+
+nlohmann::json members_for_figures(nlohmann::json sample)
+{
+    static const std::set<std::string> members{"vehicle_id", "pose", "speed", "steering_servo", "state_type", "log_level", "stamp", "id", "content"};
+    nlohmann::json kept = nlohmann::json::object();
+    for (auto& member : sample.items()) {
+        if (members.count(member.key())) kept[member.key()] = std::move(member.value());
+    }
+    return kept;
+}
+
+RecordedRun read_recording(const rtdb::LoadedRecording& rec, const rtdb::IdlDecoder& types)
+{
+    RecordedRun run{.samples = rec.samples, .started_ns = rec.started_ns, .warning = rec.warning};
+    for (const auto& o : rec.store->search({.kind = rtdb::ObjectKind::instance})) {
+        RecordedInstance instance{.topic = o.topic, .stamped = o.data_time == "create_stamp"};
+        const bool decode = read_for_figures(o.topic);
+        for (const auto& s : rec.store->range(o.oid, 0, UINT64_MAX, rtdb::By::commit, 100'000'000).samples) {
+            RecordedSample sample{.data_ns = s.data_ns, .commit_ns = s.commit_ns};
+            if (decode) {
+                if (auto j = types.decode(o.type_name, s.payload)) sample.value = members_for_figures(std::move(*j));
+            }
+            instance.samples.push_back(std::move(sample));
+        }
+        run.instances.push_back(std::move(instance));
+    }
+    return run;
+}
+
+/// The recording, or a cpm::Error with the reader's message.
+rtdb::LoadedRecording load(const std::string& path)
+{
+    try {
+        return rtdb::load_recording(path);
+    } catch (const Error&) {
+        throw;
+    } catch (const std::runtime_error& e) {
+        throw Error(e.what());
+    }
+}
+
+/// The world summary.json names, if it names one that can be read.
+std::optional<vehicle::World> world_of(const nlohmann::json& summary)
+{
+    if (!summary.contains("world") || !summary.at("world").is_string() || summary.at("world").get<std::string>().empty()) return std::nullopt;
+    try {
+        return vehicle::World::load(summary.at("world"));
+    } catch (const std::exception&) {
+        return std::nullopt;  // a world that cannot be read: the report is drawn without the map
+    }
+}
+
+std::vector<Line> lanes_of(const nlohmann::json& summary)
+{
+    std::vector<Line> lanes;
+    if (!summary.contains("lanes") || !summary.at("lanes").is_string()) return lanes;
+    const auto graph = read_json(summary.at("lanes"));
+    if (!graph.is_object()) return lanes;
+    for (const auto& e : graph.value("edges", nlohmann::json::array())) {
+        Line line;
+        for (const auto& p : e["points"]) line.emplace_back(p[0], p[1]);
+        lanes.push_back(std::move(line));
+    }
+    return lanes;
+}
+
+RunFolder read_run_folder(const std::string& run_dir)
+{
+    const fs::path dir(run_dir);
+    if (!fs::is_directory(dir)) throw Error("no run folder " + run_dir);
+    const std::string recording = (dir / "recording.db").string();
+    if (!fs::exists(recording)) throw Error(run_dir + " holds no recording.db");
+    if (::access("/usr/bin/gnuplot", X_OK) != 0) throw Error("gnuplot is not installed (Debian package gnuplot-nox; ./lab installs it)");
+    const auto rec = load(recording);
+    if (rec.samples == 0) {
+        // Nothing to draw: say why instead of handing gnuplot empty data ("x range is invalid").
+        throw Error(recording + " holds no samples" + (rec.warning.empty() ? "" : ": " + rec.warning));
+    }
+    const rtdb::IdlDecoder* types = rec.types ? rec.types.get() : rtdb::IdlDecoder::lab_types();
+    if (!types) throw Error(recording + " carries no IDL and none is installed");
+    RunFolder run{.summary = read_json((dir / "summary.json").string()), .recording = read_recording(rec, *types)};
+    if (run.summary.is_null()) run.summary = nlohmann::json::object();
+    run.world = world_of(run.summary);
+    run.lanes = lanes_of(run.summary);
+    return run;
+}
+
+/// summary.json with the run folder's name as the run's name when it gives none.
+nlohmann::json named(nlohmann::json summary, const std::string& folder)
+{
+    if (summary.is_object() && !summary.contains("name")) summary["name"] = folder;
+    return summary;
+}
+
+// ---- The figures -------------------------------------------------------------------------------
 
 /// Why a run did not end well, as summary.json says it: its error, or that it was stopped early.
 std::string why_not_ok(const nlohmann::json& summary)
@@ -82,14 +169,211 @@ std::string why_not_ok(const nlohmann::json& summary)
     return "see summary.json";
 }
 
-std::string fixed(double v, int decimals)
+/// The run as summary.json outlines it.
+RunFigures outline_of(const nlohmann::json& summary)
 {
-    std::ostringstream s;
-    s.setf(std::ios::fixed);
-    s.precision(decimals);
-    s << v;
-    return s.str();
+    RunFigures f;
+    f.name = summary.value("name", std::string());
+    f.time = summary.value("time", std::string("?"));
+    f.lab_time_s = summary.value("lab_time_s", 0.0);
+    f.real_s = summary.value("real_s", 0.0);
+    f.ok = summary.value("ok", false);
+    if (!f.ok) f.why_not_ok = why_not_ok(summary);
+    return f;
 }
+
+/// In simulated time the stamps are lab time and the commits the history's real clock: a
+/// stamped topic's rate is per lab second there, and create -> commit means nothing.
+std::map<std::string, TopicFigures> topic_figures(const RecordedRun& recording, bool simulated)
+{
+    struct Span
+    {
+        uint64_t samples = 0, first = std::numeric_limits<uint64_t>::max(), last = 0;
+        std::vector<double> delay_ms;
+        bool stamped = true;
+    };
+    std::map<std::string, Span> spans;
+    for (const auto& o : recording.instances) {
+        auto& s = spans[o.topic];
+        s.stamped = o.stamped;
+        const bool lab_clock = simulated && o.stamped;
+        for (const auto& x : o.samples) {
+            ++s.samples;
+            s.first = std::min(s.first, lab_clock ? x.data_ns : x.commit_ns);
+            s.last = std::max(s.last, lab_clock ? x.data_ns : x.commit_ns);
+            if (o.stamped && !simulated && x.commit_ns >= x.data_ns) s.delay_ms.push_back(double(x.commit_ns - x.data_ns) * 1e-6);
+        }
+    }
+    std::map<std::string, TopicFigures> topics;
+    for (const auto& [name, s] : spans) {
+        TopicFigures& t = topics[name];
+        t.samples = s.samples;
+        t.rate_hz = s.last > s.first ? double(s.samples - 1) / (double(s.last - s.first) * 1e-9) : 0.0;
+        t.per_lab_second = simulated && s.stamped;
+        if (!s.delay_ms.empty()) {
+            t.delay_ms_p50 = percentile(s.delay_ms, 0.5);
+            t.delay_ms_p99 = percentile(s.delay_ms, 0.99);
+        }
+    }
+    return topics;
+}
+
+/// The figures' time 0: the first car sample's data time, else the recording's start.
+uint64_t lab_zero_ns(const RecordedRun& recording)
+{
+    uint64_t t0 = std::numeric_limits<uint64_t>::max();
+    for (const auto& o : recording.instances) {
+        if (o.topic != "vehicleObservation" && o.topic != "vehicleState") continue;
+        for (const auto& s : o.samples) t0 = std::min(t0, s.data_ns);
+    }
+    return t0 == std::numeric_limits<uint64_t>::max() ? recording.started_ns : t0;
+}
+
+double seconds_since(uint64_t t0, uint64_t t)
+{
+    return t >= t0 ? double(t - t0) * 1e-9 : -double(t0 - t) * 1e-9;
+}
+
+/// A log sample: a warning or an error to list, a timer's missed ticks to count.
+void read_log_sample(const nlohmann::json& j, const RecordedSample& s, uint64_t t0, bool simulated, RunFigures& f)
+{
+    const int level = j.value("log_level", 3);
+    // Simulated: a node on the lab clock stamps lab time; one on the real clock (the history)
+    // cannot be placed on the lab's time axis.
+    const uint64_t stamp = j.value(nlohmann::json::json_pointer("/stamp/nanoseconds"), uint64_t{0});
+    if (level <= 2) {
+        LogLine line{.error = level == 1, .node = j.value("id", ""), .text = j.value("content", "")};
+        if (!simulated) line.t_s = seconds_since(t0, s.commit_ns);
+        else if (stamp < kRealClockSince) line.t_s = seconds_since(t0, stamp);
+        f.log.push_back(std::move(line));
+    }
+    if (const auto missed = timer_missed_ticks(j.value("content", ""))) {
+        uint64_t& most = f.missed_ticks_by_timer[missed->first];
+        most = std::max(most, missed->second);
+    }
+}
+
+/// A car's sample of vehicleObservation, vehicleState or fsmStatus at lab time t.
+void read_car_sample(const std::string& topic, const nlohmann::json& j, double t, bool path_topic, RunFigures& f)
+{
+    CarFigures& car = f.cars[j.value("vehicle_id", 0)];
+    if (path_topic) {
+        const auto& pose = j.at("pose");
+        car.path.push_back({.t_s = t, .x_m = pose.value("x", 0.0), .y_m = pose.value("y", 0.0), .yaw_rad = pose.value("yaw", 0.0)});
+    }
+    if (topic == "vehicleState") {
+        car.speed_m_s.push_back({.t_s = t, .value = j.value("speed", 0.0)});
+        car.steering.push_back({.t_s = t, .value = j.value("steering_servo", 0.0)});
+    }
+    if (topic == "fsmStatus") car.states.push_back({.t_s = t, .state = j.value("state_type", std::string("?"))});
+}
+
+/// The cars' series and the log's lines; a car's path is its true one (vehicleObservation)
+/// when the run recorded any, else its own estimate (vehicleState).
+void read_samples(const RecordedRun& recording, RunFigures& f)
+{
+    const uint64_t t0 = lab_zero_ns(recording);
+    const bool observed = std::any_of(recording.instances.begin(), recording.instances.end(),
+                                      [](const RecordedInstance& o) { return o.topic == "vehicleObservation"; });
+    for (const auto& o : recording.instances) {
+        const bool path_topic = o.topic == (observed ? "vehicleObservation" : "vehicleState");
+        if (!path_topic && o.topic != "vehicleState" && o.topic != "fsmStatus" && o.topic != "log") continue;
+        for (const auto& s : o.samples) {
+            if (s.value.is_null()) continue;
+            if (o.topic == "log") read_log_sample(s.value, s, t0, f.simulated(), f);
+            else read_car_sample(o.topic, s.value, seconds_since(t0, s.data_ns), path_topic, f);
+        }
+    }
+}
+
+/// Each gate of the world judged on the car's path (the path of its reference point).
+void judge_gates(CarFigures& car, const vehicle::World& world)
+{
+    std::vector<aruco::PathPoint> path;
+    for (const auto& p : car.path) path.push_back({p.t_s, {p.x_m, p.y_m, p.yaw_rad}});
+    for (const auto& g : aruco::gate_passages(world, path, vehicle::VehicleParameters{}.width)) {
+        car.gates_passed += g.passed;
+        car.gates.push_back(g.passed ? GateFigures{.gate = g.gate + 1, .passed = true, .t_s = g.t, .offset_m = g.offset, .clearance_m = g.clearance}
+                                     : GateFigures{.gate = g.gate + 1});
+    }
+}
+
+/// A car's numbers, from its series.
+void complete_car(CarFigures& car, const vehicle::World* world)
+{
+    std::sort(car.path.begin(), car.path.end(), [](const CarPose& a, const CarPose& b) { return a.t_s < b.t_s; });
+    if (world && !world->walls().empty()) {
+        for (const auto& p : car.path) car.clearance_m.push_back({.t_s = p.t_s, .value = world->nearest_wall(p.x_m, p.y_m)});
+    }
+    for (size_t i = 1; i < car.path.size(); ++i) car.driven_m += std::hypot(car.path[i].x_m - car.path[i - 1].x_m, car.path[i].y_m - car.path[i - 1].y_m);
+    for (const auto& v : car.speed_m_s) car.max_speed_m_s = std::max(car.max_speed_m_s, v.value);
+    double clearance_min = std::numeric_limits<double>::infinity();
+    for (const auto& d : car.clearance_m) clearance_min = std::min(clearance_min, d.value);
+    if (std::isfinite(clearance_min)) car.min_clearance_m = clearance_min;
+    if (world && !world->gates().empty()) judge_gates(car, *world);
+}
+
+/// The smallest distance between two cars' reference points, every 0.1 s of the run.
+std::vector<TimedValue> closest_between(const std::map<int, CarFigures>& cars)
+{
+    std::vector<TimedValue> closest;
+    if (cars.size() < 2) return closest;
+    double end = 0;
+    for (const auto& [id, car] : cars) end = std::max(end, car.path.empty() ? 0.0 : car.path.back().t_s);
+    for (double t = 0; t <= end; t += 0.1) {
+        Line at;
+        for (const auto& [id, car] : cars) {
+            auto it = std::upper_bound(car.path.begin(), car.path.end(), t, [](double v, const CarPose& p) { return v < p.t_s; });
+            if (it == car.path.begin()) continue;
+            --it;
+            at.emplace_back(it->x_m, it->y_m);
+        }
+        double d = std::numeric_limits<double>::infinity();
+        for (size_t i = 0; i < at.size(); ++i) {
+            for (size_t k = i + 1; k < at.size(); ++k) d = std::min(d, std::hypot(at[i].first - at[k].first, at[i].second - at[k].second));
+        }
+        if (std::isfinite(d)) closest.push_back({.t_s = t, .value = d});
+    }
+    return closest;
+}
+
+// ---- The figures as summary.json's "report" --------------------------------------------------
+
+nlohmann::json json_of(const CarFigures& car, size_t gates)
+{
+    nlohmann::json c{{"driven_m", car.driven_m}, {"max_speed_mps", car.max_speed_m_s}, {"states_entered", car.states.size()}};
+    c["min_clearance_m"] = car.min_clearance_m ? nlohmann::json(*car.min_clearance_m) : nlohmann::json(nullptr);
+    if (!car.states.empty()) c["last_state"] = car.states.back().state;
+    if (gates > 0) {
+        nlohmann::json list = nlohmann::json::array();
+        for (const auto& g : car.gates) {
+            list.push_back(g.passed ? nlohmann::json{{"gate", g.gate}, {"passed", true}, {"t_s", g.t_s}, {"offset_m", g.offset_m}, {"clearance_m", g.clearance_m}}
+                                    : nlohmann::json{{"gate", g.gate}, {"passed", false}});
+        }
+        c["gates"] = list;
+        c["gates_passed"] = car.gates_passed;
+    }
+    return c;
+}
+
+nlohmann::json json_of(const RunFigures& f)
+{
+    nlohmann::json figures{{"cars", nlohmann::json::object()}, {"topics", nlohmann::json::object()}};
+    for (const auto& [id, car] : f.cars) figures["cars"][std::to_string(id)] = json_of(car, f.gates_in_world);
+    figures["min_distance_between_cars_m"] = f.min_distance_between_cars_m ? nlohmann::json(*f.min_distance_between_cars_m) : nlohmann::json(nullptr);
+    for (const auto& [name, t] : f.topics) {
+        nlohmann::json topic{{"samples", t.samples}, {"rate_hz", t.rate_hz}, {"rate_per", t.per_lab_second ? "lab second" : "real second"}};
+        if (t.delay_ms_p50) topic.update({{"delay_ms_p50", *t.delay_ms_p50}, {"delay_ms_p99", t.delay_ms_p99.value_or(0.0)}});
+        figures["topics"][name] = topic;
+    }
+    figures["missed_deadlines"] = f.missed_deadlines;
+    figures["missed_deadlines_by_timer"] = f.missed_ticks_by_timer;
+    figures["log_errors"] = f.log_errors;
+    figures["log_warnings"] = f.log_warnings;
+    return figures;
+}
+
+// ---- The plots ---------------------------------------------------------------------------------
 
 /// A gnuplot string literal.
 std::string quoted(const std::string& s)
@@ -99,356 +383,288 @@ std::string quoted(const std::string& s)
     return out + "\"";
 }
 
+Line points_of(const std::vector<TimedValue>& series)
+{
+    Line points;
+    for (const auto& v : series) points.emplace_back(v.t_s, v.value);
+    return points;
+}
+
+/// One gnuplot script drawing PNG files into a folder, beside the data files it reads.
+class PlotScript
+{
+public:
+    explicit PlotScript(fs::path folder) : folder_(std::move(folder))
+    {
+        fs::create_directories(folder_);
+        script_ << "set terminal png size 960,600 font ',11'\nset grid\nset key outside right top\n";
+    }
+
+    std::string path(const std::string& file) const { return (folder_ / file).string(); }
+    std::ostream& script() { return script_; }
+
+    /// Writes the data file `file`, a line "a b" per point; its path.
+    std::string data(const std::string& file, const Line& points)
+    {
+        std::ofstream out(path(file));
+        for (const auto& [a, b] : points) out << a << ' ' << b << '\n';
+        return path(file);
+    }
+
+    /// The next plot goes to the image `file`.
+    void image(const std::string& file)
+    {
+        images_.push_back(path(file));
+        script_ << "set output " << quoted(path(file)) << "\n";
+    }
+
+    /// A plot over lab time of each (data file, title) of `series`; none when there are none.
+    void over_time(const std::string& file, const std::string& title, const std::string& ylabel,
+                   const std::vector<std::pair<std::string, std::string>>& series, const std::string& with = "lines")
+    {
+        if (series.empty()) return;
+        image(file);
+        script_ << "set title " << quoted(title) << "\nset xlabel 'lab time (s)'\nset ylabel " << quoted(ylabel) << "\nunset size\nplot ";
+        for (size_t i = 0; i < series.size(); ++i) {
+            script_ << (i ? ", " : "") << quoted(series[i].first) << " using 1:2 with " << with << " lw 2 title " << quoted(series[i].second);
+        }
+        script_ << "\n";
+    }
+
+    /// Runs gnuplot on the script; the images' paths. Throws cpm::Error with gnuplot's log when it fails.
+    std::vector<std::string> draw()
+    {
+        const std::string file = path("plots.gp"), log = path("gnuplot.log");
+        std::ofstream(file) << script_.str();
+        cpm::ChildProcess gnuplot({.argv = {"/usr/bin/gnuplot", file}, .stdout_path = log, .stderr_path = log});
+        const auto end = gnuplot.wait(std::chrono::seconds(60));
+        if (!end || !end->ok()) {
+            std::ifstream in(log);
+            const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+            throw Error("gnuplot failed on " + file + ": " + text);
+        }
+        return images_;
+    }
+
+private:
+    fs::path folder_;
+    std::ostringstream script_;
+    std::vector<std::string> images_;
+};
+
+void write_map_layers(PlotScript& p, const RunFolder& run)
+{
+    std::ofstream walls(p.path("walls.dat")), markers(p.path("markers.dat")), lanes(p.path("lanes.dat"));
+    if (run.world) {
+        for (const auto& s : run.world->walls()) walls << s.x1 << ' ' << s.y1 << '\n' << s.x2 << ' ' << s.y2 << "\n\n";
+        for (const auto& m : run.world->markers()) markers << m.x << ' ' << m.y << ' ' << m.id << '\n';
+    }
+    for (const auto& line : run.lanes) {
+        for (const auto& [x, y] : line) lanes << x << ' ' << y << '\n';
+        lanes << "\n";
+    }
+}
+
+/// The cars' paths on the map: walls, markers, lanes.
+void plot_map(PlotScript& p, const RunFolder& run, const RunFigures& f)
+{
+    write_map_layers(p, run);
+    p.image("map.png");
+    p.script() << "set title 'paths on the map'\nset xlabel 'x (m)'\nset ylabel 'y (m)'\nset size ratio -1\nplot ";
+    std::vector<std::string> parts;
+    if (!run.lanes.empty()) parts.push_back(quoted(p.path("lanes.dat")) + " using 1:2 with lines lc rgb '#cccccc' title 'lanes'");
+    if (run.world && !run.world->walls().empty()) parts.push_back(quoted(p.path("walls.dat")) + " using 1:2 with lines lw 3 lc rgb 'black' title 'walls'");
+    if (run.world && !run.world->markers().empty()) {
+        parts.push_back(quoted(p.path("markers.dat")) + " using 1:2 with points pt 5 ps 1.2 lc rgb '#aa00aa' title 'markers'");
+    }
+    for (const auto& [id, car] : f.cars) {
+        Line xy;
+        for (const auto& pose : car.path) xy.emplace_back(pose.x_m, pose.y_m);
+        parts.push_back(quoted(p.data("path_" + std::to_string(id) + ".dat", xy)) + " using 1:2 with lines lw 2 title 'car " + std::to_string(id) + "'");
+    }
+    if (parts.empty()) parts.push_back("0 notitle");
+    for (size_t i = 0; i < parts.size(); ++i) p.script() << (i ? ", " : "") << parts[i];
+    p.script() << "\nset size noratio\n";
+}
+
+/// The state machines' states over time, a step for each state entered.
+void plot_states(PlotScript& p, const RunFigures& f)
+{
+    std::map<std::string, int> state_index;
+    for (const auto& [id, car] : f.cars) {
+        for (const auto& s : car.states) state_index.emplace(s.state, int(state_index.size()));
+    }
+    std::vector<std::pair<std::string, std::string>> states;
+    for (const auto& [id, car] : f.cars) {
+        if (car.states.empty()) continue;
+        Line steps;
+        const double end = car.path.empty() ? car.states.back().t_s : std::max(car.states.back().t_s, car.path.back().t_s);
+        for (const auto& s : car.states) steps.emplace_back(s.t_s, state_index[s.state]);
+        steps.emplace_back(end, state_index[car.states.back().state]);
+        states.emplace_back(p.data("fsm_" + std::to_string(id) + ".dat", steps), "car " + std::to_string(id));
+    }
+    if (states.empty()) return;
+    p.script() << "set ytics (";
+    bool first = true;
+    for (const auto& [name, i] : state_index) {
+        p.script() << (first ? "" : ", ") << quoted(name) << " " << i;
+        first = false;
+    }
+    p.script() << ")\nset yrange [-0.5:" << state_index.size() - 0.5 << "]\n";
+    p.over_time("fsm.png", "state machine: state over time", "state", states, "steps");
+    p.script() << "set ytics autofreq\nset yrange [*:*]\n";
+}
+
+/// Speed, steering, states and clearance of each car over time, the closest two cars' distance.
+void plot_cars_over_time(PlotScript& p, const RunFigures& f)
+{
+    std::vector<std::pair<std::string, std::string>> speed, steering, clearance;
+    for (const auto& [id, car] : f.cars) {
+        const std::string n = std::to_string(id);
+        if (!car.speed_m_s.empty()) speed.emplace_back(p.data("speed_" + n + ".dat", points_of(car.speed_m_s)), "car " + n);
+        if (!car.steering.empty()) steering.emplace_back(p.data("steering_" + n + ".dat", points_of(car.steering)), "car " + n);
+        if (!car.clearance_m.empty()) clearance.emplace_back(p.data("clearance_" + n + ".dat", points_of(car.clearance_m)), "car " + n);
+    }
+    p.over_time("speed.png", "speed", "m/s", speed);
+    p.over_time("steering.png", "steering (servo command)", "-1 .. 1", steering);
+    plot_states(p, f);
+    p.over_time("clearance.png", "clearance to the nearest wall (reference point)", "m", clearance);
+    if (!f.closest_m.empty()) {
+        p.over_time("cars.png", "smallest distance between two cars (reference points)", "m", {{p.data("closest.dat", points_of(f.closest_m)), "closest pair"}});
+    }
+}
+
+/// Samples per second by topic.
+void plot_rates(PlotScript& p, const RunFigures& f)
+{
+    {
+        std::ofstream out(p.path("rates.dat"));
+        int i = 0;
+        for (const auto& [name, t] : f.topics) out << i++ << ' ' << quoted(name) << ' ' << t.rate_hz << '\n';
+    }
+    p.image("topics.png");
+    // A log scale: the lab clock's topics in simulated time run thousands a second beside the
+    // cars' 50 Hz.
+    p.script() << "set title '" << (f.simulated() ? "samples per second by topic (stamped topics per lab second, the others per real second)"
+                                                  : "samples per second, by topic")
+               << "'\nset xlabel ''\nset ylabel 'Hz (log scale)'\nset logscale y\nset yrange [0.1:*]\nset style fill solid 0.6\nset boxwidth 0.7\n"
+                  "set xtics rotate by -40\nplot " << quoted(p.path("rates.dat")) << " using 1:3:xtic(2) with boxes notitle\n"
+                  "set xtics norotate\nunset logscale y\nset yrange [*:*]\n";
+}
+
+/// Draws the plots into the folder `plots`; their paths.
+std::vector<std::string> draw_plots(const fs::path& plots, const RunFolder& run, const RunFigures& f)
+{
+    PlotScript p(plots);
+    plot_map(p, run, f);
+    plot_cars_over_time(p, f);
+    plot_rates(p, f);
+    return p.draw();
+}
+
+// ---- The page ----------------------------------------------------------------------------------
+
+std::string fixed(double v, int decimals)
+{
+    std::ostringstream s;
+    s.setf(std::ios::fixed);
+    s.precision(decimals);
+    s << v;
+    return s.str();
+}
+
+detail::PageValues car_row(int id, const CarFigures& car, size_t gates)
+{
+    return {.text = {{"car", std::to_string(id)},
+                     {"driven_m", fixed(car.driven_m, 2)},
+                     {"max_speed_m_s", fixed(car.max_speed_m_s, 2)},
+                     {"min_clearance_m", car.min_clearance_m ? fixed(*car.min_clearance_m, 3) : "-"},
+                     {"last_state", car.states.empty() ? "-" : car.states.back().state},
+                     {"gates_passed", std::to_string(car.gates_passed)}},
+            .flags = {{"all_gates_passed", car.gates_passed >= int(gates)}}};
+}
+
+detail::PageValues topic_row(const std::string& name, const TopicFigures& t)
+{
+    return {.text = {{"topic", name},
+                     {"samples", std::to_string(t.samples)},
+                     {"rate_hz", fixed(t.rate_hz, 1)},
+                     {"delay_ms_p50", t.delay_ms_p50 ? fixed(*t.delay_ms_p50, 2) : "-"},
+                     {"delay_ms_p99", t.delay_ms_p99 ? fixed(*t.delay_ms_p99, 2) : "-"}}};
+}
+
+detail::PageValues log_row(const LogLine& l)
+{
+    return {.text = {{"t_s", l.t_s ? fixed(*l.t_s, 3) : "-"}, {"level", l.error ? "error" : "warn"}, {"node", l.node}, {"text", l.text}},
+            .flags = {{"error", l.error}}};
+}
+
+/// The page's lists: images, cars, topics, timers, log lines.
+void fill_lists(detail::PageValues& v, const RunFigures& f, const std::vector<std::string>& images)
+{
+    auto& lists = v.lists;
+    for (const char* key : {"images", "cars", "topics", "timers", "log"}) lists[key];
+    for (const auto& file : images) lists["images"].push_back({.text = {{"file", file}}});
+    // In the order summary.json's "report" lists the cars: by id as text (12 before 6).
+    std::map<std::string, std::pair<int, const CarFigures*>> by_text;
+    for (const auto& [id, car] : f.cars) by_text.emplace(std::to_string(id), std::pair{id, &car});
+    for (const auto& [text, car] : by_text) lists["cars"].push_back(car_row(car.first, *car.second, f.gates_in_world));
+    for (const auto& [name, t] : f.topics) lists["topics"].push_back(topic_row(name, t));
+    for (const auto& [timer, n] : f.missed_ticks_by_timer) lists["timers"].push_back({.text = {{"timer", timer}, {"missed", std::to_string(n)}}});
+    for (const auto& l : f.log) lists["log"].push_back(log_row(l));
+}
+
 }  // namespace
+
+RunFigures figures_of(const RecordedRun& recording, const nlohmann::json& summary, const vehicle::World* world)
+{
+    RunFigures f = outline_of(summary);
+    f.recorded_samples = recording.samples;
+    f.recording_warning = recording.warning;
+    f.topics = topic_figures(recording, f.simulated());
+    read_samples(recording, f);
+    for (auto& [id, car] : f.cars) complete_car(car, world);
+    f.gates_in_world = world ? world->gates().size() : 0;
+    f.closest_m = closest_between(f.cars);
+    for (const auto& c : f.closest_m) f.min_distance_between_cars_m = std::min(f.min_distance_between_cars_m.value_or(c.value), c.value);
+    for (const auto& [timer, n] : f.missed_ticks_by_timer) f.missed_deadlines += n;
+    for (const auto& l : f.log) ++(l.error ? f.log_errors : f.log_warnings);
+    return f;
+}
+
+std::string report_page(const RunFigures& f, const std::vector<std::string>& images)
+{
+    detail::PageValues v{.text = {{"name", f.name},
+                                  {"time", f.time},
+                                  {"lab_time_s", fixed(f.lab_time_s, 1)},
+                                  {"real_s", fixed(f.real_s, 1)},
+                                  {"why_not_ok", f.why_not_ok},
+                                  {"recorded_samples", std::to_string(f.recorded_samples)},
+                                  {"recording_warning", f.recording_warning},
+                                  {"gates", std::to_string(f.gates_in_world)},
+                                  {"missed_deadlines", std::to_string(f.missed_deadlines)},
+                                  {"log_count", std::to_string(f.log.size())}},
+                         .flags = {{"ok", f.ok},
+                                   {"recording_warned", !f.recording_warning.empty()},
+                                   {"with_gates", f.gates_in_world > 0},
+                                   {"simulated", f.simulated()},
+                                   {"any_missed", !f.missed_ticks_by_timer.empty()},
+                                   {"any_log", !f.log.empty()}}};
+    fill_lists(v, f, images);
+    return detail::fill(detail::kReportPage, v);
+}
 
 Report make_report(const std::string& run_dir)
 {
     const fs::path dir(run_dir);
-    if (!fs::is_directory(dir)) throw std::runtime_error("no run folder " + run_dir);
-    const std::string recording = (dir / "recording.db").string();
-    if (!fs::exists(recording)) throw std::runtime_error(run_dir + " holds no recording.db");
-    if (::access("/usr/bin/gnuplot", X_OK) != 0) {
-        throw std::runtime_error("gnuplot is not installed (Debian package gnuplot-nox; ./lab installs it)");
-    }
-    const auto rec = rtdb::load_recording(recording);
-    if (rec.samples == 0) {
-        // Nothing to draw: say why instead of handing gnuplot empty data ("x range is invalid").
-        throw std::runtime_error(recording + " holds no samples" + (rec.warning.empty() ? "" : ": " + rec.warning));
-    }
-    const rtdb::IdlDecoder* types = rec.types ? rec.types.get() : rtdb::IdlDecoder::lab_types();
-    if (!types) throw std::runtime_error(recording + " carries no IDL and none is installed");
-    nlohmann::json summary = read_json((dir / "summary.json").string());
-    if (summary.is_null()) summary = nlohmann::json::object();
-
-    // The map: walls and markers of the world, the lanes.
-    std::vector<Segment> walls;
-    std::vector<std::array<double, 3>> markers;  // x, y, id
-    std::vector<std::vector<std::pair<double, double>>> lanes;
-    std::optional<vehicle::World> world;  // read and checked once: its walls, markers and gates
-    if (summary.contains("world") && summary["world"].is_string() && !summary["world"].get<std::string>().empty()) {
-        try {
-            world = vehicle::World::load(summary["world"]);
-        } catch (const std::exception&) {
-            // a world that cannot be read: the report is drawn without the map
-        }
-    }
-    if (world) {
-        for (const auto& w : world->walls()) walls.push_back({w.x1, w.y1, w.x2, w.y2});
-        for (const auto& m : world->markers()) markers.push_back({m.x, m.y, double(m.id)});
-    }
-    if (summary.contains("lanes") && summary["lanes"].is_string()) {
-        const auto graph = read_json(summary["lanes"]);
-        if (graph.is_object()) {
-            for (const auto& e : graph.value("edges", nlohmann::json::array())) {
-                std::vector<std::pair<double, double>> line;
-                for (const auto& p : e["points"]) line.emplace_back(p[0], p[1]);
-                lanes.push_back(std::move(line));
-            }
-        }
-    }
-
-    // Every sample of the topics the plots need, by data time from the run's first one.
-    std::map<int, Car> cars;
-    // In simulated time the stamps are lab time and the commits the history's real clock: a
-    // stamped topic's rate is per lab second there, and create -> commit means nothing.
-    const bool simulated = summary.value("time", std::string()) == "simulated";
-    struct TopicFigures
-    {
-        uint64_t samples = 0, first = std::numeric_limits<uint64_t>::max(), last = 0;
-        std::vector<double> delay_ms;
-        bool stamped = true;
-        double rate_hz() const { return last > first ? double(samples - 1) / (double(last - first) * 1e-9) : 0.0; }
-    };
-    std::map<std::string, TopicFigures> topics;
-    std::vector<std::tuple<double, std::string, std::string, std::string>> log_lines;  // t, level, node, text
-    std::map<std::string, uint64_t> missed_by_timer;  // the nodes' timers' own counts, from the log
-    uint64_t t0 = std::numeric_limits<uint64_t>::max();
-    std::vector<std::pair<rtdb::ObjectInfo, std::vector<rtdb::StoredSample>>> all;
-    for (const auto& o : rec.store->search({.kind = rtdb::ObjectKind::instance})) {
-        auto samples = rec.store->range(o.oid, 0, UINT64_MAX, rtdb::By::commit, 100'000'000).samples;
-        auto& f = topics[o.topic];
-        f.stamped = o.data_time == "create_stamp";
-        const bool lab_clock = simulated && f.stamped;
-        for (const auto& s : samples) {
-            ++f.samples;
-            f.first = std::min(f.first, lab_clock ? s.data_ns : s.commit_ns);
-            f.last = std::max(f.last, lab_clock ? s.data_ns : s.commit_ns);
-            if (f.stamped && !simulated && s.commit_ns >= s.data_ns) f.delay_ms.push_back(double(s.commit_ns - s.data_ns) * 1e-6);
-            if (o.topic == "vehicleObservation" || o.topic == "vehicleState") t0 = std::min(t0, s.data_ns);
-        }
-        all.emplace_back(o, std::move(samples));
-    }
-    if (t0 == std::numeric_limits<uint64_t>::max()) t0 = rec.started_ns;
-    auto seconds = [&](uint64_t t) { return t >= t0 ? double(t - t0) * 1e-9 : -double(t0 - t) * 1e-9; };
-    bool observed = false;
-    for (const auto& [o, samples] : all) observed = observed || o.topic == "vehicleObservation";
-    for (const auto& [o, samples] : all) {
-        const bool path_topic = o.topic == (observed ? "vehicleObservation" : "vehicleState");
-        if (!path_topic && o.topic != "vehicleState" && o.topic != "fsmStatus" && o.topic != "log") continue;
-        for (const auto& s : samples) {
-            const auto j = types->decode(o.type_name, s.payload);
-            if (!j) continue;
-            const double t = seconds(s.data_ns);
-            if (o.topic == "log") {
-                const int level = j->value("log_level", 3);
-                // Simulated: a node on the lab clock stamps lab time; one on the real clock (the
-                // history) cannot be placed on the lab's time axis.
-                const uint64_t stamp = j->value(nlohmann::json::json_pointer("/stamp/nanoseconds"), uint64_t{0});
-                const double when = !simulated ? seconds(s.commit_ns) : stamp < kRealClockSince ? seconds(stamp) : std::nan("");
-                if (level <= 2) log_lines.emplace_back(when, level == 1 ? "error" : "warn", j->value("id", ""), j->value("content", ""));
-                if (const auto missed = timer_missed_ticks(j->value("content", ""))) {
-                    missed_by_timer[missed->first] = std::max(missed_by_timer[missed->first], missed->second);
-                }
-                continue;
-            }
-            Car& car = cars[j->value("vehicle_id", 0)];
-            if (path_topic) car.path.push_back({t, j->at("pose").value("x", 0.0), j->at("pose").value("y", 0.0), j->at("pose").value("yaw", 0.0)});
-            if (o.topic == "vehicleState") {
-                car.speed.emplace_back(t, j->value("speed", 0.0));
-                car.steering.emplace_back(t, j->value("steering_servo", 0.0));
-            }
-            if (o.topic == "fsmStatus") car.states.emplace_back(t, j->value("state_type", std::string("?")));
-        }
-    }
-    for (auto& [id, car] : cars) {
-        std::sort(car.path.begin(), car.path.end(), [](const Point& a, const Point& b) { return a.t < b.t; });
-        if (walls.empty()) continue;
-        for (const auto& p : car.path) car.clearance.emplace_back(p.t, world->nearest_wall(p.x, p.y));
-    }
-    // The smallest distance between two cars' reference points, every 0.1 s of the run.
-    std::vector<std::pair<double, double>> closest;
-    if (cars.size() >= 2) {
-        double end = 0;
-        for (const auto& [id, car] : cars) end = std::max(end, car.path.empty() ? 0.0 : car.path.back().t);
-        for (double t = 0; t <= end; t += 0.1) {
-            std::vector<std::pair<double, double>> at;
-            for (const auto& [id, car] : cars) {
-                auto it = std::upper_bound(car.path.begin(), car.path.end(), t, [](double v, const Point& p) { return v < p.t; });
-                if (it == car.path.begin()) continue;
-                --it;
-                at.emplace_back(it->x, it->y);
-            }
-            double d = std::numeric_limits<double>::infinity();
-            for (size_t i = 0; i < at.size(); ++i) {
-                for (size_t k = i + 1; k < at.size(); ++k) d = std::min(d, std::hypot(at[i].first - at[k].first, at[i].second - at[k].second));
-            }
-            if (std::isfinite(d)) closest.emplace_back(t, d);
-        }
-    }
-
-    // The data files and one gnuplot script.
-    const fs::path plots = dir / "plots";
-    fs::create_directories(plots);
-    auto write_series = [&](const std::string& name, const std::vector<std::pair<double, double>>& v) {
-        std::ofstream out(plots / name);
-        for (const auto& [a, b] : v) out << a << ' ' << b << '\n';
-        return (plots / name).string();
-    };
-    std::ostringstream gp;
-    gp << "set terminal png size 960,600 font ',11'\nset grid\nset key outside right top\n";
-    Report report;
-    auto image = [&](const std::string& name) {
-        const std::string path = (plots / name).string();
-        report.images.push_back(path);
-        gp << "set output " << quoted(path) << "\n";
-    };
-    auto series_plot = [&](const std::string& file, const std::string& title, const std::string& ylabel,
-                           const std::vector<std::pair<std::string, std::string>>& data, const std::string& with = "lines") {
-        if (data.empty()) return;
-        image(file);
-        gp << "set title " << quoted(title) << "\nset xlabel 'lab time (s)'\nset ylabel " << quoted(ylabel) << "\nunset size\nplot ";
-        for (size_t i = 0; i < data.size(); ++i) gp << (i ? ", " : "") << quoted(data[i].first) << " using 1:2 with " << with << " lw 2 title " << quoted(data[i].second);
-        gp << "\n";
-    };
-
-    // The map.
-    {
-        std::ofstream w(plots / "walls.dat");
-        for (const auto& s : walls) w << s[0] << ' ' << s[1] << '\n' << s[2] << ' ' << s[3] << "\n\n";
-        std::ofstream m(plots / "markers.dat");
-        for (const auto& k : markers) m << k[0] << ' ' << k[1] << ' ' << int(k[2]) << '\n';
-        std::ofstream l(plots / "lanes.dat");
-        for (const auto& line : lanes) {
-            for (const auto& [x, y] : line) l << x << ' ' << y << '\n';
-            l << "\n";
-        }
-        image("map.png");
-        gp << "set title 'paths on the map'\nset xlabel 'x (m)'\nset ylabel 'y (m)'\nset size ratio -1\nplot ";
-        std::vector<std::string> parts;
-        if (!lanes.empty()) parts.push_back(quoted((plots / "lanes.dat").string()) + " using 1:2 with lines lc rgb '#cccccc' title 'lanes'");
-        if (!walls.empty()) parts.push_back(quoted((plots / "walls.dat").string()) + " using 1:2 with lines lw 3 lc rgb 'black' title 'walls'");
-        if (!markers.empty()) parts.push_back(quoted((plots / "markers.dat").string()) + " using 1:2 with points pt 5 ps 1.2 lc rgb '#aa00aa' title 'markers'");
-        for (const auto& [id, car] : cars) {
-            std::vector<std::pair<double, double>> xy;
-            for (const auto& p : car.path) xy.emplace_back(p.x, p.y);
-            parts.push_back(quoted(write_series("path_" + std::to_string(id) + ".dat", xy)) + " using 1:2 with lines lw 2 title 'car " + std::to_string(id) + "'");
-        }
-        if (parts.empty()) parts.push_back("0 notitle");
-        for (size_t i = 0; i < parts.size(); ++i) gp << (i ? ", " : "") << parts[i];
-        gp << "\nset size noratio\n";
-    }
-    std::vector<std::pair<std::string, std::string>> speed, steering, clearance, states;
-    std::map<std::string, int> state_index;
-    for (const auto& [id, car] : cars) {
-        const std::string n = std::to_string(id);
-        if (!car.speed.empty()) speed.emplace_back(write_series("speed_" + n + ".dat", car.speed), "car " + n);
-        if (!car.steering.empty()) steering.emplace_back(write_series("steering_" + n + ".dat", car.steering), "car " + n);
-        if (!car.clearance.empty()) clearance.emplace_back(write_series("clearance_" + n + ".dat", car.clearance), "car " + n);
-        for (const auto& [t, s] : car.states) state_index.emplace(s, int(state_index.size()));
-    }
-    for (const auto& [id, car] : cars) {
-        if (car.states.empty()) continue;
-        std::vector<std::pair<double, double>> steps;
-        const double end = car.path.empty() ? car.states.back().first : std::max(car.states.back().first, car.path.back().t);
-        for (const auto& [t, s] : car.states) steps.emplace_back(t, state_index[s]);
-        steps.emplace_back(end, state_index[car.states.back().second]);
-        states.emplace_back(write_series("fsm_" + std::to_string(id) + ".dat", steps), "car " + std::to_string(id));
-    }
-    series_plot("speed.png", "speed", "m/s", speed);
-    series_plot("steering.png", "steering (servo command)", "-1 .. 1", steering);
-    if (!states.empty()) {
-        gp << "set ytics (";
-        bool first = true;
-        for (const auto& [name, i] : state_index) {
-            gp << (first ? "" : ", ") << quoted(name) << " " << i;
-            first = false;
-        }
-        gp << ")\nset yrange [-0.5:" << state_index.size() - 0.5 << "]\n";
-        series_plot("fsm.png", "state machine: state over time", "state", states, "steps");
-        gp << "set ytics autofreq\nset yrange [*:*]\n";
-    }
-    series_plot("clearance.png", "clearance to the nearest wall (reference point)", "m", clearance);
-    if (!closest.empty()) series_plot("cars.png", "smallest distance between two cars (reference points)", "m", {{write_series("closest.dat", closest), "closest pair"}});
-    {
-        std::ofstream out(plots / "rates.dat");
-        int i = 0;
-        for (const auto& [name, f] : topics) out << i++ << ' ' << quoted(name) << ' ' << f.rate_hz() << '\n';
-        image("topics.png");
-        // A log scale: the lab clock's topics in simulated time run thousands a second beside
-        // the cars' 50 Hz.
-        gp << "set title '" << (simulated ? "samples per second by topic (stamped topics per lab second, the others per real second)"
-                                           : "samples per second, by topic")
-           << "'\nset xlabel ''\nset ylabel 'Hz (log scale)'\nset logscale y\nset yrange [0.1:*]\nset style fill solid 0.6\nset boxwidth 0.7\n"
-              "set xtics rotate by -40\nplot " << quoted((plots / "rates.dat").string()) << " using 1:3:xtic(2) with boxes notitle\n"
-              "set xtics norotate\nunset logscale y\nset yrange [*:*]\n";
-    }
-    const std::string script = (plots / "plots.gp").string();
-    std::ofstream(script) << gp.str();
-    cpm::ChildProcess gnuplot({.argv = {"/usr/bin/gnuplot", script}, .stdout_path = (plots / "gnuplot.log").string(),
-                               .stderr_path = (plots / "gnuplot.log").string()});
-    const auto end = gnuplot.wait(std::chrono::seconds(60));
-    if (!end || !end->ok()) {
-        std::ifstream log(plots / "gnuplot.log");
-        const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
-        throw std::runtime_error("gnuplot failed on " + script + ": " + text);
-    }
-
-    // The figures as numbers.
-    nlohmann::json figures{{"cars", nlohmann::json::object()}, {"topics", nlohmann::json::object()}};
-    for (const auto& [id, car] : cars) {
-        double driven = 0, v_max = 0, clear_min = std::numeric_limits<double>::infinity();
-        for (size_t i = 1; i < car.path.size(); ++i) driven += std::hypot(car.path[i].x - car.path[i - 1].x, car.path[i].y - car.path[i - 1].y);
-        for (const auto& [t, v] : car.speed) v_max = std::max(v_max, v);
-        for (const auto& [t, d] : car.clearance) clear_min = std::min(clear_min, d);
-        nlohmann::json c{{"driven_m", driven}, {"max_speed_mps", v_max}, {"states_entered", car.states.size()}};
-        c["min_clearance_m"] = std::isfinite(clear_min) ? nlohmann::json(clear_min) : nlohmann::json(nullptr);
-        if (!car.states.empty()) c["last_state"] = car.states.back().second;
-        if (world && !world->gates().empty()) {
-            // Each gate of the world judged on the car's path (the path of its reference point).
-            std::vector<aruco::PathPoint> path;
-            for (const auto& p : car.path) path.push_back({p.t, {p.x, p.y, p.yaw}});
-            nlohmann::json list = nlohmann::json::array();
-            int passed = 0;
-            for (const auto& g : aruco::gate_passages(*world, path, vehicle::VehicleParameters{}.width)) {
-                passed += g.passed;
-                list.push_back(g.passed ? nlohmann::json{{"gate", g.gate + 1}, {"passed", true}, {"t_s", g.t}, {"offset_m", g.offset}, {"clearance_m", g.clearance}}
-                                        : nlohmann::json{{"gate", g.gate + 1}, {"passed", false}});
-            }
-            c["gates"] = list;
-            c["gates_passed"] = passed;
-        }
-        figures["cars"][std::to_string(id)] = c;
-    }
-    double closest_min = std::numeric_limits<double>::infinity();
-    for (const auto& [t, d] : closest) closest_min = std::min(closest_min, d);
-    figures["min_distance_between_cars_m"] = std::isfinite(closest_min) ? nlohmann::json(closest_min) : nlohmann::json(nullptr);
-    for (const auto& [name, f] : topics) {
-        nlohmann::json t{{"samples", f.samples}, {"rate_hz", f.rate_hz()}, {"rate_per", simulated && f.stamped ? "lab second" : "real second"}};
-        if (!f.delay_ms.empty()) t.update({{"delay_ms_p50", percentile(f.delay_ms, 0.5)}, {"delay_ms_p99", percentile(f.delay_ms, 0.99)}});
-        figures["topics"][name] = t;
-    }
-    size_t errors = 0, warnings = 0;
-    for (const auto& l : log_lines) (std::get<1>(l) == "error" ? errors : warnings)++;
-    uint64_t missed = 0;
-    for (const auto& [timer, n] : missed_by_timer) missed += n;
-    figures["missed_deadlines"] = missed;
-    figures["missed_deadlines_by_timer"] = missed_by_timer;
-    figures["log_errors"] = errors;
-    figures["log_warnings"] = warnings;
-    report.figures = figures;
-
-    // The page: the images beside it, nothing fetched from elsewhere; a script counts the images
-    // that loaded (data-images, data-images-loaded on <body>) for a browser test to read.
-    std::ostringstream h;
-    const std::string name = summary.value("name", fs::path(run_dir).filename().string());
-    h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>cpm run " << html_escape(name) << "</title>\n"
-      << "<style>body{font-family:sans-serif;margin:2em;max-width:1000px}table{border-collapse:collapse}"
-         "td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}td:first-child,th:first-child{text-align:left}"
-         ".bad{color:#b00}img{max-width:100%;border:1px solid #eee;margin:0.5em 0}</style>\n"
-      << "<script>window.addEventListener('load',()=>{const i=[...document.images];document.body.dataset.images=i.length;"
-         "document.body.dataset.imagesLoaded=i.filter(x=>x.complete&&x.naturalWidth>0).length;});</script></head>\n<body>\n"
-      << "<h1>Run " << html_escape(name) << "</h1>\n<p>" << html_escape(summary.value("time", std::string("?"))) << " time, "
-      << fixed(summary.value("lab_time_s", 0.0), 1) << " s of lab time in " << fixed(summary.value("real_s", 0.0), 1) << " s; "
-      << (summary.value("ok", false) ? "every process ran its time" : "<span class=\"bad\">the run did not end well: " + html_escape(why_not_ok(summary)) + "</span>")
-      << ". Recording: <code>recording.db</code> (" << rec.samples << " samples; ask it with <code>cpm history --file recording.db</code>)"
-      << (rec.warning.empty() ? std::string() : "; <span class=\"bad\">" + html_escape(rec.warning) + "</span>") << ".</p>\n";
-    const bool with_gates = world && !world->gates().empty();
-    h << "<h2>Cars</h2>\n<table><tr><th>car</th><th>driven (m)</th><th>top speed (m/s)</th><th>least clearance to a wall (m)</th><th>last state</th>"
-      << (with_gates ? "<th>gates passed</th>" : "") << "</tr>\n";
-    for (const auto& [id, c] : figures["cars"].items()) {
-        h << "<tr><td>" << id << "</td><td>" << fixed(c["driven_m"], 2) << "</td><td>" << fixed(c["max_speed_mps"], 2) << "</td><td>"
-          << (c["min_clearance_m"].is_null() ? "-" : fixed(c["min_clearance_m"], 3)) << "</td><td>"
-          << html_escape(c.value("last_state", std::string("-"))) << "</td>";
-        if (with_gates) {
-            const int passed = c.value("gates_passed", 0);
-            h << "<td" << (passed < int(world->gates().size()) ? " class=\"bad\"" : "") << ">" << passed << " of " << world->gates().size() << "</td>";
-        }
-        h << "</tr>\n";
-    }
-    h << "</table>\n";
-    for (const auto& img : report.images) {
-        const std::string file = fs::path(img).filename().string();
-        h << "<div><img src=\"plots/" << file << "\" alt=\"" << file << "\"></div>\n";
-    }
-    h << "<h2>Topics</h2>\n";
-    if (simulated) h << "<p>Simulated time: rates of stamped topics per second of lab time; their delay create → commit is not measured (two clocks).</p>\n";
-    h << "<table><tr><th>topic</th><th>samples</th><th>rate (Hz)</th><th>delay create → commit p50 (ms)</th><th>p99 (ms)</th></tr>\n";
-    for (const auto& [t, f] : figures["topics"].items()) {
-        h << "<tr><td>" << html_escape(t) << "</td><td>" << f["samples"] << "</td><td>" << fixed(f["rate_hz"], 1) << "</td><td>"
-          << (f.contains("delay_ms_p50") ? fixed(f["delay_ms_p50"], 2) : "-") << "</td><td>"
-          << (f.contains("delay_ms_p99") ? fixed(f["delay_ms_p99"], 2) : "-") << "</td></tr>\n";
-    }
-    h << "</table>\n<h2>Missed deadlines (" << missed << ")</h2>\n<p>Ticks the nodes' timers skipped because a tick ended after the next "
-         "one was due, as the timers said in the log.</p>\n";
-    if (!missed_by_timer.empty()) {
-        h << "<table><tr><th>timer</th><th>ticks missed</th></tr>\n";
-        for (const auto& [timer, n] : missed_by_timer) h << "<tr><td>" << html_escape(timer) << "</td><td>" << n << "</td></tr>\n";
-        h << "</table>\n";
-    }
-    h << "<h2>Warnings and errors (" << log_lines.size() << ")</h2>\n";
-    if (log_lines.empty()) h << "<p>None.</p>\n";
-    else {
-        h << "<table><tr><th>time (s)</th><th>level</th><th>node</th><th>message</th></tr>\n";
-        for (const auto& [t, level, node, text] : log_lines) {
-            h << "<tr><td>" << (std::isfinite(t) ? fixed(t, 3) : "-") << "</td><td" << (level == "error" ? " class=\"bad\"" : "") << ">" << level << "</td><td>"
-              << html_escape(node) << "</td><td style=\"text-align:left\">" << html_escape(text) << "</td></tr>\n";
-        }
-        h << "</table>\n";
-    }
-    h << "</body></html>\n";
-    report.html = (dir / "report.html").string();
-    std::ofstream(report.html) << h.str();
-    summary["report"] = figures;
+    const RunFolder run = read_run_folder(run_dir);
+    const RunFigures figures = figures_of(run.recording, named(run.summary, dir.filename().string()), run.world ? &*run.world : nullptr);
+    Report report{.html = (dir / "report.html").string(), .images = draw_plots(dir / "plots", run, figures), .figures = json_of(figures)};
+    std::vector<std::string> files;
+    for (const auto& image : report.images) files.push_back(fs::path(image).filename().string());
+    std::ofstream(report.html) << report_page(figures, files);
+    nlohmann::json summary = run.summary;
+    summary["report"] = report.figures;
     std::ofstream(dir / "summary.json") << summary.dump(2) << "\n";
     return report;
 }
