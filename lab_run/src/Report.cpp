@@ -4,6 +4,7 @@
 
 #include <cpm/ChildProcess.hpp>
 #include <cpm/Error.hpp>
+#include <cpm/topics.hpp>
 #include <cpm/aruco/GateCourse.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 #include <cpm/vehicle/World.hpp>
@@ -59,7 +60,7 @@ nlohmann::json read_json(const std::string& path)
 /// rest is dropped as the recording is read, so that a long run's samples fit in memory.
 bool read_for_figures(const std::string& topic)
 {
-    return topic == "vehicleObservation" || topic == "vehicleState" || topic == "fsmStatus" || topic == "log";
+    return topic == topics::vehicle_observation.name || topic == topics::vehicle_state.name || topic == topics::fsm_status.name || topic == topics::log.name;
 }
 
 nlohmann::json members_for_figures(nlohmann::json sample)
@@ -223,7 +224,7 @@ uint64_t lab_zero_ns(const RecordedRun& recording)
 {
     uint64_t t0 = std::numeric_limits<uint64_t>::max();
     for (const auto& o : recording.instances) {
-        if (o.topic != "vehicleObservation" && o.topic != "vehicleState") continue;
+        if (o.topic != topics::vehicle_observation.name && o.topic != topics::vehicle_state.name) continue;
         for (const auto& s : o.samples) t0 = std::min(t0, s.data_ns);
     }
     return t0 == std::numeric_limits<uint64_t>::max() ? recording.started_ns : t0;
@@ -261,11 +262,11 @@ void read_car_sample(const std::string& topic, const nlohmann::json& j, double t
         const auto& pose = j.at("pose");
         car.path.push_back({.t_s = t, .x_m = pose.value("x", 0.0), .y_m = pose.value("y", 0.0), .yaw_rad = pose.value("yaw", 0.0)});
     }
-    if (topic == "vehicleState") {
+    if (topic == topics::vehicle_state.name) {
         car.speed_m_s.push_back({.t_s = t, .value = j.value("speed", 0.0)});
         car.steering.push_back({.t_s = t, .value = j.value("steering_servo", 0.0)});
     }
-    if (topic == "fsmStatus") car.states.push_back({.t_s = t, .state = j.value("state_type", std::string("?"))});
+    if (topic == topics::fsm_status.name) car.states.push_back({.t_s = t, .state = j.value("state_type", std::string("?"))});
 }
 
 /// The cars' series and the log's lines; a car's path is its true one (vehicleObservation)
@@ -274,13 +275,13 @@ void read_samples(const RecordedRun& recording, RunFigures& f)
 {
     const uint64_t t0 = lab_zero_ns(recording);
     const bool observed = std::any_of(recording.instances.begin(), recording.instances.end(),
-                                      [](const RecordedInstance& o) { return o.topic == "vehicleObservation"; });
+                                      [](const RecordedInstance& o) { return o.topic == topics::vehicle_observation.name; });
     for (const auto& o : recording.instances) {
-        const bool path_topic = o.topic == (observed ? "vehicleObservation" : "vehicleState");
-        if (!path_topic && o.topic != "vehicleState" && o.topic != "fsmStatus" && o.topic != "log") continue;
+        const bool path_topic = o.topic == (observed ? topics::vehicle_observation.name : topics::vehicle_state.name);
+        if (!path_topic && o.topic != topics::vehicle_state.name && o.topic != topics::fsm_status.name && o.topic != topics::log.name) continue;
         for (const auto& s : o.samples) {
             if (s.value.is_null()) continue;
-            if (o.topic == "log") read_log_sample(s.value, s, t0, f.simulated(), f);
+            if (o.topic == topics::log.name) read_log_sample(s.value, s, t0, f.simulated(), f);
             else read_car_sample(o.topic, s.value, seconds_since(t0, s.data_ns), path_topic, f);
         }
     }
