@@ -72,6 +72,8 @@ ChildProcess::ChildProcess(ProcessOptions o) : program_(o.argv.empty() ? "" : o.
     }
     int pipe_fds[2] = {-1, -1};
     if (o.capture_stdout && ::pipe2(pipe_fds, O_CLOEXEC) != 0) throw Error("cannot make a pipe for " + program_);
+    int in_fds[2] = {-1, -1};
+    if (o.pipe_stdin && ::pipe2(in_fds, O_CLOEXEC) != 0) throw Error("cannot make a pipe for " + program_ + "'s input");
     const pid_t parent = ::getpid();
 
     pid_ = ::fork();
@@ -82,6 +84,7 @@ ChildProcess::ChildProcess(ProcessOptions o) : program_(o.argv.empty() ? "" : o.
             if (::getppid() != parent) ::_exit(127);  // the parent died before the line above
         }
         if (o.own_process_group) ::setpgid(0, 0);
+        if (in_fds[0] >= 0) ::dup2(in_fds[0], STDIN_FILENO);
         if (pipe_fds[1] >= 0) ::dup2(pipe_fds[1], STDOUT_FILENO);
         else if (out_file >= 0) ::dup2(out_file, STDOUT_FILENO);
         if (err_file >= 0) ::dup2(err_file, STDERR_FILENO);
@@ -96,7 +99,9 @@ ChildProcess::ChildProcess(ProcessOptions o) : program_(o.argv.empty() ? "" : o.
     if (out_file >= 0) ::close(out_file);
     if (err_file >= 0) ::close(err_file);
     if (pipe_fds[1] >= 0) ::close(pipe_fds[1]);
+    if (in_fds[0] >= 0) ::close(in_fds[0]);
     out_fd_ = pipe_fds[0];
+    in_fd_ = in_fds[1];
 }
 
 ChildProcess::~ChildProcess()
@@ -106,10 +111,11 @@ ChildProcess::~ChildProcess()
 }
 
 ChildProcess::ChildProcess(ChildProcess&& other) noexcept
-    : program_(std::move(other.program_)), pid_(other.pid_), out_fd_(other.out_fd_), group_(other.group_), end_(other.end_)
+    : program_(std::move(other.program_)), pid_(other.pid_), out_fd_(other.out_fd_), in_fd_(other.in_fd_), group_(other.group_), end_(other.end_)
 {
     other.pid_ = -1;
     other.out_fd_ = -1;
+    other.in_fd_ = -1;
 }
 
 ChildProcess& ChildProcess::operator=(ChildProcess&& other) noexcept
@@ -120,10 +126,12 @@ ChildProcess& ChildProcess::operator=(ChildProcess&& other) noexcept
         program_ = std::move(other.program_);
         pid_ = other.pid_;
         out_fd_ = other.out_fd_;
+        in_fd_ = other.in_fd_;
         group_ = other.group_;
         end_ = other.end_;
         other.pid_ = -1;
         other.out_fd_ = -1;
+        other.in_fd_ = -1;
     }
     return *this;
 }
@@ -132,6 +140,7 @@ void ChildProcess::release()
 {
     if (out_fd_ >= 0) ::close(out_fd_);
     out_fd_ = -1;
+    close_stdin();
 }
 
 std::optional<ExitStatus> ChildProcess::ended()
@@ -202,6 +211,43 @@ std::string sibling_executable(const std::string& name)
                     "); cpm's programs are installed together");
     }
     return path;
+}
+
+}  // namespace cpm
+
+namespace cpm {
+
+bool ChildProcess::write_stdin(const std::string& text)
+{
+    // A child that no longer reads would raise SIGPIPE, which ends a process by default: it is
+    // blocked on this thread for the write, and a pending one taken (the write says EPIPE).
+    sigset_t pipe_only, before;
+    sigemptyset(&pipe_only);
+    sigaddset(&pipe_only, SIGPIPE);
+    ::pthread_sigmask(SIG_BLOCK, &pipe_only, &before);
+    size_t done = 0;
+    bool ok = in_fd_ >= 0;
+    while (ok && done < text.size()) {
+        const ssize_t n = ::write(in_fd_, text.data() + done, text.size() - done);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) {
+            ok = false;
+            if (errno == EPIPE) {
+                const timespec none{0, 0};
+                ::sigtimedwait(&pipe_only, nullptr, &none);
+            }
+            break;
+        }
+        done += size_t(n);
+    }
+    ::pthread_sigmask(SIG_SETMASK, &before, nullptr);
+    return ok;
+}
+
+void ChildProcess::close_stdin()
+{
+    if (in_fd_ >= 0) ::close(in_fd_);
+    in_fd_ = -1;
 }
 
 }  // namespace cpm

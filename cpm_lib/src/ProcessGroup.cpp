@@ -45,12 +45,16 @@ void ProcessGroup::launch(Member& m, bool again)
 {
     if (again && !m.spec.log.empty()) std::ofstream(m.spec.log, std::ios::app) << "\n--- restarted ---\n";
     m.child.reset();  // reaped already
-    m.child.emplace(ProcessOptions{.argv = m.spec.argv,
-                                   .env = m.spec.env,
+    const bool remote = !m.spec.host.is_local();
+    std::vector<std::string> argv = m.spec.argv;
+    if (remote && !m.spec.env.empty()) argv.insert(argv.begin(), m.spec.env.begin(), m.spec.env.end()), argv.insert(argv.begin(), "/usr/bin/env");
+    m.child.emplace(ProcessOptions{.argv = remote ? remote_command(m.spec.host, argv, m.spec.stop_grace) : argv,
+                                   .env = remote ? std::vector<std::string>{} : m.spec.env,
                                    .stdout_path = m.spec.capture_stdout ? "" : m.spec.log,
                                    .stderr_path = m.spec.log,
                                    .append_output = again,
                                    .capture_stdout = m.spec.capture_stdout,
+                                   .pipe_stdin = remote,
                                    .own_process_group = m.spec.own_process_group,
                                    .die_with_parent = true});
     m.end.reset();
@@ -60,9 +64,6 @@ ChildProcess& ProcessGroup::start(ProcessSpec spec)
 {
     if (spec.name.empty()) throw Error("process group: a process needs a name");
     if (member(spec.name)) throw Error("process group: the name '" + spec.name + "' is taken");
-    if (!spec.host.empty()) {
-        throw Error("process group: " + spec.name + ": host '" + spec.host + "': starting processes on other hosts is not supported yet");
-    }
     Member& m = members_.emplace_back();
     m.spec = std::move(spec);
     try {
@@ -82,7 +83,7 @@ std::vector<ProcessEvent> ProcessGroup::poll()
         auto end = m.child->ended();
         if (!end) continue;
         m.end = end;
-        ProcessEvent e{m.spec.name, *end, false, m.restarts};
+        ProcessEvent e = event_of(m, *end);
         if (m.spec.restart && !end->ok()) {
             try {
                 launch(m, true);
@@ -99,10 +100,36 @@ std::vector<ProcessEvent> ProcessGroup::poll()
     return events;
 }
 
+void ProcessGroup::interrupt(Member& m)
+{
+    // A remote process is stopped by its `cpm host run` when its ssh's input closes; a signal to
+    // ssh would end the connection without waiting for the process's end.
+    if (m.spec.host.is_local()) m.child->signal(SIGINT);
+    else m.child->close_stdin();
+}
+
 void ProcessGroup::stop(Member& m)
 {
-    m.end = m.child->wait(m.spec.stop_grace);
+    // A remote one's grace is spent there; the connection gets 3 s more.
+    const auto grace = m.spec.stop_grace + (m.spec.host.is_local() ? std::chrono::milliseconds(0) : std::chrono::milliseconds(3000));
+    m.end = m.child->wait(grace);
     if (!m.end) m.end = m.child->stop(std::chrono::seconds(2));
+}
+
+ProcessEvent ProcessGroup::event_of(const Member& m, const ExitStatus& end)
+{
+    ProcessEvent e{m.spec.name, end, false, m.restarts, m.spec.host.name};
+    if (m.spec.host.is_local() || end.signal != 0) return e;
+    // What ssh passes on: the remote exit code, 128 + a remote signal (cpm host run), or 255 for its own failure.
+    if (end.code == 255) e.host_lost = true;
+    else if (end.code > 128 && end.code < 128 + 65) e.end = ExitStatus{.code = -1, .signal = end.code - 128};
+    return e;
+}
+
+std::string ProcessEvent::describe() const
+{
+    if (host_lost) return "lost with host " + host + " (ssh ended: the host was not reached or the connection broke)";
+    return end.describe() + (host.empty() ? "" : " on " + host);
 }
 
 ChildProcess& ProcessGroup::restart(const std::string& name)
@@ -110,7 +137,7 @@ ChildProcess& ProcessGroup::restart(const std::string& name)
     Member* m = member(name);
     if (!m) throw Error("process group: no process '" + name + "' to restart");
     if (m->child && !m->end) {
-        m->child->signal(SIGINT);
+        interrupt(*m);
         stop(*m);
     }
     launch(*m, true);
@@ -127,12 +154,12 @@ std::vector<ProcessEvent> ProcessGroup::stop_all()
         for (auto& m : members_) {
             if (m.spec.stop_order == order && m.child && !m.end) now.push_back(&m);
         }
-        for (Member* m : now) m->child->signal(SIGINT);
+        for (Member* m : now) interrupt(*m);
         for (Member* m : now) stop(*m);
     }
     std::vector<ProcessEvent> ends;
     for (const auto& m : members_) {
-        if (m.end) ends.push_back({m.spec.name, *m.end, false, m.restarts});
+        if (m.end) ends.push_back(event_of(m, *m.end));
     }
     return ends;
 }

@@ -3,6 +3,9 @@
 // last lines.
 #include <cpm/Error.hpp>
 #include <cpm/ProcessGroup.hpp>
+#include <cpm/RemoteHost.hpp>
+
+#include <algorithm>
 
 #include <cpm_test/TempDir.hpp>
 #include <cpm_test/Isolation.hpp>
@@ -96,7 +99,7 @@ TEST(ProcessGroup, AProcessThatIsDoneIsNotRestarted)
     EXPECT_EQ(sut.end_of("done")->describe(), "exited with code 0");
 }
 
-TEST(ProcessGroup, ANameTakenAnotherHostOrAMissingProgramIsAnErrorNamingIt)
+TEST(ProcessGroup, ANameTakenOrAMissingProgramIsAnErrorNamingIt)
 {
     cpm::ProcessGroup sut;
     (void)sut.start(sh("a", "sleep 5"));
@@ -106,14 +109,6 @@ TEST(ProcessGroup, ANameTakenAnotherHostOrAMissingProgramIsAnErrorNamingIt)
     } catch (const cpm::Error& e) {
         EXPECT_STREQ(e.what(), "process group: the name 'a' is taken");
     }
-    auto remote = sh("far", "true");
-    remote.host = "car5";
-    try {
-        (void)sut.start(remote);
-        FAIL();
-    } catch (const cpm::Error& e) {
-        EXPECT_NE(std::string(e.what()).find("far: host 'car5'"), std::string::npos) << e.what();
-    }
     try {
         (void)sut.start({.name = "ghost", .argv = {"/nonexistent/program"}});
         FAIL();
@@ -121,4 +116,21 @@ TEST(ProcessGroup, ANameTakenAnotherHostOrAMissingProgramIsAnErrorNamingIt)
         EXPECT_NE(std::string(e.what()).find("/nonexistent/program"), std::string::npos) << e.what();
     }
     EXPECT_EQ(sut.names(), std::vector<std::string>{"a"}) << "a refused spec leaves nothing behind";
+}
+
+TEST(RemoteHost, AProgramThereRunsTiedToItsSshWithEveryArgumentQuotedAsGiven)
+{
+    const cpm::RemoteHost car{.name = "car5", .ssh = "pi@10.0.0.5", .ssh_options = {"-F", "/lab/ssh config"}, .cpm_prefix = "/opt/cpm"};
+    const auto argv = cpm::remote_command(car, {"/opt/cpm/bin/fsm_node", "--fsm", "it's a car.json", "$(reboot)"}, std::chrono::seconds(2));
+    ASSERT_GE(argv.size(), 5u);
+    EXPECT_EQ(argv[0], "/usr/bin/ssh");
+    EXPECT_NE(std::find(argv.begin(), argv.end(), "BatchMode=yes"), argv.end()) << "never a password prompt";
+    const auto config = std::find(argv.begin(), argv.end(), "-F");
+    ASSERT_NE(config, argv.end());
+    EXPECT_EQ(*(config + 1), "/lab/ssh config");
+    EXPECT_EQ(argv[argv.size() - 3], "pi@10.0.0.5");
+    EXPECT_EQ(argv[argv.size() - 2], "--");
+    // One word for the remote shell each, nothing it would expand.
+    EXPECT_EQ(argv.back(), "'/opt/cpm/bin/cpm' 'host' 'run' '--grace' '2000ms' '--' '/opt/cpm/bin/fsm_node' '--fsm' 'it'\\''s a car.json' '$(reboot)'");
+    EXPECT_TRUE(cpm::RemoteHost{}.is_local());
 }

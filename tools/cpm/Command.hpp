@@ -39,6 +39,7 @@ std::vector<Command> routing_commands();
 std::vector<Command> record_commands();
 std::vector<Command> monitor_commands();
 std::vector<Command> security_commands();
+std::vector<Command> host_commands();
 
 /// The participant options of cpm::init, named `name` unless --node_id named the process: a
 /// command whose role others tell by its name (cpm_play, cpm_monitor).

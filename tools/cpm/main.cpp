@@ -36,7 +36,7 @@ std::vector<Command> all_commands()
     for (auto group : {cpm::tools::lab_commands, cpm::tools::param_commands, cpm::tools::topic_commands,
                        cpm::tools::fsm_commands, cpm::tools::vehicle_commands, cpm::tools::history_commands,
                        cpm::tools::aruco_commands, cpm::tools::routing_commands, cpm::tools::record_commands,
-                       cpm::tools::monitor_commands, cpm::tools::security_commands}) {
+                       cpm::tools::monitor_commands, cpm::tools::security_commands, cpm::tools::host_commands}) {
         auto more = group();
         all.insert(all.end(), more.begin(), more.end());
     }

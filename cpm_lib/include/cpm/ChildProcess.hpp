@@ -26,6 +26,7 @@ struct ProcessOptions
     std::string stderr_path;        ///< "": this process's stderr; the same path as stdout_path: one file for both
     bool append_output = false;     ///< append to the output files instead of starting them afresh
     bool capture_stdout = false;    ///< read it with read_line()
+    bool pipe_stdin = false;        ///< its stdin is a pipe from this process (write_stdin, close_stdin); else /dev/null's or ours
     bool own_process_group = false; ///< signals then reach the programs it starts too
     bool die_with_parent = false;   ///< SIGTERM when this process dies, even by SIGKILL
 };
@@ -69,12 +70,17 @@ public:
     std::optional<std::string> read_line();
     /// The captured stdout's file descriptor (-1 when not captured), for poll().
     int stdout_fd() const { return out_fd_; }
+    /// Writes to its stdin (ProcessOptions::pipe_stdin); false when it no longer reads it.
+    bool write_stdin(const std::string& text);
+    /// Closes its stdin: it reads the end of its input (a remote process's wrapper then stops it).
+    void close_stdin();
 
 private:
     void release();
     std::string program_;
     int pid_ = -1;
     int out_fd_ = -1;
+    int in_fd_ = -1;
     bool group_ = false;
     std::optional<ExitStatus> end_;
 };

@@ -11,6 +11,7 @@
 //
 // Not thread-safe: one thread owns the group.
 #include <cpm/ChildProcess.hpp>
+#include <cpm/RemoteHost.hpp>
 
 #include <chrono>
 #include <deque>
@@ -36,9 +37,10 @@ struct ProcessSpec
     bool own_process_group = true;
     /// How long it may take to end on SIGINT before SIGTERM and SIGKILL follow.
     std::chrono::milliseconds stop_grace{5000};
-    /// Where it runs: "" is this host. Another host (over ssh) is not supported yet: start()
-    /// refuses it by name.
-    std::string host;
+    /// Where it runs: this host (the default), or another reached with ssh (argv[0] is then a
+    /// path on that host). A remote process runs under `cpm host run` in a process group of its
+    /// own there; its output comes back into `log`; stopping it closes its ssh's input.
+    RemoteHost host;
 };
 
 /// A process of the group that ended.
@@ -48,6 +50,11 @@ struct ProcessEvent
     ExitStatus end;
     bool restarted = false;  ///< its spec said restart, and it was started again
     int restarts = 0;        ///< times it has been restarted so far
+    std::string host;        ///< the host it ran on ("" this one)
+    /// It ran on another host and ssh ended without its end: the host was lost or not reached.
+    bool host_lost = false;
+    /// "exited with code 3", "killed by SIGSEGV on car5", "lost with host car5 (ssh: …)".
+    std::string describe() const;
 };
 
 class ProcessGroup
@@ -97,7 +104,9 @@ private:
     Member* member(const std::string& name);
     const Member* member(const std::string& name) const;
     void launch(Member& m, bool again);
+    static void interrupt(Member& m);
     static void stop(Member& m);
+    static ProcessEvent event_of(const Member& m, const ExitStatus& end);
     std::deque<Member> members_;  // a deque: references to members stay valid
 };
 

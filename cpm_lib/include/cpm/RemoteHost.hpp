@@ -1,0 +1,61 @@
+#pragma once
+// Another computer of the lab, reached with OpenSSH (no agent of cpm's own): the ssh command
+// that runs a program there tied to the connection, the other side of that tie (`cpm host run`),
+// and the host's clock measured against this one's.
+//
+//   cpm::RemoteHost car{.name = "car5", .ssh = "pi@192.168.1.21", .cpm_prefix = "/opt/cpm"};
+//   auto argv = cpm::remote_command(car, {"/opt/cpm/bin/fsm_node", "--vehicle_id", "5"});
+//   // ssh -o BatchMode=yes ... pi@192.168.1.21 -- '/opt/cpm/bin/cpm' host run -- '/opt/cpm/bin/fsm_node' ...
+//
+// A program started so runs in a process group of its own on that host; it is stopped (SIGINT,
+// then SIGTERM and SIGKILL after its grace) when its ssh's input closes: when the supervisor
+// closes it, when the supervisor dies, or when the connection is lost.
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace cpm {
+
+struct RemoteHost
+{
+    std::string name;                      ///< the lab's name for it ("car5"), for messages; "" is this host
+    std::string ssh;                       ///< ssh's destination: "pi@192.168.1.21", or a Host of an ssh config
+    std::vector<std::string> ssh_options;  ///< more options for ssh, e.g. {"-F", "lab_ssh_config"}
+    std::string cpm_prefix;                ///< where cpm is installed there: its programs are in PREFIX/bin
+    bool is_local() const { return name.empty(); }
+    /// PREFIX/bin/program.
+    std::string program(const std::string& name) const;
+};
+
+/// The argv that runs `remote_argv` (argv[0]: a path on that host) there, non-interactively
+/// (BatchMode: a host that asks for a password fails at once), tied to the connection through
+/// `cpm host run` with the given grace.
+std::vector<std::string> remote_command(const RemoteHost& host, const std::vector<std::string>& remote_argv,
+                                        std::chrono::milliseconds grace = std::chrono::seconds(5));
+/// The argv that runs a plain command there and returns (checks: `cpm --version`, `test -x`).
+std::vector<std::string> ssh_command(const RemoteHost& host, const std::vector<std::string>& remote_argv);
+/// `text` quoted for the remote shell: 'it'\''s'.
+std::string shell_quote(const std::string& text);
+
+/// The remote side of remote_command (`cpm host run`): starts `argv` in a process group of its
+/// own with this process's stdout and stderr, and supervises it until it ends or stdin reaches
+/// its end; then SIGINT, SIGTERM and SIGKILL, `grace` apart. Returns its exit code, or 128 + the
+/// signal that ended it (as a shell does). Throws cpm::Error when it cannot be started.
+int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::milliseconds grace);
+
+/// The remote side of measure_clock (`cpm host clock`): answers each line of stdin with this
+/// host's CLOCK_REALTIME in nanoseconds, until stdin ends.
+void answer_clock_queries();
+
+/// A host's clock against this one's: its time minus ours, from the round trip with the least
+/// delay among `rounds` over one ssh connection; the true offset lies within ±rtt/2 of it.
+struct ClockOffset
+{
+    int64_t offset_ns = 0;
+    int64_t rtt_ns = 0;
+};
+/// Throws cpm::Error naming the host and what ssh said when it cannot be reached.
+ClockOffset measure_clock(const RemoteHost& host, int rounds = 20);
+
+}  // namespace cpm

@@ -1,0 +1,144 @@
+#include <cpm/RemoteHost.hpp>
+
+#include <cpm/ChildProcess.hpp>
+#include <cpm/Error.hpp>
+
+#include <poll.h>
+#include <unistd.h>
+
+#include <csignal>
+#include <cstdio>
+#include <ctime>
+#include <iostream>
+#include <limits>
+#include <optional>
+
+namespace cpm {
+
+namespace {
+
+int64_t realtime_ns()
+{
+    timespec ts{};
+    ::clock_gettime(CLOCK_REALTIME, &ts);
+    return int64_t(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+/// The ssh program itself, as a path (ChildProcess runs paths, not names on PATH).
+std::string ssh_program()
+{
+    for (const char* p : {"/usr/bin/ssh", "/usr/local/bin/ssh", "/bin/ssh"}) {
+        if (::access(p, X_OK) == 0) return p;
+    }
+    throw Error("ssh is not installed (the Debian package openssh-client); a lab across hosts needs it");
+}
+
+/// The code a shell reports for an end: the exit code, or 128 + the signal.
+int shell_code(const ExitStatus& end) { return end.signal != 0 ? 128 + end.signal : end.code; }
+
+}  // namespace
+
+std::string RemoteHost::program(const std::string& program_name) const { return cpm_prefix + "/bin/" + program_name; }
+
+std::string shell_quote(const std::string& text)
+{
+    std::string out = "'";
+    for (char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return out + "'";
+}
+
+std::vector<std::string> ssh_command(const RemoteHost& host, const std::vector<std::string>& remote_argv)
+{
+    // Never a prompt (BatchMode), a lost host noticed within about 3 s (ServerAlive*), a new
+    // host's key not taken on trust silently (the lab's hosts are in known_hosts: StrictHostKeyChecking stays as configured).
+    std::vector<std::string> argv{ssh_program(), "-o", "BatchMode=yes", "-o", "ConnectTimeout=5", "-o", "ServerAliveInterval=1",
+                                  "-o", "ServerAliveCountMax=3", "-o", "LogLevel=ERROR"};
+    argv.insert(argv.end(), host.ssh_options.begin(), host.ssh_options.end());
+    argv.push_back(host.ssh);
+    argv.push_back("--");
+    std::string command;
+    for (const auto& a : remote_argv) command += (command.empty() ? "" : " ") + shell_quote(a);
+    argv.push_back(command);
+    return argv;
+}
+
+std::vector<std::string> remote_command(const RemoteHost& host, const std::vector<std::string>& remote_argv, std::chrono::milliseconds grace)
+{
+    std::vector<std::string> wrapped{host.program("cpm"), "host", "run", "--grace", std::to_string(grace.count()) + "ms", "--"};
+    wrapped.insert(wrapped.end(), remote_argv.begin(), remote_argv.end());
+    return ssh_command(host, wrapped);
+}
+
+namespace {
+
+/// Ends what is left of a process group whose leader has ended (what it started in the
+/// background, which would else keep the connection open): SIGTERM, then SIGKILL.
+int with_group_ended(int group, int code)
+{
+    if (::kill(-group, SIGTERM) == 0) {
+        for (int i = 0; i < 20 && ::kill(-group, 0) == 0; ++i) ::usleep(50'000);
+        ::kill(-group, SIGKILL);
+    }
+    return code;
+}
+
+}  // namespace
+
+int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::milliseconds grace)
+{
+    ChildProcess child({.argv = argv, .own_process_group = true, .die_with_parent = true});
+    const int group = child.pid();
+    pollfd in{STDIN_FILENO, POLLIN, 0};
+    bool input_open = true;
+    for (;;) {
+        if (auto end = child.ended()) return with_group_ended(group, shell_code(*end));
+        if (!input_open) break;
+        const int n = ::poll(&in, 1, 100);
+        if (n > 0) {
+            char buf[256];
+            const ssize_t got = ::read(STDIN_FILENO, buf, sizeof buf);
+            if (got == 0 || (got < 0 && errno != EINTR && errno != EAGAIN)) input_open = false;
+        }
+    }
+    // The supervisor closed our input, died, or lost the connection: stop it, as a local one is stopped.
+    child.signal(SIGINT);
+    if (auto end = child.wait(grace)) return with_group_ended(group, shell_code(*end));
+    return with_group_ended(group, shell_code(child.stop(std::chrono::seconds(2))));
+}
+
+void answer_clock_queries()
+{
+    for (std::string line; std::getline(std::cin, line);) {
+        std::printf("%lld\n", static_cast<long long>(realtime_ns()));
+        std::fflush(stdout);
+    }
+}
+
+ClockOffset measure_clock(const RemoteHost& host, int rounds)
+{
+    ChildProcess ssh({.argv = ssh_command(host, {host.program("cpm"), "host", "clock"}), .capture_stdout = true, .pipe_stdin = true});
+    std::optional<ClockOffset> best;
+    for (int i = 0; i < rounds; ++i) {
+        const int64_t sent = realtime_ns();
+        if (!ssh.write_stdin("?\n")) break;
+        const auto answer = ssh.read_line();
+        const int64_t back = realtime_ns();
+        if (!answer) break;
+        long long theirs = 0;
+        if (std::sscanf(answer->c_str(), "%lld", &theirs) != 1) {
+            throw Error("host " + host.name + " (" + host.ssh + "): its clock answered '" + *answer + "', not a time (is cpm there the same version?)");
+        }
+        const ClockOffset sample{theirs - (sent + back) / 2, back - sent};
+        if (!best || sample.rtt_ns < best->rtt_ns) best = sample;
+    }
+    ssh.close_stdin();
+    const auto end = ssh.wait(std::chrono::seconds(5));
+    if (!best) {
+        throw Error("host " + host.name + " (" + host.ssh + "): cannot measure its clock: ssh " +
+                    (end ? end->describe() : std::string("did not answer")) + " (is the host reachable, its key in known_hosts, cpm installed in " +
+                    host.cpm_prefix + "?)");
+    }
+    return *best;
+}
+
+}  // namespace cpm

@@ -1,0 +1,151 @@
+// Processes on another host, started over a real ssh into a real sshd in a network namespace
+// that stands for that host: where they run, how they end, how they stop, the host's clock.
+#include <cpm/Error.hpp>
+#include <cpm/ProcessGroup.hpp>
+#include <cpm/RemoteHost.hpp>
+#include <cpm_test/Hosts.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+#include <cpm_test/TempDir.hpp>
+
+#include <gtest/gtest.h>
+
+#include <sys/stat.h>
+
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+
+using namespace std::chrono_literals;
+
+namespace {
+
+/// Where cpm is "installed" on every namespace host: the build tree (one machine, one disk).
+std::string cpm_prefix() { return std::filesystem::path(cpm_test::built_program("cpm")).parent_path().parent_path().string(); }
+
+std::string command_line(int pid)
+{
+    std::ifstream in("/proc/" + std::to_string(pid) + "/cmdline");
+    std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    for (char& c : s) c = c == '\0' ? ' ' : c;
+    return s;
+}
+
+unsigned long netns_of(int pid)
+{
+    struct stat st{};
+    return ::stat(("/proc/" + std::to_string(pid) + "/ns/net").c_str(), &st) == 0 ? st.st_ino : 0;
+}
+
+/// The pids in a host's namespace whose command line begins with `start` ("sleep 31": the
+/// sleeps themselves, not the shell or ssh that names them).
+std::vector<int> running(const cpm_test::NamespaceHosts& hosts, size_t host, const std::string& start)
+{
+    std::vector<int> out;
+    for (int pid : hosts.pids(host)) {
+        if (command_line(pid).rfind(start, 0) == 0) out.push_back(pid);
+    }
+    return out;
+}
+
+class RemoteHostEndToEnd : public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        hosts_.emplace(std::vector<std::string>{"central", "car_a"});
+        if (!hosts_->why_not().empty()) GTEST_SKIP() << "no namespace hosts: " << hosts_->why_not() << "; not run";
+    }
+    cpm_test::NamespaceHosts& hosts() { return *hosts_; }
+    cpm_test::TempDir dir;
+
+private:
+    std::optional<cpm_test::NamespaceHosts> hosts_;
+};
+
+}  // namespace
+
+TEST_F(RemoteHostEndToEnd, AProcessRunsInItsHostsNamespaceAndStoppingItStopsWhatItStarted)
+{
+    cpm_test::NamespaceHosts::Inside central(hosts(), 0);  // the supervisor runs on the central host
+    cpm::ProcessGroup sut;
+    (void)sut.start({.name = "sleeper",
+                     .argv = {"/bin/sh", "-c", "trap 'echo stopping; exit 0' INT; sleep 311 & sleep 312 & wait"},
+                     .log = dir.file("sleeper.log"),
+                     .stop_grace = 2000ms,
+                     .host = hosts().remote(1, cpm_prefix())});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return running(hosts(), 1, "sleep 31").size() == 2; }, 20s))
+        << "not started on car_a:\n" << sut.log_text("sleeper");
+    for (int pid : running(hosts(), 1, "sleep 31")) EXPECT_EQ(netns_of(pid), hosts().netns_inode(1)) << "pid " << pid << " is not on car_a";
+    EXPECT_TRUE(running(hosts(), 0, "sleep 31").empty()) << "ran on the central host too";
+
+    const auto ends = sut.stop_all();
+    ASSERT_EQ(ends.size(), 1u);
+    EXPECT_TRUE(ends[0].end.ok()) << ends[0].describe() << "\n" << sut.log_text("sleeper");
+    EXPECT_EQ(ends[0].host, "car_a");
+    EXPECT_NE(sut.log_text("sleeper").find("stopping"), std::string::npos) << "its output comes back into its log: " << sut.log_text("sleeper");
+    // Its children too: nothing of it is left on the host.
+    EXPECT_TRUE(cpm_test::wait_until([&] { return running(hosts(), 1, "sleep 31").empty() && running(hosts(), 1, cpm_prefix() + "/bin/cpm host run").empty(); }, 10s));
+}
+
+TEST_F(RemoteHostEndToEnd, ARemoteEndIsToldAsALocalOneWithItsHost)
+{
+    cpm_test::NamespaceHosts::Inside central(hosts(), 0);
+    cpm::ProcessGroup sut;
+    (void)sut.start({.name = "three", .argv = {"/bin/sh", "-c", "echo about to fail >&2; exit 3"}, .log = dir.file("three.log"),
+                     .host = hosts().remote(1, cpm_prefix())});
+    (void)sut.start({.name = "segv", .argv = {"/bin/sh", "-c", "kill -SEGV $$"}, .log = dir.file("segv.log"),
+                     .host = hosts().remote(1, cpm_prefix())});
+    std::vector<cpm::ProcessEvent> events;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        for (auto& e : sut.poll()) events.push_back(e);
+        return events.size() == 2;
+    }, 20s));
+    for (const auto& e : events) {
+        if (e.name == "three") {
+            EXPECT_EQ(e.end.code, 3);
+            EXPECT_EQ(e.describe(), "exited with code 3 on car_a");
+            EXPECT_NE(sut.log_text("three").find("about to fail"), std::string::npos);
+        } else {
+            EXPECT_EQ(e.end.signal, SIGSEGV);
+            EXPECT_EQ(e.describe(), "killed by SIGSEGV on car_a");
+        }
+        EXPECT_FALSE(e.host_lost);
+    }
+}
+
+TEST_F(RemoteHostEndToEnd, AHostWhoseLinkIsCutIsReportedLost)
+{
+    cpm_test::NamespaceHosts::Inside central(hosts(), 0);
+    cpm::ProcessGroup sut;
+    (void)sut.start({.name = "far", .argv = {"/bin/sleep", "300"}, .log = dir.file("far.log"), .host = hosts().remote(1, cpm_prefix())});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return !running(hosts(), 1, "/bin/sleep 300").empty(); }, 20s)) << sut.log_text("far");
+    ASSERT_TRUE(hosts().cut(1));
+    std::vector<cpm::ProcessEvent> events;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        for (auto& e : sut.poll()) events.push_back(e);
+        return !events.empty();
+    }, 20s)) << "a lost host was not noticed";
+    EXPECT_TRUE(events[0].host_lost) << events[0].describe();
+    EXPECT_NE(events[0].describe().find("lost with host car_a"), std::string::npos) << events[0].describe();
+}
+
+TEST_F(RemoteHostEndToEnd, AHostsClockIsMeasuredAndAHostWithoutSshIsNamed)
+{
+    cpm_test::NamespaceHosts::Inside central(hosts(), 0);
+    const auto car = hosts().remote(1, cpm_prefix());
+    const auto clock = cpm::measure_clock(car, 20);
+    // One machine, one clock: the offset lies within the measurement's own bound (plus scheduling).
+    EXPECT_GT(clock.rtt_ns, 0);
+    EXPECT_LT(std::llabs(clock.offset_ns), clock.rtt_ns / 2 + 1'000'000) << "offset " << clock.offset_ns << " ns, rtt " << clock.rtt_ns;
+    EXPECT_LT(clock.rtt_ns, 50'000'000) << "a round trip over one ssh session takes milliseconds, not a new connection each";
+
+    hosts().stop_sshd(1);
+    try {
+        (void)cpm::measure_clock(car, 3);
+        FAIL() << "a host without sshd answered";
+    } catch (const cpm::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("host car_a (car_a)"), std::string::npos) << e.what();
+    }
+}

@@ -1,0 +1,54 @@
+// cpm host run|clock: the far side of a lab run's ssh to another host (the work is in
+// cpm/RemoteHost.hpp). A lab run calls these; a user rarely does.
+#include "Command.hpp"
+
+#include <cpm/RemoteHost.hpp>
+
+namespace cpm::tools {
+namespace {
+
+const char* kRunHelp =
+    "usage: cpm host run [--grace DURATION] -- PROGRAM [ARGS...]\n"
+    "\n"
+    "Runs PROGRAM in a process group of its own, with this command's output, until it ends or\n"
+    "this command's input ends; then stops it: SIGINT, and SIGTERM and SIGKILL --grace apart\n"
+    "(default 5s). Exits with its exit code, or 128 + the signal that ended it. A lab run starts\n"
+    "each process on another host this way over ssh, so that closing the connection (the run\n"
+    "stops, dies, or loses the host) stops the process and everything it started.\n"
+    "\n"
+    "Example: cpm host run --grace 2s -- /opt/cpm/bin/fsm_node --vehicle_id 5 --fsm car.json\n";
+
+const char* kClockHelp =
+    "usage: cpm host clock\n"
+    "\n"
+    "Answers each line of its input with this host's clock (CLOCK_REALTIME) in nanoseconds, until\n"
+    "its input ends. A lab run measures each host's clock offset with it before it starts.\n";
+
+int host_run(const std::vector<std::string>& args)
+{
+    const std::string command = "cpm host run";
+    const auto split = std::find(args.begin(), args.end(), "--");
+    if (split == args.end() || split + 1 == args.end()) throw UsageError(command + ": expected -- PROGRAM [ARGS...]");
+    const auto parsed = parse_flags(std::vector<std::string>(args.begin(), split), {{"--grace", true}}, command);
+    const auto grace_ns = parsed.has("--grace") ? parse_duration("--grace", parsed.get("--grace")) : 5'000'000'000ull;
+    return cpm::run_until_input_ends(std::vector<std::string>(split + 1, args.end()), std::chrono::milliseconds(grace_ns / 1'000'000));
+}
+
+int host_clock(const std::vector<std::string>& args)
+{
+    (void)parse_flags(args, {}, "cpm host clock");
+    cpm::answer_clock_queries();
+    return 0;
+}
+
+}  // namespace
+
+std::vector<Command> host_commands()
+{
+    return {{.group = "host", .verb = "run", .summary = "run a program tied to this command's input (a lab run's remote processes)",
+             .help = kRunHelp, .run = host_run},
+            {.group = "host", .verb = "clock", .summary = "answer clock queries (a lab run measures each host's clock offset)",
+             .help = kClockHelp, .run = host_clock}};
+}
+
+}  // namespace cpm::tools
