@@ -70,13 +70,13 @@ public:
     std::optional<KeyBytes> key_bytes(const std::string& type_name, const uint8_t* data, size_t size) const;
 
 private:
+    friend class IdlParser;  // reads the IDL text into structs_ and enums_
     struct Member
     {
         std::string name, type;  // type: a primitive, "string", a struct or enum name, "sequence<T>"
         size_t array = 0;        // > 0: a fixed array of that many
         bool key = false;        // @key
     };
-    void parse(const std::string& text, const std::string& file);
     nlohmann::json read(const std::string& type, class CdrCursor& c) const;
     void write(const std::string& type, const nlohmann::json& v, class CdrWriter& w, const std::string& path) const;
 
