@@ -1,16 +1,17 @@
 #pragma once
 // Reading a serialized sample for IdlDecoder::decode.
+#include <cpm/Error.hpp>
+
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
-#include <stdexcept>
 #include <string>
 
 namespace cpm::rtdb {
 
 /// Reads plain CDR: each primitive aligned to its size from the start of the data (after the
 /// 4-byte encapsulation header), in the encapsulation's byte order. Throws when the payload
-/// ends before what is read (IdlDecoder::decode turns that into "does not decode").
+/// ends before what is read, a cpm::Error (IdlDecoder::decode turns that into "does not decode").
 class CdrCursor
 {
 public:
@@ -42,7 +43,7 @@ private:
     void align(size_t n) { at_ = 4 + (at_ - 4 + n - 1) / n * n; }
     void need(size_t n)
     {
-        if (n > size_ || at_ > size_ - n) throw std::out_of_range("payload ends early");
+        if (n > size_ || at_ > size_ - n) throw Error("payload ends early");
     }
     const uint8_t* b_;
     size_t size_;

@@ -1,5 +1,6 @@
 #include <cpm/rtdb/IdlDecoder.hpp>
 
+#include <cpm/Error.hpp>
 #include <cpm/base64.hpp>
 #include <cpm/read_text_file.hpp>
 
@@ -31,7 +32,7 @@ template <typename T>
 T number_of(const nlohmann::json& v, const std::string& path)
 {
     auto bad = [&](const std::string& why) {
-        return std::invalid_argument(path + ": " + (v.is_string() ? "'" + v.get<std::string>() + "'" : v.dump()) + " " + why);
+        return Error(path + ": " + (v.is_string() ? "'" + v.get<std::string>() + "'" : v.dump()) + " " + why);
     };
     long double x = 0;
     if (v.is_null()) return T{};
@@ -91,17 +92,17 @@ void IdlDecoder::write(const std::string& type, const nlohmann::json& v, CdrWrit
     if (type == "string") return w.string(v.is_null() ? "" : v.is_string() ? v.get<std::string>() : v.dump());
     if (type.rfind("sequence", 0) == 0) {
         const auto seq = sequence_of(type);
-        if (!seq) throw std::invalid_argument(path + ": cannot write type " + type);
+        if (!seq) throw Error(path + ": cannot write type " + type);
         nlohmann::json items = v.is_null() ? nlohmann::json::array() : v;
         if (items.is_string()) {
             try {
                 items = nlohmann::json::parse(items.get<std::string>());
             } catch (const std::exception&) {
-                throw std::invalid_argument(path + ": '" + v.get<std::string>() + "' is not a JSON array");
+                throw Error(path + ": '" + v.get<std::string>() + "' is not a JSON array");
             }
         }
-        if (!items.is_array()) throw std::invalid_argument(path + ": " + v.dump() + " is not an array");
-        if (seq->bound && items.size() > *seq->bound) throw std::invalid_argument(path + ": " + std::to_string(items.size()) + " items, at most " + std::to_string(*seq->bound));
+        if (!items.is_array()) throw Error(path + ": " + v.dump() + " is not an array");
+        if (seq->bound && items.size() > *seq->bound) throw Error(path + ": " + std::to_string(items.size()) + " items, at most " + std::to_string(*seq->bound));
         w.put<uint32_t>(uint32_t(items.size()));
         for (size_t i = 0; i < items.size(); ++i) write(seq->element, items[i], w, path + "[" + std::to_string(i) + "]");
         return;
@@ -112,12 +113,12 @@ void IdlDecoder::write(const std::string& type, const nlohmann::json& v, CdrWrit
             if (it != e->second.end()) return w.put<uint32_t>(uint32_t(it - e->second.begin()));
         }
         const uint32_t n = number_of<uint32_t>(v, path);
-        if (n >= e->second.size()) throw std::invalid_argument(path + ": " + v.dump() + " is no " + type);
+        if (n >= e->second.size()) throw Error(path + ": " + v.dump() + " is no " + type);
         return w.put<uint32_t>(n);
     }
     auto s = structs_.find(type);
-    if (s == structs_.end()) throw std::invalid_argument(path + ": unknown type " + type);
-    if (!v.is_null() && !v.is_object()) throw std::invalid_argument(path + ": " + v.dump() + " is not a " + type);
+    if (s == structs_.end()) throw Error(path + ": unknown type " + type);
+    if (!v.is_null() && !v.is_object()) throw Error(path + ": " + v.dump() + " is not a " + type);
     for (const auto& m : s->second) {
         const std::string p = path.empty() ? m.name : path + "." + m.name;
         const nlohmann::json& mv = v.is_object() && v.contains(m.name) ? v[m.name] : nlohmann::json();
@@ -127,11 +128,11 @@ void IdlDecoder::write(const std::string& type, const nlohmann::json& v, CdrWrit
                 try {
                     items = nlohmann::json::parse(items.get<std::string>());
                 } catch (const std::exception&) {
-                    throw std::invalid_argument(p + ": '" + mv.get<std::string>() + "' is not a JSON array");
+                    throw Error(p + ": '" + mv.get<std::string>() + "' is not a JSON array");
                 }
             }
             if (!items.is_null() && (!items.is_array() || items.size() != m.array))
-                throw std::invalid_argument(p + ": expected " + std::to_string(m.array) + " items, got " + items.dump());
+                throw Error(p + ": expected " + std::to_string(m.array) + " items, got " + items.dump());
             for (size_t i = 0; i < m.array; ++i) write(m.type, items.is_null() ? nlohmann::json() : items[i], w, p + "[" + std::to_string(i) + "]");
         } else {
             write(m.type, mv, w, p);
@@ -157,7 +158,7 @@ std::vector<std::string> IdlDecoder::field_paths(const std::string& type_name) c
 
 std::vector<uint8_t> IdlDecoder::encode(const std::string& type_name, const nlohmann::json& sample) const
 {
-    if (!knows(type_name)) throw std::invalid_argument("unknown type " + type_name);
+    if (!knows(type_name)) throw Error("unknown type " + type_name);
     CdrWriter w;
     write(type_name, sample, w, "");
     return w.bytes();
@@ -166,7 +167,7 @@ std::vector<uint8_t> IdlDecoder::encode(const std::string& type_name, const nloh
 IdlDecoder::IdlDecoder(const std::string& dir)
 {
     DIR* d = ::opendir(dir.c_str());
-    if (!d) throw std::runtime_error("cannot read the IDL folder " + dir);
+    if (!d) throw Error("cannot read the IDL folder " + dir);
     std::vector<std::string> files;
     while (dirent* e = ::readdir(d)) {
         std::string name = e->d_name;
@@ -214,10 +215,10 @@ nlohmann::json IdlDecoder::read(const std::string& type, CdrCursor& c) const
     if (type == "string") return as_utf8(c.string());
     if (type.rfind("sequence", 0) == 0) {
         const auto seq = sequence_of(type);
-        if (!seq) throw std::runtime_error("cannot read type " + type);
+        if (!seq) throw Error("cannot read type " + type);
         const uint32_t n = c.get<uint32_t>();
         nlohmann::json out = nlohmann::json::array();
-        if (seq->bound && n > *seq->bound) throw std::runtime_error("a sequence of " + std::to_string(n) + " items, at most " + std::to_string(*seq->bound));
+        if (seq->bound && n > *seq->bound) throw Error("a sequence of " + std::to_string(n) + " items, at most " + std::to_string(*seq->bound));
         for (uint32_t i = 0; i < n; ++i) out.push_back(read(seq->element, c));
         return out;
     }
@@ -226,7 +227,7 @@ nlohmann::json IdlDecoder::read(const std::string& type, CdrCursor& c) const
         return v < e->second.size() ? nlohmann::json(e->second[v]) : nlohmann::json(v);
     }
     auto s = structs_.find(type);
-    if (s == structs_.end()) throw std::runtime_error("unknown type " + type);
+    if (s == structs_.end()) throw Error("unknown type " + type);
     nlohmann::json out = nlohmann::json::object();
     for (const auto& m : s->second) {
         if (m.array) {

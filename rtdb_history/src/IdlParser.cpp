@@ -1,10 +1,11 @@
 #include "IdlParser.hpp"
 
+#include <cpm/Error.hpp>
+
 #include <algorithm>
 #include <cctype>
 #include <cstring>
 #include <sstream>
-#include <stdexcept>
 
 namespace cpm::rtdb {
 
@@ -60,7 +61,7 @@ std::string cleaned_idl(const std::string& text, const std::string& file)
         if (c == '/' && i + 1 < text.size() && text[i + 1] == '*') {
             const size_t close = text.find("*/", i + 2);
             if (close == std::string::npos) {
-                throw std::runtime_error(file + ":" + std::to_string(1 + std::count(text.begin(), text.begin() + long(i), '\n')) +
+                throw Error(file + ":" + std::to_string(1 + std::count(text.begin(), text.begin() + long(i), '\n')) +
                                          ": a /* comment that never ends");
             }
             for (; i < close + 2; ++i) out += text[i] == '\n' ? '\n' : ' ';
@@ -214,11 +215,11 @@ std::optional<IdlParser::Block> IdlParser::block_at(size_t& i) const
     if (b.name.empty() || j >= clean_.size() || clean_[j] != '{') return std::nullopt;  // a forward declaration, or no block
     b.open = j;
     const size_t close = clean_.find('}', b.open);
-    if (close == std::string::npos) throw std::runtime_error(file_ + ":" + line_of(b.open) + ": " + b.kind + " " + b.name + ": no closing }");
+    if (close == std::string::npos) throw Error(file_ + ":" + line_of(b.open) + ": " + b.kind + " " + b.name + ": no closing }");
     size_t after = close + 1;
     skip_space(after);
     if (after >= clean_.size() || clean_[after] != ';') {
-        throw std::runtime_error(file_ + ":" + line_of(close) + ": " + b.kind + " " + b.name + ": expected ; after }");
+        throw Error(file_ + ":" + line_of(close) + ": " + b.kind + " " + b.name + ": expected ; after }");
     }
     i = after + 1;
     b.body = clean_.substr(b.open + 1, close - b.open - 1);
@@ -238,7 +239,7 @@ std::vector<IdlDecoder::Member> IdlParser::members_of(const Block& b) const
         from = semi + 1;
         const std::string flat = trimmed(collapsed(decl));
         if (flat.empty()) continue;
-        if (semi == body.size()) throw std::runtime_error(file_ + ":" + line_of(decl_at) + ": struct " + b.name + ": member '" + flat + "' has no ;");
+        if (semi == body.size()) throw Error(file_ + ":" + line_of(decl_at) + ": struct " + b.name + ": member '" + flat + "' has no ;");
         members.push_back(member(b, flat, decl_at));
     }
     return members;
@@ -252,7 +253,7 @@ IdlDecoder::Member IdlParser::member(const Block& b, std::string flat, size_t de
         flat = trimmed(collapsed(flat.erase(key_at, std::strlen(kKeyMark))));
     }
     auto bad = [&](const std::string& why) {
-        return std::runtime_error(file_ + ":" + line_of(decl_at) + ": struct " + b.name + ": cannot read member '" + flat + "'" + why);
+        return Error(file_ + ":" + line_of(decl_at) + ": struct " + b.name + ": cannot read member '" + flat + "'" + why);
     };
     size_t k = 0;
     m.type = type_at(flat, k, bad);

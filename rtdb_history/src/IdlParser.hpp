@@ -19,10 +19,10 @@ public:
     using Structs = std::map<std::string, std::vector<IdlDecoder::Member>>;
     using Enums = std::map<std::string, std::vector<std::string>>;
 
-    /// Throws std::runtime_error naming file and line for a comment that never ends.
+    /// Throws cpm::Error naming file and line for a comment that never ends.
     IdlParser(const std::string& text, std::string file);
     /// Adds each block to structs or enums (a name read again replaces the earlier one). Throws
-    /// std::runtime_error naming file, line and struct for a block or member it cannot read.
+    /// cpm::Error naming file, line and struct for a block or member it cannot read.
     void read_into(Structs& structs, Enums& enums) const;
 
 private:

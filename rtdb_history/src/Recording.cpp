@@ -46,11 +46,11 @@ const char* const kSchema =
 
 sqlite3* open_recording_file(const std::string& path, std::map<std::string, std::string>& meta)
 {
-    if (!file_exists(path)) throw std::runtime_error("recording " + path + ": no such file");
+    if (!file_exists(path)) throw Error("recording " + path + ": no such file");
     std::error_code ec;
     if (std::filesystem::is_directory(path, ec)) {
         const bool run = std::filesystem::is_regular_file(std::filesystem::path(path) / "recording.db", ec);
-        throw std::runtime_error("recording " + path + ": it is a directory" +
+        throw Error("recording " + path + ": it is a directory" +
                                  (run ? " (a run's folder? its recording is " + (std::filesystem::path(path) / "recording.db").string() + ")" : ""));
     }
     sqlite3* db = nullptr;
@@ -62,13 +62,13 @@ sqlite3* open_recording_file(const std::string& path, std::map<std::string, std:
         rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
     }
     std::unique_ptr<sqlite3, int (*)(sqlite3*)> owner(db, sqlite3_close);
-    auto fail = [&](const std::string& what) { return std::runtime_error("recording " + path + ": " + what); };
+    auto fail = [&](const std::string& what) { return Error("recording " + path + ": " + what); };
     if (rc != SQLITE_OK) throw fail("cannot open it: " + sqlite_error(db, rc));
     auto read_meta = [&] {
         meta.clear();
         Statement m(db, "SELECT key, value FROM meta");
         while ((rc = m.step()) == SQLITE_ROW) meta[m.text(0)] = m.text(1);
-        if (rc != SQLITE_DONE) throw std::runtime_error(sqlite_error(db, rc));
+        if (rc != SQLITE_DONE) throw Error(sqlite_error(db, rc));
     };
     try {
         read_meta();
@@ -101,14 +101,14 @@ struct RecordingWriter::Event
 
 RecordingWriter::RecordingWriter(std::string path, RecordingOptions options) : path_(std::move(path)), options_(std::move(options))
 {
-    if (file_exists(path_)) throw std::runtime_error("recording " + path_ + ": the file exists already (a recording is never overwritten)");
+    if (file_exists(path_)) throw Error("recording " + path_ + ": the file exists already (a recording is never overwritten)");
     int rc = sqlite3_open_v2(path_.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX, nullptr);
     auto give_up = [&](const std::string& what) {
         const std::string e = "recording " + path_ + ": " + what + ": " + sqlite_error(db_, rc);
         sqlite3_close(db_);
         db_ = nullptr;
         ::unlink(path_.c_str());
-        throw std::runtime_error(e);
+        throw Error(e);
     };
     if (rc != SQLITE_OK) give_up("cannot create it");
     if ((rc = exec(db_, "PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL;")) != SQLITE_OK) give_up("cannot set WAL mode");
@@ -483,7 +483,7 @@ LoadedRecording load_recording(const std::string& path)
         restore_objects(*out.store, rows, oids, deletions);
         read_samples(db.get(), oids, out, newest, damage);
     } catch (const std::runtime_error& e) {
-        if (oids.empty()) throw std::runtime_error("recording " + path + ": its tables do not read: " + e.what());
+        if (oids.empty()) throw Error("recording " + path + ": its tables do not read: " + e.what());
         damage.push_back(std::string("it is damaged: ") + e.what());
     }
     for (const auto& [oid, t] : deletions) out.store->mark_deleted(oid, t);

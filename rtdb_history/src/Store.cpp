@@ -1,10 +1,11 @@
 #include <cpm/rtdb/Store.hpp>
 
+#include <cpm/Error.hpp>
+
 #include "ObjectState.hpp"
 
 #include <algorithm>
 #include <regex>
-#include <stdexcept>
 
 namespace cpm::rtdb {
 
@@ -81,7 +82,7 @@ Oid Store::add_object(ObjectInfo info)
         } else {
             n = slots_used_.load(std::memory_order_relaxed);
             if ((n >> kBlockBits) >= kBlocks) {
-                throw std::length_error("cpm::rtdb::Store: more than " + std::to_string(kBlocks << kBlockBits) + " objects held at once");
+                throw Error("cpm::rtdb::Store: more than " + std::to_string(kBlocks << kBlockBits) + " objects held at once");
             }
             Object**& block = blocks_[n >> kBlockBits];
             if (!block) block = new Object*[size_t(1) << kBlockBits]();

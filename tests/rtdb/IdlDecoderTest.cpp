@@ -1,5 +1,6 @@
 // cpm::rtdb::IdlDecoder: the lab's IDL read at run time decodes samples, says which types have
 // a Header, and gives each instance's key as text and as DDS hashes it (equal to the writer's).
+#include <cpm/Error.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 
 #include <ParameterPubSubTypes.h>
@@ -120,10 +121,10 @@ TEST(IdlDecoder, ReadsEveryKindOfMemberTheLabsIdlUses)
     const auto bytes = sut.encode("Thing", sample);
     EXPECT_EQ(sut.decode("Thing", bytes), sample);
     EXPECT_FALSE(sut.decode("Thing", std::vector<uint8_t>(bytes.begin(), bytes.end() - 1))) << "a payload that ends early";
-    EXPECT_THROW((void)sut.encode("Thing", {{"few", {1.0, 2.0, 3.0, 4.0}}}), std::exception) << "past the sequence's bound";
+    EXPECT_THROW((void)sut.encode("Thing", {{"few", {1.0, 2.0, 3.0, 4.0}}}), cpm::Error) << "past the sequence's bound";
 }
 
-TEST(IdlDecoder, AnIdlItCannotReadIsAnErrorNamingFileLineAndWhat)
+TEST(IdlDecoder, AnIdlItCannotReadIsACpmErrorNamingFileLineAndWhat)
 {
     const std::vector<std::pair<std::string, std::string>> cases = {
         {"struct A { long x; };\n/* never closed\n", "bad.idl:2: a /* comment that never ends"},
@@ -144,7 +145,7 @@ TEST(IdlDecoder, AnIdlItCannotReadIsAnErrorNamingFileLineAndWhat)
         try {
             const IdlDecoder sut(Sources{{"bad.idl", text}});
             ADD_FAILURE() << "read: " << text;
-        } catch (const std::runtime_error& e) {
+        } catch (const cpm::Error& e) {
             EXPECT_EQ(std::string(e.what()), message) << text;
         }
     }
