@@ -1,5 +1,6 @@
 #include <cpm/rtdb/Csv.hpp>
 
+#include <cpm/Error.hpp>
 #include <cpm/rtdb/Recording.hpp>
 
 #include <algorithm>
@@ -97,7 +98,7 @@ bool read_record(std::istream& in, std::vector<std::string>& cells, size_t& line
     for (;; ch = in.get()) {
         if (quoted) {
             if (ch == EOF) {
-                throw std::invalid_argument("line " + std::to_string(first_line) + ", column " + std::to_string(column) +
+                throw Error("line " + std::to_string(first_line) + ", column " + std::to_string(column) +
                                             ": a quoted cell is never closed");
             }
             if (ch == '"') {
@@ -127,7 +128,7 @@ bool read_record(std::istream& in, std::vector<std::string>& cells, size_t& line
             continue;
         }
         if (was_quoted) {
-            throw std::invalid_argument("line " + std::to_string(line_no) + ", column " + std::to_string(column) +
+            throw Error("line " + std::to_string(line_no) + ", column " + std::to_string(column) +
                                         ": text after a quoted cell's closing quote");
         }
         cell += char(ch);
@@ -137,31 +138,31 @@ bool read_record(std::istream& in, std::vector<std::string>& cells, size_t& line
 ImportReport import(std::istream& in, const std::string& source, const std::string& topic, const std::string& type,
                     const IdlDecoder& types, const std::string& out_path)
 {
-    if (!types.knows(type)) throw std::invalid_argument(source + ": type " + type + " is not one of cpm's types (its IDL is needed to write samples)");
+    if (!types.knows(type)) throw Error(source + ": type " + type + " is not one of cpm's types (its IDL is needed to write samples)");
     std::vector<std::string> header;
     size_t line_no = 0;
     try {
-        if (!read_record(in, header, line_no)) throw std::invalid_argument("empty (the first line names the columns)");
-    } catch (const std::invalid_argument& e) {
-        throw std::invalid_argument(source + ": " + e.what());
+        if (!read_record(in, header, line_no)) throw Error("empty (the first line names the columns)");
+    } catch (const Error& e) {
+        throw Error(source + ": " + e.what());
     }
     // Which columns are which; a field column must be one of the type's fields.
     std::map<std::string, size_t> named;
     for (size_t i = 0; i < header.size(); ++i) {
-        if (!named.emplace(header[i], i).second) throw std::invalid_argument(source + ":1: column " + header[i] + " comes twice");
+        if (!named.emplace(header[i], i).second) throw Error(source + ":1: column " + header[i] + " comes twice");
     }
     const std::vector<std::string> fields = types.field_paths(type);
     for (size_t i = 0; i < header.size(); ++i) {
         const bool time = std::find(time_columns().begin(), time_columns().end(), header[i]) != time_columns().end();
         if (!time && std::find(fields.begin(), fields.end(), header[i]) == fields.end()) {
-            throw std::invalid_argument(source + ":1: column " + std::to_string(i + 1) + " '" + header[i] + "' is no field of " + type);
+            throw Error(source + ":1: column " + std::to_string(i + 1) + " '" + header[i] + "' is no field of " + type);
         }
     }
     auto column = [&](const std::string& name) { return named.count(name) ? std::optional<size_t>(named[name]) : std::nullopt; };
     const auto commit_col = column("commit_ns"), data_col = column("data_ns"), valid_col = column("valid_after_ns");
     const bool header_time = types.has_header(type);
     if (!commit_col && !data_col && !(header_time && named.count("header.create_stamp.nanoseconds"))) {
-        throw std::invalid_argument(source + ":1: no time column (commit_ns, data_ns or header.create_stamp.nanoseconds)");
+        throw Error(source + ":1: no time column (commit_ns, data_ns or header.create_stamp.nanoseconds)");
     }
 
     struct Row
@@ -182,7 +183,7 @@ ImportReport import(std::istream& in, const std::string& source, const std::stri
         size_t at = line_no;
         try {
             if (!read_record(in, cells, line_no)) break;
-        } catch (const std::invalid_argument& e) {
+        } catch (const Error& e) {
             report(at + 1, e.what());
             break;  // the rest of the file cannot be split into cells
         }
@@ -199,7 +200,7 @@ ImportReport import(std::istream& in, const std::string& source, const std::stri
         Row r;
         try {
             r.payload = types.encode(type, sample);
-        } catch (const std::invalid_argument& e) {
+        } catch (const Error& e) {
             const std::string what = e.what();
             const std::string path = what.substr(0, what.find(':'));
             std::string col = path;
@@ -238,9 +239,9 @@ ImportReport import(std::istream& in, const std::string& source, const std::stri
         std::string all;
         for (const auto& e : errors) all += (all.empty() ? "" : "\n") + e;
         if (more_errors) all += "\nand " + std::to_string(more_errors) + " more rows that do not parse";
-        throw std::invalid_argument(all);
+        throw Error(all);
     }
-    if (rows.empty()) throw std::invalid_argument(source + ": no rows after the header");
+    if (rows.empty()) throw Error(source + ": no rows after the header");
 
     // The file, as a history service would have written it: an object per key, each sample
     // committed at its commit time (one per object strictly increasing: ties move on by 1 ns).
@@ -264,7 +265,7 @@ ImportReport import(std::istream& in, const std::string& source, const std::stri
             writer.sample_committed(it->second, in, store.commit(it->second, in, r.commit));
         }
         writer.close();
-        if (writer.counters().failed) throw std::runtime_error(writer.counters().error);
+        if (writer.counters().failed) throw Error(writer.counters().error);
         out.rows = rows.size();
         out.objects = objects.size();
     } catch (...) {

@@ -15,7 +15,7 @@ class Outlet
 public:
     Outlet(Store& store, std::vector<std::shared_ptr<IngestSink>> sinks) : store_(store), sinks_(std::move(sinks)) {}
 
-    /// Throws std::length_error, as Store::add_object, when the store holds too many objects.
+    /// Throws cpm::Error, as Store::add_object, when the store holds too many objects.
     Oid add(ObjectInfo info)
     {
         const Oid oid = store_.add_object(std::move(info));

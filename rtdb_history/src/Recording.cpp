@@ -46,11 +46,11 @@ const char* const kSchema =
 
 sqlite3* open_recording_file(const std::string& path, std::map<std::string, std::string>& meta)
 {
-    if (!file_exists(path)) throw std::runtime_error("recording " + path + ": no such file");
+    if (!file_exists(path)) throw Error("recording " + path + ": no such file");
     std::error_code ec;
     if (std::filesystem::is_directory(path, ec)) {
         const bool run = std::filesystem::is_regular_file(std::filesystem::path(path) / "recording.db", ec);
-        throw std::runtime_error("recording " + path + ": it is a directory" +
+        throw Error("recording " + path + ": it is a directory" +
                                  (run ? " (a run's folder? its recording is " + (std::filesystem::path(path) / "recording.db").string() + ")" : ""));
     }
     sqlite3* db = nullptr;
@@ -62,13 +62,13 @@ sqlite3* open_recording_file(const std::string& path, std::map<std::string, std:
         rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
     }
     std::unique_ptr<sqlite3, int (*)(sqlite3*)> owner(db, sqlite3_close);
-    auto fail = [&](const std::string& what) { return std::runtime_error("recording " + path + ": " + what); };
+    auto fail = [&](const std::string& what) { return Error("recording " + path + ": " + what); };
     if (rc != SQLITE_OK) throw fail("cannot open it: " + sqlite_error(db, rc));
     auto read_meta = [&] {
         meta.clear();
         Statement m(db, "SELECT key, value FROM meta");
         while ((rc = m.step()) == SQLITE_ROW) meta[m.text(0)] = m.text(1);
-        if (rc != SQLITE_DONE) throw std::runtime_error(sqlite_error(db, rc));
+        if (rc != SQLITE_DONE) throw Error(sqlite_error(db, rc));
     };
     try {
         read_meta();
@@ -101,14 +101,14 @@ struct RecordingWriter::Event
 
 RecordingWriter::RecordingWriter(std::string path, RecordingOptions options) : path_(std::move(path)), options_(std::move(options))
 {
-    if (file_exists(path_)) throw std::runtime_error("recording " + path_ + ": the file exists already (a recording is never overwritten)");
+    if (file_exists(path_)) throw Error("recording " + path_ + ": the file exists already (a recording is never overwritten)");
     int rc = sqlite3_open_v2(path_.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX, nullptr);
     auto give_up = [&](const std::string& what) {
         const std::string e = "recording " + path_ + ": " + what + ": " + sqlite_error(db_, rc);
         sqlite3_close(db_);
         db_ = nullptr;
         ::unlink(path_.c_str());
-        throw std::runtime_error(e);
+        throw Error(e);
     };
     if (rc != SQLITE_OK) give_up("cannot create it");
     if ((rc = exec(db_, "PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL;")) != SQLITE_OK) give_up("cannot set WAL mode");
@@ -320,112 +320,174 @@ RecordingCounters RecordingWriter::counters() const
 
 // ---- reading -------------------------------------------------------------------------------
 
-LoadedRecording load_recording(const std::string& path)
-{
-    std::map<std::string, std::string> meta;
-    sqlite3* db = open_recording_file(path, meta);
-    std::unique_ptr<sqlite3, int (*)(sqlite3*)> owner(db, sqlite3_close);
-    auto fail = [&](const std::string& what) -> std::runtime_error { return std::runtime_error("recording " + path + ": " + what); };
-    int rc = SQLITE_OK;
+namespace {
 
-    LoadedRecording out;
+/// A store that keeps all a recording holds: a window and byte budgets nothing reaches.
+StoreOptions keeping_everything()
+{
     StoreOptions keep_all;
     keep_all.default_retention.window_ns = uint64_t(1) << 62;
     keep_all.default_retention.max_bytes_per_topic = std::numeric_limits<uint64_t>::max() / 4;
     keep_all.max_bytes_total = std::numeric_limits<uint64_t>::max() / 4;
-    out.store = std::make_unique<Store>(keep_all);
+    return keep_all;
+}
+
+/// The recording's name, start and (when it was closed) end from its meta table.
+void read_meta(std::map<std::string, std::string>& meta, LoadedRecording& out)
+{
     out.name = meta["name"];
     out.started_ns = std::strtoull(meta["started_ns"].c_str(), nullptr, 10);
     out.complete = meta.count("ended_ns") != 0;  // written by a clean close
     out.ended_ns = std::strtoull(meta["ended_ns"].c_str(), nullptr, 10);
-    std::vector<std::string> damage;
+}
+
+/// The IDL the recording carries, and the decoder made of it; what does not read is damage.
+void read_types(sqlite3* db, LoadedRecording& out, std::vector<std::string>& damage)
+{
     try {
         Statement t(db, "SELECT file, idl FROM types");
+        int rc;
         while ((rc = t.step()) == SQLITE_ROW) out.idl[t.text(0)] = t.text(1);
         if (rc != SQLITE_DONE) damage.push_back("its types table is damaged: " + sqlite_error(db, rc));
         if (!out.idl.empty()) out.types = std::make_shared<IdlDecoder>(out.idl);
     } catch (const std::runtime_error& e) {
         damage.push_back(std::string("its IDL does not read: ") + e.what());
     }
+}
 
-    std::map<Oid, Oid> oids;  // as recorded → as loaded (differs only where the live store reused a slot)
-    auto loaded = [&](Oid recorded) {
-        auto it = oids.find(recorded);
-        return it == oids.end() ? kNoOid : it->second;
-    };
-    std::vector<std::pair<Oid, uint64_t>> deletions;
-    uint64_t newest = 0;
-    try {
-        Statement objects(db, "SELECT oid, kind, name, topic, key, type_name, parent, creator, creator_guid, created_ns, deleted_ns,"
-                              " history_interval_ns, data_time FROM objects ORDER BY created_ns, oid");
-        std::vector<std::pair<ObjectInfo, uint64_t>> rows;  // info, deleted_ns
-        while ((rc = objects.step()) == SQLITE_ROW) {
-            ObjectInfo i;
-            i.oid = objects.u64(0);
-            i.kind = objects.text(1) == "process" ? ObjectKind::process : ObjectKind::instance;
-            i.name = objects.text(2);
-            i.topic = objects.text(3);
-            i.key = objects.text(4);
-            i.type_name = objects.text(5);
-            i.parent = objects.u64(6);
-            i.creator = objects.text(7);
-            i.creator_guid = objects.text(8);
-            i.created_ts = objects.u64(9);
-            i.history_interval_ns = objects.u64(11);
-            i.data_time = objects.text(12);
-            rows.emplace_back(std::move(i), objects.u64(10));
-        }
-        if (rc != SQLITE_DONE) damage.push_back("its objects table is damaged after " + std::to_string(rows.size()) + " objects: " + sqlite_error(db, rc));
-        // Where the live store gave a purged object's slot to a later one, the later one keeps its
-        // oid (the one the live store answered with last) and the earlier moves past every slot.
-        std::map<uint32_t, uint32_t> newest_generation;
-        for (const auto& [i, deleted] : rows) {
-            auto& g = newest_generation[uint32_t(i.oid)];
-            g = std::max(g, uint32_t(i.oid >> 32));
-        }
-        uint32_t next_slot = newest_generation.empty() ? 1 : newest_generation.rbegin()->first + 1;
-        for (const auto& [i, deleted] : rows) oids[i.oid] = uint32_t(i.oid >> 32) == newest_generation[uint32_t(i.oid)] ? i.oid : next_slot++;
-        for (auto& [i, deleted] : rows) {
-            const Oid wanted = oids[i.oid];
-            i.oid = wanted;
-            i.parent = loaded(i.parent);
-            const Oid got = out.store->restore_object(std::move(i));
-            if (deleted) deletions.emplace_back(got, deleted);
-            if (got != wanted) {
-                for (auto& [recorded, now] : oids) now = now == wanted ? got : now;
-            }
-        }
+/// The objects as recorded, each with its deletion time (0: never), oldest first.
+using RecordedObjects = std::vector<std::pair<ObjectInfo, uint64_t>>;
 
-        Statement samples(db, "SELECT oid, commit_ns, data_ns, valid_after_ns, source_ns, lost_before, payload FROM samples ORDER BY rowid");
-        while ((rc = samples.step()) == SQLITE_ROW) {
-            const Oid oid = loaded(samples.u64(0));
-            Incoming in;
-            in.data_ns = samples.u64(2);
-            in.valid_after_ns = samples.u64(3);
-            in.source_ns = samples.u64(4);
-            in.lost_before = samples.u64(5);
-            in.data = samples.blob(6);
-            in.size = samples.bytes(6);
-            const uint64_t commit = samples.u64(1);
-            if (oid != kNoOid) out.store->commit(oid, in, commit);
-            newest = std::max(newest, commit);
-            ++out.samples;
-        }
-        if (rc != SQLITE_DONE) {
-            damage.push_back("it is damaged after " + std::to_string(out.samples) + " samples (" + sqlite_error(db, rc) +
-                             "); the samples before the damage answer");
-        }
-    } catch (const std::runtime_error& e) {
-        if (oids.empty()) throw fail(std::string("its tables do not read: ") + e.what());
-        damage.push_back(std::string("it is damaged: ") + e.what());
+/// The objects table; the rows before a damaged one, and the damage. Throws when it does not read.
+RecordedObjects read_objects(sqlite3* db, std::vector<std::string>& damage)
+{
+    Statement objects(db, "SELECT oid, kind, name, topic, key, type_name, parent, creator, creator_guid, created_ns, deleted_ns,"
+                          " history_interval_ns, data_time FROM objects ORDER BY created_ns, oid");
+    RecordedObjects rows;
+    int rc;
+    while ((rc = objects.step()) == SQLITE_ROW) {
+        ObjectInfo i;
+        i.oid = objects.u64(0);
+        i.kind = objects.text(1) == "process" ? ObjectKind::process : ObjectKind::instance;
+        i.name = objects.text(2);
+        i.topic = objects.text(3);
+        i.key = objects.text(4);
+        i.type_name = objects.text(5);
+        i.parent = objects.u64(6);
+        i.creator = objects.text(7);
+        i.creator_guid = objects.text(8);
+        i.created_ts = objects.u64(9);
+        i.history_interval_ns = objects.u64(11);
+        i.data_time = objects.text(12);
+        rows.emplace_back(std::move(i), objects.u64(10));
     }
-    for (const auto& [oid, t] : deletions) out.store->mark_deleted(oid, t);
+    if (rc != SQLITE_DONE) damage.push_back("its objects table is damaged after " + std::to_string(rows.size()) + " objects: " + sqlite_error(db, rc));
+    return rows;
+}
+
+/// Each recorded oid → the oid to restore it under. Where the live store gave a purged object's
+/// slot to a later one, the later one keeps its oid (the one the live store answered with last)
+/// and the earlier moves past every slot.
+std::map<Oid, Oid> oids_to_restore(const RecordedObjects& rows)
+{
+    std::map<uint32_t, uint32_t> newest_generation;
+    for (const auto& [i, deleted] : rows) {
+        auto& g = newest_generation[uint32_t(i.oid)];
+        g = std::max(g, uint32_t(i.oid >> 32));
+    }
+    uint32_t next_slot = newest_generation.empty() ? 1 : newest_generation.rbegin()->first + 1;
+    std::map<Oid, Oid> oids;
+    for (const auto& [i, deleted] : rows) oids[i.oid] = uint32_t(i.oid >> 32) == newest_generation[uint32_t(i.oid)] ? i.oid : next_slot++;
+    return oids;
+}
+
+/// The oid a recorded one was loaded under; kNoOid for one not loaded.
+Oid as_loaded(const std::map<Oid, Oid>& oids, Oid recorded)
+{
+    auto it = oids.find(recorded);
+    return it == oids.end() ? kNoOid : it->second;
+}
+
+/// Puts the objects into the store (oids updated where the store gave another) and adds their
+/// deletions, to be marked once the samples are in.
+void restore_objects(Store& store, RecordedObjects& rows, std::map<Oid, Oid>& oids, std::vector<std::pair<Oid, uint64_t>>& deletions)
+{
+    for (auto& [i, deleted] : rows) {
+        const Oid wanted = oids[i.oid];
+        i.oid = wanted;
+        i.parent = as_loaded(oids, i.parent);
+        const Oid got = store.restore_object(std::move(i));
+        if (deleted) deletions.emplace_back(got, deleted);
+        if (got != wanted) {
+            for (auto& [recorded, now] : oids) now = now == wanted ? got : now;
+        }
+    }
+}
+
+/// Commits every sample to its object in the order recorded, counting them (out.samples) and
+/// keeping the newest commit time; samples after a damaged row are lost, and that is damage.
+void read_samples(sqlite3* db, const std::map<Oid, Oid>& oids, LoadedRecording& out, uint64_t& newest, std::vector<std::string>& damage)
+{
+    Statement samples(db, "SELECT oid, commit_ns, data_ns, valid_after_ns, source_ns, lost_before, payload FROM samples ORDER BY rowid");
+    int rc;
+    while ((rc = samples.step()) == SQLITE_ROW) {
+        const Oid oid = as_loaded(oids, samples.u64(0));
+        Incoming in;
+        in.data_ns = samples.u64(2);
+        in.valid_after_ns = samples.u64(3);
+        in.source_ns = samples.u64(4);
+        in.lost_before = samples.u64(5);
+        in.data = samples.blob(6);
+        in.size = samples.bytes(6);
+        const uint64_t commit = samples.u64(1);
+        if (oid != kNoOid) out.store->commit(oid, in, commit);
+        newest = std::max(newest, commit);
+        ++out.samples;
+    }
+    if (rc != SQLITE_DONE) {
+        damage.push_back("it is damaged after " + std::to_string(out.samples) + " samples (" + sqlite_error(db, rc) +
+                         "); the samples before the damage answer");
+    }
+}
+
+/// A recording not closed ends at its newest sample; it is complete when closed and undamaged,
+/// and every damage is said in one warning naming the file.
+void sum_up(LoadedRecording& out, uint64_t newest, std::vector<std::string> damage, const std::string& path)
+{
     if (!out.complete) {
         damage.push_back("it was not closed (the recording process ended without closing it); it ends at its newest sample");
         out.ended_ns = newest;
     }
     out.complete = out.complete && damage.size() == 0;
     for (const auto& d : damage) out.warning += (out.warning.empty() ? "recording " + path + ": " : "; ") + d;
+}
+
+}  // namespace
+
+LoadedRecording load_recording(const std::string& path)
+{
+    std::map<std::string, std::string> meta;
+    std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_recording_file(path, meta), sqlite3_close);
+    LoadedRecording out;
+    out.store = std::make_unique<Store>(keeping_everything());
+    read_meta(meta, out);
+    std::vector<std::string> damage;
+    read_types(db.get(), out, damage);
+
+    std::map<Oid, Oid> oids;  // as recorded → as loaded (differs only where the live store reused a slot)
+    std::vector<std::pair<Oid, uint64_t>> deletions;
+    uint64_t newest = 0;
+    try {
+        RecordedObjects rows = read_objects(db.get(), damage);
+        oids = oids_to_restore(rows);
+        restore_objects(*out.store, rows, oids, deletions);
+        read_samples(db.get(), oids, out, newest, damage);
+    } catch (const std::runtime_error& e) {
+        if (oids.empty()) throw Error("recording " + path + ": its tables do not read: " + e.what());
+        damage.push_back(std::string("it is damaged: ") + e.what());
+    }
+    for (const auto& [oid, t] : deletions) out.store->mark_deleted(oid, t);
+    sum_up(out, newest, std::move(damage), path);
     return out;
 }
 

@@ -1,5 +1,6 @@
 #include "Registry.hpp"
 
+#include <cpm/Error.hpp>
 
 namespace cpm::rtdb {
 
@@ -47,7 +48,7 @@ Oid Registry::instance(const std::string& topic, const rtps::InstanceHandle_t& h
             inst.oid = out_.add({.topic = topic, .key = n.key, .type_name = n.type_name, .parent = creator.oid,
                                  .creator = creator.name, .creator_guid = guid_prefix_text(writer.guidPrefix), .created_ts = now,
                                  .data_time = n.data_time});
-        } catch (const std::length_error&) {  // millions of instances held at once
+        } catch (const Error&) {  // millions of instances held at once (Store::add_object)
             instances_[topic].erase(handle);
             return kNoOid;
         }

@@ -1,23 +1,25 @@
 #pragma once
 // SQLite for the recording's writer, reader and player: a prepared statement finalized with
 // its scope, and errors as text.
+#include <cpm/Error.hpp>
+
 #include <sqlite3.h>
 
 #include <cstdint>
 #include <map>
-#include <stdexcept>
 #include <string>
 #include <sys/stat.h>
 
 namespace cpm::rtdb::sqlite {
 
-/// A prepared statement, finalized with its scope.
+/// A prepared statement, finalized with its scope. Throws cpm::Error with SQLite's message when
+/// the SQL or a bound value is refused.
 class Statement
 {
 public:
     Statement(sqlite3* db, const char* sql) : db_(db)
     {
-        if (sqlite3_prepare_v2(db, sql, -1, &s_, nullptr) != SQLITE_OK) throw std::runtime_error(sqlite3_errmsg(db));
+        if (sqlite3_prepare_v2(db, sql, -1, &s_, nullptr) != SQLITE_OK) throw Error(sqlite3_errmsg(db));
     }
     ~Statement() { sqlite3_finalize(s_); }
     Statement(const Statement&) = delete;
@@ -50,7 +52,7 @@ public:
 private:
     Statement& check(int rc)
     {
-        if (rc != SQLITE_OK) throw std::runtime_error(sqlite3_errmsg(db_));
+        if (rc != SQLITE_OK) throw Error(sqlite3_errmsg(db_));
         return *this;
     }
     sqlite3* db_;
@@ -76,7 +78,7 @@ inline bool file_exists(const std::string& path)
 }  // namespace cpm::rtdb::sqlite
 
 namespace cpm::rtdb {
-/// Opens a recording for reading and reads its meta table; throws std::runtime_error naming the
+/// Opens a recording for reading and reads its meta table; throws cpm::Error naming the
 /// file when it is none (or of a format version this cpm does not read).
 sqlite3* open_recording_file(const std::string& path, std::map<std::string, std::string>& meta);
 }  // namespace cpm::rtdb

@@ -1,6 +1,7 @@
 // Samples as CSV and back: the encoder writes what Fast DDS writes for every field, cells quote
 // and unquote as RFC 4180 says, an import names each row that does not parse by line and column
 // and leaves no file behind.
+#include <cpm/Error.hpp>
 #include <cpm/rtdb/Csv.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 #include <cpm/rtdb/Recording.hpp>
@@ -99,7 +100,7 @@ TEST(Csv, EncodeNamesTheFieldAndValueThatDoNotFit)
         try {
             (void)types().encode("VehicleState", j);
             return std::string("accepted");
-        } catch (const std::invalid_argument& e) {
+        } catch (const cpm::Error& e) {
             return std::string(e.what());
         }
     };
@@ -130,7 +131,7 @@ TEST(Csv, CellsQuoteAndReadBack)
     try {
         csv::read_record(open, back, line);
         FAIL() << "an open quote was read";
-    } catch (const std::invalid_argument& e) {
+    } catch (const cpm::Error& e) {
         EXPECT_STREQ(e.what(), "line 1, column 2: a quoted cell is never closed");
     }
 }
@@ -165,7 +166,7 @@ TEST(Csv, ImportNamesEveryRowThatDoesNotParseAndWritesNothing)
     try {
         (void)csv::import(in, "drive.csv", "vehicleState", "VehicleState", types(), out);
         FAIL() << "bad rows were imported";
-    } catch (const std::invalid_argument& e) {
+    } catch (const cpm::Error& e) {
         EXPECT_EQ(std::string(e.what()),
                   "drive.csv:3: column pose.x (3): 'zero' is not a number\n"
                   "drive.csv:4: column vehicle_id (2): '700' is out of range\n"
@@ -177,7 +178,7 @@ TEST(Csv, ImportNamesEveryRowThatDoesNotParseAndWritesNothing)
     try {
         (void)csv::import(unknown, "w.csv", "vehicleState", "VehicleState", types(), out);
         FAIL();
-    } catch (const std::invalid_argument& e) {
+    } catch (const cpm::Error& e) {
         EXPECT_EQ(std::string(e.what()), "w.csv:1: column 2 'wheels' is no field of VehicleState");
     }
     EXPECT_FALSE(fs::exists(out));
@@ -185,7 +186,7 @@ TEST(Csv, ImportNamesEveryRowThatDoesNotParseAndWritesNothing)
     try {
         (void)csv::import(empty, "empty.csv", "vehicleState", "VehicleState", types(), out);
         FAIL();
-    } catch (const std::invalid_argument& e) {
+    } catch (const cpm::Error& e) {
         EXPECT_EQ(std::string(e.what()), "empty.csv: empty (the first line names the columns)") << "the file named once";
     }
 }

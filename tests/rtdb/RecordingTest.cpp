@@ -1,6 +1,7 @@
 // A recording written through the IngestSink interface as the service writes it, then read
 // back: every question answers as it did from the store the samples went to; bad files, a
 // full disk and damage give an error naming the file and keep what was written.
+#include <cpm/Error.hpp>
 #include <cpm/rtdb/HistoryJson.hpp>
 #include <cpm/rtdb/Recording.hpp>
 #include <cpm/rtdb/Requests.hpp>
@@ -171,7 +172,7 @@ TEST(Recording, NeverOverwritesAFileAndNamesIt)
     try {
         RecordingWriter w(path);
         FAIL() << "a recording overwrote " << path;
-    } catch (const std::runtime_error& e) {
+    } catch (const cpm::Error& e) {
         EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
         EXPECT_NE(std::string(e.what()).find("exists"), std::string::npos) << e.what();
     }
@@ -182,7 +183,7 @@ TEST(Recording, NeverOverwritesAFileAndNamesIt)
     try {
         RecordingWriter w(dir.file("no/such/folder/r.db"));
         FAIL() << "a recording in a missing folder";
-    } catch (const std::runtime_error& e) {
+    } catch (const cpm::Error& e) {
         EXPECT_NE(std::string(e.what()).find("no/such/folder/r.db"), std::string::npos) << e.what();
     }
 }
@@ -195,14 +196,14 @@ TEST(Recording, AFileThatIsNoRecordingIsNamedInTheError)
         try {
             (void)load_recording(dir.file(name));
             FAIL() << name << " loaded as a recording";
-        } catch (const std::runtime_error& e) {
+        } catch (const cpm::Error& e) {
             EXPECT_NE(std::string(e.what()).find(dir.file(name)), std::string::npos) << e.what();
         }
     }
     try {
         (void)load_recording(dir.file("missing.db"));
         FAIL();
-    } catch (const std::runtime_error& e) {
+    } catch (const cpm::Error& e) {
         EXPECT_NE(std::string(e.what()).find("no such file"), std::string::npos) << e.what();
     }
     EXPECT_THROW((void)cpm::HistoryClient::open_recording(dir.file("text.db")), cpm::Error);

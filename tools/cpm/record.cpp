@@ -64,7 +64,7 @@ int import_command(const std::vector<std::string>& args)
         const auto r = cpm::rtdb::csv::import(in, csv_file, parsed.get("--topic"), parsed.get("--type"), *types, parsed.get("--out"));
         std::printf("%s: %llu samples of %llu objects\n", parsed.get("--out").c_str(), (unsigned long long)r.rows,
                     (unsigned long long)r.objects);
-    } catch (const std::invalid_argument& e) {
+    } catch (const cpm::Error& e) {  // rows that do not parse, or the recording that cannot be written
         std::fprintf(stderr, "%s: %s\n", command.c_str(), e.what());
         return 1;
     } catch (const std::runtime_error& e) {

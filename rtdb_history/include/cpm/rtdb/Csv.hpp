@@ -33,7 +33,7 @@ std::vector<std::pair<std::string, std::string>> flatten(const nlohmann::json& d
 std::string line(const std::vector<std::string>& cells);
 
 /// Reads one record (a quoted cell may span lines). False at the end of the input. `line_no` is
-/// the line the record starts on (1-based), counted on. Throws std::invalid_argument naming the
+/// the line the record starts on (1-based), counted on. Throws cpm::Error naming the
 /// line and column for a quote that is never closed or text after a closing quote.
 bool read_record(std::istream& in, std::vector<std::string>& cells, size_t& line_no);
 
@@ -48,7 +48,7 @@ struct ImportReport
 /// without data_ns that is the type's header.create_stamp) and writes a new recording at
 /// out_path with the samples as topic `topic` of type `type`. Every row that does not parse is
 /// reported as "SOURCE:LINE: column NAME (C): what" (at most 20, then "and N more") in one
-/// std::invalid_argument, and no file is left behind.
+/// cpm::Error, and no file is left behind.
 ImportReport import(std::istream& in, const std::string& source, const std::string& topic, const std::string& type,
                     const IdlDecoder& types, const std::string& out_path);
 

@@ -15,7 +15,7 @@ namespace cpm::rtdb {
 class IdlDecoder
 {
 public:
-    /// Reads every *.idl in `dir`; throws std::runtime_error naming file and line on a
+    /// Reads every *.idl in `dir`; throws cpm::Error naming file and line on a
     /// construct it cannot read.
     explicit IdlDecoder(const std::string& dir);
     /// From IDL texts (file name → text), as a recording carries them.
@@ -34,7 +34,7 @@ public:
     /// The reverse of decode(): the sample as a writer puts it on the wire (XCDR1 little endian,
     /// encapsulation header included) from JSON shaped as decode() gives it. Lenient where text
     /// comes in: a number given as a string ("0.5", "nan", "inf"), an enum by name or number, a
-    /// missing member as its zero. Throws std::invalid_argument naming the member path (e.g.
+    /// missing member as its zero. Throws cpm::Error naming the member path (e.g.
     /// "pose.x") and the value for anything that does not fit the type.
     std::vector<uint8_t> encode(const std::string& type_name, const nlohmann::json& sample) const;
 
@@ -70,13 +70,13 @@ public:
     std::optional<KeyBytes> key_bytes(const std::string& type_name, const uint8_t* data, size_t size) const;
 
 private:
+    friend class IdlParser;  // reads the IDL text into structs_ and enums_
     struct Member
     {
         std::string name, type;  // type: a primitive, "string", a struct or enum name, "sequence<T>"
         size_t array = 0;        // > 0: a fixed array of that many
         bool key = false;        // @key
     };
-    void parse(const std::string& text, const std::string& file);
     nlohmann::json read(const std::string& type, class CdrCursor& c) const;
     void write(const std::string& type, const nlohmann::json& v, class CdrWriter& w, const std::string& path) const;
 

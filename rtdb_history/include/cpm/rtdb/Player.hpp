@@ -42,7 +42,7 @@ struct PlayStats
 class Player
 {
 public:
-    /// Opens the recording (throws std::runtime_error naming the file when it is not one) and
+    /// Opens the recording (throws cpm::Error naming the file when it is not one) and
     /// makes a writer per topic it will replay (throws cpm::Error when DDS refuses one).
     Player(Participant& participant, const std::string& path, PlayOptions options);
     ~Player();

@@ -59,7 +59,7 @@ class RecordingWriter final : public IngestSink
 {
 public:
     /// Creates the file (it must not exist: a recording is never overwritten) and starts the
-    /// writer thread. Throws std::runtime_error naming the file when it cannot be made.
+    /// writer thread. Throws cpm::Error naming the file when it cannot be made.
     explicit RecordingWriter(std::string path, RecordingOptions options = {});
     /// close().
     ~RecordingWriter() override;
@@ -110,7 +110,7 @@ struct LoadedRecording
     std::map<std::string, std::string> idl;  ///< IDL file name → text
 };
 
-/// Reads a recording. Throws std::runtime_error naming the file when it is not one (missing, not
+/// Reads a recording. Throws cpm::Error naming the file when it is not one (missing, not
 /// SQLite, no cpm tables); a file damaged part way loads up to the damage (see warning).
 LoadedRecording load_recording(const std::string& path);
 
