@@ -1,5 +1,6 @@
 #include "bench_common.hpp"
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/Security.hpp>
 
 #include <nlohmann/json.hpp>
@@ -156,12 +157,11 @@ SecuredLab::~SecuredLab()
     std::filesystem::remove_all(std::filesystem::path(dir).parent_path(), ignored);
 }
 
-std::string arg(int argc, char** argv, const std::string& name, const std::string& fallback)
+std::vector<long long> integer_list(const std::string& flag, const std::string& text, long long min, long long max)
 {
-    for (int i = 1; i + 1 < argc; ++i) {
-        if (argv[i] == name) return argv[i + 1];
-    }
-    return fallback;
+    std::vector<long long> values;
+    for (const auto& item : cpm::cli::split_list(flag, text)) values.push_back(cpm::cli::parse_integer(flag, item, min, max));
+    return values;
 }
 
 void record(const Figure& f)

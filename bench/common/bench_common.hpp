@@ -2,7 +2,8 @@
 #include <cpm/ChildProcess.hpp>
 
 // What every benchmark here shares: statistics printed the same way, child processes, the
-// Cyclone configuration that pins ddsperf to loopback, and the machine description.
+// Cyclone configuration that pins ddsperf to loopback, and the machine description. Flags are
+// cpm's own (cpm::cli, cpm/CommandLine.hpp), as in every cpm program.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -93,7 +94,8 @@ struct SecuredLab
     SecuredLab& operator=(const SecuredLab&) = delete;
 };
 
-/// The value of "--name value" in argv, or fallback.
-std::string arg(int argc, char** argv, const std::string& name, const std::string& fallback);
+/// A flag's list of whole numbers ("--sizes 100,65536"): cpm::cli::split_list, each item read
+/// by cpm::cli::parse_integer within [min, max]; a UsageError names the flag and the item.
+std::vector<long long> integer_list(const std::string& flag, const std::string& text, long long min, long long max);
 
 }  // namespace bench

@@ -19,6 +19,8 @@
 
 #include "bench_common.hpp"
 
+#include <cpm/CommandLine.hpp>
+
 #include <benchmark/benchmark.h>
 #include <sqlite3.h>
 
@@ -475,7 +477,8 @@ void print_percentiles()
 int main(int argc, char** argv)
 {
     benchmark::Initialize(&argc, argv);
-    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+    // Google Benchmark's flags (--benchmark_filter=…, --help); anything else is a usage error.
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return cpm::cli::kUsageExit;
     std::printf("bench_history_store: %d objects x %d samples of %zu bytes held; store vs SQLite (in-memory, indexed, prepared)\n",
                 kObjects, kSamples, kPayload);
     // The fixtures are built before any timing: built lazily, the first benchmark to touch one
