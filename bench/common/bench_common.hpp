@@ -16,8 +16,9 @@ struct Stats
     double min = 0, p50 = 0, p90 = 0, p99 = 0, max = 0;  // microseconds
 };
 
-/// Percentiles of samples given in microseconds (sorts a copy).
-Stats stats_of(std::vector<double> samples_us);
+/// min, p50, p90, p99 and max of samples given in microseconds, each by cpm::percentile (the
+/// nearest rank: min is p0, max is p100).
+Stats stats_of(const std::vector<double>& samples_us);
 
 /// "n min p50 p90 p99 max" header and one row; ratio rows compare p50/p99.
 void print_header(const std::string& what);

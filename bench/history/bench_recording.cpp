@@ -15,6 +15,7 @@
 
 #include <cpm/CommandLine.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/percentile.hpp>
 #include <cpm/rtdb/Player.hpp>
 #include <cpm/rtdb/Recording.hpp>
 #include <cpm/rtdb/Requests.hpp>
@@ -97,12 +98,6 @@ Ramp ramp(int domain, double seconds, const std::vector<std::string>& extra, con
         }
     }
     return out;
-}
-
-double median(std::vector<double> v)
-{
-    std::sort(v.begin(), v.end());
-    return v.empty() ? 0 : v[v.size() / 2];
 }
 
 const char* kHelp =
@@ -199,7 +194,7 @@ int run(int argc, char** argv)
     }
     sqlite3_finalize(q);
     sqlite3_close(db);
-    const double live_ns = median(t_live), loaded_ns = median(t_loaded), sql_ns = median(t_sql);
+    const double live_ns = cpm::percentile(t_live, 0.5), loaded_ns = cpm::percentile(t_loaded, 0.5), sql_ns = cpm::percentile(t_sql, 0.5);
     std::printf("%-44s %10.0f ns\n", "live store (copied answer)", live_ns);
     std::printf("%-44s %10.0f ns (%.2fx the live store)\n", "recording loaded into a store (copied answer)", loaded_ns, loaded_ns / live_ns);
     std::printf("%-44s %10.0f ns (%.1fx the loaded store)\n", "SQLite on the file, index (oid, commit_ns)", sql_ns, sql_ns / loaded_ns);

@@ -16,6 +16,7 @@
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/percentile.hpp>
 #include <cpm/stamp_message.hpp>
 
 #include <VehicleCommandDirect.h>
@@ -291,8 +292,7 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
         // state lands within half a period of its slot.
         std::vector<uint64_t> phases;
         for (auto t : in_window) phases.push_back(t % period);
-        std::nth_element(phases.begin(), phases.begin() + long(phases.size() / 2), phases.end());
-        const uint64_t phase = phases[phases.size() / 2];
+        const uint64_t phase = cpm::percentile(phases, 0.5);
         std::set<uint64_t> slots;
         for (auto t : in_window) slots.insert((t - phase + period / 2) / period);
         const uint64_t first = (t0 - phase + period - 1) / period, last = (t1 - phase - 1) / period;
