@@ -7,6 +7,7 @@
 #include "bench_common.hpp"
 
 #include <cpm/AsyncReader.hpp>
+#include <cpm/CommandLine.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/aruco/ArucoNode.hpp>
 #include <cpm/aruco/Detector.hpp>
@@ -449,16 +450,23 @@ void frame_transport()
     }
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_aruco [--root DIR] [--dds_domain D]\n"
+    "aruco_node's per-frame work against plain OpenCV and AprilTag 3 on the same frames; detection rate,\n"
+    "false detections, pose and gate error against ground truth; the node's latency in the running lab;\n"
+    "CameraFrame over DDS between two processes.\n"
+    "  --root DIR  the cpm source tree (its scenarios/); default: the one this was built from\n"
+    "(--echo TOPIC --sharing 0|1: the echo process it starts itself)\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const std::string echo = bench::arg(argc, argv, "--echo", "");
+    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--root", true}, {"--echo", true}, {"--sharing", true}}, "bench_aruco");
+    const std::string echo = flags.get("--echo");
     if (!echo.empty()) {
         cpm::init(argc, argv);
-        return frame_echo(echo, bench::arg(argc, argv, "--sharing", "0") == "1");
+        return frame_echo(echo, flags.get("--sharing", "0") == "1");
     }
-    g_root = bench::arg(argc, argv, "--root", CPM_SOURCE_DIR);
+    g_root = flags.get("--root", CPM_SOURCE_DIR);
     cv::setNumThreads(1);
     bench::print_machine("OpenCV " + std::string(CV_VERSION) + ", cv::setNumThreads(1); frames rendered by cpm's synthetic camera");
     cpm::init(argc, argv);
@@ -472,3 +480,7 @@ int main(int argc, char** argv)
     frame_transport();
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_aruco", kHelp, run); }

@@ -1,10 +1,11 @@
 #include "bench_common.hpp"
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/Security.hpp>
+#include <cpm/percentile.hpp>
 
 #include <nlohmann/json.hpp>
 
-#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -23,19 +24,14 @@ extern char** environ;
 
 namespace bench {
 
-Stats stats_of(std::vector<double> v)
+Stats stats_of(const std::vector<double>& v)
 {
-    Stats s;
-    s.n = v.size();
-    if (v.empty()) return s;
-    std::sort(v.begin(), v.end());
-    auto at = [&](double q) { return v[std::min(v.size() - 1, static_cast<size_t>(q * double(v.size())))]; };
-    s.min = v.front();
-    s.p50 = at(0.50);
-    s.p90 = at(0.90);
-    s.p99 = at(0.99);
-    s.max = v.back();
-    return s;
+    return {.n = v.size(),
+            .min = cpm::percentile(v, 0.0),
+            .p50 = cpm::percentile(v, 0.50),
+            .p90 = cpm::percentile(v, 0.90),
+            .p99 = cpm::percentile(v, 0.99),
+            .max = cpm::percentile(v, 1.0)};
 }
 
 void print_header(const std::string& what)
@@ -156,12 +152,11 @@ SecuredLab::~SecuredLab()
     std::filesystem::remove_all(std::filesystem::path(dir).parent_path(), ignored);
 }
 
-std::string arg(int argc, char** argv, const std::string& name, const std::string& fallback)
+std::vector<long long> integer_list(const std::string& flag, const std::string& text, long long min, long long max)
 {
-    for (int i = 1; i + 1 < argc; ++i) {
-        if (argv[i] == name) return argv[i + 1];
-    }
-    return fallback;
+    std::vector<long long> values;
+    for (const auto& item : cpm::cli::split_list(flag, text)) values.push_back(cpm::cli::parse_integer(flag, item, min, max));
+    return values;
 }
 
 void record(const Figure& f)

@@ -2,7 +2,8 @@
 #include <cpm/ChildProcess.hpp>
 
 // What every benchmark here shares: statistics printed the same way, child processes, the
-// Cyclone configuration that pins ddsperf to loopback, and the machine description.
+// Cyclone configuration that pins ddsperf to loopback, and the machine description. Flags are
+// cpm's own (cpm::cli, cpm/CommandLine.hpp), as in every cpm program.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -15,8 +16,9 @@ struct Stats
     double min = 0, p50 = 0, p90 = 0, p99 = 0, max = 0;  // microseconds
 };
 
-/// Percentiles of samples given in microseconds (sorts a copy).
-Stats stats_of(std::vector<double> samples_us);
+/// min, p50, p90, p99 and max of samples given in microseconds, each by cpm::percentile (the
+/// nearest rank: min is p0, max is p100).
+Stats stats_of(const std::vector<double>& samples_us);
 
 /// "n min p50 p90 p99 max" header and one row; ratio rows compare p50/p99.
 void print_header(const std::string& what);
@@ -93,7 +95,8 @@ struct SecuredLab
     SecuredLab& operator=(const SecuredLab&) = delete;
 };
 
-/// The value of "--name value" in argv, or fallback.
-std::string arg(int argc, char** argv, const std::string& name, const std::string& fallback);
+/// A flag's list of whole numbers ("--sizes 100,65536"): cpm::cli::split_list, each item read
+/// by cpm::cli::parse_integer within [min, max]; a UsageError names the flag and the item.
+std::vector<long long> integer_list(const std::string& flag, const std::string& text, long long min, long long max);
 
 }  // namespace bench

@@ -1,5 +1,7 @@
 // bench_table FILE: the figures `./lab bench` recorded (one JSON object per line, see
 // bench_common.hpp's Figure) as one table: bench, case, cpm, peer, ratio, target, met.
+#include <cpm/CommandLine.hpp>
+
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
@@ -19,17 +21,19 @@ std::string number(const nlohmann::json& v)
 
 std::string text(const nlohmann::json& v) { return v.is_string() ? v.get<std::string>() : "-"; }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_table FILE\n"
+    "The figures ./lab bench recorded (the JSON lines ./lab bench --json wrote) as one table: bench, case,\n"
+    "cpm, peer, ratio, target and whether it is met; then how many targets were met.\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    if (argc != 2) {
-        std::fprintf(stderr, "usage: bench_table FILE (the JSON lines ./lab bench --json wrote)\n");
-        return 2;
-    }
-    std::ifstream in(argv[1]);
+    const auto args = cpm::cli::parse_args(std::vector<std::string>(argv + 1, argv + argc), {}, "bench_table");
+    if (args.positional.size() != 1) throw cpm::cli::UsageError("bench_table: give one FILE (see --help)");
+    const std::string& file = args.positional[0];
+    std::ifstream in(file);
     if (!in) {
-        std::fprintf(stderr, "bench_table: cannot read %s\n", argv[1]);
+        std::fprintf(stderr, "bench_table: cannot read %s\n", file.c_str());
         return 1;
     }
     std::printf("%-15s %-56s %12s %-10s %-44s %12s %7s %-26s %s\n", "bench", "case", "cpm", "unit", "peer", "peer value", "ratio", "target",
@@ -40,7 +44,7 @@ int main(int argc, char** argv)
         if (line.empty()) continue;
         const auto f = nlohmann::json::parse(line, nullptr, false);
         if (f.is_discarded() || !f.is_object()) {
-            std::fprintf(stderr, "bench_table: %s:%d: not a JSON object; skipped\n", argv[1], line_no);
+            std::fprintf(stderr, "bench_table: %s:%d: not a JSON object; skipped\n", file.c_str(), line_no);
             continue;
         }
         const std::string verdict = f.value("met", nlohmann::json()).is_boolean() ? (f["met"].get<bool>() ? "yes" : "NO") : "-";
@@ -55,3 +59,7 @@ int main(int argc, char** argv)
     std::printf("\ntargets met: %d, not met: %d\n", met, missed);
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_table", kHelp, run); }

@@ -8,6 +8,7 @@
 //   bench_fsm [--count 500] [--domain 211]
 #include "bench_common.hpp"
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Writer.hpp>
@@ -128,13 +129,19 @@ std::vector<double> command_latency(cpm::Participant& p, int count)
     return us;
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_fsm [--count 500] [--domain 211]\n"
+    "The tick cost of a 50-state machine, and fsm_node's command latency (a RangeSensors sample written\n"
+    "to the VehicleCommandDirect it causes, received back) beside a plain relay process's.\n"
+    "  --count N  samples per case, after 50 warm-up\n"
+    "(--relay 1: the relay process it starts itself)\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "211"));
-    if (bench::arg(argc, argv, "--relay", "") == "1") return relay(domain);
-    const int count = std::stoi(bench::arg(argc, argv, "--count", "500"));
+    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--count", true}, {"--domain", true}, {"--relay", true}}, "bench_fsm");
+    const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "211"), 0, 232));
+    if (flags.get("--relay") == "1") return relay(domain);
+    const int count = int(cpm::cli::parse_integer("--count", flags.get("--count", "500"), 1, 1'000'000));
     bench::print_machine("fsm_node --rate 80 (default); RangeSensors every 20 ms; " + std::to_string(count) +
                          " samples after 50 warm-up; domain " + std::to_string(domain));
     tick_cost();
@@ -181,3 +188,7 @@ int main(int argc, char** argv)
                 missing(ours), missing(on_sample), missing(reference), count);
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_fsm", kHelp, run); }

@@ -14,6 +14,7 @@
 #include "history_load.hpp"
 
 #include <cpm/AsyncReader.hpp>
+#include <cpm/CommandLine.hpp>
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
@@ -104,15 +105,22 @@ std::vector<double> round_trips(cpm::HistoryClient& client, int n)
     return us;
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_history_service [--domain 212] [--seconds 3]\n"
+    "cpm_history over DDS: ingest without loss at rising rates, memory per stored sample, and the `at`\n"
+    "round trip beside a plain request/reply ping-pong; uses domains D and D+1.\n"
+    "  --seconds S  per rate\n"
+    "(--echo 1: the ping-pong's echo process it starts itself)\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "212"));
-    if (bench::arg(argc, argv, "--echo", "") == "1") return echo(domain);
-    const double seconds = std::stod(bench::arg(argc, argv, "--seconds", "3"));
-    bench::print_machine("bench_history_service: cpm_history on domain " + std::to_string(domain) + ", " +
-                         bench::arg(argc, argv, "--seconds", "3") + " s per rate");
+    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--domain", true}, {"--seconds", true}, {"--echo", true}}, "bench_history_service");
+    const bool echo_role = flags.get("--echo") == "1";
+    const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "212"), 0, echo_role ? 232 : 231));
+    if (echo_role) return echo(domain);
+    const double seconds = cpm::cli::parse_number("--seconds", flags.get("--seconds", "3"), 0.1, 86400);
+    bench::print_machine("bench_history_service: cpm_history on domain " + std::to_string(domain) + ", " + flags.get("--seconds", "3") +
+                         " s per rate");
     const std::vector<std::string> env{"CPM_DOMAIN_ID=" + std::to_string(domain)};
     auto service = bench::spawn({cpm::sibling_executable("cpm_history"), "--window", "120s", "--max-bytes-total",
                                       "4294967296", "--max-bytes-per-topic", "4294967296"},
@@ -216,3 +224,7 @@ int main(int argc, char** argv)
     bench::wait_child(echo_process, 10);
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_history_service", kHelp, run); }

@@ -13,7 +13,9 @@
 #include "bench_common.hpp"
 #include "history_load.hpp"
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/percentile.hpp>
 #include <cpm/rtdb/Player.hpp>
 #include <cpm/rtdb/Recording.hpp>
 #include <cpm/rtdb/Requests.hpp>
@@ -98,19 +100,18 @@ Ramp ramp(int domain, double seconds, const std::vector<std::string>& extra, con
     return out;
 }
 
-double median(std::vector<double> v)
-{
-    std::sort(v.begin(), v.end());
-    return v.empty() ? 0 : v[v.size() / 2];
-}
+const char* kHelp =
+    "usage: bench_recording [--domain 214] [--seconds 3]\n"
+    "Recordings: ingest with cpm_history's --record on against off, `at` from a recording against the\n"
+    "live store and SQLite, the file's size per sample, and cpm play's timing; uses domains D to D+2.\n"
+    "  --seconds S  per rate\n";
 
-}  // namespace
-
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "214"));
-    const double seconds = std::stod(bench::arg(argc, argv, "--seconds", "3"));
-    bench::print_machine("bench_recording: domain " + std::to_string(domain) + ", " + bench::arg(argc, argv, "--seconds", "3") + " s per rate");
+    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--domain", true}, {"--seconds", true}}, "bench_recording");
+    const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "214"), 0, 230));
+    const double seconds = cpm::cli::parse_number("--seconds", flags.get("--seconds", "3"), 0.1, 86400);
+    bench::print_machine("bench_recording: domain " + std::to_string(domain) + ", " + flags.get("--seconds", "3") + " s per rate");
     const fs::path dir = fs::temp_directory_path() / ("bench_recording." + std::to_string(::getpid()));
     fs::create_directories(dir);
 
@@ -193,7 +194,7 @@ int main(int argc, char** argv)
     }
     sqlite3_finalize(q);
     sqlite3_close(db);
-    const double live_ns = median(t_live), loaded_ns = median(t_loaded), sql_ns = median(t_sql);
+    const double live_ns = cpm::percentile(t_live, 0.5), loaded_ns = cpm::percentile(t_loaded, 0.5), sql_ns = cpm::percentile(t_sql, 0.5);
     std::printf("%-44s %10.0f ns\n", "live store (copied answer)", live_ns);
     std::printf("%-44s %10.0f ns (%.2fx the live store)\n", "recording loaded into a store (copied answer)", loaded_ns, loaded_ns / live_ns);
     std::printf("%-44s %10.0f ns (%.1fx the loaded store)\n", "SQLite on the file, index (oid, commit_ns)", sql_ns, sql_ns / loaded_ns);
@@ -233,3 +234,7 @@ int main(int argc, char** argv)
     fs::remove_all(dir);
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_recording", kHelp, run); }

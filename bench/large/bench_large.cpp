@@ -15,6 +15,7 @@
 // in every case (as ddsperf and cyclone_bench do), so the figures are what carrying costs.
 #include "bench_common.hpp"
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/TopicType.hpp>
 #include <cpm/Writer.hpp>
@@ -30,7 +31,6 @@
 #include <functional>
 #include <map>
 #include <memory>
-#include <sstream>
 #include <thread>
 
 #include <unistd.h>
@@ -227,40 +227,43 @@ Rate cyclone_throughput(int domain, size_t size, int seconds)
     return bench::cyclone_pub_sub(domain, size - 28, seconds, {"--type", "blob"}, {"--type", "blob"});
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 220]\n"
+    "One-way latency and throughput of large samples between two processes: cpm's shared-memory\n"
+    "transport, data sharing and written and read in place, against Cyclone DDS doing the same work.\n"
+    "  --count N      round trips per case and size, in 10 alternating blocks (at least 10)\n"
+    "  --seconds S    how long each throughput case writes\n"
+    "  --sizes A,B    each 307200 or 1048576 (the plain frame types)\n"
+    "  uses domains D to D+3; the last is Cyclone DDS's, which must be at most 232\n"
+    "(--role pong|sub --mode MODE --size B: the processes it starts itself)\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const std::string role = bench::arg(argc, argv, "--role", "main");
-    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "220"));
-    if (role != "main") {
+    const auto flags = cpm::cli::parse_flags(argc, argv,
+                                             {{"--count", true}, {"--seconds", true}, {"--sizes", true}, {"--domain", true},
+                                              {"--role", true}, {"--mode", true}, {"--size", true}},
+                                             "bench_large");
+    const std::string role = flags.get("--role", "main");
+    const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "220"), 0, 232));
+    const int seconds = int(cpm::cli::parse_integer("--seconds", flags.get("--seconds", role == "main" ? "3" : "60"), 1, 86400));
+    if (role == "pong" || role == "sub") {
         std::signal(SIGTERM, [](int) { g_stop = true; });
-        const std::string mode = bench::arg(argc, argv, "--mode", "shm");
-        const size_t size = std::stoul(bench::arg(argc, argv, "--size", "1048576"));
+        const std::string mode = flags.get("--mode", "shm");
+        const size_t size = size_t(cpm::cli::parse_integer("--size", flags.get("--size", "1048576"), 307200, 1048576));
         if (role == "pong") return pong(domain, mode, size);
-        return subscribe(domain, mode, size, std::stoi(bench::arg(argc, argv, "--seconds", "60")));
+        return subscribe(domain, mode, size, seconds);
     }
-    if (argc > 1 && std::string(argv[1]) == "--help") {
-        std::puts("usage: bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 220]\n"
-                  "  uses domains D to D+3; the last is Cyclone DDS's, which must be at most 232");
-        return 0;
+    if (role != "main") throw cpm::cli::UsageError("bench_large: --role '" + role + "' is none of main, pong, sub");
+    if (domain + 3 > 232) {
+        throw cpm::cli::UsageError("bench_large: --domain " + std::to_string(domain) + ": the run uses domains " + std::to_string(domain) +
+                                   " to " + std::to_string(domain + 3) + ", and Cyclone DDS (the last) takes at most 232");
     }
-    if (domain < 0 || domain + 3 > 232) {
-        std::fprintf(stderr, "bench_large: --domain %d: the run uses domains %d to %d, and Cyclone DDS (the last) "
-                     "takes at most 232\n", domain, domain, domain + 3);
-        return 2;
-    }
-    const int count = std::stoi(bench::arg(argc, argv, "--count", "500"));
-    const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "3"));
+    const int count = int(cpm::cli::parse_integer("--count", flags.get("--count", "500"), 10, 10'000'000));
     std::vector<size_t> sizes;
-    std::stringstream size_list(bench::arg(argc, argv, "--sizes", "307200,1048576"));
-    for (std::string v; std::getline(size_list, v, ',');) {
-        const size_t size = std::strtoul(v.c_str(), nullptr, 10);
-        if (size != 307200 && size != 1048576) {
-            std::fprintf(stderr, "bench_large: --sizes %s: each size must be 307200 or 1048576 (the plain frame types)\n", v.c_str());
-            return 2;
-        }
-        sizes.push_back(size);
+    for (long long size : bench::integer_list("--sizes", flags.get("--sizes", "307200,1048576"), 307200, 1048576)) {
+        if (size != 307200 && size != 1048576)
+            throw cpm::cli::UsageError("bench_large: --sizes: " + std::to_string(size) + " is neither 307200 nor 1048576 (the plain frame types)");
+        sizes.push_back(size_t(size));
     }
 
     bench::print_machine("one way: reliable keep-last 1, " + std::to_string(count) +
@@ -355,3 +358,7 @@ int main(int argc, char** argv)
     }
     return exit_code;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_large", kHelp, run); }

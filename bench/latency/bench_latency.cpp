@@ -9,8 +9,10 @@
 #include "raw_fastdds.hpp"
 
 #include <cpm/AsyncReader.hpp>
+#include <cpm/CommandLine.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Writer.hpp>
+#include <cpm/init.hpp>
 
 #include <BenchPayload.h>
 
@@ -283,31 +285,38 @@ bench::Stats ddsperf_latency(int domain, size_t size, int seconds, size_t& windo
     return s;
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_latency [--count 10000] [--warmup 1000] [--sizes 100,65536] [--domain 200]\n"
+    "One-way latency (round trip / 2) between two processes: cpm against raw Fast DDS, Cyclone DDS's\n"
+    "ddsperf and Cyclone doing the same work, in one run; uses domains D to D+7.\n"
+    "  --count N        round trips per case and size, in 10 alternating blocks (at least 10)\n"
+    "  --warmup N       round trips discarded before the first block\n"
+    "  --sizes A,B,...  payload sizes in bytes, each at most 65536\n"
+    "(--role pong --impl IMPL --security DIR: the pong processes it starts itself)\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const std::string role = bench::arg(argc, argv, "--role", "main");
-    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "200"));
+    const auto flags = cpm::cli::parse_flags(
+        argc, argv, {{"--count", true}, {"--warmup", true}, {"--sizes", true}, {"--domain", true}, {"--role", true}, {"--impl", true}},
+        "bench_latency");
+    const std::string role = flags.get("--role", "main");
+    // The run uses domains D to D+7; each pong process one of them.
+    const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "200"), 0, role == "pong" ? 232 : 225));
     if (role == "pong") {
         std::signal(SIGTERM, [](int) { g_stop = true; });
-        const std::string impl = bench::arg(argc, argv, "--impl", "cpm");
+        const std::string impl = flags.get("--impl", "cpm");
         if (impl == "cpm" || impl == "cpm_udp") pong_cpm(domain, impl == "cpm");
         else if (impl == "cpm_dds_thread") pong_cpm(domain, true, "", true);
-        else if (impl == "cpm_secured") pong_cpm(domain, true, bench::arg(argc, argv, "--security", ""));
+        else if (impl == "cpm_secured") pong_cpm(domain, true, cpm::parse_init_settings(argc, argv, nullptr).security);
         else if (impl == "raw_listener") pong_raw_listener(domain);
         else pong_raw_waitset(domain);
         return 0;
     }
-    if (argc > 1 && std::string(argv[1]) == "--help") {
-        std::puts("usage: bench_latency [--count 10000] [--warmup 1000] [--sizes 100,65536] [--domain 200]");
-        return 0;
-    }
-    const int count = std::stoi(bench::arg(argc, argv, "--count", "10000"));
-    const int warmup = std::stoi(bench::arg(argc, argv, "--warmup", "1000"));
-    std::vector<size_t> sizes;
-    std::stringstream size_list(bench::arg(argc, argv, "--sizes", "100,65536"));
-    for (std::string s; std::getline(size_list, s, ',');) sizes.push_back(std::stoul(s));
+    if (role != "main") throw cpm::cli::UsageError("bench_latency: --role '" + role + "' is neither main nor pong");
+    const int count = int(cpm::cli::parse_integer("--count", flags.get("--count", "10000"), 10, 10'000'000));
+    const int warmup = int(cpm::cli::parse_integer("--warmup", flags.get("--warmup", "1000"), 0, 1'000'000));
+    const auto listed = bench::integer_list("--sizes", flags.get("--sizes", "100,65536"), 1, 65536);
+    const std::vector<size_t> sizes(listed.begin(), listed.end());
 
     bench::print_machine("reliable, keep-last 1, volatile; loopback UDP + shared memory (cpm defaults); " +
                          std::to_string(count) + " round trips after " + std::to_string(warmup) +
@@ -431,3 +440,7 @@ int main(int argc, char** argv)
     }
     return exit_code;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_latency", kHelp, run); }

@@ -12,6 +12,7 @@
 
 #include <cpm/AsyncReader.hpp>
 #include <cpm/ChildProcess.hpp>
+#include <cpm/CommandLine.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
@@ -160,12 +161,17 @@ Result run_case(const Case& c, int port, int monitor_pid, cpm::Participant& part
     return r;
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_monitor [--seconds 10] [--domain 212]\n"
+    "cpm monitor as its own process: create_stamp to a watcher's snapshot with 1 and 10 watchers, beside\n"
+    "a plain cpm reader's latency, and the monitor's CPU with 20 cars at 50 Hz.\n"
+    "  --seconds S  per case, after 2 s of warm-up\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const double seconds = std::stod(bench::arg(argc, argv, "--seconds", "10"));
-    const std::string domain = bench::arg(argc, argv, "--domain", "212");
+    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--seconds", true}, {"--domain", true}}, "bench_monitor");
+    const double seconds = cpm::cli::parse_number("--seconds", flags.get("--seconds", "10"), 1, 86400);
+    const std::string domain = std::to_string(cpm::cli::parse_integer("--domain", flags.get("--domain", "212"), 0, 232));
     bench::print_machine("cpm monitor as its own process on domain " + domain + "; cars publish VehicleState, VehicleObservation and "
                          "RangeSensors at 50 Hz each; watchers are HTTP clients reading /api/stream on 127.0.0.1; " +
                          std::to_string(int(seconds)) + " s per case after 2 s of warm-up");
@@ -209,3 +215,7 @@ int main(int argc, char** argv)
     ::unlink(out.c_str());
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_monitor", kHelp, run); }

@@ -1,6 +1,7 @@
 // Central routing: planning time per cycle against the number of cars, start-up, and traffic
 // through the central intersection for the cooperative planner against cpm_lab's scheme
 // (fixed priority by id, speed capping, no stopping; --mode cpm_lab), same map, seeds, margin.
+#include <cpm/CommandLine.hpp>
 #include <cpm/percentile.hpp>
 #include <cpm/routing/Simulate.hpp>
 
@@ -21,11 +22,17 @@ double ms_since(std::chrono::steady_clock::time_point t0)
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_routing [LANES.json]\n"
+    "Central routing on a lane map (default: scenarios/lanes/intersection.json): start-up, planning time\n"
+    "per cycle against the number of cars, and traffic through the central intersection for the\n"
+    "cooperative planner against cpm_lab's scheme.\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const std::string lanes = argc > 1 ? argv[1] : std::string(CPM_SOURCE_DIR) + "/scenarios/lanes/intersection.json";
+    const auto args = cpm::cli::parse_args(std::vector<std::string>(argv + 1, argv + argc), {}, "bench_routing");
+    if (args.positional.size() > 1) throw cpm::cli::UsageError("bench_routing: one lane map at most, not '" + args.positional[1] + "' too");
+    const std::string lanes = args.positional.empty() ? std::string(CPM_SOURCE_DIR) + "/scenarios/lanes/intersection.json" : args.positional[0];
 
     // Start-up: load and check the graph, sample it, compute the conflicts and zones.
     std::vector<double> startup;
@@ -108,3 +115,7 @@ int main(int argc, char** argv)
     std::printf("(target: at least 1.3x cpm_lab's throughput, and no stall where it stalls)\n");
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_routing", kHelp, run); }

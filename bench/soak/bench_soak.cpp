@@ -13,6 +13,8 @@
 #include "../common/bench_common.hpp"
 
 #include <cpm/ChildProcess.hpp>
+#include <cpm/CommandLine.hpp>
+#include <cpm/init.hpp>
 #include <cpm/topics.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 
@@ -103,12 +105,20 @@ std::string run_command(const std::vector<std::string>& argv, const std::string&
     return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_soak [--minutes 10] [--dds_domain N]\n"
+    "A whole lab (ten simulated cars, central routing, the history recording every topic, the monitor)\n"
+    "for a long time, watched from outside: memory, file descriptors and /dev/shm every 10 s, missed\n"
+    "deadlines and lost samples, against their targets.\n"
+    "  --minutes M     how long the lab runs\n"
+    "  --dds_domain N  its domain (default CPM_DOMAIN_ID, else 0)\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const double minutes = std::stod(bench::arg(argc, argv, "--minutes", "10"));
-    const std::string domain = bench::arg(argc, argv, "--dds_domain", std::getenv("CPM_DOMAIN_ID") ? std::getenv("CPM_DOMAIN_ID") : "0");
+    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--minutes", true}}, "bench_soak");
+    const double minutes = cpm::cli::parse_number("--minutes", flags.get("--minutes", "10"), 0.1, 100'000);
+    cpm::init(argc, argv);  // --dds_domain is cpm's own flag
+    const std::string domain = std::to_string(cpm::init_settings().domain_id);
     // The history fills its 60 s window first: its memory grows until then, by design.
     const double warm_up_s = std::min(120.0, minutes * 60.0 / 5.0);
     const std::string bin = cpm::executable_dir();
@@ -242,3 +252,7 @@ int main(int argc, char** argv)
     target("the run ended well", exit_code == 0 && summary.is_object() && summary.value("ok", false), "exit " + std::to_string(exit_code));
     return ok ? 0 : 1;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_soak", kHelp, run); }

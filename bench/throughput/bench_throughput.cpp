@@ -12,7 +12,9 @@
 #include "raw_fastdds.hpp"
 
 #include <cpm/AsyncReader.hpp>
+#include <cpm/CommandLine.hpp>
 #include <cpm/Writer.hpp>
+#include <cpm/init.hpp>
 
 #include <BenchPayload.h>
 
@@ -168,9 +170,10 @@ using Result = bench::Rate;
 Result run_fastdds(const std::string& impl, int domain, size_t size, int seconds)
 {
     const std::string out = "/tmp/bench_throughput_sub_" + std::to_string(getpid());
-    auto sub = bench::spawn({cpm::sibling_executable("bench_throughput"), "--role", "sub", "--impl", impl, "--domain", std::to_string(domain), "--seconds",
-                                  std::to_string(seconds + 60), "--security", g_security},
-                                 {}, out);
+    std::vector<std::string> sub_argv{cpm::sibling_executable("bench_throughput"), "--role", "sub", "--impl", impl, "--domain",
+                                      std::to_string(domain), "--seconds", std::to_string(seconds + 60)};
+    if (!g_security.empty()) sub_argv.insert(sub_argv.end(), {"--security", g_security});
+    auto sub = bench::spawn(sub_argv, {}, out);
     Result r;
     r.written = publish(impl, domain, size, seconds);
     const int code = bench::wait_child(sub, seconds + 90);
@@ -238,27 +241,36 @@ void print_result(const std::string& label, const Result& r)
     std::fflush(stdout);
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_throughput [--seconds 5] [--size 1024] [--domain 201] [--only cpm|secured|raw|cyclone]\n"
+    "Reliable samples per second from a publisher process to a subscriber process, none lost: cpm\n"
+    "against raw Fast DDS, Cyclone DDS's ddsperf and Cyclone doing the same work, in one run.\n"
+    "  --seconds S  how long each case writes\n"
+    "  --size B     sample size in bytes, at most 65536\n"
+    "  --only CASE  run one case\n"
+    "(--role sub --impl IMPL --security DIR: the subscriber processes it starts itself)\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const std::string role = bench::arg(argc, argv, "--role", "main");
-    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "201"));
-    const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "5"));
+    const auto flags = cpm::cli::parse_flags(
+        argc, argv, {{"--seconds", true}, {"--size", true}, {"--domain", true}, {"--only", true}, {"--role", true}, {"--impl", true}},
+        "bench_throughput");
+    const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "201"), 0, 232));
+    const int seconds = int(cpm::cli::parse_integer("--seconds", flags.get("--seconds", "5"), 1, 86400));
+    const std::string role = flags.get("--role", "main");
     if (role == "sub") {
-        g_security = bench::arg(argc, argv, "--security", "");
-        return subscribe(bench::arg(argc, argv, "--impl", "cpm"), domain, seconds);
+        g_security = cpm::parse_init_settings(argc, argv, nullptr).security;
+        return subscribe(flags.get("--impl", "cpm"), domain, seconds);
     }
-    if (argc > 1 && std::string(argv[1]) == "--help") {
-        std::puts("usage: bench_throughput [--seconds 5] [--size 1024] [--domain 201] [--only cpm|secured|raw|cyclone]");
-        return 0;
-    }
-    const size_t size = std::stoul(bench::arg(argc, argv, "--size", "1024"));
+    if (role != "main") throw cpm::cli::UsageError("bench_throughput: --role '" + role + "' is neither main nor sub");
+    const size_t size = size_t(cpm::cli::parse_integer("--size", flags.get("--size", "1024"), 1, 65536));
+    const std::string only = flags.get("--only");
+    if (!only.empty() && only != "cpm" && only != "secured" && only != "raw" && only != "cyclone")
+        throw cpm::cli::UsageError("bench_throughput: --only '" + only + "' is none of cpm, secured, raw, cyclone");
     bench::print_machine("reliable, keep-all, volatile; loopback UDP + shared memory (cpm defaults); " +
                          std::to_string(size) + " B samples for " + std::to_string(seconds) +
                          " s; publisher and subscriber in separate processes");
     std::printf("\nthroughput, %zu B samples\n%-44s %12s %12s %8s\n", size, "case", "samples/s", "received", "lost");
-    const std::string only = bench::arg(argc, argv, "--only", "");  // cpm, raw or cyclone
     Result cpm_result, cpm_udp, cpm_secured, raw_result, cyclone, cyclone_same, cyclone_listener, cyclone_batched;
     if (only.empty() || only == "cpm") {
         cpm_result = run_fastdds("cpm", domain, size, seconds);
@@ -319,3 +331,7 @@ int main(int argc, char** argv)
     ratio("cpm / Cyclone batched + listener", cpm_result, cyclone_batched, "Cyclone, batched writes, listener (UDP)", 0);
     return (only == "cyclone" || only == "raw" || (cpm_result.ok && cpm_udp.ok)) && (only == "cyclone" || only == "cpm" || raw_result.ok) ? 0 : 1;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_throughput", kHelp, run); }

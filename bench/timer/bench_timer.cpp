@@ -4,6 +4,7 @@
 //   bench_timer [--seconds 10] [--domain 202]
 #include "bench_common.hpp"
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/init.hpp>
@@ -72,20 +73,24 @@ double simulated_run(cpm::Participant& participant, uint64_t simulated_s)
     return real;
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_timer [--seconds 10] [--domain 202]\n"
+    "Tick jitter of cpm::Timer at 50 Hz and 1 kHz, idle and with the other core busy, beside a plain\n"
+    "clock_nanosleep loop; then the simulated clock's speed-up.\n"
+    "  --seconds S  per case\n"
+    "(--role busy: the spinning process it starts itself)\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    if (argc > 1 && std::string(argv[1]) == "--help") {
-        std::puts("usage: bench_timer [--seconds 10] [--domain 202]");
-        return 0;
-    }
-    if (bench::arg(argc, argv, "--role", "") == "busy") {
+    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--seconds", true}, {"--domain", true}, {"--role", true}}, "bench_timer");
+    const std::string role = flags.get("--role", "main");
+    if (role == "busy") {
         for (;;) asm volatile("" ::: "memory");  // spin: keep a core busy
     }
-    const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "10"));
+    if (role != "main") throw cpm::cli::UsageError("bench_timer: --role '" + role + "' is neither main nor busy");
+    const int seconds = int(cpm::cli::parse_integer("--seconds", flags.get("--seconds", "10"), 1, 86400));
     cpm::ParticipantOptions options;
-    options.domain_id = std::stoi(bench::arg(argc, argv, "--domain", "202"));
+    options.domain_id = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "202"), 0, 232));
     cpm::Participant participant(options);
 
     bench::print_machine("jitter = actual - nominal tick time in microseconds; " + std::to_string(seconds) +
@@ -128,13 +133,17 @@ int main(int argc, char** argv)
     cpm::init(2, const_cast<char**>(sim_argv));
     std::printf("\nsimulated clock: 3 nodes (20, 50, 400 ms periods), 10 simulated s per run\n");
     std::vector<double> speedups;
-    for (int run = 0; run < 5; ++run) {
+    for (int n = 1; n <= 5; ++n) {
         const double real = simulated_run(participant, 10);
         speedups.push_back(10.0 / real);
-        std::printf("  run %d: %.3f real s = %.1f simulated s per real s\n", run + 1, real, 10.0 / real);
+        std::printf("  run %d: %.3f real s = %.1f simulated s per real s\n", n, real, 10.0 / real);
     }
     const auto s = bench::stats_of(speedups);
     std::printf("speed-up (simulated s per real s): min %.1f, median %.1f, max %.1f  (target >= 20)\n", s.min, s.p50,
                 s.max);
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_timer", kHelp, run); }

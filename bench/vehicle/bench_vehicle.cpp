@@ -11,10 +11,12 @@
 //   bench_vehicle [--seconds 10] [--cars 4,8,12,16,20,24] [--cars-per-car 2,4,6,8,10,12] [--domain 210]
 #include "bench_common.hpp"
 
+#include <cpm/CommandLine.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/percentile.hpp>
 #include <cpm/stamp_message.hpp>
 
 #include <VehicleCommandDirect.h>
@@ -290,8 +292,7 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
         // state lands within half a period of its slot.
         std::vector<uint64_t> phases;
         for (auto t : in_window) phases.push_back(t % period);
-        std::nth_element(phases.begin(), phases.begin() + long(phases.size() / 2), phases.end());
-        const uint64_t phase = phases[phases.size() / 2];
+        const uint64_t phase = cpm::percentile(phases, 0.5);
         std::set<uint64_t> slots;
         for (auto t : in_window) slots.insert((t - phase + period / 2) / period);
         const uint64_t first = (t0 - phase + period - 1) / period, last = (t1 - phase - 1) / period;
@@ -303,17 +304,23 @@ CapacityResult capacity(cpm::Participant& participant, const std::vector<std::st
     return r;
 }
 
-}  // namespace
+const char* kHelp =
+    "usage: bench_vehicle [--seconds 10] [--cars 4,8,12,16,20,24] [--cars-per-car 2,4,6,8,10,12] [--domain 210]\n"
+    "The simulated car's loop: the bridge's CPU per cycle and the command latency for one car, then how\n"
+    "many cars this machine runs with under 1 % missed cycles.\n"
+    "  --seconds S          per case\n"
+    "  --cars A,B,...       fleet sizes with all cars in one simulator and one bridge process\n"
+    "  --cars-per-car A,... fleet sizes with a simulator and bridge process pair per car\n";
 
-int main(int argc, char** argv)
+int run(int argc, char** argv)
 {
-    const int seconds = std::stoi(bench::arg(argc, argv, "--seconds", "10"));
-    const int domain = std::stoi(bench::arg(argc, argv, "--domain", "210"));
+    const auto flags = cpm::cli::parse_flags(
+        argc, argv, {{"--seconds", true}, {"--domain", true}, {"--cars", true}, {"--cars-per-car", true}}, "bench_vehicle");
+    const int seconds = int(cpm::cli::parse_integer("--seconds", flags.get("--seconds", "10"), 1, 86400));
+    const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "210"), 0, 232));
     auto sizes = [&](const char* flag, const char* fallback) {
-        std::vector<int> out;
-        std::istringstream list(bench::arg(argc, argv, flag, fallback));
-        for (std::string item; std::getline(list, item, ',');) out.push_back(std::stoi(item));
-        return out;
+        const auto listed = bench::integer_list(flag, flags.get(flag, fallback), 1, 255);
+        return std::vector<int>(listed.begin(), listed.end());
     };
     const std::vector<int> one_process = sizes("--cars", "4,8,12,16,20,24"), per_car = sizes("--cars-per-car", "2,4,6,8,10,12");
 
@@ -369,3 +376,7 @@ int main(int argc, char** argv)
                 one, pairs);
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "bench_vehicle", kHelp, run); }

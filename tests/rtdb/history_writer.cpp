@@ -4,7 +4,9 @@
 // (valid_after = data + 5 ns; VehicleState pose.x = k; LabOnlyThing note "thing k", value k/2),
 // waits for them to be acknowledged and prints "written N". --dispose then disposes the
 // instance ("disposed"); --stay keeps the process alive until it is killed.
+#include <cpm/CommandLine.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/init.hpp>
 
 #include <LabOnlyThingPubSubTypes.h>
 #include <TinyPubSubTypes.h>
@@ -17,7 +19,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <cstring>
 #include <string>
 #include <thread>
 
@@ -25,20 +26,27 @@ namespace fdds = eprosima::fastdds::dds;
 
 constexpr uint64_t kBase = 1'700'000'000'000'000'000ull;
 
-int main(int argc, char** argv)
+namespace {
+
+const char* kHelp =
+    "usage: history_writer [--type vehicle|lab_only|tiny] [--topic T] [--vehicle K] [--count N] [--dispose] [--stay]\n"
+    "Waits for a reader, writes N samples (default 10) of the type on T (default vehicleState) as vehicle K\n"
+    "(default 3), waits for them to be acknowledged and prints \"written N\"; --dispose then disposes the\n"
+    "instance, --stay keeps the process alive until it is killed.\n";
+
+int run(int argc, char** argv)
 {
-    std::string type = "vehicle", topic = "vehicleState";
-    int vehicle = 3, count = 10;
-    bool dispose = false, stay = false;
-    for (int i = 1; i < argc; ++i) {
-        std::string a = argv[i];
-        if (a == "--type") type = argv[++i];
-        else if (a == "--topic") topic = argv[++i];
-        else if (a == "--vehicle") vehicle = std::atoi(argv[++i]);
-        else if (a == "--count") count = std::atoi(argv[++i]);
-        else if (a == "--dispose") dispose = true;
-        else if (a == "--stay") stay = true;
-    }
+    const auto flags = cpm::cli::parse_flags(argc, argv,
+                                             {{"--type", true}, {"--topic", true}, {"--vehicle", true}, {"--count", true},
+                                              {"--dispose", false}, {"--stay", false}},
+                                             "history_writer");
+    const std::string type = flags.get("--type", "vehicle"), topic = flags.get("--topic", "vehicleState");
+    if (type != "vehicle" && type != "lab_only" && type != "tiny")
+        throw cpm::cli::UsageError("history_writer: --type '" + type + "' is none of vehicle, lab_only, tiny");
+    const int vehicle = int(cpm::cli::parse_integer("--vehicle", flags.get("--vehicle", "3"), 0, 255));
+    const int count = int(cpm::cli::parse_integer("--count", flags.get("--count", "10"), 0, 1'000'000));
+    const bool dispose = flags.has("--dispose"), stay = flags.has("--stay");
+    cpm::init(argc, argv);
     cpm::ParticipantOptions options = cpm::ParticipantOptions::from_init();
     options.name = "history_writer_" + type;
     options.shared_memory = false;  // see HistoryServiceEndToEndTest: no reuse of a dead process's shared-memory port
@@ -119,3 +127,7 @@ int main(int argc, char** argv)
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
     return 0;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "history_writer", kHelp, run); }

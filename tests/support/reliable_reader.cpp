@@ -12,25 +12,30 @@
 #include <VehicleState.h>
 
 #include <chrono>
+#include <climits>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
+#include <string>
+#include <vector>
 
-int main(int argc, char** argv)
+namespace {
+
+const char* kHelp =
+    "usage: reliable_reader TOPIC [--expect N]\n"
+    "A reliable, keep-all VehicleState reader on TOPIC: prints \"matched\" once a writer matched, then takes\n"
+    "what arrives until stopped; with --expect, until N samples came (or none for 10 s), then prints\n"
+    "{\"received\",\"in_order\",\"gaps\",\"duplicates\"} and exits 0 when all N came in order.\n";
+
+int run(int argc, char** argv)
 {
-    if (argc < 2) {
-        std::fprintf(stderr, "usage: reliable_reader TOPIC [--expect N]\n");
-        return 2;
-    }
+    const auto args = cpm::cli::parse_args(std::vector<std::string>(argv + 1, argv + argc), {{"--expect", true}}, "reliable_reader");
+    if (args.positional.size() != 1) throw cpm::cli::UsageError("reliable_reader: give one TOPIC (see --help)");
+    const long long expect = args.has("--expect") ? cpm::cli::parse_integer("--expect", args.get("--expect"), 0, LLONG_MAX) : -1;
     cpm::init(argc, argv);
     cpm::cli::stop_on_signals();
-    long long expect = -1;
-    for (int i = 2; i + 1 < argc; ++i)
-        if (std::strcmp(argv[i], "--expect") == 0) expect = std::atoll(argv[i + 1]);
     cpm::ReaderOptions options;
     options.reliable = true;
     options.keep_all = true;
-    cpm::ReaderAbstract<VehicleState> reader(argv[1], options);
+    cpm::ReaderAbstract<VehicleState> reader(args.positional[0], options);
     if (!reader.wait_for_matched(1, std::chrono::seconds(20))) return 3;
     if (cpm::cli::stop_requested()) return 0;
     std::printf("matched\n");
@@ -56,3 +61,7 @@ int main(int argc, char** argv)
                 duplicates);
     return in_order ? 0 : 1;
 }
+
+}  // namespace
+
+int main(int argc, char** argv) { return cpm::cli::run_main(argc, argv, "reliable_reader", kHelp, run); }
