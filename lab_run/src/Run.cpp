@@ -4,6 +4,7 @@
 #include <cpm/ChildProcess.hpp>
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/RemoteHost.hpp>
 #include <cpm/ProcessGroup.hpp>
 #include <cpm/Security.hpp>
 #include <cpm/TimeMaster.hpp>
@@ -156,8 +157,83 @@ private:
     AsyncReader<Log> log_;
 };
 
+/// How the run reaches a host of the scenario (this host: a RemoteHost that is local).
+RemoteHost remote_of(const Scenario& s, const std::string& host_name)
+{
+    const HostSpec* h = s.host(host_name);
+    if (!h || h->ssh.empty()) return {};
+    return {.name = h->name,
+            .ssh = h->ssh,
+            .ssh_options = s.ssh_config.empty() ? std::vector<std::string>{} : std::vector<std::string>{"-F", s.ssh_config},
+            .cpm_prefix = h->cpm};
+}
+
+/// The first line a command prints ("" when it prints none or cannot run).
+std::string first_line_of(const std::vector<std::string>& argv)
+{
+    try {
+        ChildProcess c({.argv = argv, .capture_stdout = true});
+        auto line = c.read_line();
+        (void)c.wait(std::chrono::seconds(10));
+        return line.value_or("");
+    } catch (const cpm::Error&) {
+        return "";
+    }
+}
+
+std::string milliseconds(int64_t ns)
+{
+    char b[32];
+    std::snprintf(b, sizeof b, "%.3f ms", double(ns) / 1e6);
+    return b;
+}
+
+/// Every other host, before anything starts anywhere: reached with ssh, the same cpm as here,
+/// its clock within max_clock_offset. Throws ScenarioError naming each host that is not.
+std::vector<RunResult::Host> check_hosts(const Scenario& s, const RunSettings& settings)
+{
+    std::vector<RunResult::Host> out;
+    std::vector<Diagnostic> errors;
+    const std::string ours = first_line_of({(fs::path(settings.bin_dir) / "cpm").string(), "--version"});
+    for (const auto& h : s.hosts) {
+        RunResult::Host entry{.name = h.name, .address = h.address};
+        const RemoteHost remote = remote_of(s, h.name);
+        const std::string where = s.file + ": hosts." + h.name;
+        if (remote.is_local()) {
+            out.push_back(entry);
+            continue;
+        }
+        const std::string theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}));
+        if (theirs.empty()) {
+            errors.push_back({where, "cannot run " + remote.program("cpm") + " there with ssh " + h.ssh +
+                                         " (the host unreachable, ssh asking for a password or a key, or cpm not installed there)"});
+            continue;
+        }
+        if (theirs != ours) {
+            errors.push_back({where, "runs " + theirs + ", this host " + ours + ": install the same cpm on every host"});
+            continue;
+        }
+        try {
+            const auto clock = measure_clock(remote);
+            entry.clock_offset_ns = clock.offset_ns;
+            entry.rtt_ns = clock.rtt_ns;
+            if (uint64_t(std::llabs(clock.offset_ns)) > s.max_clock_offset_ns) {
+                errors.push_back({where, "its clock is " + milliseconds(clock.offset_ns) + " off this host's (measured to ±" +
+                                             milliseconds(clock.rtt_ns / 2) + "), more than max_clock_offset " +
+                                             milliseconds(int64_t(s.max_clock_offset_ns)) +
+                                             ": synchronise the hosts' clocks (chrony or NTP) and run again"});
+            }
+        } catch (const cpm::Error& e) {
+            errors.push_back({where, e.what()});
+        }
+        out.push_back(entry);
+    }
+    if (!errors.empty()) throw ScenarioError(errors);
+    return out;
+}
+
 /// The run's spec of a planned process: its log in the run's folder, the run's domain and QoS.
-ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, int domain, const std::string& qos)
+ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, int domain, const std::string& qos, const Scenario& s)
 {
     ProcessSpec spec{.name = p.name,
                      .argv = p.argv,
@@ -168,6 +244,7 @@ ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, int domain, const
                      // The history closes the recording on its way out: it may take a while.
                      .stop_grace = std::chrono::seconds(p.name == "cpm_history" ? 30 : 5)};
     if (!qos.empty()) spec.env.push_back(std::string(kQosOverridesVariable) + "=" + qos);
+    spec.host = remote_of(s, p.host);
     return spec;
 }
 
@@ -265,8 +342,9 @@ void supervise(ProcessGroup& group, std::set<std::string>& died, RunResult& resu
                 continue;
             }
             died.insert(e.name);
+            for (auto& h : result.hosts) h.lost = h.lost || (e.host_lost && h.name == e.host);
             if (result.error.empty()) {
-                result.error = e.name + " " + e.end.describe() + " during the run; the end of its log (" + (dir / (e.name + ".log")).string() +
+                result.error = e.name + " " + e.describe() + " during the run; the end of its log (" + (dir / (e.name + ".log")).string() +
                                "):\n" + group.tail(e.name);
             }
         }
@@ -293,11 +371,11 @@ std::vector<std::string> timers_of(const std::vector<ProcessPlan>& plan)
 
 /// The history first, so that the recording holds the run from its first sample, then the rest.
 /// An error message when the history does not answer ("" when all started).
-std::string start_processes(ProcessGroup& group, const std::vector<ProcessPlan>& plan, const fs::path& dir, const RunSettings& settings,
-                            const std::string& qos, HistoryClient& history, const std::function<bool()>& stop)
+std::string start_processes(ProcessGroup& group, const Scenario& s, const std::vector<ProcessPlan>& plan, const fs::path& dir,
+                            const RunSettings& settings, const std::string& qos, HistoryClient& history, const std::function<bool()>& stop)
 {
     const std::string& history_name = plan[0].name;
-    (void)group.start(spec_of(plan[0], dir, settings.domain, qos));
+    (void)group.start(spec_of(plan[0], dir, settings.domain, qos, s));
     bool up = false;
     const auto deadline = Clock::now() + std::chrono::seconds(15);
     while (!up && Clock::now() < deadline && !stop() && group.find(history_name)->running()) {
@@ -307,7 +385,7 @@ std::string start_processes(ProcessGroup& group, const std::vector<ProcessPlan>&
         }
     }
     if (!up) return "the history service did not answer within 15 s; the end of its log:\n" + group.tail(history_name);
-    for (size_t i = 1; i < plan.size(); ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos));
+    for (size_t i = 1; i < plan.size(); ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos, s));
     return "";
 }
 
@@ -352,6 +430,15 @@ nlohmann::json process_ends(const std::vector<ProcessPlan>& plan, const ProcessG
 
 /// summary.json in the run's folder: the run, its processes, and the history's own counts (the
 /// last JSON line of its log).
+nlohmann::json hosts_json(const std::vector<RunResult::Host>& hosts)
+{
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& h : hosts) {
+        out.push_back({{"name", h.name}, {"address", h.address}, {"clock_offset_ns", h.clock_offset_ns}, {"rtt_ns", h.rtt_ns}, {"lost", h.lost}});
+    }
+    return out;
+}
+
 void write_summary(const Scenario& s, const RunSettings& settings, const std::string& qos, const RunResult& result,
                    const nlohmann::json& processes, const RunWatch& watch, const std::string& history_log)
 {
@@ -375,7 +462,8 @@ void write_summary(const Scenario& s, const RunSettings& settings, const std::st
                            {"samples_recorded", recorded.contains("recording") ? recorded["recording"].value("written", watch.recorded())
                                                                                : watch.recorded()},
                            {"qos", qos.empty() ? nlohmann::json::object() : nlohmann::json::parse(qos)},
-                           {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()}};
+                           {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()},
+                           {"hosts", hosts_json(result.hosts)}};
     std::ofstream(fs::path(settings.run_dir) / "summary.json") << summary.dump(2) << "\n";
 }
 
@@ -393,6 +481,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) throw cpm::Error("the run's folder " + dir.string() + " exists and is not empty");
     settings.run_dir = dir.string();
     const auto plan = plan_run(s, settings);  // names a missing program before anything starts
+    const auto hosts = check_hosts(s, settings);  // and a host that cannot take part
 
     // Every process, this one too, makes its readers and writers with the scenario's QoS.
     const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
@@ -401,11 +490,18 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     po.domain_id = settings.domain;
     po.name = "cpm_lab_run";
     po.shared_memory = false;  // short-lived beside many processes: UDP loopback (see cpm history)
+    if (const HostSpec* here = s.local_host()) {  // across hosts: this host's address, the others as peers
+        po.interfaces = {here->address};
+        for (const auto& h : s.hosts) {
+            if (h.name != here->name) po.initial_peers.push_back(h.address);
+        }
+    }
     const DomainClaim claim(settings.domain, po);
     po.security = prepare_folder(s, settings, plan, dir);
 
     RunResult result;
     result.dir = dir.string();
+    result.hosts = hosts;
     auto say = [&](const std::string& line) {
         if (o.progress) std::fprintf(o.progress, "%s\n", line.c_str());
     };
@@ -418,7 +514,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     ProcessGroup group;          // every process of the run, stopped in order on every way out
     std::set<std::string> died;  // ended badly while the run went on
 
-    result.error = start_processes(group, plan, dir, settings, qos, history, o.stop);
+    result.error = start_processes(group, s, plan, dir, settings, qos, history, o.stop);
     say("cpm lab run: " + s.name + ": " + std::to_string(plan.size()) + " processes on domain " + std::to_string(settings.domain) +
         ", logs and recording in " + dir.string());
     if (result.error.empty()) result.error = clock.start(timers_of(plan), s.routing.enabled);

@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <set>
 #include <tuple>
+#include <arpa/inet.h>
 #include <unistd.h>
 
 namespace cpm::lab {
@@ -101,6 +102,78 @@ void check_starts(Checker& c, const Scenario& s, const YAML::Node& vehicles)
 }
 
 /// The cars: each one's id (once), start, camera, state machine and restart.
+/// `hosts:`: each computer's address and how to reach it; the one without ssh is the run's own.
+void read_hosts(Checker& c, const YAML::Node& root, Scenario& s)
+{
+    const YAML::Node hosts = root["hosts"];
+    if (!hosts) return;
+    if (!hosts.IsMap() || hosts.size() == 0) {
+        c.error(hosts, "hosts", "expected a map of host name: {address, ssh, cpm}");
+        return;
+    }
+    for (const auto& kv : hosts) {
+        HostSpec h;
+        h.name = kv.first.as<std::string>("");
+        const std::string p = "hosts." + h.name;
+        const YAML::Node v = kv.second;
+        if (!v.IsMap()) {
+            c.error(v, p, "expected a map (address, ssh, cpm)");
+            continue;
+        }
+        c.keys(v, p, {"address", "ssh", "cpm"});
+        in_addr parsed{};
+        if (!v["address"]) c.error(v, p + ".address", "missing (the IPv4 address its processes use for DDS)");
+        else if (auto a = c.text(v["address"], p + ".address")) {
+            if (::inet_pton(AF_INET, a->c_str(), &parsed) != 1) c.error(v["address"], p + ".address", "'" + *a + "' is not an IPv4 address");
+            else h.address = *a;
+        }
+        if (v["ssh"]) h.ssh = c.text(v["ssh"], p + ".ssh").value_or("");
+        h.cpm = v["cpm"] ? c.text(v["cpm"], p + ".cpm").value_or("") : std::string("/usr");
+        if (v["cpm"] && !v["ssh"]) c.error(v["cpm"], p + ".cpm", "only a host reached with ssh has a cpm of its own (the run's own host runs its own programs)");
+        s.hosts.push_back(h);
+    }
+    const auto locals = std::count_if(s.hosts.begin(), s.hosts.end(), [](const HostSpec& h) { return h.ssh.empty(); });
+    if (locals != 1) {
+        c.error(hosts, "hosts", std::to_string(locals) + " hosts without ssh; exactly one must be the host the run runs on (no ssh: key), every other reached with ssh");
+    }
+    if (root["ssh_config"]) s.ssh_config = c.file(root["ssh_config"], "ssh_config", s.dir, "ssh config");
+    if (root["max_clock_offset"]) s.max_clock_offset_ns = c.duration(root["max_clock_offset"], "max_clock_offset").value_or(s.max_clock_offset_ns);
+    if (const YAML::Node d = root["discovery"]) {
+        const auto t = c.text(d, "discovery");
+        if (t && *t != "peers") c.error(d, "discovery", "'" + *t + "': only peers (unicast to every host's address) is supported yet");
+    }
+    if (root["security"]) c.error(root["security"], "security", "a secured lab across hosts is not supported yet (each host would need its nodes' folders)");
+}
+
+/// A process's `host:`: a name of `hosts:` (with did-you-mean), or "" with an error said.
+std::string host_name(Checker& c, const Scenario& s, const YAML::Node& n, const std::string& path)
+{
+    const auto name = c.text(n, path);
+    if (!name) return "";
+    std::vector<std::string> known;
+    for (const auto& h : s.hosts) known.push_back(h.name);
+    if (s.host(*name)) return *name;
+    const auto meant = did_you_mean(*name, known);
+    std::string list;
+    for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+    c.error(n, path, "no host '" + *name + "'" + (meant ? " (did you mean '" + *meant + "'?)" : std::string()) +
+                         (known.empty() ? "; name the lab's computers under hosts:" : "; hosts: " + list));
+    return "";
+}
+
+/// `history: {host: …}`.
+void read_history(Checker& c, const YAML::Node& root, Scenario& s)
+{
+    const YAML::Node h = root["history"];
+    if (!h) return;
+    if (!h.IsMap()) {
+        c.error(h, "history", "expected a map (host)");
+        return;
+    }
+    c.keys(h, "history", {"host"});
+    if (h["host"]) s.history_host = host_name(c, s, h["host"], "history.host");
+}
+
 void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicles, Scenario& s)
 {
     if (!vehicles) c.error(root, "vehicles", "missing (a list of cars, each with an id)");
@@ -111,10 +184,10 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
             const YAML::Node v = vehicles[i];
             const std::string p = "vehicles[" + std::to_string(i) + "]";
             if (!v.IsMap()) {
-                c.error(v, p, "expected a map (id, start, camera, fsm, restart)");
+                c.error(v, p, "expected a map (id, start, camera, fsm, restart, host)");
                 continue;
             }
-            c.keys(v, p, {"id", "start", "camera", "fsm", "restart"});
+            c.keys(v, p, {"id", "start", "camera", "fsm", "restart", "host"});
             VehicleSpec spec;
             if (!v["id"]) c.error(v, p + ".id", "missing");
             else if (auto id = c.integer(v["id"], p + ".id", 1, 255)) {
@@ -133,6 +206,7 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
             if (v["camera"]) spec.camera = c.file(v["camera"], p + ".camera", s.dir, "camera file");
             if (v["fsm"]) spec.fsm = c.file(v["fsm"], p + ".fsm", s.dir, "state machine");
             if (v["restart"]) spec.restart = c.boolean(v["restart"], p + ".restart").value_or(false);
+            if (v["host"]) spec.host = host_name(c, s, v["host"], p + ".host");
             if (v["camera"] && !root["world"]) c.error(v["camera"], p + ".camera", "a camera needs the world's markers: give world");
             s.vehicles.push_back(spec);
         }
@@ -144,9 +218,10 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
 void read_routing(Checker& c, const YAML::Node& root, const YAML::Node& vehicles, Scenario& s)
 {
     if (const YAML::Node r = root["routing"]) {
-        if (!r.IsMap()) c.error(r, "routing", "expected a map (enabled, seed, period, restart)");
+        if (!r.IsMap()) c.error(r, "routing", "expected a map (enabled, seed, period, restart, host)");
         else {
-            c.keys(r, "routing", {"enabled", "seed", "period", "restart"});
+            c.keys(r, "routing", {"enabled", "seed", "period", "restart", "host"});
+            if (r["host"]) s.routing.host = host_name(c, s, r["host"], "routing.host");
             if (r["enabled"]) s.routing.enabled = c.boolean(r["enabled"], "routing.enabled").value_or(false);
             if (r["seed"]) s.routing.seed = uint64_t(c.integer(r["seed"], "routing.seed", 0, 1ll << 53).value_or(1));
             if (r["period"]) {
@@ -210,10 +285,11 @@ void read_run_options(Checker& c, const YAML::Node& root, Scenario& s)
     }
     if (const YAML::Node m = root["monitor"]) {
         if (m.IsMap()) {
-            c.keys(m, "monitor", {"port", "allow_stop"});
+            c.keys(m, "monitor", {"port", "allow_stop", "host"});
             if (!m["port"]) c.error(m, "monitor", "port is missing");
             else if (auto port = c.integer(m["port"], "monitor.port", 1, 65535)) s.monitor_port = int(*port);
             if (m["allow_stop"]) s.monitor_allow_stop = c.boolean(m["allow_stop"], "monitor.allow_stop").value_or(false);
+            if (m["host"]) s.monitor_host = host_name(c, s, m["host"], "monitor.host");
         } else if (m.IsScalar() && (m.Scalar() == "off" || m.Scalar() == "false" || m.Scalar() == "none")) {
             s.monitor_port.reset();  // as --monitor off
         } else if (auto port = c.integer(m, "monitor", 1, 65535)) {
@@ -240,7 +316,8 @@ Scenario load_scenario(const std::string& path)
     Checker c(path);
     if (!root.IsMap()) throw ScenarioError(std::vector<Diagnostic>{{path, "expected a map of keys (name, time, duration, world, vehicles, ...)"}});
     c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor",
-                    "parameters", "security"});
+                    "parameters", "security", "hosts", "ssh_config", "max_clock_offset", "discovery", "history"});
+    read_hosts(c, root, s);  // before anything names a host
 
     if (!root["name"]) c.error(root, "name", "missing (the run's name; its folder is runs/<name>-<UTC time>)");
     else if (auto n = c.text(root["name"], "name")) {
@@ -282,9 +359,27 @@ Scenario load_scenario(const std::string& path)
     if (!s.routing.enabled && !root["world"]) c.error(root, "world", "missing (the map the cars drive in)");
 
     read_run_options(c, root, s);
+    read_history(c, root, s);
     if (c.ok() && !s.world.empty() && !s.routing.enabled) check_starts(c, s, vehicles);
     if (!c.ok()) throw ScenarioError(c.errors());
     return s;
+}
+
+const HostSpec* Scenario::local_host() const
+{
+    for (const auto& h : hosts) {
+        if (h.ssh.empty()) return &h;
+    }
+    return nullptr;
+}
+
+const HostSpec* Scenario::host(const std::string& host_name) const
+{
+    if (host_name.empty()) return local_host();
+    for (const auto& h : hosts) {
+        if (h.name == host_name) return &h;
+    }
+    return nullptr;
 }
 
 std::string security_node_name(const RunSettings& settings, const std::string& process)
@@ -298,6 +393,21 @@ std::string security_node_name(const RunSettings& settings, const std::string& p
 ProcessPlan lab_run_process()
 {
     return process("cpm_lab_run", "lab_run", {}, false, 0, 0);
+}
+
+/// A planned process on its host (a scenario with hosts): the host's address for DDS, the other
+/// hosts' as peers, and argv[0] as installed there.
+void place_on_host(ProcessPlan& p, const Scenario& s)
+{
+    if (s.hosts.empty()) return;
+    const HostSpec* here = s.host(p.host);
+    if (!here) return;  // named in the scenario's errors
+    p.host = here->name;
+    if (!here->ssh.empty()) p.argv[0] = here->cpm + "/bin/" + fs::path(p.argv[0]).filename().string();
+    p.argv.insert(p.argv.end(), {"--dds_interface", here->address});
+    for (const auto& other : s.hosts) {
+        if (other.name != here->name) p.argv.insert(p.argv.end(), {"--dds_initial_peer", other.address});
+    }
 }
 
 std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
@@ -330,6 +440,7 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
     }
     for (const auto& t : s.record.exclude) history.insert(history.end(), {"--exclude", cpm::cli::glob_regex(t)});
     plan.push_back(process("cpm_history", "cpm_history", history, false, 9, 0));
+    plan.back().host = s.history_host;
     if (!s.parameters.empty()) {
         plan.push_back(process("parameters", "parameter_server", {program("cpm"), "param", "serve", s.parameters, "--dds_domain", domain}, false, 8, 0));
     }
@@ -340,6 +451,7 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         if (s.monitor_allow_stop) argv.push_back("--allow-stop");
         argv.insert(argv.end(), {"--dds_domain", domain});
         plan.push_back(process("monitor", "monitor", argv, false, 8, 0));
+        plan.back().host = s.monitor_host;
         if (!s.monitor_allow_stop) plan.back().publish.clear();  // it writes stop requests only with --allow-stop
     }
 
@@ -354,6 +466,7 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
                                             std::to_string(s.vehicles.size()), "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed)}),
                                restart, 5, first));
         plan.back().timer = timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first);
+        plan.back().host = s.vehicles.front().host;
     } else {
         // Each car's simulator, bridge and camera supervised by the run itself: one that dies is
         // restarted alone (restart: true), the bridge finding its simulator's new pty by the link
@@ -365,14 +478,17 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
             plan.push_back(process("sim_" + id, "firmware_sim",
                                    with_common({program("firmware_sim"), "--vehicle_id", id, "--map", s.world, "--start", start, "--link", link}),
                                    v.restart, 6, v.id));
+            plan.back().host = v.host;
             plan.push_back(process("bridge_" + id, "vehicle_bridge",
                                    with_common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}), v.restart, 5,
                                    v.id));
+            plan.back().host = v.host;
             if (v.camera.empty()) continue;
             // In real time the camera starts at once; on the simulated clock it ticks with the car.
             plan.push_back(process("camera_" + id, "camera_sim",
                                    with_common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s.world, "--rate", "30"}),
                                    v.restart, 4, v.id, simulated));
+            plan.back().host = v.host;
         }
     }
     for (const auto& v : s.vehicles) {
@@ -381,6 +497,7 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
         plan.push_back(process("aruco_" + id, "aruco_node",
                                with_common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world}), v.restart, 3,
                                v.id, simulated));
+        plan.back().host = v.host;
     }
     if (s.routing.enabled) {
         std::string ids;
@@ -389,13 +506,18 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
                                with_common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s.lanes, "--seed",
                                             std::to_string(s.routing.seed), "--period", std::to_string(s.routing.period_ns / 1'000'000) + "ms"}),
                                s.routing.restart, 1, 0));
+        plan.back().host = s.routing.host;
     }
     for (const auto& v : s.vehicles) {
         if (v.fsm.empty()) continue;
         const std::string id = std::to_string(v.id);
         plan.push_back(process("fsm_" + id, "fsm_node", with_common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}),
                                v.restart, 1, v.id));
+        plan.back().host = v.host;
     }
+    // Across hosts: each process with its host's address and the others' as peers, and the
+    // program as installed there.
+    for (auto& p : plan) place_on_host(p, s);
     // A secured run: every process as a node of its own, allowed what it uses (issued by the run).
     if (!s.security.empty()) {
         for (auto& p : plan) {

@@ -203,7 +203,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
                                        "qos: {vehicleState: {reliable: maybe}}\n"); // 14
     const auto errors = errors_of(file);
     const std::vector<std::string> expected = {
-        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security",
+        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, history",
         file + ":1: name: 'bad run': use letters, digits, - and _ only",
         file + ":2: time: 'sometimes': expected real or simulated",
         file + ":1: duration: missing (how long the run lasts, e.g. 30s)",
@@ -211,7 +211,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
         file + ":8: vehicles[0].fsm: state machine 'missing.json' does not exist (looked for " + (dir.path / "missing.json").string() + ")",
         file + ":9: vehicles[1].id: 5 is given twice (also vehicles[0])",
         file + ":10: vehicles[1].start[1]: 'nan' is not a finite number",
-        file + ":12: vehicles[2].camra: unknown key (did you mean 'camera'?); known: id, start, camera, fsm, restart",
+        file + ":12: vehicles[2].camra: unknown key (did you mean 'camera'?); known: id, start, camera, fsm, restart, host",
         file + ":11: vehicles[2].id: 300 is out of range (1 to 255)",
         file + ":13: routing.period: must be a multiple of 50ms",
         file + ":13: routing.enabled: central routing needs a lane graph: give lanes",
@@ -336,4 +336,53 @@ TEST(Scenario, ASecuredLabRunsEachProcessAsANodeAllowedTheTopicsItUses)
     ASSERT_EQ(errors.size(), 1u);
     EXPECT_NE(errors[0].find("bad.yaml:4: security: 'map.json'"), std::string::npos) << errors[0];
     EXPECT_NE(errors[0].find("cpm security init DIR"), std::string::npos) << errors[0];
+}
+
+TEST(Scenario, HostsNameEachProcessesComputerAndEveryMistakeInThemIsNamed)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "firmware_sim", "vehicle_bridge"});
+    const std::string good = dir.write("hosts.yaml",
+                                       "name: h\nduration: 5s\nworld: map.json\n"
+                                       "hosts:\n  central: {address: 10.1.0.1}\n  car_a: {address: 10.1.0.2, ssh: pi@10.1.0.2, cpm: /opt/cpm}\n"
+                                       "history: {host: central}\n"
+                                       "vehicles: [{id: 2, host: car_a}]\n");
+    const auto s = load_scenario(good);
+    ASSERT_EQ(s.hosts.size(), 2u);
+    EXPECT_EQ(s.local_host()->name, "central");
+    EXPECT_EQ(s.host("car_a")->cpm, "/opt/cpm");
+    RunSettings r{.bin_dir = bin, .run_dir = dir.file("run"), .domain = 3};
+    const auto plan = plan_run(s, r);
+    for (const auto& p : plan) {
+        const bool on_car = p.name == "sim_2" || p.name == "bridge_2";
+        EXPECT_EQ(p.host, on_car ? "car_a" : "central") << p.name;
+        // Its host's address for DDS, the other host as its peer; the program as installed there.
+        const std::string own = on_car ? "10.1.0.2" : "10.1.0.1", other = on_car ? "10.1.0.1" : "10.1.0.2";
+        const auto flag = [&](const std::string& name) {
+            const auto it = std::find(p.argv.begin(), p.argv.end(), name);
+            return it == p.argv.end() || it + 1 == p.argv.end() ? std::string() : *(it + 1);
+        };
+        EXPECT_EQ(flag("--dds_interface"), own) << p.name;
+        EXPECT_EQ(flag("--dds_initial_peer"), other) << p.name;
+        if (on_car) EXPECT_EQ(p.argv[0].rfind("/opt/cpm/bin/", 0), 0u) << p.argv[0];
+    }
+
+    const auto errors = errors_of(dir.write("bad_hosts.yaml",
+                                            "name: h\nduration: 5s\nworld: map.json\n"
+                                            "hosts:\n  central: {address: 10.1.0.1}\n  car_a: {adress: 10.1.0.2, ssh: car_a}\n"
+                                            "  car_b: {address: ten, ssh: car_b}\n"
+                                            "vehicles: [{id: 2, host: car_c}, {id: 3, host: lab}]\n"));
+    const std::string file = dir.file("bad_hosts.yaml");
+    EXPECT_EQ(errors, (std::vector<std::string>{
+                          file + ":6: hosts.car_a.adress: unknown key (did you mean 'address'?); known: address, ssh, cpm",
+                          file + ":6: hosts.car_a.address: missing (the IPv4 address its processes use for DDS)",
+                          file + ":7: hosts.car_b.address: 'ten' is not an IPv4 address",
+                          file + ":8: vehicles[0].host: no host 'car_c' (did you mean 'car_a'?); hosts: central, car_a, car_b",
+                          file + ":8: vehicles[1].host: no host 'lab'; hosts: central, car_a, car_b",
+                      }));
+    const auto no_local = errors_of(dir.write("no_local.yaml", "name: h\nduration: 5s\nworld: map.json\n"
+                                                               "hosts: {a: {address: 10.1.0.1, ssh: a}}\nvehicles: [{id: 2}]\n"));
+    ASSERT_EQ(no_local.size(), 1u);
+    EXPECT_NE(no_local[0].find("hosts: 0 hosts without ssh; exactly one must be the host the run runs on"), std::string::npos) << no_local[0];
 }

@@ -103,10 +103,20 @@ int lab_check(const std::vector<std::string>& args)
     std::printf("%s: ok: %s, %zu car(s), %s time, %.1f s on domain %d; a run starts %zu processes:\n", file.c_str(), s.name.c_str(),
                 s.vehicles.size(), s.time == cpm::lab::TimeMode::simulated ? "simulated" : "real", double(s.duration_ns) * 1e-9,
                 settings.domain, plan.size());
-    for (const auto& p : plan) {
+    auto print = [](const cpm::lab::ProcessPlan& p) {
         std::string line;
         for (const auto& a : p.argv) line += (line.empty() ? "" : " ") + a;
         std::printf("  %-16s %s%s\n", p.name.c_str(), line.c_str(), p.restart ? "   (restarted when it dies)" : "");
+    };
+    if (s.hosts.empty()) {
+        for (const auto& p : plan) print(p);
+        return 0;
+    }
+    for (const auto& h : s.hosts) {  // the plan per host, as each host will run it
+        std::printf("on %s (%s%s):\n", h.name.c_str(), h.address.c_str(), h.ssh.empty() ? ", this host" : (", ssh " + h.ssh + ", cpm in " + h.cpm).c_str());
+        for (const auto& p : plan) {
+            if (p.host == h.name) print(p);
+        }
     }
     return 0;
 }

@@ -45,10 +45,20 @@ struct RunResult
     double real_seconds = 0;
     std::vector<ProcessEnd> processes;
     std::string error;                  ///< why the run ended early ("" when it ran its time)
+    /// Across hosts: each host's clock against the run's own (offset and round trip, ns), and
+    /// whether it was lost during the run.
+    struct Host
+    {
+        std::string name, address;
+        int64_t clock_offset_ns = 0, rtt_ns = 0;
+        bool lost = false;
+    };
+    std::vector<Host> hosts;
 };
 
-/// Runs the scenario. Throws ScenarioError for a missing program and std::runtime_error when
-/// the run's folder cannot be made (before anything starts).
+/// Runs the scenario. Throws ScenarioError for a missing program, a host that cannot be reached,
+/// runs another cpm or whose clock is off by more than max_clock_offset, and cpm::Error when the
+/// run's folder cannot be made (each before anything starts anywhere).
 RunResult run_lab(const Scenario& scenario, const RunOptions& options);
 
 }  // namespace cpm::lab

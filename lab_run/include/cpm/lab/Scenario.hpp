@@ -46,6 +46,16 @@ struct VehicleSpec
     std::string camera;  ///< absolute path, or empty
     std::string fsm;     ///< absolute path, or empty
     bool restart = false;
+    std::string host;    ///< where its processes run (a name of `hosts:`); "" the run's own
+};
+
+/// A computer of the lab (`hosts:`): the address its participants use and how the run reaches it.
+struct HostSpec
+{
+    std::string name;
+    std::string address;  ///< IPv4: its processes' --dds_interface, the others' --dds_initial_peer
+    std::string ssh;      ///< ssh's destination; "" for the host the run runs on
+    std::string cpm;      ///< where cpm is installed there (its programs in cpm/bin)
 };
 
 struct RoutingSpec
@@ -54,6 +64,7 @@ struct RoutingSpec
     uint64_t seed = 1;
     uint64_t period_ns = 400'000'000ull;
     bool restart = false;
+    std::string host;  ///< where central_routing runs; "" the run's own
 };
 
 /// Per-topic QoS a run applies to every node (unset: each node's own choice); the run passes
@@ -84,6 +95,15 @@ struct Scenario
     RecordSpec record;
     std::optional<int> monitor_port;  ///< cpm monitor on 127.0.0.1 at this port during the run
     bool monitor_allow_stop = false;
+    std::string monitor_host;  ///< where the monitor runs; "" the run's own
+    std::string history_host;  ///< where the history records; "" the run's own
+    std::vector<HostSpec> hosts;  ///< empty: every process on the run's own host
+    std::string ssh_config;       ///< an ssh config file for reaching the hosts (ssh -F), or empty
+    uint64_t max_clock_offset_ns = 2'000'000;  ///< a host's clock further off refuses the run
+    /// The host the run runs on (the one without ssh), or nullptr without hosts.
+    const HostSpec* local_host() const;
+    /// The host of that name ("": the run's own), or nullptr.
+    const HostSpec* host(const std::string& name) const;
 };
 
 /// Every error of a scenario file, one "FILE:LINE: PATH: message" each.
@@ -109,6 +129,7 @@ struct ProcessPlan
     std::vector<std::string> publish;    ///< the topics it writes (patterns), beyond every process's own
     std::vector<std::string> subscribe;  ///< the topics it reads (patterns)
     std::string security_node;      ///< secured run: the node folder it runs as (--security), issued by the run
+    std::string host;               ///< the host it runs on ("" the run's own); argv[0] is a path there
 };
 
 struct RunSettings
