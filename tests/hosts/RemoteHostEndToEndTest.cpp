@@ -21,16 +21,8 @@ using namespace std::chrono_literals;
 
 namespace {
 
-/// Where cpm is "installed" on every namespace host: the build tree (one machine, one disk).
-std::string cpm_prefix() { return std::filesystem::path(cpm_test::built_program("cpm")).parent_path().parent_path().string(); }
-
-std::string command_line(int pid)
-{
-    std::ifstream in("/proc/" + std::to_string(pid) + "/cmdline");
-    std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    for (char& c : s) c = c == '\0' ? ' ' : c;
-    return s;
-}
+using cpm_test::command_line;
+using cpm_test::cpm_prefix;
 
 unsigned long netns_of(int pid)
 {

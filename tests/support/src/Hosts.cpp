@@ -1,6 +1,7 @@
 #include <cpm_test/Hosts.hpp>
 
 #include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
 
 #include <dirent.h>
 #include <fcntl.h>
@@ -162,6 +163,15 @@ void NamespaceHosts::stop_sshd(size_t host)
     ::kill(sshd_pids_[host], SIGTERM);
     ::waitpid(sshd_pids_[host], nullptr, 0);
     sshd_pids_[host] = -1;
+}
+
+std::string cpm_prefix() { return std::filesystem::path(built_program("cpm")).parent_path().parent_path().string(); }
+
+std::string command_line(int pid)
+{
+    std::string s = read_file("/proc/" + std::to_string(pid) + "/cmdline");
+    for (char& c : s) c = c == '\0' ? ' ' : c;
+    return s;
 }
 
 unsigned long NamespaceHosts::netns_inode(size_t host) const

@@ -62,4 +62,9 @@ private:
     std::vector<int> sshd_pids_;
 };
 
+/// Where cpm is "installed" on every namespace host: the build tree (one machine, one disk).
+std::string cpm_prefix();
+/// A process's command line, its words joined by spaces ("" when it is gone).
+std::string command_line(int pid);
+
 }  // namespace cpm_test

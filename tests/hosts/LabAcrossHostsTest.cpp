@@ -1,0 +1,134 @@
+// One scenario, one run, three hosts: cpm lab run on the central host (a network namespace with
+// its own sshd, as are the car hosts) starts each car's simulator, bridge and fsm_node on the
+// car's own host over ssh, records centrally, and leaves nothing running anywhere.
+#include <cpm/HistoryClient.hpp>
+#include <cpm_test/Hosts.hpp>
+#include <cpm_test/Isolation.hpp>
+#include <cpm_test/Process.hpp>
+#include <cpm_test/TempDir.hpp>
+
+#include <VehicleState.h>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <sys/stat.h>
+
+#include <filesystem>
+#include <fstream>
+#include <optional>
+
+using namespace std::chrono_literals;
+using cpm_test::built_program;
+
+namespace {
+
+using cpm_test::command_line;
+using cpm_test::cpm_prefix;
+
+const std::string kRoot = CPM_SOURCE_DIR;
+
+/// The pids of cpm's programs (not sshd) in a host's namespace.
+std::vector<std::string> programs_on(const cpm_test::NamespaceHosts& hosts, size_t host)
+{
+    std::vector<std::string> out;
+    for (int pid : hosts.pids(host)) {
+        const std::string cmd = command_line(pid);
+        if (cmd.rfind(cpm_prefix(), 0) == 0) out.push_back(cmd.substr(0, cmd.find(' ')));
+    }
+    return out;
+}
+
+bool runs(const std::vector<std::string>& programs, const std::string& name)
+{
+    return std::any_of(programs.begin(), programs.end(), [&](const std::string& p) { return std::filesystem::path(p).filename() == name; });
+}
+
+class LabAcrossHosts : public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        cpm_test::test_domain_id();
+        hosts_.emplace(std::vector<std::string>{"central", "car_a", "car_b"});
+        if (!hosts_->why_not().empty()) GTEST_SKIP() << "no namespace hosts: " << hosts_->why_not() << "; not run";
+    }
+    cpm_test::NamespaceHosts& hosts() { return *hosts_; }
+    /// A scenario with one car on each car host, the history and this run on the central host.
+    std::string scenario(const std::string& extra = "")
+    {
+        std::string hosts_yaml = "hosts:\n  central: {address: " + hosts().address(0) + "}\n";
+        for (size_t i = 1; i < 3; ++i) {
+            hosts_yaml += "  " + std::string(i == 1 ? "car_a" : "car_b") + ": {address: " + hosts().address(i) + ", ssh: " +
+                          (i == 1 ? "car_a" : "car_b") + ", cpm: " + cpm_prefix() + "}\n";
+        }
+        return dir.write("two_cars.yaml", "name: across\ntime: real\nduration: 6s\nworld: " + kRoot + "/scenarios/maps/gates.json\n" +
+                                              hosts_yaml + "ssh_config: " + hosts().ssh_config() + "\n" + extra +
+                                              "history: {host: central}\n"
+                                              "vehicles:\n"
+                                              "  - {id: 5, host: car_a, start: [0.0, 0.0, 0.3], fsm: " + kRoot + "/scenarios/fsm/gates.json}\n"
+                                              "  - {id: 6, host: car_b, start: [0.0, 0.6, 0.3]}\n");
+    }
+    cpm_test::TempDir dir;
+
+private:
+    std::optional<cpm_test::NamespaceHosts> hosts_;
+};
+
+}  // namespace
+
+TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeftAnywhere)
+{
+    const std::string file = scenario();
+    const std::string out = dir.file("run");
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
+    // While it runs: each car's programs on its own host, none of them on the others.
+    bool seen = false;
+    cpm_test::wait_until([&] {
+        const auto a = programs_on(hosts(), 1), b = programs_on(hosts(), 2), central = programs_on(hosts(), 0);
+        seen = runs(a, "firmware_sim") && runs(a, "vehicle_bridge") && runs(a, "fsm_node") && runs(b, "firmware_sim") &&
+               runs(b, "vehicle_bridge") && !runs(central, "firmware_sim") && runs(central, "cpm_history");
+        return seen;
+    }, 30s, 200ms);
+    EXPECT_TRUE(seen) << "car_a runs " << ::testing::PrintToString(programs_on(hosts(), 1)) << ", car_b "
+                      << ::testing::PrintToString(programs_on(hosts(), 2)) << ", central " << ::testing::PrintToString(programs_on(hosts(), 0));
+    ASSERT_EQ(run.wait(90s), 0) << run.output() << run.errors();
+
+    std::ifstream in(out + "/summary.json");
+    const auto summary = nlohmann::json::parse(in);
+    EXPECT_TRUE(summary["ok"].get<bool>()) << summary.dump(2);
+    ASSERT_EQ(summary["hosts"].size(), 3u) << summary.dump(2);
+    for (const auto& h : summary["hosts"]) {
+        if (h["name"] == "central") continue;
+        EXPECT_GT(h["rtt_ns"].get<int64_t>(), 0) << h.dump();
+        EXPECT_LT(std::llabs(h["clock_offset_ns"].get<int64_t>()), 2'000'000) << h.dump();  // one machine: one clock
+    }
+    // The central recording holds both cars' states at their 50 Hz from their own hosts.
+    auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
+    for (int car : {5, 6}) {
+        const auto states = recording.range_of<VehicleState>("vehicleState", car, 0, UINT64_MAX, cpm::HistoryBy::commit, 100000);
+        EXPECT_GE(states.samples.size(), 200u) << "car " << car << ": " << states.samples.size() << " states in a 6 s run at 50 Hz";
+    }
+    // Nothing of the run is left on any host.
+    for (size_t h = 0; h < 3; ++h) {
+        EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s))
+            << "left on host " << h << ": " << ::testing::PrintToString(programs_on(hosts(), h));
+    }
+}
+
+TEST_F(LabAcrossHosts, AHostWithoutSshOrWithItsClockOffIsRefusedBeforeAnythingStarts)
+{
+    hosts().stop_sshd(2);
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", dir.file("run"), "--monitor", "off"}));
+    EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
+    EXPECT_NE(run.errors().find("hosts.car_b: cannot run " + cpm_prefix() + "/bin/cpm there with ssh car_b"), std::string::npos) << run.errors();
+    for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(programs_on(hosts(), h).empty()) << "started on host " << h << " though the run was refused";
+
+    // A bound no real clock meets: the offset itself is named.
+    cpm_test::Process strict(
+        hosts().in(0, {built_program("cpm"), "lab", "run", scenario("max_clock_offset: 1ns\n"), "--out", dir.file("run2"), "--monitor", "off"}));
+    EXPECT_EQ(strict.wait(60s), 1) << strict.output() << strict.errors();
+    EXPECT_NE(strict.errors().find("hosts.car_a: its clock is "), std::string::npos) << strict.errors();
+    EXPECT_NE(strict.errors().find("more than max_clock_offset 0.000 ms: synchronise the hosts' clocks (chrony or NTP)"), std::string::npos)
+        << strict.errors();
+}
