@@ -5,6 +5,7 @@
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/RemoteHost.hpp>
+#include <cpm/read_text_file.hpp>
 #include <cpm/ProcessGroup.hpp>
 #include <cpm/Security.hpp>
 #include <cpm/TimeMaster.hpp>
@@ -230,6 +231,53 @@ std::vector<RunResult::Host> check_hosts(const Scenario& s, const RunSettings& s
     }
     if (!errors.empty()) throw ScenarioError(errors);
     return out;
+}
+
+/// Runs a command on another host with `input` as its stdin; whether it exited 0.
+bool run_there(const RemoteHost& remote, const std::vector<std::string>& argv, const std::string& input)
+{
+    ChildProcess c({.argv = ssh_command(remote, argv), .pipe_stdin = true});
+    const bool written = c.write_stdin(input);
+    c.close_stdin();
+    const auto end = c.wait(std::chrono::seconds(30));
+    return written && end && end->ok();
+}
+
+/// The run's folders on the other hosts, removed once their processes ended (the logs are here).
+void remove_from_hosts(const Scenario& s, const RunSettings& settings)
+{
+    for (const auto& h : s.hosts) {
+        const RemoteHost remote = remote_of(s, h.name);
+        if (!remote.is_local()) (void)run_there(remote, {"rm", "-rf", remote_run_dir(settings)}, "");
+    }
+}
+
+/// The files each process on another host reads, copied into the run's folder there (made
+/// first) with ssh. Throws ScenarioError naming the host and file that could not be copied.
+void copy_to_hosts(const Scenario& s, const std::vector<ProcessPlan>& plan, const RunSettings& settings)
+{
+    std::vector<Diagnostic> errors;
+    for (const auto& h : s.hosts) {
+        const RemoteHost remote = remote_of(s, h.name);
+        if (remote.is_local()) continue;
+        std::set<std::string> done;
+        const std::string there = remote_run_dir(settings);
+        auto ssh = [&](const std::vector<std::string>& argv, const std::string& input) { return run_there(remote, argv, input); };
+        if (!ssh({"mkdir", "-p", there}, "")) {
+            errors.push_back({s.file + ": hosts." + h.name, "cannot make the run's folder " + there + " there"});
+            continue;
+        }
+        for (const auto& p : plan) {
+            if (p.host != h.name) continue;
+            for (const auto& [local, copy] : p.copies) {
+                if (!done.insert(copy).second) continue;
+                if (!ssh({"/bin/sh", "-c", "cat > " + shell_quote(copy)}, read_text_file(local, "file for " + p.name))) {
+                    errors.push_back({s.file + ": hosts." + h.name, "cannot copy " + local + " to " + copy + " there (for " + p.name + ")"});
+                }
+            }
+        }
+    }
+    if (!errors.empty()) throw ScenarioError(errors);
 }
 
 /// The run's spec of a planned process: its log in the run's folder, the run's domain and QoS.
@@ -482,6 +530,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     settings.run_dir = dir.string();
     const auto plan = plan_run(s, settings);  // names a missing program before anything starts
     const auto hosts = check_hosts(s, settings);  // and a host that cannot take part
+    copy_to_hosts(s, plan, settings);
 
     // Every process, this one too, makes its readers and writers with the scenario's QoS.
     const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
@@ -539,6 +588,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     clock.stop();
     (void)group.stop_all();
+    remove_from_hosts(s, settings);
     result.real_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
 
     const nlohmann::json processes = process_ends(plan, group, died, result);

@@ -395,15 +395,40 @@ ProcessPlan lab_run_process()
     return process("cpm_lab_run", "lab_run", {}, false, 0, 0);
 }
 
+std::string remote_run_dir(const RunSettings& settings) { return "/tmp/cpm-runs/" + fs::path(settings.run_dir).filename().string(); }
+
 /// A planned process on its host (a scenario with hosts): the host's address for DDS, the other
-/// hosts' as peers, and argv[0] as installed there.
-void place_on_host(ProcessPlan& p, const Scenario& s)
+/// hosts' as peers; on another host, the program as installed there, the files it reads copied
+/// into the run's folder there, and what it makes in the run's folder made there.
+void place_on_host(ProcessPlan& p, const Scenario& s, const RunSettings& r, std::map<std::string, std::string>& copied_as)
 {
     if (s.hosts.empty()) return;
     const HostSpec* here = s.host(p.host);
     if (!here) return;  // named in the scenario's errors
     p.host = here->name;
-    if (!here->ssh.empty()) p.argv[0] = here->cpm + "/bin/" + fs::path(p.argv[0]).filename().string();
+    if (!here->ssh.empty()) {
+        const std::string there = remote_run_dir(r);
+        p.argv[0] = here->cpm + "/bin/" + fs::path(p.argv[0]).filename().string();
+        const std::string run_dir = r.run_dir + "/";
+        for (size_t i = 1; i < p.argv.size(); ++i) {
+            std::string& a = p.argv[i];
+            std::error_code ec;
+            if (a.rfind(run_dir, 0) == 0) {
+                a = there + "/" + a.substr(run_dir.size());
+            } else if (a.size() > 1 && a[0] == '/' && fs::is_regular_file(a, ec)) {
+                // One name there per file here (maps/gates.json and fsm/gates.json are two files).
+                auto [it, fresh] = copied_as.emplace(a, fs::path(a).filename().string());
+                if (fresh) {
+                    for (const auto& [other, name] : copied_as) {
+                        if (other != a && name == it->second) it->second = std::to_string(copied_as.size()) + "_" + it->second;
+                    }
+                }
+                const std::string copy = there + "/" + it->second;
+                p.copies.emplace_back(a, copy);
+                a = copy;
+            }
+        }
+    }
     p.argv.insert(p.argv.end(), {"--dds_interface", here->address});
     for (const auto& other : s.hosts) {
         if (other.name != here->name) p.argv.insert(p.argv.end(), {"--dds_initial_peer", other.address});
@@ -517,7 +542,8 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
     }
     // Across hosts: each process with its host's address and the others' as peers, and the
     // program as installed there.
-    for (auto& p : plan) place_on_host(p, s);
+    std::map<std::string, std::string> copied_as;
+    for (auto& p : plan) place_on_host(p, s, r, copied_as);
     // A secured run: every process as a node of its own, allowed what it uses (issued by the run).
     if (!s.security.empty()) {
         for (auto& p : plan) {

@@ -80,7 +80,7 @@ private:
 TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeftAnywhere)
 {
     const std::string file = scenario();
-    const std::string out = dir.file("run");
+    const std::string out = dir.file("across-" + std::to_string(::getpid()));
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
     // While it runs: each car's programs on its own host, none of them on the others.
     bool seen = false;
@@ -90,6 +90,13 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
                runs(b, "vehicle_bridge") && !runs(central, "firmware_sim") && runs(central, "cpm_history");
         return seen;
     }, 30s, 200ms);
+    // What a car's programs read comes from the run's folder on its host (copied there; the
+    // world and the state machine are both gates.json: two files, two names).
+    std::string fsm_command;
+    for (int pid : hosts().pids(1)) {
+        if (command_line(pid).find("/bin/fsm_node ") != std::string::npos) fsm_command = command_line(pid);
+    }
+    EXPECT_NE(fsm_command.find("--fsm /tmp/cpm-runs/across-" + std::to_string(::getpid()) + "/"), std::string::npos) << fsm_command;
     EXPECT_TRUE(seen) << "car_a runs " << ::testing::PrintToString(programs_on(hosts(), 1)) << ", car_b "
                       << ::testing::PrintToString(programs_on(hosts(), 2)) << ", central " << ::testing::PrintToString(programs_on(hosts(), 0));
     ASSERT_EQ(run.wait(90s), 0) << run.output() << run.errors();
@@ -109,6 +116,7 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
         const auto states = recording.range_of<VehicleState>("vehicleState", car, 0, UINT64_MAX, cpm::HistoryBy::commit, 100000);
         EXPECT_GE(states.samples.size(), 200u) << "car " << car << ": " << states.samples.size() << " states in a 6 s run at 50 Hz";
     }
+    EXPECT_FALSE(std::filesystem::exists("/tmp/cpm-runs/across-" + std::to_string(::getpid()))) << "the run's folder on the car hosts stays";
     // Nothing of the run is left on any host.
     for (size_t h = 0; h < 3; ++h) {
         EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s))

@@ -130,6 +130,8 @@ struct ProcessPlan
     std::vector<std::string> subscribe;  ///< the topics it reads (patterns)
     std::string security_node;      ///< secured run: the node folder it runs as (--security), issued by the run
     std::string host;               ///< the host it runs on ("" the run's own); argv[0] is a path there
+    /// On another host: the files it reads, copied there before it starts (local path, path there).
+    std::vector<std::pair<std::string, std::string>> copies;
 };
 
 struct RunSettings
@@ -144,6 +146,9 @@ struct RunSettings
 /// A secured run's node name for one of its processes ("cpm_lab_run" for the run itself): the
 /// run's folder name and the process, so that every run has nodes of its own.
 std::string security_node_name(const RunSettings& settings, const std::string& process);
+/// The run's folder on another host (/tmp/cpm-runs/<the run folder's name>): the files its
+/// processes read, copied there, and their serial links.
+std::string remote_run_dir(const RunSettings& settings);
 /// The topics `cpm lab run` itself uses: the stop requests and the clock's start it writes; the
 /// log, the history's status and the timers' readiness it reads.
 ProcessPlan lab_run_process();
