@@ -372,8 +372,21 @@ private:
 /// ends with code 0 is done (an fsm_node whose machine stopped, a node the simulated clock
 /// stopped at its end), one whose scenario says restart is started again, any other ends the run
 /// with the end of its log. Prints `progress()` every second on a terminal, every 10 s else.
+/// Whether every process planned on `host` drives a car (its simulator, bridge, camera, marker
+/// finder, state machine): losing that host loses those cars, not the run.
+bool carries_only_cars(const std::vector<ProcessPlan>& plan, const std::string& host)
+{
+    return std::all_of(plan.begin(), plan.end(), [&](const ProcessPlan& p) {
+        if (p.host != host) return true;
+        for (const char* car : {"sim_", "bridge_", "camera_", "aruco_", "fsm_"}) {
+            if (p.name.rfind(car, 0) == 0) return true;
+        }
+        return p.name == "cars";
+    });
+}
+
 void supervise(ProcessGroup& group, std::set<std::string>& died, RunResult& result, const LabClock& clock,
-               const std::function<std::string()>& progress, const RunOptions& o, const fs::path& dir)
+               const std::function<std::string()>& progress, const RunOptions& o, const fs::path& dir, const std::vector<ProcessPlan>& plan)
 {
     const bool tty = o.progress && ::isatty(::fileno(o.progress));
     auto last_progress = Clock::now();
@@ -391,6 +404,10 @@ void supervise(ProcessGroup& group, std::set<std::string>& died, RunResult& resu
             }
             died.insert(e.name);
             for (auto& h : result.hosts) h.lost = h.lost || (e.host_lost && h.name == e.host);
+            if (e.host_lost && carries_only_cars(plan, e.host)) {  // its cars are lost; the others drive on
+                if (o.progress) std::fprintf(o.progress, "cpm lab run: %s %s; the run goes on without it\n", e.name.c_str(), e.describe().c_str());
+                continue;
+            }
             if (result.error.empty()) {
                 result.error = e.name + " " + e.describe() + " during the run; the end of its log (" + (dir / (e.name + ".log")).string() +
                                "):\n" + group.tail(e.name);
@@ -464,13 +481,14 @@ nlohmann::json process_ends(const std::vector<ProcessPlan>& plan, const ProcessG
     nlohmann::json processes = nlohmann::json::array();
     for (const auto& p : plan) {
         const auto end = group.end_of(p.name);
-        ProcessEnd e{p.name, end ? end->describe() : "never started"};
+        const bool lost = std::any_of(result.hosts.begin(), result.hosts.end(), [&](const RunResult::Host& h) { return h.lost && h.name == p.host; });
+        ProcessEnd e{p.name, lost && end && end->code == 255 ? "lost with host " + p.host : end ? end->describe() : "never started"};
         const bool clean = end && (end->ok() || end->signal == SIGINT || end->signal == SIGTERM);
         e.failed = died.count(p.name) > 0 || (end && !clean);
         e.restarts = group.restarts_of(p.name);
         if (e.failed) e.last_lines = group.tail(p.name);
         processes.push_back({{"name", e.name}, {"argv", p.argv}, {"end", e.how}, {"failed", e.failed}, {"restarts", e.restarts},
-                             {"log", p.name + ".log"}});
+                             {"log", p.name + ".log"}, {"host", p.host}});
         result.processes.push_back(e);
     }
     return processes;
@@ -575,7 +593,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
                       clock.simulated() ? (" (simulated, " + std::to_string(int(real)) + " s real)").c_str() : "", s.vehicles.size(),
                       (unsigned long long)watch.missed(), (unsigned long long)watch.recorded());
         return std::string(line);
-    }, o, dir);
+    }, o, dir, plan);
     result.lab_time_ns = clock.now();
 
     // The end, in order: every car told to stop, the timers stopped, then the processes that
@@ -593,7 +611,8 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
 
     const nlohmann::json processes = process_ends(plan, group, died, result);
     result.ok = result.error.empty() && !result.interrupted &&
-                std::none_of(result.processes.begin(), result.processes.end(), [](const ProcessEnd& e) { return e.failed; });
+                std::none_of(result.processes.begin(), result.processes.end(), [](const ProcessEnd& e) { return e.failed; }) &&
+                std::none_of(result.hosts.begin(), result.hosts.end(), [](const RunResult::Host& h) { return h.lost; });
     write_summary(s, settings, qos, result, processes, watch, (dir / (plan[0].name + ".log")).string());
     return result;
 }

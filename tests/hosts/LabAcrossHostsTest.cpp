@@ -2,6 +2,7 @@
 // its own sshd, as are the car hosts) starts each car's simulator, bridge and fsm_node on the
 // car's own host over ssh, records centrally, and leaves nothing running anywhere.
 #include <cpm/HistoryClient.hpp>
+#include <cpm/get_time_ns.hpp>
 #include <cpm_test/Hosts.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
@@ -17,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <thread>
 
 using namespace std::chrono_literals;
 using cpm_test::built_program;
@@ -139,4 +141,31 @@ TEST_F(LabAcrossHosts, AHostWithoutSshOrWithItsClockOffIsRefusedBeforeAnythingSt
     EXPECT_NE(strict.errors().find("hosts.car_a: its clock is "), std::string::npos) << strict.errors();
     EXPECT_NE(strict.errors().find("more than max_clock_offset 0.000 ms: synchronise the hosts' clocks (chrony or NTP)"), std::string::npos)
         << strict.errors();
+}
+
+TEST_F(LabAcrossHosts, ACarHostLostMidRunIsNamedAndTheOtherCarDrivesOnToTheEnd)
+{
+    const std::string out = dir.file("lost-" + std::to_string(::getpid()));
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", out, "--monitor", "off", "--duration", "12s"}));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return runs(programs_on(hosts(), 2), "vehicle_bridge"); }, 30s)) << run.errors();
+    std::this_thread::sleep_for(2s);
+    const uint64_t cut_ns = cpm::get_time_ns();
+    ASSERT_TRUE(hosts().cut(2));  // car_b's cable pulled
+    EXPECT_EQ(run.wait(90s), 1) << "a run that lost a host is not ok\n" << run.output() << run.errors();
+    EXPECT_NE((run.output() + run.errors()).find("sim_6 lost with host car_b (ssh ended: the host was not reached or the connection broke); the run goes on without it"), std::string::npos) << run.output() << run.errors();
+
+    std::ifstream in(out + "/summary.json");
+    const auto summary = nlohmann::json::parse(in);
+    EXPECT_EQ(summary["error"], "") << "the run went on: " << summary.dump(2);
+    EXPECT_NEAR(summary["lab_time_s"].get<double>(), 12.0, 0.5) << summary.dump(2);
+    for (const auto& h : summary["hosts"]) EXPECT_EQ(h["lost"].get<bool>(), h["name"] == "car_b") << h.dump();
+    for (const auto& p : summary["processes"]) {
+        if (p["host"] == "car_b") EXPECT_EQ(p["end"], "lost with host car_b") << p.dump();
+    }
+    // car_a drove on after the cut; car_b's states stopped with it.
+    auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
+    const auto a = recording.range_of<VehicleState>("vehicleState", 5, cut_ns + 1'000'000'000, UINT64_MAX, cpm::HistoryBy::commit, 100000);
+    const auto b = recording.range_of<VehicleState>("vehicleState", 6, cut_ns + 1'000'000'000, UINT64_MAX, cpm::HistoryBy::commit, 100000);
+    EXPECT_GE(a.samples.size(), 200u) << "car_a's states after the cut";
+    EXPECT_EQ(b.samples.size(), 0u) << "car_b's states after its host was cut off";
 }
