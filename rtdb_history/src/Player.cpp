@@ -2,6 +2,7 @@
 
 #include <cpm/Error.hpp>
 #include <cpm/nodes.hpp>
+#include <cpm/percentile.hpp>
 #include <cpm/topics.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 
@@ -200,10 +201,9 @@ PlayStats Player::run(const std::function<bool()>& stop)
     }
     for (auto& [topic, w] : im.writers) w.writer->wait_for_acknowledgments({10, 0});
     if (!late.empty()) {
-        std::sort(late.begin(), late.end());
-        stats.late_p50_ns = late[late.size() / 2];
-        stats.late_p99_ns = late[std::min(late.size() - 1, size_t(double(late.size()) * 0.99))];
-        stats.late_max_ns = late.back();
+        stats.late_p50_ns = cpm::percentile(late, 0.50);
+        stats.late_p99_ns = cpm::percentile(late, 0.99);
+        stats.late_max_ns = *std::max_element(late.begin(), late.end());
     }
     return stats;
 }

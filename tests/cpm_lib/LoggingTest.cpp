@@ -11,6 +11,8 @@
 #include <VehicleState.h>
 
 #include <gmock/gmock.h>
+#include <cpm_test/Process.hpp>
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -53,14 +55,6 @@ protected:
     }
 };
 
-std::string read_file(const std::string& path)
-{
-    std::ifstream in(path);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-}
-
 }  // namespace
 
 TEST_F(LoggingTest, MessageReachesStderrTheCsvFileAndTheTopic)
@@ -82,9 +76,9 @@ TEST_F(LoggingTest, MessageReachesStderrTheCsvFileAndTheTopic)
     close(saved);
     cpm::Logging::instance().set_file("");
 
-    EXPECT_THAT(read_file(err_file), HasSubstr("[warn]"));
-    EXPECT_THAT(read_file(err_file), HasSubstr("vehicle 3 lost \"contact\""));
-    EXPECT_THAT(read_file(file), HasSubstr(",warn,\"vehicle 3 lost \"\"contact\"\"\""));
+    EXPECT_THAT(cpm_test::file_text(err_file), HasSubstr("[warn]"));
+    EXPECT_THAT(cpm_test::file_text(err_file), HasSubstr("vehicle 3 lost \"contact\""));
+    EXPECT_THAT(cpm_test::file_text(file), HasSubstr(",warn,\"vehicle 3 lost \"\"contact\"\"\""));
     auto logs = messages_with(monitor, "vehicle 3 lost", 1);
     ASSERT_EQ(logs.size(), 1u);
     EXPECT_EQ(logs[0].log_level(), 2);

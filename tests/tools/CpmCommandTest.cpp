@@ -299,10 +299,10 @@ TEST(CpmPrograms, BadFlagsAndFilesOfEveryProgramAreNamedWithTheRightExitCode)
         {{"vehicle_bridge", "--vehicle_id", "1", "--device", "/dev/null", "--calibration", "FILE"}, R"({"servo_range_us": 0})",
          1, "servo_range_us must not be 0"},
         {{"vehicle_bridge", "--vehicle_id", "1", "--device", "/dev/null", "--calibration", "FILE"}, R"({"max_speed": 500})",
-         1, "max_speed = 500 is out of range"},
+         1, "$.max_speed: 500 is out of range [0.01, 100]"},
         {{"vehicle_bridge", "--vehicle_id", "1", "--device", "/dev/null", "--calibration", "FILE"},
          R"({"battery_min_voltage": 9, "battery_max_voltage": 8})", 1, "battery_min_voltage must be below battery_max_voltage"},
-        {{"firmware_sim", "--vehicle_id", "1", "--params", "FILE"}, R"({"wheelbase": -1})", 1, "wheelbase = -1 is out of range"},
+        {{"firmware_sim", "--vehicle_id", "1", "--params", "FILE"}, R"({"wheelbase": -1})", 1, "$.wheelbase: -1 is out of range [0.01, inf]"},
     };
     for (const auto& c : cases) {
         std::vector<std::string> argv{cpm_test::built_program(c.argv[0])};

@@ -23,14 +23,6 @@ namespace {
 
 int shell(const std::string& command) { return std::system((command + " >/dev/null 2>&1").c_str()); }
 
-std::string read_file(const std::string& path)
-{
-    std::ifstream in(path);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-}
-
 }  // namespace
 
 NamespaceHosts::NamespaceHosts(std::vector<std::string> names) : names_(std::move(names))
@@ -49,7 +41,7 @@ NamespaceHosts::NamespaceHosts(std::vector<std::string> names) : names_(std::mov
     else if (dir_.empty()) why_not_ = "cannot make a folder in /tmp";
     else if (!make()) return;
     for (size_t i = 0; why_not_.empty() && i < names_.size(); ++i) {
-        if (!start_sshd(i)) why_not_ = "sshd did not start in the namespace of " + names_[i] + ": " + read_file(dir_ + "/sshd_" + std::to_string(i) + ".log");
+        if (!start_sshd(i)) why_not_ = "sshd did not start in the namespace of " + names_[i] + ": " + file_text(dir_ + "/sshd_" + std::to_string(i) + ".log");
     }
 }
 
@@ -76,7 +68,7 @@ bool NamespaceHosts::make()
     if (shell("ssh-keygen -q -t ed25519 -N '' -f " + dir_ + "/host_key") != 0 || shell("ssh-keygen -q -t ed25519 -N '' -f " + dir_ + "/id") != 0)
         return fail("ssh-keygen failed");
     std::filesystem::copy_file(dir_ + "/id.pub", dir_ + "/authorized_keys");
-    const std::string host_key = read_file(dir_ + "/host_key.pub");
+    const std::string host_key = file_text(dir_ + "/host_key.pub");
     std::ofstream known(dir_ + "/known_hosts");
     std::ofstream config(dir_ + "/ssh_config");
     for (size_t i = 0; i < names_.size(); ++i) {
@@ -146,7 +138,7 @@ std::vector<int> NamespaceHosts::pids(size_t host) const
     while (std::fscanf(p, "%d", &pid) == 1) {
         if (host < sshd_pids_.size() && pid == sshd_pids_[host]) continue;
         // sshd's listener (the one ip netns exec became) is ours; its sessions' processes are not.
-        const std::string cmd = read_file("/proc/" + std::to_string(pid) + "/cmdline");
+        const std::string cmd = file_text("/proc/" + std::to_string(pid) + "/cmdline");
         if (cmd.rfind("/usr/sbin/sshd", 0) == 0 && cmd.find("-D") != std::string::npos) continue;
         out.push_back(pid);
     }
@@ -169,7 +161,7 @@ std::string cpm_prefix() { return std::filesystem::path(built_program("cpm")).pa
 
 std::string command_line(int pid)
 {
-    std::string s = read_file("/proc/" + std::to_string(pid) + "/cmdline");
+    std::string s = file_text("/proc/" + std::to_string(pid) + "/cmdline");
     for (char& c : s) c = c == '\0' ? ' ' : c;
     return s;
 }

@@ -28,6 +28,8 @@ cpm::ChildProcess start(std::vector<std::string> argv, std::vector<std::string> 
         {.argv = std::move(argv), .env = std::move(env), .stdout_path = out, .stderr_path = err, .own_process_group = true});
 }
 
+}  // namespace
+
 std::string file_text(const std::string& path)
 {
     std::ifstream in(path);
@@ -35,8 +37,6 @@ std::string file_text(const std::string& path)
     ss << in.rdbuf();
     return ss.str();
 }
-
-}  // namespace
 
 Process::Process(std::vector<std::string> argv, std::vector<std::string> env)
     : out_path_(temp_file("cpm_test_out_")), err_path_(temp_file("cpm_test_err_")),

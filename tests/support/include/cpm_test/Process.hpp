@@ -34,6 +34,9 @@ private:
     cpm::ChildProcess child_;
 };
 
+/// A file's whole text ("" when it cannot be read).
+std::string file_text(const std::string& path);
+
 /// The path of a program built next to the tests (set by CMake as CPM_BIN_DIR).
 std::string built_program(const std::string& name);
 
