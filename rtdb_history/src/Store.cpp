@@ -411,7 +411,13 @@ std::optional<ObjectInfo> Store::info(Oid oid) const
 std::vector<ObjectInfo> Store::search(const Criteria& c) const
 {
     std::optional<std::regex> re;
-    if (c.name_regex) re.emplace(*c.name_regex, std::regex::ECMAScript | std::regex::icase);  // throws std::regex_error
+    if (c.name_regex) {
+        try {
+            re.emplace(*c.name_regex, std::regex::ECMAScript | std::regex::icase);
+        } catch (const std::regex_error& e) {
+            throw Error("name_regex '" + *c.name_regex + "' is not a regular expression: " + e.what());
+        }
+    }
     std::vector<ObjectInfo> out;
     for (const Object* o : slots()) {
         std::optional<ObjectInfo> i;

@@ -1,5 +1,6 @@
 // The store under a concurrent writer: snapshot consistency, wait_next/successor wake-ups,
 // timeouts and gaps, retention by time and by bytes; and the object registry.
+#include <cpm/Error.hpp>
 #include <cpm/rtdb/Store.hpp>
 
 #include <gtest/gtest.h>
@@ -212,7 +213,7 @@ TEST(StoreRegistry, SearchesByNameTypeParentCreatorAndAliveAt)
     EXPECT_EQ(oids(store.search({.alive_at = 250})), (std::vector<Oid>{proc, state3}));
     EXPECT_EQ(oids(store.search({.name_regex = "state", .alive_at = 350})), (std::vector<Oid>{state3, state4}));
     EXPECT_EQ(oids(store.search({.kind = ObjectKind::process})), (std::vector<Oid>{proc}));
-    EXPECT_THROW(store.search({.name_regex = "(unclosed"}), std::regex_error);
+    EXPECT_THROW(store.search({.name_regex = "(unclosed"}), cpm::Error);
 
     auto changes = store.changes_since(115);
     EXPECT_EQ(oids(changes.created), (std::vector<Oid>{ranges3, state4}));

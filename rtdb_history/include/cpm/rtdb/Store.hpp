@@ -224,6 +224,7 @@ public:
     // ---- registry -----------------------------------------------------------------------
     std::optional<ObjectInfo> info(Oid oid) const;
     /// Objects (alive, or deleted and still held) matching all criteria, by oid.
+    /// Throws cpm::Error naming a name_regex that is not a regular expression.
     std::vector<ObjectInfo> search(const Criteria& c) const;
     /// Waits up to `timeout` for a matching object to exist.
     std::optional<ObjectInfo> wait_for_object(const Criteria& c, std::chrono::nanoseconds timeout) const;
