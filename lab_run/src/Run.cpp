@@ -533,9 +533,8 @@ void write_summary(const Scenario& s, const RunSettings& settings, const std::st
     std::ofstream(fs::path(settings.run_dir) / "summary.json") << summary.dump(2) << "\n";
 }
 
-}  // namespace
-
-RunResult run_lab(const Scenario& s, const RunOptions& o)
+/// The run's settings and folder (fresh: a folder that holds anything is refused).
+RunSettings settings_of(const Scenario& s, const RunOptions& o)
 {
     RunSettings settings;
     settings.bin_dir = o.bin_dir.empty() ? cpm::executable_dir() : o.bin_dir;
@@ -546,32 +545,58 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     std::error_code ec;
     if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) throw cpm::Error("the run's folder " + dir.string() + " exists and is not empty");
     settings.run_dir = dir.string();
-    const auto plan = plan_run(s, settings);  // names a missing program before anything starts
-    const auto hosts = check_hosts(s, settings);  // and a host that cannot take part
-    copy_to_hosts(s, plan, settings);
+    return settings;
+}
 
-    // Every process, this one too, makes its readers and writers with the scenario's QoS.
-    const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
-    if (!qos.empty()) ::setenv(kQosOverridesVariable, qos.c_str(), 1);
+/// The run's own participant: its domain, UDP (short-lived beside many processes: see cpm
+/// history), and across hosts this host's address with the others as peers.
+ParticipantOptions participant_options(const Scenario& s, const RunSettings& settings)
+{
     ParticipantOptions po = ParticipantOptions::from_init();
     po.domain_id = settings.domain;
     po.name = "cpm_lab_run";
-    po.shared_memory = false;  // short-lived beside many processes: UDP loopback (see cpm history)
-    if (const HostSpec* here = s.local_host()) {  // across hosts: this host's address, the others as peers
+    po.shared_memory = false;
+    if (const HostSpec* here = s.local_host()) {
         po.interfaces = {here->address};
         for (const auto& h : s.hosts) {
             if (h.name != here->name) po.initial_peers.push_back(h.address);
         }
     }
+    return po;
+}
+
+/// The end, in order: every car told to stop, the timers stopped, then the processes that
+/// command the cars, the cars, and the history last (it closes the recording). The stop is
+/// stamped on the run's one clock: lab time in a simulated run, as every other sample.
+void stop_in_order(Writer<StopRequest>& stops, LabClock& clock, ProcessGroup& group, const Scenario& s, const RunSettings& settings)
+{
+    StopRequest all;
+    all.vehicle_id(0);
+    cpm::stamp_message(all, clock.simulated() ? clock.now() : cpm::get_time_ns(), 0);
+    (void)stops.write(all);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    clock.stop();
+    (void)group.stop_all();
+    remove_from_hosts(s, settings);
+}
+
+}  // namespace
+
+RunResult run_lab(const Scenario& s, const RunOptions& o)
+{
+    const RunSettings settings = settings_of(s, o);
+    const fs::path dir = settings.run_dir;
+    const auto plan = plan_run(s, settings);      // names a missing program before anything starts
+    const auto hosts = check_hosts(s, settings);  // and a host that cannot take part
+    copy_to_hosts(s, plan, settings);
+    // Every process, this one too, makes its readers and writers with the scenario's QoS.
+    const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
+    if (!qos.empty()) ::setenv(kQosOverridesVariable, qos.c_str(), 1);
+    ParticipantOptions po = participant_options(s, settings);
     const DomainClaim claim(settings.domain, po);
     po.security = prepare_folder(s, settings, plan, dir);
 
-    RunResult result;
-    result.dir = dir.string();
-    result.hosts = hosts;
-    auto say = [&](const std::string& line) {
-        if (o.progress) std::fprintf(o.progress, "%s\n", line.c_str());
-    };
+    RunResult result{.dir = dir.string(), .hosts = hosts};
     const auto t0 = Clock::now();
     Participant participant(po);
     Writer<StopRequest> stops(participant, topics::stop_request.name, topics::stop_request.writer);
@@ -582,8 +607,10 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     std::set<std::string> died;  // ended badly while the run went on
 
     result.error = start_processes(group, s, plan, dir, settings, qos, history, o.stop);
-    say("cpm lab run: " + s.name + ": " + std::to_string(plan.size()) + " processes on domain " + std::to_string(settings.domain) +
-        ", logs and recording in " + dir.string());
+    if (o.progress) {
+        std::fprintf(o.progress, "cpm lab run: %s: %zu processes on domain %d, logs and recording in %s\n", s.name.c_str(), plan.size(),
+                     settings.domain, dir.c_str());
+    }
     if (result.error.empty()) result.error = clock.start(timers_of(plan), s.routing.enabled);
     supervise(group, died, result, clock, [&] {
         const double real = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -595,18 +622,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
         return std::string(line);
     }, o, dir, plan);
     result.lab_time_ns = clock.now();
-
-    // The end, in order: every car told to stop, the timers stopped, then the processes that
-    // command the cars, the cars, and the history last (it closes the recording). The stop is
-    // stamped on the run's one clock: lab time in a simulated run, as every other sample.
-    StopRequest all;
-    all.vehicle_id(0);
-    cpm::stamp_message(all, clock.simulated() ? clock.now() : cpm::get_time_ns(), 0);
-    (void)stops.write(all);
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    clock.stop();
-    (void)group.stop_all();
-    remove_from_hosts(s, settings);
+    stop_in_order(stops, clock, group, s, settings);
     result.real_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
 
     const nlohmann::json processes = process_ends(plan, group, died, result);

@@ -397,6 +397,8 @@ ProcessPlan lab_run_process()
 
 std::string remote_run_dir(const RunSettings& settings) { return "/tmp/cpm-runs/" + fs::path(settings.run_dir).filename().string(); }
 
+namespace {
+
 /// A planned process on its host (a scenario with hosts): the host's address for DDS, the other
 /// hosts' as peers; on another host, the program as installed there, the files it reads copied
 /// into the run's folder there, and what it makes in the run's folder made there.
@@ -435,128 +437,157 @@ void place_on_host(ProcessPlan& p, const Scenario& s, const RunSettings& r, std:
     }
 }
 
-std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
+/// A run's plan, built in parts: the services, the cars, what drives them.
+class PlanBuilder
 {
-    std::vector<std::string> missing;
-    auto program = [&](const std::string& name) {
-        const std::string p = (fs::path(r.bin_dir) / name).string();
-        if (::access(p.c_str(), X_OK) != 0 && std::find(missing.begin(), missing.end(), p) == missing.end()) missing.push_back(p);
-        return p;
-    };
-    const std::string domain = std::to_string(r.domain);
-    const bool simulated = r.time == TimeMode::simulated;
-    auto with_common = [&](std::vector<std::string> argv) {
-        argv.insert(argv.end(), {"--dds_domain", domain});
-        if (simulated) argv.push_back("--simulated_time");
-        return argv;
-    };
-    auto number = [](double v) {
-        char b[32];
-        std::snprintf(b, sizeof b, "%.6g", v);
-        return std::string(b);
-    };
-    std::vector<ProcessPlan> plan;
+public:
+    PlanBuilder(const Scenario& s, const RunSettings& r) : s_(s), r_(r), domain_(std::to_string(r.domain)) {}
 
-    // The history, recording every sample of the run.
-    std::vector<std::string> history{program("cpm_history"), "--window", "60s", "--record", (fs::path(r.run_dir) / "recording.db").string(),
-                                     "--record-name", s.name, "--dds_domain", domain};
-    for (const auto& t : s.record.topics) {
-        if (t != "*") history.insert(history.end(), {"--include", cpm::cli::glob_regex(t)});
-    }
-    for (const auto& t : s.record.exclude) history.insert(history.end(), {"--exclude", cpm::cli::glob_regex(t)});
-    plan.push_back(process("cpm_history", "cpm_history", history, false, 9, 0));
-    plan.back().host = s.history_host;
-    if (!s.parameters.empty()) {
-        plan.push_back(process("parameters", "parameter_server", {program("cpm"), "param", "serve", s.parameters, "--dds_domain", domain}, false, 8, 0));
-    }
-    if (s.monitor_port) {
-        std::vector<std::string> argv{program("cpm"), "monitor", "--port", std::to_string(*s.monitor_port)};
-        if (!s.world.empty()) argv.insert(argv.end(), {"--world", s.world});
-        if (!s.lanes.empty()) argv.insert(argv.end(), {"--lanes", s.lanes});
-        if (s.monitor_allow_stop) argv.push_back("--allow-stop");
-        argv.insert(argv.end(), {"--dds_domain", domain});
-        plan.push_back(process("monitor", "monitor", argv, false, 8, 0));
-        plan.back().host = s.monitor_host;
-        if (!s.monitor_allow_stop) plan.back().publish.clear();  // it writes stop requests only with --allow-stop
+    /// The history (recording every sample of the run), the parameter server and the monitor.
+    void services()
+    {
+        std::vector<std::string> history{program("cpm_history"), "--window", "60s", "--record", (fs::path(r_.run_dir) / "recording.db").string(),
+                                         "--record-name", s_.name, "--dds_domain", domain_};
+        for (const auto& t : s_.record.topics) {
+            if (t != "*") history.insert(history.end(), {"--include", cpm::cli::glob_regex(t)});
+        }
+        for (const auto& t : s_.record.exclude) history.insert(history.end(), {"--exclude", cpm::cli::glob_regex(t)});
+        add("cpm_history", "cpm_history", history, false, 9, 0, s_.history_host);
+        if (!s_.parameters.empty()) {
+            add("parameters", "parameter_server", {program("cpm"), "param", "serve", s_.parameters, "--dds_domain", domain_}, false, 8, 0, "");
+        }
+        if (!s_.monitor_port) return;
+        std::vector<std::string> argv{program("cpm"), "monitor", "--port", std::to_string(*s_.monitor_port)};
+        if (!s_.world.empty()) argv.insert(argv.end(), {"--world", s_.world});
+        if (!s_.lanes.empty()) argv.insert(argv.end(), {"--lanes", s_.lanes});
+        if (s_.monitor_allow_stop) argv.push_back("--allow-stop");
+        argv.insert(argv.end(), {"--dds_domain", domain_});
+        add("monitor", "monitor", argv, false, 8, 0, s_.monitor_host);
+        if (!s_.monitor_allow_stop) plan_.back().publish.clear();  // it writes stop requests only with --allow-stop
     }
 
-    // The cars: with routing all in one simulator spread over the lanes, else one each.
-    if (s.routing.enabled) {
-        int first = 255;
-        for (const auto& v : s.vehicles) first = std::min(first, v.id);
-        bool restart = false;
-        for (const auto& v : s.vehicles) restart = restart || v.restart;
-        plan.push_back(process("cars", "vehicle_sim",
-                               with_common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count",
-                                            std::to_string(s.vehicles.size()), "--lanes", s.lanes, "--seed", std::to_string(s.routing.seed)}),
-                               restart, 5, first));
-        plan.back().timer = timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first);
-        plan.back().host = s.vehicles.front().host;
-    } else {
-        // Each car's simulator, bridge and camera supervised by the run itself: one that dies is
-        // restarted alone (restart: true), the bridge finding its simulator's new pty by the link
-        // in the run's folder. Stopped bridge first, so that it never reports a lost link.
-        for (const auto& v : s.vehicles) {
+    /// The cars: with routing all in one simulator spread over the lanes; else each car's
+    /// simulator, bridge and camera supervised by the run itself, so that one that dies is
+    /// restarted alone (restart: true), the bridge finding its simulator's new pty by the link in
+    /// the run's folder; stopped bridge first, so that it never reports a lost link.
+    void cars()
+    {
+        if (s_.routing.enabled) {
+            int first = 255;
+            bool restart = false;
+            for (const auto& v : s_.vehicles) first = std::min(first, v.id), restart = restart || v.restart;
+            add("cars", "vehicle_sim",
+                common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count", std::to_string(s_.vehicles.size()), "--lanes",
+                        s_.lanes, "--seed", std::to_string(s_.routing.seed)}),
+                restart, 5, first, s_.vehicles.front().host);
+            plan_.back().timer = timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first);
+            return;
+        }
+        for (const auto& v : s_.vehicles) {
             const std::string id = std::to_string(v.id);
             const std::string start = number(v.x) + "," + number(v.y) + "," + number(v.yaw);
-            const std::string link = (fs::path(r.run_dir) / ("car_" + id + ".tty")).string();
-            plan.push_back(process("sim_" + id, "firmware_sim",
-                                   with_common({program("firmware_sim"), "--vehicle_id", id, "--map", s.world, "--start", start, "--link", link}),
-                                   v.restart, 6, v.id));
-            plan.back().host = v.host;
-            plan.push_back(process("bridge_" + id, "vehicle_bridge",
-                                   with_common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}), v.restart, 5,
-                                   v.id));
-            plan.back().host = v.host;
-            if (v.camera.empty()) continue;
+            const std::string link = (fs::path(r_.run_dir) / ("car_" + id + ".tty")).string();
+            add("sim_" + id, "firmware_sim", common({program("firmware_sim"), "--vehicle_id", id, "--map", s_.world, "--start", start, "--link", link}),
+                v.restart, 6, v.id, v.host);
+            add("bridge_" + id, "vehicle_bridge", common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}),
+                v.restart, 5, v.id, v.host);
             // In real time the camera starts at once; on the simulated clock it ticks with the car.
-            plan.push_back(process("camera_" + id, "camera_sim",
-                                   with_common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s.world, "--rate", "30"}),
-                                   v.restart, 4, v.id, simulated));
-            plan.back().host = v.host;
+            if (!v.camera.empty()) {
+                add("camera_" + id, "camera_sim",
+                    common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s_.world, "--rate", "30"}), v.restart, 4,
+                    v.id, v.host, simulated());
+            }
         }
     }
-    for (const auto& v : s.vehicles) {
-        if (v.camera.empty()) continue;
-        const std::string id = std::to_string(v.id);
-        plan.push_back(process("aruco_" + id, "aruco_node",
-                               with_common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s.world}), v.restart, 3,
-                               v.id, simulated));
-        plan.back().host = v.host;
-    }
-    if (s.routing.enabled) {
-        std::string ids;
-        for (const auto& v : s.vehicles) ids += (ids.empty() ? "" : ",") + std::to_string(v.id);
-        plan.push_back(process("central_routing", "central_routing",
-                               with_common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s.lanes, "--seed",
-                                            std::to_string(s.routing.seed), "--period", std::to_string(s.routing.period_ns / 1'000'000) + "ms"}),
-                               s.routing.restart, 1, 0));
-        plan.back().host = s.routing.host;
-    }
-    for (const auto& v : s.vehicles) {
-        if (v.fsm.empty()) continue;
-        const std::string id = std::to_string(v.id);
-        plan.push_back(process("fsm_" + id, "fsm_node", with_common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}),
-                               v.restart, 1, v.id));
-        plan.back().host = v.host;
-    }
-    // Across hosts: each process with its host's address and the others' as peers, and the
-    // program as installed there.
-    std::map<std::string, std::string> copied_as;
-    for (auto& p : plan) place_on_host(p, s, r, copied_as);
-    // A secured run: every process as a node of its own, allowed what it uses (issued by the run).
-    if (!s.security.empty()) {
-        for (auto& p : plan) {
-            p.security_node = (fs::path(s.security) / "nodes" / security_node_name(r, p.name)).string();
-            p.argv.insert(p.argv.end(), {"--security", p.security_node});
+
+    /// What drives the cars: each camera's marker finder, central routing, the state machines.
+    void drivers()
+    {
+        for (const auto& v : s_.vehicles) {
+            if (v.camera.empty()) continue;
+            const std::string id = std::to_string(v.id);
+            add("aruco_" + id, "aruco_node", common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s_.world}),
+                v.restart, 3, v.id, v.host, simulated());
+        }
+        if (s_.routing.enabled) {
+            std::string ids;
+            for (const auto& v : s_.vehicles) ids += (ids.empty() ? "" : ",") + std::to_string(v.id);
+            add("central_routing", "central_routing",
+                common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s_.lanes, "--seed", std::to_string(s_.routing.seed), "--period",
+                        std::to_string(s_.routing.period_ns / 1'000'000) + "ms"}),
+                s_.routing.restart, 1, 0, s_.routing.host);
+        }
+        for (const auto& v : s_.vehicles) {
+            if (v.fsm.empty()) continue;
+            const std::string id = std::to_string(v.id);
+            add("fsm_" + id, "fsm_node", common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}), v.restart, 1, v.id, v.host);
         }
     }
-    if (!missing.empty()) {
-        std::vector<Diagnostic> errors;
-        for (const auto& m : missing) errors.push_back({s.file, "the run needs " + m + ", which does not exist (build it: ./lab build)"});
-        throw ScenarioError(errors);
+
+    /// Each process on its host; in a secured run each as a node of its own, allowed what it uses
+    /// (issued by the run). Throws ScenarioError naming every program that is missing.
+    std::vector<ProcessPlan> finish()
+    {
+        std::map<std::string, std::string> copied_as;
+        for (auto& p : plan_) place_on_host(p, s_, r_, copied_as);
+        if (!s_.security.empty()) {
+            for (auto& p : plan_) {
+                p.security_node = (fs::path(s_.security) / "nodes" / security_node_name(r_, p.name)).string();
+                p.argv.insert(p.argv.end(), {"--security", p.security_node});
+            }
+        }
+        if (!missing_.empty()) {
+            std::vector<Diagnostic> errors;
+            for (const auto& m : missing_) errors.push_back({s_.file, "the run needs " + m + ", which does not exist (build it: ./lab build)"});
+            throw ScenarioError(errors);
+        }
+        return std::move(plan_);
     }
-    return plan;
+
+private:
+    bool simulated() const { return r_.time == TimeMode::simulated; }
+    std::string program(const std::string& name)
+    {
+        const std::string p = (fs::path(r_.bin_dir) / name).string();
+        if (::access(p.c_str(), X_OK) != 0 && std::find(missing_.begin(), missing_.end(), p) == missing_.end()) missing_.push_back(p);
+        return p;
+    }
+    /// The flags every node of the run takes: its domain, and the simulated clock.
+    std::vector<std::string> common(std::vector<std::string> argv) const
+    {
+        argv.insert(argv.end(), {"--dds_domain", domain_});
+        if (simulated()) argv.push_back("--simulated_time");
+        return argv;
+    }
+    static std::string number(double v)
+    {
+        char b[32];
+        std::snprintf(b, sizeof b, "%.6g", v);
+        return b;
+    }
+    void add(std::string name, const char* kind, std::vector<std::string> argv, bool restart, int stop_order, int vehicle_id,
+             const std::string& host, bool timed = true)
+    {
+        plan_.push_back(process(std::move(name), kind, std::move(argv), restart, stop_order, vehicle_id, timed));
+        plan_.back().host = host;
+    }
+
+    const Scenario& s_;
+    const RunSettings& r_;
+    const std::string domain_;
+    std::vector<std::string> missing_;
+    std::vector<ProcessPlan> plan_;
+};
+
+}  // namespace
+
+std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
+{
+    PlanBuilder plan(s, r);
+    plan.services();
+    plan.cars();
+    plan.drivers();
+    return plan.finish();
 }
 
 }  // namespace cpm::lab
