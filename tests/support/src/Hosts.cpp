@@ -82,7 +82,7 @@ bool NamespaceHosts::make()
     return true;
 }
 
-bool NamespaceHosts::start_sshd(size_t i)
+bool NamespaceHosts::start_sshd(size_t i, const std::string& set_env)
 {
     const std::string log = dir_ + "/sshd_" + std::to_string(i) + ".log";
     const pid_t pid = ::fork();
@@ -93,12 +93,14 @@ bool NamespaceHosts::start_sshd(size_t i)
         const std::string hostkey = dir_ + "/host_key";
         const std::string pidfile = "PidFile=" + dir_ + "/sshd_" + std::to_string(i) + ".pid";
         ::setpgid(0, 0);
+        const std::string env = "SetEnv " + (set_env.empty() ? std::string("CPM_NAMESPACE_HOST=1") : set_env);
         ::execl("/usr/sbin/ip", "ip", "netns", "exec", ns.c_str(), "/usr/sbin/sshd", "-D", "-e", "-f", "/dev/null", "-h", hostkey.c_str(), "-o",
                 listen.c_str(), "-o", keys.c_str(), "-o", "PermitRootLogin=prohibit-password", "-o", "StrictModes=no", "-o", "UsePAM=no", "-o",
-                pidfile.c_str(), "-o", "AcceptEnv=CPM_*", "-E", log.c_str(), nullptr);
+                pidfile.c_str(), "-o", "AcceptEnv=CPM_*", "-o", env.c_str(), "-E", log.c_str(), nullptr);
         ::_exit(127);
     }
-    sshd_pids_.push_back(pid);
+    if (i < sshd_pids_.size()) sshd_pids_[i] = pid;
+    else sshd_pids_.push_back(pid);
     // Reached from the first host over the bridge: its sshd is up and the links are.
     return wait_until([&] { return shell("ip netns exec " + namespaces_[0] + " ssh -F " + dir_ + "/ssh_config " + names_[i] + " true") == 0; },
                       std::chrono::seconds(15), std::chrono::milliseconds(100));
@@ -164,6 +166,14 @@ std::string command_line(int pid)
     std::string s = file_text("/proc/" + std::to_string(pid) + "/cmdline");
     for (char& c : s) c = c == '\0' ? ' ' : c;
     return s;
+}
+
+bool NamespaceHosts::offset_clock(size_t host, const std::string& offset)
+{
+    const char* lib = "/usr/lib/x86_64-linux-gnu/faketime/libfaketime.so.1";
+    if (::access(lib, R_OK) != 0) return false;
+    stop_sshd(host);
+    return start_sshd(host, std::string("LD_PRELOAD=") + lib + " FAKETIME=" + offset);
 }
 
 unsigned long NamespaceHosts::netns_inode(size_t host) const

@@ -37,6 +37,9 @@ public:
     bool heal(size_t host) const;
     /// Stops the host's sshd (a host where ssh is refused).
     void stop_sshd(size_t host);
+    /// Restarts the host's sshd so that what runs there sees its clock `offset` off (libfaketime's
+    /// FAKETIME, e.g. "+0.05": 50 ms ahead); false when that cannot be done.
+    bool offset_clock(size_t host, const std::string& offset);
     /// The inode of the host's namespace, as /proc/PID/ns/net of a process in it shows.
     unsigned long netns_inode(size_t host) const;
 
@@ -55,7 +58,7 @@ public:
 
 private:
     bool make();
-    bool start_sshd(size_t host);
+    bool start_sshd(size_t host, const std::string& set_env = "");
 
     std::vector<std::string> names_, namespaces_, links_;
     std::string switch_ns_, subnet_, dir_, ssh_config_, why_not_;
