@@ -47,7 +47,10 @@ void ProcessGroup::launch(Member& m, bool again)
     m.child.reset();  // reaped already
     const bool remote = !m.spec.host.is_local();
     std::vector<std::string> argv = m.spec.argv;
-    if (remote && !m.spec.env.empty()) argv.insert(argv.begin(), m.spec.env.begin(), m.spec.env.end()), argv.insert(argv.begin(), "/usr/bin/env");
+    if (remote && !m.spec.env.empty()) {  // the environment there: env NAME=value … program
+        argv.insert(argv.begin(), m.spec.env.begin(), m.spec.env.end());
+        argv.insert(argv.begin(), "/usr/bin/env");
+    }
     m.child.emplace(ProcessOptions{.argv = remote ? remote_command(m.spec.host, argv, m.spec.stop_grace) : argv,
                                    .env = remote ? std::vector<std::string>{} : m.spec.env,
                                    .stdout_path = m.spec.capture_stdout ? "" : m.spec.log,
@@ -82,8 +85,8 @@ std::vector<ProcessEvent> ProcessGroup::poll()
         if (!m.child || m.end) continue;
         auto end = m.child->ended();
         if (!end) continue;
-        m.end = end;
-        ProcessEvent e = event_of(m, *end);
+        m.end = as_told(m, *end);
+        ProcessEvent e = event_of(m, *m.end);
         if (m.spec.restart && !end->ok()) {
             try {
                 launch(m, true);
@@ -114,15 +117,21 @@ void ProcessGroup::stop(Member& m)
     const auto grace = m.spec.stop_grace + (m.spec.host.is_local() ? std::chrono::milliseconds(0) : std::chrono::milliseconds(3000));
     m.end = m.child->wait(grace);
     if (!m.end) m.end = m.child->stop(std::chrono::seconds(2));
+    m.end = as_told(m, *m.end);
+}
+
+ExitStatus ProcessGroup::as_told(const Member& m, const ExitStatus& end)
+{
+    // What ssh passes on of a remote process: its exit code, or 128 + the signal that ended it
+    // (cpm host run); 255 is ssh's own failure, kept as it is (event_of calls it a lost host).
+    if (m.spec.host.is_local() || end.signal != 0 || end.code <= 128 || end.code >= 128 + 65) return end;
+    return ExitStatus{.code = -1, .signal = end.code - 128};
 }
 
 ProcessEvent ProcessGroup::event_of(const Member& m, const ExitStatus& end)
 {
     ProcessEvent e{m.spec.name, end, false, m.restarts, m.spec.host.name};
-    if (m.spec.host.is_local() || end.signal != 0) return e;
-    // What ssh passes on: the remote exit code, 128 + a remote signal (cpm host run), or 255 for its own failure.
-    if (end.code == 255) e.host_lost = true;
-    else if (end.code > 128 && end.code < 128 + 65) e.end = ExitStatus{.code = -1, .signal = end.code - 128};
+    e.host_lost = !m.spec.host.is_local() && end.signal == 0 && end.code == 255;
     return e;
 }
 

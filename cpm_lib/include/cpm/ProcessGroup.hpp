@@ -106,6 +106,7 @@ private:
     void launch(Member& m, bool again);
     static void interrupt(Member& m);
     static void stop(Member& m);
+    static ExitStatus as_told(const Member& m, const ExitStatus& end);
     static ProcessEvent event_of(const Member& m, const ExitStatus& end);
     std::deque<Member> members_;  // a deque: references to members stay valid
 };
