@@ -216,8 +216,29 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
     EXPECT_EQ(browser.eval("document.querySelectorAll('#walls line').length"), 10) << "the corridor's ten walls";
     EXPECT_EQ(browser.eval("document.querySelectorAll('.panel').length"), 4) << "a panel per car";
 
-    // Stop every car, then compare where the page draws them with where they are.
+    // Stop every car, then compare where the page draws them with where they are. Which of the
+    // other cars drive at the click: a stop that came too late to matter would prove nothing.
+    std::vector<int> driving;
+    const auto at_click = api_state(port);
+    for (const auto& v : at_click["vehicles"]) {
+        if (v["id"] != target && v["speed"].is_number() && std::abs(v["speed"].get<double>()) > 0.1 && v["fsm_state"] != "Stop") {
+            driving.push_back(v["id"].get<int>());
+        }
+    }
+    ASSERT_FALSE(driving.empty()) << "no other car was driving when 'stop all' was clicked: " << at_click.dump();
     browser.eval("document.getElementById('stop-all').click()");
+    EXPECT_TRUE(wait_until(
+        [&] {
+            const auto state = api_state(port);
+            for (int id : driving) {
+                for (const auto& v : state["vehicles"]) {
+                    if (v["id"] == id && v["fsm_state"] != "StoppedByRequest") return false;
+                }
+            }
+            return true;
+        },
+        kStateWait, 100ms))
+        << "every car that drove was stopped by the request: " << api_state(port).dump();
     EXPECT_TRUE(wait_until(
         [&] {
             for (int id = 1; id <= 4; ++id) {
