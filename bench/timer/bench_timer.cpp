@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <ctime>
+#include <sys/prctl.h>
 #include <string>
 #include <thread>
 
@@ -40,6 +41,8 @@ std::vector<double> jitter_cpm(cpm::Participant& participant, uint64_t period_ns
 
 std::vector<double> jitter_nanosleep(uint64_t period_ns, int seconds)
 {
+    // As a real-time loop would: no timer slack (the default 50 µs lets the kernel wake it late).
+    ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0);
     std::vector<double> jitter_us;
     const size_t ticks = static_cast<size_t>(uint64_t(seconds) * 1'000'000'000ull / period_ns);
     jitter_us.reserve(ticks);
@@ -112,16 +115,19 @@ int run(int argc, char** argv)
             const std::string what = rate + (busy ? " busy" : " idle") + " tick jitter";
             const std::string peer = "clock_nanosleep loop";
             bench::record({"timer", what + " p50", "µs", cpm_stats.p50, peer, ref_stats.p50});
-            // The target is absolute: p99 below 1 ms at 50 Hz on an idle machine.
-            const bool targeted = period == 20'000'000ull && !busy;
-            bench::record({"timer", what + " p99", "µs", cpm_stats.p99, peer, ref_stats.p99, targeted ? "< 1000 µs" : "",
-                           targeted ? int(cpm_stats.p99 < 1000) : -1});
             const auto late = [&](const std::vector<double>& j) {
                 return std::count_if(j.begin(), j.end(), [&](double us) { return us * 1e3 >= double(period); });
             };
-            std::printf("ticks a period or more late: cpm::Timer %llu skipped (not in its jitter) + %ld run late; "
-                        "reference %ld run late\n",
-                        (unsigned long long)skipped, long(late(cpm_jitter)), long(late(ref_jitter)));
+            // A tick skipped after an overrun is in no jitter figure: it counts as late here.
+            const long cpm_late = long(skipped) + long(late(cpm_jitter)), ref_late = long(late(ref_jitter));
+            std::printf("ticks a period or more late: cpm::Timer %llu skipped + %ld run late; reference %ld run late\n",
+                        (unsigned long long)skipped, long(late(cpm_jitter)), ref_late);
+            // The target is absolute: p99 below 1 ms at 50 Hz on an idle machine, no tick late or skipped.
+            const bool targeted = period == 20'000'000ull && !busy;
+            bench::record({"timer", what + " p99", "µs", cpm_stats.p99, peer, ref_stats.p99, targeted ? "< 1000 µs, no tick late or skipped" : "",
+                           targeted ? int(cpm_stats.p99 < 1000 && cpm_late == 0) : -1});
+            bench::record({"timer", rate + (busy ? " busy" : " idle") + " ticks late or skipped", "ticks", double(cpm_late), peer, double(ref_late),
+                           "<= peer", int(cpm_late <= ref_late)});
         }
         if (spinner) {
             spinner->signal(SIGKILL);
