@@ -52,8 +52,8 @@ std::string rendered_dom(const std::string& file)
 int pid_with(const std::string& needle, const std::string& tag)
 {
     auto text_of = [](const fs::path& file) {
-        std::ifstream in(file);
-        std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        // A process may end while it is read: libstdc++ then throws (ESRCH), and it is no match.
+        std::string text = cpm_test::file_text(file.string());
         std::replace(text.begin(), text.end(), '\0', ' ');
         return text + ' ';
     };
