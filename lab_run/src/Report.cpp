@@ -180,6 +180,13 @@ RunFigures outline_of(const nlohmann::json& summary)
     f.real_s = summary.value("real_s", 0.0);
     f.ok = summary.value("ok", false);
     if (!f.ok) f.why_not_ok = why_not_ok(summary);
+    for (const auto& h : summary.value("hosts", nlohmann::json::array())) {
+        f.hosts.push_back({.name = h.value("name", std::string("?")),
+                           .address = h.value("address", std::string()),
+                           .clock_offset_ms = double(h.value("clock_offset_ns", int64_t(0))) / 1e6,
+                           .rtt_ms = double(h.value("rtt_ns", int64_t(0))) / 1e6,
+                           .lost = h.value("lost", false)});
+    }
     return f;
 }
 
@@ -604,7 +611,7 @@ detail::PageValues log_row(const LogLine& l)
 void fill_lists(detail::PageValues& v, const RunFigures& f, const std::vector<std::string>& images)
 {
     auto& lists = v.lists;
-    for (const char* key : {"images", "cars", "topics", "timers", "log"}) lists[key];
+    for (const char* key : {"images", "cars", "topics", "timers", "log", "hosts"}) lists[key];
     for (const auto& file : images) lists["images"].push_back({.text = {{"file", file}}});
     // In the order summary.json's "report" lists the cars: by id as text (12 before 6).
     std::map<std::string, std::pair<int, const CarFigures*>> by_text;
@@ -613,6 +620,13 @@ void fill_lists(detail::PageValues& v, const RunFigures& f, const std::vector<st
     for (const auto& [name, t] : f.topics) lists["topics"].push_back(topic_row(name, t));
     for (const auto& [timer, n] : f.missed_ticks_by_timer) lists["timers"].push_back({.text = {{"timer", timer}, {"missed", std::to_string(n)}}});
     for (const auto& l : f.log) lists["log"].push_back(log_row(l));
+    for (const auto& h : f.hosts) {
+        lists["hosts"].push_back({.text = {{"host", h.name},
+                                           {"address", h.address},
+                                           {"clock_offset_ms", fixed(h.clock_offset_ms, 3)},
+                                           {"rtt_ms", fixed(h.rtt_ms, 3)}},
+                                  .flags = {{"lost", h.lost}}});
+    }
 }
 
 }  // namespace
@@ -650,7 +664,8 @@ std::string report_page(const RunFigures& f, const std::vector<std::string>& ima
                                    {"with_gates", f.gates_in_world > 0},
                                    {"simulated", f.simulated()},
                                    {"any_missed", !f.missed_ticks_by_timer.empty()},
-                                   {"any_log", !f.log.empty()}}};
+                                   {"any_log", !f.log.empty()},
+                                   {"across_hosts", !f.hosts.empty()}}};
     fill_lists(v, f, images);
     return detail::fill(detail::kReportPage, v);
 }

@@ -113,6 +113,10 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
         EXPECT_GT(h["rtt_ns"].get<int64_t>(), 0) << h.dump();
         EXPECT_LT(std::llabs(h["clock_offset_ns"].get<int64_t>()), 2'000'000) << h.dump();  // one machine: one clock
     }
+    // The report shows each host with its clock offset.
+    const std::string report = cpm_test::file_text(out + "/report.html");
+    EXPECT_NE(report.find("<h2>Hosts</h2>"), std::string::npos) << "no hosts in the report";
+    EXPECT_NE(report.find("<tr><td>car_a</td><td>" + hosts().address(1) + "</td>"), std::string::npos) << report;
     // The central recording holds both cars' states at their 50 Hz from their own hosts.
     auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
     for (int car : {5, 6}) {

@@ -285,6 +285,27 @@ TEST(ReportPage, AWorldWithoutGatesHasNoGatesColumn)
     EXPECT_EQ(page.find("<img"), std::string::npos);
 }
 
+TEST(ReportPage, ARunAcrossHostsShowsEachHostItsClockOffsetAndALostOne)
+{
+    const json summary = json::parse(R"({"name": "across", "ok": false, "hosts": [
+        {"name": "central", "address": "10.0.0.1", "clock_offset_ns": 0, "rtt_ns": 0, "lost": false},
+        {"name": "car<b>", "address": "10.0.0.3", "clock_offset_ns": -1234567, "rtt_ns": 800000, "lost": true}]})");
+    const RunFigures figures = figures_of({}, summary);
+
+    ASSERT_EQ(figures.hosts.size(), 2u);
+    EXPECT_DOUBLE_EQ(figures.hosts[1].clock_offset_ms, -1.234567);
+    EXPECT_DOUBLE_EQ(figures.hosts[1].rtt_ms, 0.8);
+    EXPECT_TRUE(figures.hosts[1].lost);
+    const std::string page = report_page(figures, {});
+    EXPECT_NE(page.find("<h2>Hosts</h2>"), std::string::npos) << page;
+    EXPECT_NE(page.find("<tr><td>central</td><td>10.0.0.1</td><td>0.000</td><td>0.000</td><td>answered</td></tr>"), std::string::npos) << page;
+    EXPECT_NE(page.find("<tr><td>car&lt;b&gt;</td><td>10.0.0.3</td><td>-1.235</td><td>0.800</td><td class=\"bad\">lost</td></tr>"),
+              std::string::npos)
+        << page;
+    // One host: no hosts table.
+    EXPECT_EQ(report_page(figures_of({}, json::parse(R"({"name": "here"})")), {}).find("<h2>Hosts</h2>"), std::string::npos);
+}
+
 TEST(MakeReport, AFolderThatIsNotThereIsACpmErrorNamingIt)
 {
     try {

@@ -124,6 +124,14 @@ struct LogLine
     std::string node, text;
 };
 
+/// A host of a run across computers, as summary.json says (its clock against the run's own).
+struct HostFigures
+{
+    std::string name, address;
+    double clock_offset_ms = 0, rtt_ms = 0;
+    bool lost = false;
+};
+
 /// What a run's report shows: summary.json's outline of the run and the recording's figures.
 struct RunFigures
 {
@@ -143,6 +151,7 @@ struct RunFigures
     uint64_t missed_deadlines = 0;   ///< the sum of missed_ticks_by_timer
     std::vector<LogLine> log;        ///< the log's warnings and errors, in recorded order
     size_t log_errors = 0, log_warnings = 0;
+    std::vector<HostFigures> hosts;  ///< a run across computers: each host; empty on one host
 
     bool simulated() const { return time == "simulated"; }
 };
