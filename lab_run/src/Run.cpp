@@ -376,13 +376,7 @@ private:
 /// finder, state machine): losing that host loses those cars, not the run.
 bool carries_only_cars(const std::vector<ProcessPlan>& plan, const std::string& host)
 {
-    return std::all_of(plan.begin(), plan.end(), [&](const ProcessPlan& p) {
-        if (p.host != host) return true;
-        for (const char* car : {"sim_", "bridge_", "camera_", "aruco_", "fsm_"}) {
-            if (p.name.rfind(car, 0) == 0) return true;
-        }
-        return p.name == "cars";
-    });
+    return std::all_of(plan.begin(), plan.end(), [&](const ProcessPlan& p) { return p.host != host || p.vehicle_id != 0; });
 }
 
 void supervise(ProcessGroup& group, std::set<std::string>& died, RunResult& result, const LabClock& clock,

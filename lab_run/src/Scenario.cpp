@@ -570,6 +570,7 @@ private:
     {
         plan_.push_back(process(std::move(name), kind, std::move(argv), restart, stop_order, vehicle_id, timed));
         plan_.back().host = host;
+        plan_.back().vehicle_id = vehicle_id;
     }
 
     const Scenario& s_;

@@ -130,6 +130,7 @@ struct ProcessPlan
     std::vector<std::string> subscribe;  ///< the topics it reads (patterns)
     std::string security_node;      ///< secured run: the node folder it runs as (--security), issued by the run
     std::string host;               ///< the host it runs on ("" the run's own); argv[0] is a path there
+    int vehicle_id = 0;             ///< the car it drives or simulates (its first, for several); 0: none
     /// On another host: the files it reads, copied there before it starts (local path, path there).
     std::vector<std::pair<std::string, std::string>> copies;
 };
