@@ -19,6 +19,8 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <set>
+#include <sstream>
 #include <thread>
 
 using namespace std::chrono_literals;
@@ -42,6 +44,20 @@ std::vector<std::string> programs_on(const cpm_test::NamespaceHosts& hosts, size
     return out;
 }
 
+/// The shared memory ports (Fast DDS's /dev/shm/fastrtps_port<N>) the processes on a host have
+/// mapped: their own and those they deliver to.
+std::set<std::string> shared_memory_ports_on(const cpm_test::NamespaceHosts& hosts, size_t host)
+{
+    std::set<std::string> out;
+    for (int pid : hosts.pids(host)) {
+        std::istringstream maps(cpm_test::file_text("/proc/" + std::to_string(pid) + "/maps"));
+        for (std::string line; std::getline(maps, line);) {
+            if (const auto at = line.find("/dev/shm/fastrtps_port"); at != std::string::npos) out.insert(line.substr(at));
+        }
+    }
+    return out;
+}
+
 bool runs(const std::vector<std::string>& programs, const std::string& name)
 {
     return std::any_of(programs.begin(), programs.end(), [&](const std::string& p) { return std::filesystem::path(p).filename() == name; });
@@ -57,8 +73,9 @@ protected:
         if (!hosts_->why_not().empty()) GTEST_SKIP() << "no namespace hosts: " << hosts_->why_not() << "; not run";
     }
     cpm_test::NamespaceHosts& hosts() { return *hosts_; }
-    /// A scenario with one car on each car host, the history and this run on the central host.
-    std::string scenario(const std::string& extra = "")
+    /// A scenario with one car on each car host, the history and this run on the central host;
+    /// `car_a_extra`: more of car 5's keys (its camera).
+    std::string scenario(const std::string& extra = "", const std::string& car_a_extra = "")
     {
         std::string hosts_yaml = "hosts:\n  central: {address: " + hosts().address(0) + "}\n";
         for (size_t i = 1; i < 3; ++i) {
@@ -69,7 +86,7 @@ protected:
                                               hosts_yaml + "ssh_config: " + hosts().ssh_config() + "\n" + extra +
                                               "history: {host: central}\n"
                                               "vehicles:\n"
-                                              "  - {id: 5, host: car_a, start: [0.0, 0.0, 0.3], fsm: " + kRoot + "/scenarios/fsm/gates.json}\n"
+                                              "  - {id: 5, host: car_a, start: [0.0, 0.0, 0.3], fsm: " + kRoot + "/scenarios/fsm/gates.json" + car_a_extra + "}\n"
                                               "  - {id: 6, host: car_b, start: [0.0, 0.6, 0.3]}\n");
     }
     cpm_test::TempDir dir;
@@ -84,6 +101,7 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
 {
     const std::string file = scenario();
     const std::string out = dir.file("across-" + std::to_string(::getpid()));
+    const uint64_t central_received_before = hosts().received_bytes(0);
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
     // While it runs: each car's programs on its own host, none of them on the others.
     bool seen = false;
@@ -99,6 +117,12 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
     for (int pid : hosts().pids(1)) {
         if (command_line(pid).find("/bin/fsm_node ") != std::string::npos) fsm_command = command_line(pid);
     }
+    // Shared memory within each host, never between two: no host maps another's ports.
+    const auto central_ports = shared_memory_ports_on(hosts(), 0), a_ports = shared_memory_ports_on(hosts(), 1),
+               b_ports = shared_memory_ports_on(hosts(), 2);
+    EXPECT_FALSE(central_ports.empty() || a_ports.empty() || b_ports.empty()) << "shared memory within a host is on";
+    for (const auto& port : a_ports) EXPECT_FALSE(central_ports.count(port) || b_ports.count(port)) << port << " of car_a mapped on another host";
+    for (const auto& port : b_ports) EXPECT_FALSE(central_ports.count(port)) << port << " of car_b mapped on the central host";
     EXPECT_NE(fsm_command.find("--fsm /tmp/cpm-runs/across-" + std::to_string(::getpid()) + "/"), std::string::npos) << fsm_command;
     EXPECT_TRUE(seen) << "car_a runs " << ::testing::PrintToString(programs_on(hosts(), 1)) << ", car_b "
                       << ::testing::PrintToString(programs_on(hosts(), 2)) << ", central " << ::testing::PrintToString(programs_on(hosts(), 0));
@@ -119,21 +143,50 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
     EXPECT_NE(report.find("<tr><td>car_a</td><td>" + hosts().address(1) + "</td>"), std::string::npos) << report;
     // The central recording holds both cars' states at their 50 Hz from their own hosts.
     auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
+    size_t state_bytes = 0;  // the cars' states the central host recorded, as serialized
     for (int car : {5, 6}) {
         const auto states = recording.range_of<VehicleState>("vehicleState", car, 0, UINT64_MAX, cpm::HistoryBy::commit, 100000);
         ASSERT_GE(states.samples.size(), 2u) << "car " << car;
+        for (const auto& s : states.samples) state_bytes += VehicleState::getCdrSerializedSize(s.sample);
         // At 50 Hz with nothing lost over the span the car drove (its start waits for ssh).
         const auto stamp = [](const auto& r) { return r.data_ns; };
         const double span_s = double(stamp(states.samples.back()) - stamp(states.samples.front())) * 1e-9;
         EXPECT_GE(span_s, 3.0) << "car " << car;
         EXPECT_GE(double(states.samples.size()), 0.98 * span_s * 50) << "car " << car << ": " << states.samples.size() << " states in " << span_s << " s";
     }
+    // So they came over the wire: the central host's link received at least their bytes.
+    const uint64_t central_received = hosts().received_bytes(0) - central_received_before;
+    EXPECT_GE(central_received, state_bytes) << "the central host's link received " << central_received << " bytes; the cars' states are " << state_bytes;
     EXPECT_FALSE(std::filesystem::exists("/tmp/cpm-runs/across-" + std::to_string(::getpid()))) << "the run's folder on the car hosts stays";
     // Nothing of the run is left on any host.
     for (size_t h = 0; h < 3; ++h) {
         EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s))
             << "left on host " << h << ": " << ::testing::PrintToString(programs_on(hosts(), h));
     }
+}
+
+TEST_F(LabAcrossHosts, InSimulatedTimeTheClockWaitsForTheCarsOnTheirHostsAndEveryTickIsRecorded)
+{
+    // Car 5 looks for gates with its camera: the camera, its marker finder and the state
+    // machine on car_a step with the lab clock too.
+    const std::string file = scenario("record: {topics: [\"*\"], exclude: [cameraFrame]}\n", ", camera: " + kRoot + "/scenarios/cameras/sim_640x480.yaml");
+    const std::string out = dir.file("simulated");
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off", "--time", "simulated", "--duration", "10s"}));
+    ASSERT_EQ(run.wait(120s), 0) << run.output() << run.errors() << cpm_test::file_text(out + "/fsm_5.log");
+    std::ifstream in(out + "/summary.json");
+    const auto summary = nlohmann::json::parse(in);
+    EXPECT_TRUE(summary["ok"].get<bool>()) << summary.dump(2);
+    EXPECT_NEAR(summary["lab_time_s"].get<double>(), 10.0, 0.05) << summary.dump(2);
+    // Lab time waits for the slowest node, wherever it runs: a car on another host misses no tick.
+    auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
+    for (int car : {5, 6}) {
+        const auto states = recording.range_of<VehicleState>("vehicleState", car, 0, UINT64_MAX, cpm::HistoryBy::data, 100000);
+        ASSERT_GE(states.samples.size(), 2u) << "car " << car;
+        const uint64_t span_ns = states.samples.back().data_ns - states.samples.front().data_ns;
+        EXPECT_GE(span_ns, 9'000'000'000u) << "car " << car;
+        EXPECT_EQ(states.samples.size(), span_ns / 20'000'000 + 1) << "car " << car << ": one state per 20 ms tick of lab time";
+    }
+    for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s)) << "left on host " << h;
 }
 
 TEST_F(LabAcrossHosts, AHostWithoutSshIsRefusedBeforeAnythingStarts)

@@ -151,6 +151,17 @@ std::vector<int> NamespaceHosts::pids(size_t host) const
 bool NamespaceHosts::cut(size_t host) const { return shell("ip netns exec " + namespaces_[host] + " ip link set " + links_[host] + " down") == 0; }
 bool NamespaceHosts::heal(size_t host) const { return shell("ip netns exec " + namespaces_[host] + " ip link set " + links_[host] + " up") == 0; }
 
+uint64_t NamespaceHosts::received_bytes(size_t host) const
+{
+    // ip netns exec mounts the namespace's own /sys, where the link's counters are.
+    FILE* p = ::popen(("ip netns exec " + namespaces_[host] + " cat /sys/class/net/" + links_[host] + "/statistics/rx_bytes 2>/dev/null").c_str(), "r");
+    if (!p) return 0;
+    unsigned long long bytes = 0;
+    if (std::fscanf(p, "%llu", &bytes) != 1) bytes = 0;
+    ::pclose(p);
+    return bytes;
+}
+
 void NamespaceHosts::stop_sshd(size_t host)
 {
     if (host >= sshd_pids_.size() || sshd_pids_[host] <= 0) return;

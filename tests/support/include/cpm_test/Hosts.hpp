@@ -5,6 +5,8 @@
 // config (ssh_config()) reaches them by name, non-interactively. Removed by the destructor.
 #include <cpm/RemoteHost.hpp>
 
+#include <cstdint>
+
 #include <string>
 #include <vector>
 
@@ -35,6 +37,8 @@ public:
     /// Takes the host's link down (a cable pulled) or up again.
     bool cut(size_t host) const;
     bool heal(size_t host) const;
+    /// Bytes the host's link has received so far (what crossed the wire to it, not shared memory).
+    uint64_t received_bytes(size_t host) const;
     /// Stops the host's sshd (a host where ssh is refused).
     void stop_sshd(size_t host);
     /// Restarts the host's sshd so that what runs there sees its clock `offset` off (libfaketime's
