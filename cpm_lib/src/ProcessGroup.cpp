@@ -26,6 +26,23 @@ std::string tail_of_file(const std::string& path, size_t n)
 ProcessGroup::~ProcessGroup()
 {
     (void)stop_all();
+    {
+        std::lock_guard<std::mutex> lock(stdin_mutex_);
+        keepalive_ending_ = true;
+    }
+    keepalive_wake_.notify_all();
+    if (keepalive_.joinable()) keepalive_.join();
+}
+
+void ProcessGroup::keep_remotes_alive()
+{
+    std::unique_lock<std::mutex> lock(stdin_mutex_);
+    while (!keepalive_wake_.wait_for(lock, std::chrono::seconds(1), [this] { return keepalive_ending_; })) {
+        for (auto& m : members_) {
+            // One that ended or was told to stop has its input closed: writing fails, harmlessly.
+            if (m.child && !m.spec.host.is_local()) (void)m.child->write_stdin("\n");
+        }
+    }
 }
 
 ProcessGroup::Member* ProcessGroup::member(const std::string& name)
@@ -44,13 +61,18 @@ const ProcessGroup::Member* ProcessGroup::member(const std::string& name) const
 void ProcessGroup::launch(Member& m, bool again)
 {
     if (again && !m.spec.log.empty()) std::ofstream(m.spec.log, std::ios::app) << "\n--- restarted ---\n";
-    m.child.reset();  // reaped already
+    {
+        std::lock_guard<std::mutex> lock(stdin_mutex_);
+        m.child.reset();  // reaped already
+    }
     const bool remote = !m.spec.host.is_local();
     std::vector<std::string> argv = m.spec.argv;
     if (remote && !m.spec.env.empty()) {  // the environment there: env NAME=value … program
         argv.insert(argv.begin(), m.spec.env.begin(), m.spec.env.end());
         argv.insert(argv.begin(), "/usr/bin/env");
     }
+    std::lock_guard<std::mutex> lock(stdin_mutex_);
+    if (remote && !keepalive_.joinable()) keepalive_ = std::thread([this] { keep_remotes_alive(); });
     m.child.emplace(ProcessOptions{.argv = remote ? remote_command(m.spec.host, argv, m.spec.stop_grace) : argv,
                                    .env = remote ? std::vector<std::string>{} : m.spec.env,
                                    .stdout_path = m.spec.capture_stdout ? "" : m.spec.log,
@@ -67,11 +89,17 @@ ChildProcess& ProcessGroup::start(ProcessSpec spec)
 {
     if (spec.name.empty()) throw Error("process group: a process needs a name");
     if (member(spec.name)) throw Error("process group: the name '" + spec.name + "' is taken");
-    Member& m = members_.emplace_back();
-    m.spec = std::move(spec);
+    Member* added = nullptr;
+    {
+        std::lock_guard<std::mutex> lock(stdin_mutex_);
+        added = &members_.emplace_back();
+        added->spec = std::move(spec);
+    }
+    Member& m = *added;
     try {
         launch(m, false);
     } catch (...) {
+        std::lock_guard<std::mutex> lock(stdin_mutex_);
         members_.pop_back();
         throw;
     }
@@ -108,7 +136,10 @@ void ProcessGroup::interrupt(Member& m)
     // A remote process is stopped by its `cpm host run` when its ssh's input closes; a signal to
     // ssh would end the connection without waiting for the process's end.
     if (m.spec.host.is_local()) m.child->signal(SIGINT);
-    else m.child->close_stdin();
+    else {
+        std::lock_guard<std::mutex> lock(stdin_mutex_);
+        m.child->close_stdin();
+    }
 }
 
 void ProcessGroup::stop(Member& m)

@@ -64,7 +64,8 @@ std::vector<std::string> ssh_command(const RemoteHost& host, const std::vector<s
 
 std::vector<std::string> remote_command(const RemoteHost& host, const std::vector<std::string>& remote_argv, std::chrono::milliseconds grace)
 {
-    std::vector<std::string> wrapped{host.program("cpm"), "host", "run", "--grace", std::to_string(grace.count()) + "ms", "--"};
+    std::vector<std::string> wrapped{host.program("cpm"), "host", "run", "--grace", std::to_string(grace.count()) + "ms",
+                                     "--lease", std::to_string(kRemoteLease.count()) + "ms", "--"};
     wrapped.insert(wrapped.end(), remote_argv.begin(), remote_argv.end());
     return ssh_command(host, wrapped);
 }
@@ -84,20 +85,27 @@ int with_group_ended(int group, int code)
 
 }  // namespace
 
-int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::milliseconds grace)
+int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::milliseconds grace, std::chrono::milliseconds lease)
 {
     ChildProcess child({.argv = argv, .own_process_group = true, .die_with_parent = true});
     const int group = child.pid();
     pollfd in{STDIN_FILENO, POLLIN, 0};
     bool input_open = true;
+    auto last_word = std::chrono::steady_clock::now();
     for (;;) {
         if (auto end = child.ended()) return with_group_ended(group, shell_code(*end));
         if (!input_open) break;
+        if (lease.count() > 0 && std::chrono::steady_clock::now() - last_word > lease) {
+            std::fprintf(stderr, "cpm host run: no word from the run for %lld ms (its host cut off?): stopping %s\n",
+                         static_cast<long long>(lease.count()), argv.front().c_str());
+            break;
+        }
         const int n = ::poll(&in, 1, 100);
         if (n > 0) {
             char buf[256];
             const ssize_t got = ::read(STDIN_FILENO, buf, sizeof buf);
             if (got == 0 || (got < 0 && errno != EINTR && errno != EAGAIN)) input_open = false;
+            else if (got > 0) last_word = std::chrono::steady_clock::now();
         }
     }
     // The supervisor closed our input, died, or lost the connection: stop it, as a local one is stopped.

@@ -240,4 +240,8 @@ TEST_F(LabAcrossHosts, ACarHostLostMidRunIsNamedAndTheOtherCarDrivesOnToTheEnd)
     const auto b = recording.range_of<VehicleState>("vehicleState", 6, cut_ns + 1'000'000'000, UINT64_MAX, cpm::HistoryBy::commit, 100000);
     EXPECT_GE(a.samples.size(), 200u) << "car_a's states after the cut";
     EXPECT_EQ(b.samples.size(), 0u) << "car_b's states after its host was cut off";
+    // Cut off from the run, car_b stops the run's processes by itself (its link still down).
+    EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), 2).empty(); }, cpm::kRemoteLease + 10s))
+        << "left on the lost host: " << ::testing::PrintToString(programs_on(hosts(), 2));
+    for (size_t h = 0; h < 2; ++h) EXPECT_TRUE(programs_on(hosts(), h).empty()) << "left on host " << h;
 }

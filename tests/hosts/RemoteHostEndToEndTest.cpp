@@ -107,20 +107,31 @@ TEST_F(RemoteHostEndToEnd, ARemoteEndIsToldAsALocalOneWithItsHost)
     }
 }
 
-TEST_F(RemoteHostEndToEnd, AHostWhoseLinkIsCutIsReportedLost)
+TEST_F(RemoteHostEndToEnd, AHostWhoseLinkIsCutIsReportedLostAndWhatRunsThereStopsWithinTheLease)
 {
     cpm_test::NamespaceHosts::Inside central(hosts(), 0);
     cpm::ProcessGroup sut;
     (void)sut.start({.name = "far", .argv = {"/bin/sleep", "300"}, .log = dir.file("far.log"), .host = hosts().remote(1, cpm_prefix())});
+    (void)sut.start({.name = "kept", .argv = {"/bin/sleep", "301"}, .log = dir.file("kept.log"), .host = hosts().remote(0, cpm_prefix())});
     ASSERT_TRUE(cpm_test::wait_until([&] { return !running(hosts(), 1, "/bin/sleep 300").empty(); }, 20s)) << sut.log_text("far");
     ASSERT_TRUE(hosts().cut(1));
+    const auto cut_at = std::chrono::steady_clock::now();
     std::vector<cpm::ProcessEvent> events;
     ASSERT_TRUE(cpm_test::wait_until([&] {
         for (auto& e : sut.poll()) events.push_back(e);
         return !events.empty();
     }, 20s)) << "a lost host was not noticed";
+    EXPECT_EQ(events[0].name, "far");
     EXPECT_TRUE(events[0].host_lost) << events[0].describe();
     EXPECT_NE(events[0].describe().find("lost with host car_a"), std::string::npos) << events[0].describe();
+    // Cut off, car_a's side hears nothing from the run and stops what it ran (the connection there
+    // looks open: nothing else would); the central host, reached over ssh too and hearing the run
+    // every second, keeps its process.
+    EXPECT_TRUE(cpm_test::wait_until([&] { return running(hosts(), 1, "/bin/sleep 300").empty(); }, cpm::kRemoteLease + 10s))
+        << "still running on the lost host after the lease";
+    EXPECT_GE(std::chrono::steady_clock::now() - cut_at, cpm::kRemoteLease - 1s) << "stopped before its lease ran out";
+    EXPECT_FALSE(running(hosts(), 0, "/bin/sleep 301").empty()) << "the process on the host still reached stopped";
+    for (auto& e : sut.poll()) EXPECT_NE(e.name, "kept") << e.describe();
 }
 
 TEST_F(RemoteHostEndToEnd, AHostsClockIsMeasuredAndAHostWithoutSshIsNamed)

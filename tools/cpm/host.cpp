@@ -8,13 +8,15 @@ namespace cpm::tools {
 namespace {
 
 const char* kRunHelp =
-    "usage: cpm host run [--grace DURATION] -- PROGRAM [ARGS...]\n"
+    "usage: cpm host run [--grace DURATION] [--lease DURATION] -- PROGRAM [ARGS...]\n"
     "\n"
     "Runs PROGRAM in a process group of its own, with this command's output, until it ends or\n"
     "this command's input ends; then stops it: SIGINT, and SIGTERM and SIGKILL --grace apart\n"
     "(default 5s). Exits with its exit code, or 128 + the signal that ended it. A lab run starts\n"
     "each process on another host this way over ssh, so that closing the connection (the run\n"
-    "stops, dies, or loses the host) stops the process and everything it started.\n"
+    "stops, dies, or loses the host) stops the process and everything it started. With --lease,\n"
+    "input silent for that long stops it too: a lab run writes a line every second, so a host cut\n"
+    "off from the run (where the connection may look open for hours) stops the run's processes.\n"
     "\n"
     "Example: cpm host run --grace 2s -- /opt/cpm/bin/fsm_node --vehicle_id 5 --fsm car.json\n";
 
@@ -29,9 +31,11 @@ int host_run(const std::vector<std::string>& args)
     const std::string command = "cpm host run";
     const auto split = std::find(args.begin(), args.end(), "--");
     if (split == args.end() || split + 1 == args.end()) throw UsageError(command + ": expected -- PROGRAM [ARGS...]");
-    const auto parsed = parse_flags(std::vector<std::string>(args.begin(), split), {{"--grace", true}}, command);
+    const auto parsed = parse_flags(std::vector<std::string>(args.begin(), split), {{"--grace", true}, {"--lease", true}}, command);
     const auto grace_ns = parsed.has("--grace") ? parse_duration("--grace", parsed.get("--grace")) : 5'000'000'000ull;
-    return cpm::run_until_input_ends(std::vector<std::string>(split + 1, args.end()), std::chrono::milliseconds(grace_ns / 1'000'000));
+    const auto lease_ns = parsed.has("--lease") ? parse_duration("--lease", parsed.get("--lease")) : 0ull;
+    return cpm::run_until_input_ends(std::vector<std::string>(split + 1, args.end()), std::chrono::milliseconds(grace_ns / 1'000'000),
+                                     std::chrono::milliseconds(lease_ns / 1'000'000));
 }
 
 int host_clock(const std::vector<std::string>& args)

@@ -14,9 +14,12 @@
 #include <cpm/RemoteHost.hpp>
 
 #include <chrono>
+#include <condition_variable>
 #include <deque>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace cpm {
@@ -104,11 +107,18 @@ private:
     Member* member(const std::string& name);
     const Member* member(const std::string& name) const;
     void launch(Member& m, bool again);
-    static void interrupt(Member& m);
+    void interrupt(Member& m);
+    /// Every second, a line to each remote process's input: its `cpm host run` stops it when
+    /// none comes for kRemoteLease (a host cut off from the run stops what the run started).
+    void keep_remotes_alive();
     static void stop(Member& m);
     static ExitStatus as_told(const Member& m, const ExitStatus& end);
     static ProcessEvent event_of(const Member& m, const ExitStatus& end);
     std::deque<Member> members_;  // a deque: references to members stay valid
+    std::mutex stdin_mutex_;      // members_'s shape and the remote ones' inputs, shared with the keepalive
+    std::condition_variable keepalive_wake_;
+    bool keepalive_ending_ = false;
+    std::thread keepalive_;       // started with the first remote process
 };
 
 /// The last `n` lines of a text file, each indented by four spaces.

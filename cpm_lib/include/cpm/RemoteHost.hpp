@@ -28,9 +28,14 @@ struct RemoteHost
     std::string program(const std::string& name) const;
 };
 
+/// How long `cpm host run` goes on without a word from the run before it stops what it runs:
+/// the run writes a line to each remote process's input every second (ProcessGroup), so that a
+/// host cut off from it stops the run's processes by itself instead of leaving them running.
+inline constexpr std::chrono::milliseconds kRemoteLease{10'000};
+
 /// The argv that runs `remote_argv` (argv[0]: a path on that host) there, non-interactively
 /// (BatchMode: a host that asks for a password fails at once), tied to the connection through
-/// `cpm host run` with the given grace.
+/// `cpm host run` with the given grace and kRemoteLease.
 std::vector<std::string> remote_command(const RemoteHost& host, const std::vector<std::string>& remote_argv,
                                         std::chrono::milliseconds grace = std::chrono::seconds(5));
 /// The argv that runs a plain command there and returns (checks: `cpm --version`, `test -x`).
@@ -39,10 +44,12 @@ std::vector<std::string> ssh_command(const RemoteHost& host, const std::vector<s
 std::string shell_quote(const std::string& text);
 
 /// The remote side of remote_command (`cpm host run`): starts `argv` in a process group of its
-/// own with this process's stdout and stderr, and supervises it until it ends or stdin reaches
-/// its end; then SIGINT, SIGTERM and SIGKILL, `grace` apart. Returns its exit code, or 128 + the
+/// own with this process's stdout and stderr, and supervises it until it ends, stdin reaches its
+/// end, or (`lease` > 0) nothing came on stdin for `lease` (the run's host is gone: said on
+/// stderr); then SIGINT, SIGTERM and SIGKILL, `grace` apart. Returns its exit code, or 128 + the
 /// signal that ended it (as a shell does). Throws cpm::Error when it cannot be started.
-int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::milliseconds grace);
+int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::milliseconds grace,
+                         std::chrono::milliseconds lease = std::chrono::milliseconds(0));
 
 /// The remote side of measure_clock (`cpm host clock`): answers each line of stdin with this
 /// host's CLOCK_REALTIME in nanoseconds, until stdin ends.
