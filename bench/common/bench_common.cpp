@@ -1,6 +1,7 @@
 #include "bench_common.hpp"
 
 #include <cpm/CommandLine.hpp>
+#include <cpm/Error.hpp>
 #include <cpm/Security.hpp>
 #include <cpm/percentile.hpp>
 
@@ -13,9 +14,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <thread>
 
 #include <fcntl.h>
+#include <sched.h>
 #include <sys/utsname.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -89,6 +92,111 @@ int wait_child(cpm::ChildProcess& child, double timeout_s)
 
 std::string cyclone_loopback_env() { return "CYCLONEDDS_URI=file://" CPM_CYCLONE_LOOPBACK_XML; }
 
+namespace {
+
+int run_quietly(const std::string& command) { return std::system((command + " >/dev/null 2>&1").c_str()); }
+
+std::unique_ptr<VethLink> g_link;
+std::string g_interface, g_peer;
+
+}  // namespace
+
+VethLink::VethLink()
+{
+    const std::string tag = std::to_string(::getpid() % 100000);
+    subnet_ = "10.232." + std::to_string(::getpid() % 250 + 1);
+    ns_[0] = "cpmbench" + tag + "_a";
+    ns_[1] = "cpmbench" + tag + "_b";
+    if (::geteuid() != 0) throw cpm::Error("--link veth: making network namespaces needs root");
+    const std::string a = "ip netns exec " + ns_[0] + " ", b = "ip netns exec " + ns_[1] + " ";
+    const bool ok = run_quietly("ip netns add " + ns_[0]) == 0 && run_quietly("ip netns add " + ns_[1]) == 0 &&
+                    run_quietly("ip link add cpmbv" + tag + " netns " + ns_[0] + " type veth peer name cpmbw" + tag + " netns " + ns_[1]) == 0 &&
+                    run_quietly(a + "ip addr add " + address(0) + "/24 dev cpmbv" + tag) == 0 &&
+                    run_quietly(b + "ip addr add " + address(1) + "/24 dev cpmbw" + tag) == 0 &&
+                    run_quietly(a + "ip link set cpmbv" + tag + " up") == 0 && run_quietly(b + "ip link set cpmbw" + tag + " up") == 0 &&
+                    run_quietly(a + "ip link set lo up") == 0 && run_quietly(b + "ip link set lo up") == 0;
+    if (!ok) {
+        remove();
+        throw cpm::Error("--link veth: could not make two network namespaces joined by a veth pair (ip netns, ip link)");
+    }
+    // A participant made before the link carries leaves its address out: wait for both ends.
+    const std::string both_up = a + "grep -qx up /sys/class/net/cpmbv" + tag + "/operstate && " + b + "grep -qx up /sys/class/net/cpmbw" + tag + "/operstate";
+    for (int i = 0; i < 100 && run_quietly(both_up) != 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+}
+
+VethLink::~VethLink() { remove(); }
+
+void VethLink::remove()
+{
+    for (const auto& ns : ns_) {
+        if (ns.empty()) continue;
+        // What is left there, but this program (which moved its main thread to side 0).
+        run_quietly("ip netns pids " + ns + " | grep -vx " + std::to_string(::getpid()) + " | xargs -r kill -9");
+        run_quietly("ip netns del " + ns);
+    }
+}
+
+std::string VethLink::address(int side) const { return subnet_ + "." + std::to_string(side + 1); }
+
+std::vector<std::string> VethLink::in(int side, std::vector<std::string> argv) const
+{
+    argv.insert(argv.begin(), {"/usr/sbin/ip", "netns", "exec", ns_[side]});
+    return argv;
+}
+
+void VethLink::enter(int side) const
+{
+    const int fd = ::open(("/var/run/netns/" + ns_[side]).c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || ::setns(fd, CLONE_NEWNET) != 0) throw cpm::Error("--link veth: cannot enter namespace " + ns_[side]);
+    ::close(fd);
+}
+
+std::string VethLink::cyclone_env(int side) const
+{
+    return "CYCLONEDDS_URI=<CycloneDDS><Domain id=\"any\"><General><Interfaces><NetworkInterface address=\"" + address(side) +
+           "\"/></Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
+           "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer address=\"" + address(1 - side) +
+           "\"/></Peers></Discovery></Domain></CycloneDDS>";
+}
+
+const VethLink& use_veth_link()
+{
+    if (!g_link) {
+        g_link = std::make_unique<VethLink>();
+        g_link->enter(0);
+        set_link_end(g_link->address(0), g_link->address(1));
+        // Ended by a signal, the program would leave the namespaces behind: end it by exit.
+        for (int sig : {SIGINT, SIGTERM}) std::signal(sig, [](int) { std::exit(130); });
+    }
+    return *g_link;
+}
+
+const VethLink* veth_link() { return g_link.get(); }
+
+void set_link_end(const std::string& interface, const std::string& peer)
+{
+    g_interface = interface;
+    g_peer = peer;
+}
+
+void apply_link_end(cpm::ParticipantOptions& o)
+{
+    if (g_interface.empty()) return;
+    o.interfaces = {g_interface};
+    o.initial_peers = {g_peer};
+}
+
+std::vector<std::string> far_side(std::vector<std::string> argv)
+{
+    if (g_link) argv.insert(argv.end(), {"--interface", g_link->address(1), "--peer", g_link->address(0)});
+    return on_far_side(std::move(argv));
+}
+
+std::vector<std::string> on_far_side(std::vector<std::string> argv) { return g_link ? g_link->in(1, std::move(argv)) : argv; }
+
+std::string cyclone_env_here() { return g_link ? g_link->cyclone_env(0) : cyclone_loopback_env(); }
+std::string cyclone_env_far() { return g_link ? g_link->cyclone_env(1) : cyclone_loopback_env(); }
+
 bool cyclone_ping_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us,
                         const std::vector<std::string>& extra)
 {
@@ -96,7 +204,7 @@ bool cyclone_ping_block(int domain, size_t size, int count, int warmup, std::vec
     std::vector<std::string> argv{cpm::sibling_executable("cyclone_bench"), "ping", "--domain", std::to_string(domain), "--size",
                                   std::to_string(size), "--count", std::to_string(count), "--warmup", std::to_string(warmup)};
     argv.insert(argv.end(), extra.begin(), extra.end());
-    auto ping = spawn(argv, {cyclone_loopback_env()}, out);
+    auto ping = spawn(argv, {cyclone_env_here()}, out);
     const int code = wait_child(ping, 120);
     const size_t before = one_way_us.size();
     std::ifstream in(out);
@@ -110,15 +218,14 @@ Rate cyclone_pub_sub(int domain, size_t size, int seconds, const std::vector<std
 {
     const std::string sub_out = "/tmp/bench_cyclone_sub_" + std::to_string(getpid());
     const std::string pub_out = "/tmp/bench_cyclone_pub_" + std::to_string(getpid());
-    const std::vector<std::string> env{cyclone_loopback_env()};
     const std::string exe = cpm::sibling_executable("cyclone_bench");
     std::vector<std::string> sub_argv{exe, "sub", "--domain", std::to_string(domain)};
     sub_argv.insert(sub_argv.end(), sub_extra.begin(), sub_extra.end());
-    auto sub = spawn(sub_argv, env, sub_out);
+    auto sub = spawn(on_far_side(sub_argv), {cyclone_env_far()}, sub_out);
     std::vector<std::string> pub_argv{exe, "pub", "--domain", std::to_string(domain), "--size", std::to_string(size), "--seconds",
                                       std::to_string(seconds)};
     pub_argv.insert(pub_argv.end(), pub_extra.begin(), pub_extra.end());
-    auto pub = spawn(pub_argv, env, pub_out);
+    auto pub = spawn(pub_argv, {cyclone_env_here()}, pub_out);
     const int pub_code = wait_child(pub, seconds + 60);
     const int sub_code = wait_child(sub, seconds + 90);
     Rate r;

@@ -1,5 +1,6 @@
 #pragma once
 #include <cpm/ChildProcess.hpp>
+#include <cpm/Participant.hpp>
 
 // What every benchmark here shares: statistics printed the same way, child processes, the
 // Cyclone configuration that pins ddsperf to loopback, and the machine description. Flags are
@@ -40,6 +41,48 @@ int wait_child(cpm::ChildProcess& child, double timeout_s);
 /// CYCLONEDDS_URI=... for loopback only, unicast discovery, no multicast.
 std::string cyclone_loopback_env();
 
+/// Two hosts on one machine: network namespaces joined by a veth pair (root only), for the cases
+/// that measure what goes between hosts. Made by use_veth_link(); gone when the program exits.
+class VethLink
+{
+public:
+    VethLink();  ///< throws cpm::Error saying what failed
+    ~VethLink();
+    VethLink(const VethLink&) = delete;
+    VethLink& operator=(const VethLink&) = delete;
+    /// The address of side 0 (the publisher's host) or 1 (the subscriber's).
+    std::string address(int side) const;
+    /// argv run on that side (ip netns exec).
+    std::vector<std::string> in(int side, std::vector<std::string> argv) const;
+    /// Moves the calling thread (and the threads it starts from now on) to that side.
+    void enter(int side) const;
+    /// CYCLONEDDS_URI=<CycloneDDS>… for that side: its address, the other side as peer, no multicast.
+    std::string cyclone_env(int side) const;
+
+private:
+    void remove();
+    std::string ns_[2];
+    std::string subnet_;
+};
+/// Makes the link (once) and moves this thread to side 0; every case then runs across it.
+const VethLink& use_veth_link();
+/// The link when use_veth_link() made one; nullptr: this host, loopback and shared memory.
+const VethLink* veth_link();
+/// This process's end of the link (its address, the other's), as a lab run gives each process
+/// --dds_interface and --dds_initial_peer: side 0 after use_veth_link(), or what a far-side
+/// process was told (--interface A --peer B, passed by far_side()). Empty: loopback.
+void set_link_end(const std::string& interface, const std::string& peer);
+/// Its address and the peer on `o` when there is a link; `o` unchanged otherwise.
+void apply_link_end(cpm::ParticipantOptions& o);
+/// A helper process of this program for the other end: with a link, run on side 1 and told its
+/// end (--interface, --peer); without, `argv` as it is.
+std::vector<std::string> far_side(std::vector<std::string> argv);
+/// Another program (Cyclone's) for the other end: on side 1 with a link, as it is without.
+std::vector<std::string> on_far_side(std::vector<std::string> argv);
+/// CYCLONEDDS_URI for Cyclone on this side (side 0 with a link, else loopback) or the far side.
+std::string cyclone_env_here();
+std::string cyclone_env_far();
+
 /// One block of round trips from a fresh `cyclone_bench ping` (loopback UDP) against the pong on
 /// `domain`; appends its one-way latencies (µs). False when the block did not complete. `extra`:
 /// more arguments (e.g. --type blob).
@@ -53,7 +96,7 @@ struct Rate
     uint64_t received = 0, lost = 0, written = 0;
     bool ok = false;  ///< both ended well and every written sample arrived, none lost
 };
-/// `cyclone_bench sub` and `pub` on `domain` (loopback UDP) for `seconds`; `pub_extra` and
+/// `cyclone_bench sub` and `pub` on `domain` (loopback UDP, or across veth_link()) for `seconds`; `pub_extra` and
 /// `sub_extra` are added to their arguments (--batch, --listener, --type blob).
 Rate cyclone_pub_sub(int domain, size_t size, int seconds, const std::vector<std::string>& pub_extra,
                             const std::vector<std::string>& sub_extra);

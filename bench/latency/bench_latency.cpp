@@ -55,6 +55,7 @@ cpm::ParticipantOptions options_for(int domain, bool shared_memory = true, const
     o.name = "bench_latency";
     o.shared_memory = shared_memory;
     o.security = security;
+    bench::apply_link_end(o);
     return o;
 }
 
@@ -243,9 +244,9 @@ bench::Stats ddsperf_latency(int domain, size_t size, int seconds, size_t& windo
 {
     const std::string pong_out = "/tmp/bench_ddsperf_pong_" + std::to_string(getpid());
     const std::string ping_out = "/tmp/bench_ddsperf_ping_" + std::to_string(getpid());
-    const std::vector<std::string> env{bench::cyclone_loopback_env()};
+    const std::vector<std::string> env{bench::cyclone_env_here()};
     const std::string dur = std::to_string(seconds + 2);
-    auto pong = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", dur, "pong"}, env, pong_out);
+    auto pong = bench::spawn(bench::on_far_side({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", dur, "pong"}), {bench::cyclone_env_far()}, pong_out);
     auto ping = bench::spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain), "-D", std::to_string(seconds),
                                    "ping", "size", std::to_string(size)},
                                   env, ping_out);
@@ -287,23 +288,29 @@ bench::Stats ddsperf_latency(int domain, size_t size, int seconds, size_t& windo
 
 const char* kHelp =
     "usage: bench_latency [--count 10000] [--warmup 1000] [--sizes 100,65536] [--domain 200]\n"
+    "                     [--link loopback|veth]\n"
     "One-way latency (round trip / 2) between two processes: cpm against raw Fast DDS, Cyclone DDS's\n"
     "ddsperf and Cyclone doing the same work, in one run; uses domains D to D+7.\n"
     "  --count N        round trips per case and size, in 10 alternating blocks (at least 10)\n"
     "  --warmup N       round trips discarded before the first block\n"
     "  --sizes A,B,...  payload sizes in bytes, each at most 65536\n"
-    "(--role pong --impl IMPL --security DIR: the pong processes it starts itself)\n";
+    "  --link veth      the pongs on a second host: network namespaces joined by a veth pair\n"
+    "                   (root), each side given its address and the other as peer (default\n"
+    "                   loopback: one host)\n"
+    "(--role pong --impl IMPL --security DIR --interface A --peer B: the pongs it starts)\n";
 
 int run(int argc, char** argv)
 {
     const auto flags = cpm::cli::parse_flags(
-        argc, argv, {{"--count", true}, {"--warmup", true}, {"--sizes", true}, {"--domain", true}, {"--role", true}, {"--impl", true}},
+        argc, argv, {{"--count", true}, {"--warmup", true}, {"--sizes", true}, {"--domain", true}, {"--role", true}, {"--impl", true},
+                     {"--link", true}, {"--interface", true}, {"--peer", true}},
         "bench_latency");
     const std::string role = flags.get("--role", "main");
     // The run uses domains D to D+7; each pong process one of them.
     const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "200"), 0, role == "pong" ? 232 : 225));
     if (role == "pong") {
         std::signal(SIGTERM, [](int) { g_stop = true; });
+        bench::set_link_end(flags.get("--interface"), flags.get("--peer"));
         const std::string impl = flags.get("--impl", "cpm");
         if (impl == "cpm" || impl == "cpm_udp") pong_cpm(domain, impl == "cpm");
         else if (impl == "cpm_dds_thread") pong_cpm(domain, true, "", true);
@@ -318,7 +325,12 @@ int run(int argc, char** argv)
     const auto listed = bench::integer_list("--sizes", flags.get("--sizes", "100,65536"), 1, 65536);
     const std::vector<size_t> sizes(listed.begin(), listed.end());
 
-    bench::print_machine("reliable, keep-last 1, volatile; loopback UDP + shared memory (cpm defaults); " +
+    const std::string link = flags.get("--link", "loopback");
+    if (link != "loopback" && link != "veth") throw cpm::cli::UsageError("bench_latency: --link '" + link + "' is neither loopback nor veth");
+    if (link == "veth") (void)bench::use_veth_link();
+    bench::print_machine("reliable, keep-last 1, volatile; " +
+                         std::string(link == "veth" ? "pongs on a second host (network namespace) across a veth pair"
+                                                    : "loopback UDP + shared memory (cpm defaults)") + "; " +
                          std::to_string(count) + " round trips after " + std::to_string(warmup) +
                          " warm-up; one-way = RTT/2 in microseconds; each case its own pong process and domain, "
                          "cases alternating in 10 blocks");
@@ -342,7 +354,9 @@ int run(int argc, char** argv)
         std::vector<std::unique_ptr<Pinger>> pingers;
         for (size_t k = 0; k < cases.size(); ++k) {
             const int d = domain + int(k);
-            pongs.push_back(bench::spawn_self({"--role", "pong", "--impl", cases[k].impl, "--domain", std::to_string(d), "--security", lab.node}));
+            pongs.push_back(bench::spawn(bench::far_side({cpm::sibling_executable("bench_latency"), "--role", "pong", "--impl", cases[k].impl,
+                                                          "--domain", std::to_string(d), "--security", lab.node}),
+                                         {}, ""));
             if (cases[k].impl == "cpm" || cases[k].impl == "cpm_udp" || cases[k].impl == "cpm_dds_thread")
                 pingers.push_back(std::make_unique<CpmPinger>(d, cases[k].impl != "cpm_udp"));
             else if (cases[k].impl == "cpm_secured")
@@ -351,8 +365,8 @@ int run(int argc, char** argv)
         }
         // Cyclone doing the same work takes its turn in every block too (a new ping process each).
         const int cyclone_domain = domain + int(cases.size()) + 1;
-        pongs.push_back(bench::spawn({cpm::sibling_executable("cyclone_bench"), "pong", "--domain", std::to_string(cyclone_domain)},
-                                     {bench::cyclone_loopback_env()}, ""));
+        const std::vector<std::string> cyclone_pong{cpm::sibling_executable("cyclone_bench"), "pong", "--domain", std::to_string(cyclone_domain)};
+        pongs.push_back(bench::spawn(bench::on_far_side(cyclone_pong), {bench::cyclone_env_far()}, ""));
         std::vector<std::vector<double>> samples(cases.size());
         std::vector<double> cyclone_samples;
         bool cyclone_ok = true;
