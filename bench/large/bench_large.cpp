@@ -19,6 +19,8 @@
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/TopicType.hpp>
 #include <cpm/Writer.hpp>
+#include <cpm/get_time_ns.hpp>
+#include <cpm/topics.hpp>
 
 #include <BenchLargePubSubTypes.h>
 
@@ -110,6 +112,7 @@ cpm::ParticipantOptions options_for(int domain)
     cpm::ParticipantOptions o;
     o.domain_id = domain;
     o.name = "bench_large";
+    bench::apply_link_end(o);
     return o;
 }
 
@@ -165,6 +168,86 @@ int subscribe(int domain, const std::string& mode, size_t size, int max_seconds)
     std::printf("received %llu lost %llu seconds %.6f\n", (unsigned long long)received, (unsigned long long)lost,
                 std::chrono::duration<double>(last - first).count());
     return done ? 0 : 1;
+}
+
+// A camera's stream (--camera): 307,200 B frames with cameraFrame's QoS, each stamped when
+// written; the receiver prints "received N lost L" and then each frame's latency in µs (one
+// machine, one clock: the stamp and the arrival are comparable across its namespaces).
+int camera_receive(int domain, int max_seconds)
+{
+    cpm::Participant participant(options_for(domain));
+    cpm::ReaderAbstract<BenchBlob> reader(participant, "large_camera", cpm::topics::camera_frame.reader);
+    std::vector<double> latency_us;
+    uint64_t received = 0, lost = 0, next = 0;
+    bool done = false;
+    const auto deadline = Clock::now() + std::chrono::seconds(max_seconds);
+    while (!done && Clock::now() < deadline) {
+        if (!reader.wait_for_data(100ms)) continue;
+        reader.take_each([&](const BenchBlob& frame) {
+            const uint64_t now = cpm::get_time_ns();
+            if (frame.seq() == kEndMarker) {
+                done = true;
+                return;
+            }
+            latency_us.push_back(double(now - frame.header().create_stamp().nanoseconds()) / 1e3);
+            ++received;
+            if (frame.seq() > next) lost += frame.seq() - next;
+            next = frame.seq() + 1;
+        });
+    }
+    std::printf("received %llu lost %llu\n", (unsigned long long)received, (unsigned long long)lost);
+    for (double v : latency_us) std::printf("%.1f\n", v);
+    return done ? 0 : 1;
+}
+
+struct CameraStream
+{
+    bench::Stats latency;
+    uint64_t written = 0, received = 0, lost = 0;
+    bool ok = false;
+};
+
+/// `hz` frames a second for `seconds` to a receiver on this host or (far) across the link.
+CameraStream camera_stream(int domain, int hz, int seconds, bool far)
+{
+    const std::string out = "/tmp/bench_large_camera_" + std::to_string(getpid());
+    const std::vector<std::string> argv{cpm::sibling_executable("bench_large"), "--role", "camera", "--domain", std::to_string(domain),
+                                        "--seconds", std::to_string(seconds + 30)};
+    auto receiver = bench::spawn(far ? bench::far_side(argv) : argv, {}, out);
+    CameraStream r;
+    {
+        cpm::Participant participant(options_for(domain));
+        cpm::Writer<BenchBlob> writer(participant, "large_camera", cpm::topics::camera_frame.writer);
+        if (!writer.wait_for_matched(1, 20s)) return r;
+        std::this_thread::sleep_for(500ms);  // matched both ways
+        BenchBlob frame;
+        frame.data().resize(307200 - 28);
+        const auto period = std::chrono::nanoseconds(1'000'000'000 / hz);
+        auto next = Clock::now();
+        for (int i = 0; i < hz * seconds; ++i) {
+            std::this_thread::sleep_until(next);
+            next += period;
+            frame.seq(r.written);
+            frame.header().create_stamp().nanoseconds(cpm::get_time_ns());
+            if (writer.write(frame)) ++r.written;
+        }
+        frame.seq(kEndMarker);
+        for (int i = 0; i < 10; ++i) {  // best effort: said more than once
+            (void)writer.write(frame);
+            std::this_thread::sleep_for(20ms);
+        }
+    }
+    const int code = bench::wait_child(receiver, seconds + 60);
+    std::ifstream in(out);
+    std::string word;
+    in >> word >> r.received >> word >> r.lost;
+    std::vector<double> us;
+    for (double v; in >> v;) us.push_back(v);
+    std::remove(out.c_str());
+    if (!us.empty()) r.latency = bench::stats_of(us);
+    r.lost = r.written - r.received;  // the tail lost too, not only gaps between frames
+    r.ok = code == 0 && r.written > 0;
+    return r;
 }
 
 // ---- measurements -------------------------------------------------------------------------
@@ -235,13 +318,18 @@ const char* kHelp =
     "  --seconds S    how long each throughput case writes\n"
     "  --sizes A,B    each 307200 or 1048576 (the plain frame types)\n"
     "  uses domains D to D+3; the last is Cyclone DDS's, which must be at most 232\n"
-    "(--role pong|sub --mode MODE --size B: the processes it starts itself)\n";
+    "       bench_large --camera [--hz 30] [--seconds 3] [--link loopback|veth] [--domain 220]\n"
+    "  --camera       a camera's stream instead: 307,200 B frames at --hz with cameraFrame's QoS,\n"
+    "                 latency and frames lost, on this host and (--link veth) to a second host: a\n"
+    "                 network namespace joined by a veth pair (root)\n"
+    "(--role pong|sub|camera --mode MODE --size B --interface A --peer B: the processes it starts)\n";
 
 int run(int argc, char** argv)
 {
     const auto flags = cpm::cli::parse_flags(argc, argv,
                                              {{"--count", true}, {"--seconds", true}, {"--sizes", true}, {"--domain", true},
-                                              {"--role", true}, {"--mode", true}, {"--size", true}},
+                                              {"--role", true}, {"--mode", true}, {"--size", true}, {"--camera", false},
+                                              {"--hz", true}, {"--link", true}, {"--interface", true}, {"--peer", true}},
                                              "bench_large");
     const std::string role = flags.get("--role", "main");
     const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "220"), 0, 232));
@@ -253,7 +341,36 @@ int run(int argc, char** argv)
         if (role == "pong") return pong(domain, mode, size);
         return subscribe(domain, mode, size, seconds);
     }
-    if (role != "main") throw cpm::cli::UsageError("bench_large: --role '" + role + "' is none of main, pong, sub");
+    if (role == "camera") {
+        bench::set_link_end(flags.get("--interface"), flags.get("--peer"));
+        return camera_receive(domain, seconds);
+    }
+    if (role != "main") throw cpm::cli::UsageError("bench_large: --role '" + role + "' is none of main, pong, sub, camera");
+    const std::string link = flags.get("--link", "loopback");
+    if (link != "loopback" && link != "veth") throw cpm::cli::UsageError("bench_large: --link '" + link + "' is neither loopback nor veth");
+    if (flags.has("--camera")) {
+        const int hz = int(cpm::cli::parse_integer("--hz", flags.get("--hz", "30"), 1, 1000));
+        bench::print_machine("a camera's stream: 307,200 B frames at " + std::to_string(hz) + " Hz for " + std::to_string(seconds) +
+                             " s with cameraFrame's QoS (best effort, keep last 1); latency from the frame's stamp to its arrival (µs)");
+        bench::print_header("camera frames, 307200 B at " + std::to_string(hz) + " Hz");
+        const CameraStream here = camera_stream(domain, hz, seconds, false);
+        bench::print_row("cpm, same host (shared memory)", here.latency);
+        std::printf("    written %llu, received %llu, lost %llu\n", (unsigned long long)here.written, (unsigned long long)here.received,
+                    (unsigned long long)here.lost);
+        if (link != "veth") return here.ok ? 0 : 1;
+        (void)bench::use_veth_link();  // after the same-host case, which runs as a lab on one host does
+        const CameraStream far = camera_stream(domain + 1, hz, seconds, true);
+        bench::print_row("cpm, across the veth link (UDP)", far.latency);
+        std::printf("    written %llu, received %llu, lost %llu\n", (unsigned long long)far.written, (unsigned long long)far.received,
+                    (unsigned long long)far.lost);
+        if (here.ok && far.ok) {
+            bench::record_latency("large", "camera frame 307200 B at " + std::to_string(hz) + " Hz across a veth link", far.latency,
+                                  "cpm, same host (shared memory)", here.latency, 0);
+            bench::record({"large", "camera frames lost across a veth link, of " + std::to_string(far.written), "frames", double(far.lost),
+                           "cpm, same host (shared memory)", double(here.lost)});
+        }
+        return here.ok && far.ok ? 0 : 1;
+    }
     if (domain + 3 > 232) {
         throw cpm::cli::UsageError("bench_large: --domain " + std::to_string(domain) + ": the run uses domains " + std::to_string(domain) +
                                    " to " + std::to_string(domain + 3) + ", and Cyclone DDS (the last) takes at most 232");
