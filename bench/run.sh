@@ -13,6 +13,16 @@ echo
 echo "== bench_large (307 kB frames and 1 MiB: shared-memory transport, data sharing, written and read in place, vs Cyclone doing the same work)"
 "$bin/bench_large"
 echo
+# Between hosts: two network namespaces joined by a veth pair (needs root).
+if [ "$(id -u)" = 0 ]; then
+  echo "== across hosts (veth): bench_throughput, bench_latency (100 B), bench_large --camera (307 kB at 30 Hz)"
+  "$bin/bench_throughput" --link veth
+  "$bin/bench_latency" --link veth --sizes 100 --count 4000
+  "$bin/bench_large" --camera --link veth --seconds 30
+else
+  echo "== across hosts (veth): not run, making network namespaces needs root"
+fi
+echo
 echo "== bench_timer (tick jitter, cpm::Timer vs clock_nanosleep)"
 "$bin/bench_timer"
 echo
