@@ -271,7 +271,10 @@ void copy_to_hosts(const Scenario& s, const std::vector<ProcessPlan>& plan, cons
             if (p.host != h.name) continue;
             for (const auto& [local, copy] : p.copies) {
                 if (!done.insert(copy).second) continue;
-                if (!ssh({"/bin/sh", "-c", "cat > " + shell_quote(copy)}, read_text_file(local, "file for " + p.name))) {
+                // Readable by its owner only (a node's private key among them), in folders made as needed.
+                const std::string parent = fs::path(copy).parent_path().string();
+                if (!ssh({"/bin/sh", "-c", "umask 077 && mkdir -p " + shell_quote(parent) + " && cat > " + shell_quote(copy)},
+                         read_text_file(local, "file for " + p.name))) {
                     errors.push_back({s.file + ": hosts." + h.name, "cannot copy " + local + " to " + copy + " there (for " + p.name + ")"});
                 }
             }
@@ -582,13 +585,13 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     const fs::path dir = settings.run_dir;
     const auto plan = plan_run(s, settings);      // names a missing program before anything starts
     const auto hosts = check_hosts(s, settings);  // and a host that cannot take part
-    copy_to_hosts(s, plan, settings);
     // Every process, this one too, makes its readers and writers with the scenario's QoS.
     const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
     if (!qos.empty()) ::setenv(kQosOverridesVariable, qos.c_str(), 1);
     ParticipantOptions po = participant_options(s, settings);
     const DomainClaim claim(settings.domain, po);
-    po.security = prepare_folder(s, settings, plan, dir);
+    po.security = prepare_folder(s, settings, plan, dir);  // a secured lab's nodes issued, then copied to their hosts
+    copy_to_hosts(s, plan, settings);
 
     RunResult result{.dir = dir.string(), .hosts = hosts};
     const auto t0 = Clock::now();

@@ -3,6 +3,7 @@
 #include <cpm/CommandLine.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/checkers/YamlChecker.hpp>
+#include <cpm/Security.hpp>
 #include <cpm/read_text_file.hpp>
 #include <cpm/nodes.hpp>
 #include <cpm/timer_ids.hpp>
@@ -142,7 +143,6 @@ void read_hosts(Checker& c, const YAML::Node& root, Scenario& s)
         const auto t = c.text(d, "discovery");
         if (t && *t != "peers") c.error(d, "discovery", "'" + *t + "': only peers (unicast to every host's address) is supported yet");
     }
-    if (root["security"]) c.error(root["security"], "security", "a secured lab across hosts is not supported yet (each host would need its nodes' folders)");
 }
 
 /// A process's `host:`: a name of `hosts:` (with did-you-mean), or "" with an error said.
@@ -532,8 +532,16 @@ public:
         for (auto& p : plan_) place_on_host(p, s_, r_, copied_as);
         if (!s_.security.empty()) {
             for (auto& p : plan_) {
-                p.security_node = (fs::path(s_.security) / "nodes" / security_node_name(r_, p.name)).string();
-                p.argv.insert(p.argv.end(), {"--security", p.security_node});
+                const std::string node = security_node_name(r_, p.name);
+                p.security_node = (fs::path(s_.security) / "nodes" / node).string();
+                std::string given = p.security_node;
+                if (const HostSpec* h = s_.host(p.host); h && !h->ssh.empty()) {
+                    // Another host gets its own nodes' files, copied into the run's folder there;
+                    // never a CA's key (the lab's folder stays here).
+                    given = remote_run_dir(r_) + "/security/" + node;
+                    for (const char* f : security::kNodeFileNames) p.copies.emplace_back(p.security_node + "/" + f, given + "/" + f);
+                }
+                p.argv.insert(p.argv.end(), {"--security", given});
             }
         }
         if (!missing_.empty()) {

@@ -2,6 +2,7 @@
 // its own sshd, as are the car hosts) starts each car's simulator, bridge and fsm_node on the
 // car's own host over ssh, records centrally, and leaves nothing running anywhere.
 #include <cpm/HistoryClient.hpp>
+#include <cpm/Security.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm_test/Hosts.hpp>
 #include <cpm_test/Isolation.hpp>
@@ -18,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -187,6 +189,53 @@ TEST_F(LabAcrossHosts, InSimulatedTimeTheClockWaitsForTheCarsOnTheirHostsAndEver
         EXPECT_EQ(states.samples.size(), span_ns / 20'000'000 + 1) << "car " << car << ": one state per 20 ms tick of lab time";
     }
     for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s)) << "left on host " << h;
+}
+
+TEST_F(LabAcrossHosts, ASecuredLabGivesEachHostItsOwnNodesAndNeverACaKey)
+{
+    const std::string lab = dir.file("lab-sec");
+    cpm_test::Process init({built_program("cpm"), "security", "init", lab, "--days", "30"});
+    ASSERT_EQ(init.wait(60s), 0) << init.errors();
+    const std::string name = "secured-" + std::to_string(::getpid()), out = dir.file(name), there = "/tmp/cpm-runs/" + name;
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario("security: " + lab + "\n"), "--out", out, "--monitor", "off"}));
+    // While the cars run: each process on a car host runs as its own node from the run's folder
+    // there, which holds the nodes of the car hosts' processes and no key of a CA.
+    std::map<std::string, std::string> node_of;  // a car host's process's --security -> the program
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        for (size_t h : {1u, 2u}) {
+            for (int pid : hosts().pids(h)) {
+                const std::string cmd = command_line(pid);
+                const auto at = cmd.find(" --security ");
+                if (cmd.rfind(cpm_prefix() + "/bin/", 0) == 0 && cmd.find("/bin/cpm ") == std::string::npos && at != std::string::npos)
+                    node_of[cmd.substr(at + 12, cmd.find(' ', at + 12) - at - 12)] = cmd.substr(0, cmd.find(' '));
+            }
+        }
+        return node_of.size() >= 5;  // firmware_sim and vehicle_bridge of both cars, car 5's fsm_node
+    }, 30s)) << run.errors() << ::testing::PrintToString(node_of);
+    std::set<std::string> files_there;
+    for (const auto& e : std::filesystem::recursive_directory_iterator(there + "/security")) {
+        if (e.is_regular_file()) files_there.insert(std::filesystem::relative(e.path(), there + "/security").string());
+    }
+    for (const auto& [node, program] : node_of) {
+        EXPECT_EQ(node.rfind(there + "/security/" + name + "-", 0), 0u) << program << " runs as " << node;
+        EXPECT_EQ(cpm_test::file_text(node + "/cert.pem"), cpm_test::file_text(lab + "/nodes/" + std::filesystem::path(node).filename().string() + "/cert.pem"));
+        struct stat st{};
+        ASSERT_EQ(::stat((node + "/key.pem").c_str(), &st), 0) << node;
+        EXPECT_EQ(st.st_mode & 077, 0u) << node << "/key.pem is readable by others";
+    }
+    for (const auto& f : files_there) {
+        EXPECT_EQ(f.find("ca.key"), std::string::npos) << "a CA's key on a car host: " << f;
+        EXPECT_EQ(f.find("cpm_history"), std::string::npos) << "the central host's node on a car host: " << f;
+    }
+    EXPECT_EQ(files_there.size(), node_of.size() * std::size(cpm::security::kNodeFileNames)) << ::testing::PrintToString(files_there);
+    ASSERT_EQ(run.wait(90s), 0) << run.output() << run.errors();
+    std::ifstream in(out + "/summary.json");
+    const auto summary = nlohmann::json::parse(in);
+    EXPECT_TRUE(summary["ok"].get<bool>()) << summary.dump(2);
+    // The secured history on the central host recorded both cars from their hosts.
+    auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
+    for (int car : {5, 6}) EXPECT_GT(recording.range_of<VehicleState>("vehicleState", car, 0, UINT64_MAX, cpm::HistoryBy::commit, 100000).samples.size(), 100u) << car;
+    EXPECT_FALSE(std::filesystem::exists(there)) << "the run's folder on the car hosts stays";
 }
 
 TEST_F(LabAcrossHosts, AHostWithoutSshIsRefusedBeforeAnythingStarts)

@@ -49,6 +49,10 @@ struct NodeFiles
     std::string permissions_xml;  ///< the readable copy of the signed permissions
 };
 NodeFiles node_files(const std::string& node_dir);
+/// The files of a node's folder, all node_files() reads (no CA's key among them): what another
+/// host needs to run the node.
+inline constexpr const char* kNodeFileNames[] = {"identity_ca.cert.pem", "cert.pem",       "key.pem",        "permissions_ca.cert.pem",
+                                                 "governance.p7s",       "permissions.p7s", "permissions.xml"};
 
 /// The DomainParticipantQos properties that make a participant secure with these files.
 std::vector<std::pair<std::string, std::string>> participant_properties(const NodeFiles& files);
