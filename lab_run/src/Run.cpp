@@ -253,31 +253,32 @@ void remove_from_hosts(const Scenario& s, const RunSettings& settings)
 }
 
 /// The files each process on another host reads, copied into the run's folder there (made
-/// first) with ssh. Throws ScenarioError naming the host and file that could not be copied.
+/// first): one ssh per host, the files in one stream of "<bytes> <path>" lines each followed by
+/// the file. Readable by their owner only (a node's private key among them). Throws
+/// ScenarioError naming the host and what could not be copied.
 void copy_to_hosts(const Scenario& s, const std::vector<ProcessPlan>& plan, const RunSettings& settings)
 {
     std::vector<Diagnostic> errors;
     for (const auto& h : s.hosts) {
         const RemoteHost remote = remote_of(s, h.name);
         if (remote.is_local()) continue;
-        std::set<std::string> done;
         const std::string there = remote_run_dir(settings);
-        auto ssh = [&](const std::vector<std::string>& argv, const std::string& input) { return run_there(remote, argv, input); };
-        if (!ssh({"mkdir", "-p", there}, "")) {
-            errors.push_back({s.file + ": hosts." + h.name, "cannot make the run's folder " + there + " there"});
-            continue;
-        }
+        std::set<std::string> done;
+        std::string stream, what;
         for (const auto& p : plan) {
             if (p.host != h.name) continue;
             for (const auto& [local, copy] : p.copies) {
                 if (!done.insert(copy).second) continue;
-                // Readable by its owner only (a node's private key among them), in folders made as needed.
-                const std::string parent = fs::path(copy).parent_path().string();
-                if (!ssh({"/bin/sh", "-c", "umask 077 && mkdir -p " + shell_quote(parent) + " && cat > " + shell_quote(copy)},
-                         read_text_file(local, "file for " + p.name))) {
-                    errors.push_back({s.file + ": hosts." + h.name, "cannot copy " + local + " to " + copy + " there (for " + p.name + ")"});
-                }
+                const std::string text = read_text_file(local, "file for " + p.name);
+                stream += std::to_string(text.size()) + " " + copy + "\n" + text;
+                what += (what.empty() ? "" : ", ") + local;
             }
+        }
+        const std::string script = "umask 077 && mkdir -p " + shell_quote(there) +
+                                   " && while read -r n f; do mkdir -p \"$(dirname \"$f\")\" && head -c \"$n\" > \"$f\" || exit 1; done";
+        if (!run_there(remote, {"/bin/sh", "-c", script}, stream)) {
+            errors.push_back({s.file + ": hosts." + h.name, "cannot make the run's folder " + there + " there" +
+                                                               (what.empty() ? std::string() : " with " + what)});
         }
     }
     if (!errors.empty()) throw ScenarioError(errors);

@@ -131,6 +131,6 @@ TEST(RemoteHost, AProgramThereRunsTiedToItsSshWithEveryArgumentQuotedAsGiven)
     EXPECT_EQ(argv[argv.size() - 3], "pi@10.0.0.5");
     EXPECT_EQ(argv[argv.size() - 2], "--");
     // One word for the remote shell each, nothing it would expand.
-    EXPECT_EQ(argv.back(), "'/opt/cpm/bin/cpm' 'host' 'run' '--grace' '2000ms' '--' '/opt/cpm/bin/fsm_node' '--fsm' 'it'\\''s a car.json' '$(reboot)'");
+    EXPECT_EQ(argv.back(), "'/opt/cpm/bin/cpm' 'host' 'run' '--grace' '2000ms' '--lease' '10000ms' '--' '/opt/cpm/bin/fsm_node' '--fsm' 'it'\\''s a car.json' '$(reboot)'");
     EXPECT_TRUE(cpm::RemoteHost{}.is_local());
 }

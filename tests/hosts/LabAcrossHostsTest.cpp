@@ -211,7 +211,7 @@ TEST_F(LabAcrossHosts, ASecuredLabGivesEachHostItsOwnNodesAndNeverACaKey)
             }
         }
         return node_of.size() >= 5;  // firmware_sim and vehicle_bridge of both cars, car 5's fsm_node
-    }, 30s)) << run.errors() << ::testing::PrintToString(node_of);
+    }, 60s)) << run.errors() << ::testing::PrintToString(node_of);
     std::set<std::string> files_there;
     for (const auto& e : std::filesystem::recursive_directory_iterator(there + "/security")) {
         if (e.is_regular_file()) files_there.insert(std::filesystem::relative(e.path(), there + "/security").string());
