@@ -411,7 +411,15 @@ void supervise(ProcessGroup& group, std::set<std::string>& died, RunResult& resu
                                "):\n" + group.tail(e.name);
             }
         }
-        if (!result.error.empty() || clock.ended(result.error)) break;
+        if (!result.error.empty()) break;
+        if (clock.ended(result.error)) {
+            // A node the simulated clock waited for in vain: what its log says (it may be waiting itself).
+            for (const auto& p : plan) {
+                if (p.timer.empty() || result.error.find("'" + p.timer + "'") == std::string::npos) continue;
+                result.error += "\n" + p.name + "'s log (" + (dir / (p.name + ".log")).string() + ") ends:\n" + group.tail(p.name, 5);
+            }
+            break;
+        }
         if (o.progress && Clock::now() - last_progress >= std::chrono::seconds(tty ? 1 : 10)) {
             last_progress = Clock::now();
             std::fprintf(o.progress, tty ? "\r%s   " : "%s\n", progress().c_str());

@@ -187,7 +187,9 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json").string();
     int pid = 0;
     ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args, run_tag(out))) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
-    std::this_thread::sleep_for(2s);  // driving
+    // Driving, and saying so in its log (on a loaded machine that can take longer than a moment).
+    EXPECT_TRUE(cpm_test::wait_until([&] { return cpm_test::file_text(out + "/fsm_5.log").find("fsm_node: vehicle 5") != std::string::npos; }, 30s))
+        << cpm_test::file_text(out + "/fsm_5.log");
     ::kill(pid, SIGKILL);
     EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
     EXPECT_NE(run.errors().find("fsm_5 killed by SIGKILL during the run"), std::string::npos) << run.errors();
@@ -324,6 +326,24 @@ TEST(LabRun, CtrlCInSimulatedTimeSaysHowMuchLabTimeRanAndWhyTheRunEndedEarly)
     std::ifstream page(out + "/report.html");
     const std::string html((std::istreambuf_iterator<char>(page)), std::istreambuf_iterator<char>());
     EXPECT_NE(html.find("did not end well: it was stopped (Ctrl-C or SIGTERM) before its end"), std::string::npos) << html.substr(0, 3000);
+}
+
+TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
+{
+    // A state machine that looks for gates on a car without a camera: its fsm_node waits for a
+    // marker finder before it joins the clock, and the clock for it.
+    TempDir dir;
+    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string file = dir.write("no_camera.yaml", "name: no_camera\ntime: simulated\nduration: 5s\nworld: " + source +
+                                                             "maps/gates.json\nvehicles:\n  - {id: 5, start: [0.0, 0.0, 0.3], fsm: " + source +
+                                                             "fsm/gates.json}\n");
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"});
+    EXPECT_EQ(run.wait(90s), 1) << run.output() << run.errors();
+    const std::string said = run.output() + run.errors();
+    EXPECT_NE(said.find("no announcement from 'fsm_node_5'"), std::string::npos) << said;
+    EXPECT_NE(said.find("fsm_5's log (" + out + "/fsm_5.log) ends:"), std::string::npos) << said;
+    EXPECT_NE(said.find("waiting for a writer of arucoMarkers"), std::string::npos) << said;
 }
 
 TEST(LabRun, AWrongScenarioStartsNothing)
