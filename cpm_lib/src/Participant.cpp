@@ -207,7 +207,9 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
     qos.wire_protocol().participant_id = -1;
 
     if (!options.discovery_server.empty()) {
-        builtin.discovery_config.discoveryProtocol = rtps::DiscoveryProtocol_t::CLIENT;
+        // A super client: it hears of every endpoint, not only of those matching its own (a
+        // recording history, the monitor and `cpm topic list` subscribe to what they discover).
+        builtin.discovery_config.discoveryProtocol = rtps::DiscoveryProtocol_t::SUPER_CLIENT;
         rtps::RemoteServerAttributes server;
         rtps::get_server_client_default_guidPrefix(0, server.guidPrefix);
         rtps::Locator_t locator = udp_locator(options.discovery_server, "discovery server");

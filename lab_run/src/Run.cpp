@@ -440,13 +440,17 @@ std::vector<std::string> timers_of(const std::vector<ProcessPlan>& plan)
     return timers;
 }
 
-/// The history first, so that the recording holds the run from its first sample, then the rest.
-/// An error message when the history does not answer ("" when all started).
+/// The history first (after a discovery server, which it needs), so that the recording holds the
+/// run from its first sample, then the rest. An error message when the history does not answer
+/// ("" when all started).
 std::string start_processes(ProcessGroup& group, const Scenario& s, const std::vector<ProcessPlan>& plan, const fs::path& dir,
                             const RunSettings& settings, const std::string& qos, HistoryClient& history, const std::function<bool()>& stop)
 {
-    const std::string& history_name = plan[0].name;
-    (void)group.start(spec_of(plan[0], dir, settings.domain, qos, s));
+    const auto history_at = std::find_if(plan.begin(), plan.end(), [](const ProcessPlan& p) { return p.name == "cpm_history"; });
+    if (history_at == plan.end()) throw cpm::Error("a run's plan without cpm_history");
+    const size_t first = size_t(history_at - plan.begin()) + 1;
+    const std::string& history_name = history_at->name;
+    for (size_t i = 0; i < first; ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos, s));
     bool up = false;
     const auto deadline = Clock::now() + std::chrono::seconds(15);
     while (!up && Clock::now() < deadline && !stop() && group.find(history_name)->running()) {
@@ -456,7 +460,7 @@ std::string start_processes(ProcessGroup& group, const Scenario& s, const std::v
         }
     }
     if (!up) return "the history service did not answer within 15 s; the end of its log:\n" + group.tail(history_name);
-    for (size_t i = 1; i < plan.size(); ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos, s));
+    for (size_t i = first; i < plan.size(); ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos, s));
     return "";
 }
 
@@ -564,6 +568,10 @@ ParticipantOptions participant_options(const Scenario& s, const RunSettings& set
     po.shared_memory = false;
     if (const HostSpec* here = s.local_host()) {
         po.interfaces = {here->address};
+        if (s.discovery_server) {
+            po.discovery_server = s.discovery_server_locator();
+            return po;
+        }
         for (const auto& h : s.hosts) {
             if (h.name != here->name) po.initial_peers.push_back(h.address);
         }
@@ -635,7 +643,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     result.ok = result.error.empty() && !result.interrupted &&
                 std::none_of(result.processes.begin(), result.processes.end(), [](const ProcessEnd& e) { return e.failed; }) &&
                 std::none_of(result.hosts.begin(), result.hosts.end(), [](const RunResult::Host& h) { return h.lost; });
-    write_summary(s, settings, qos, result, processes, watch, (dir / (plan[0].name + ".log")).string());
+    write_summary(s, settings, qos, result, processes, watch, (dir / "cpm_history.log").string());
     return result;
 }
 

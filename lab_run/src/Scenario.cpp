@@ -139,10 +139,6 @@ void read_hosts(Checker& c, const YAML::Node& root, Scenario& s)
     }
     if (root["ssh_config"]) s.ssh_config = c.file(root["ssh_config"], "ssh_config", s.dir, "ssh config");
     if (root["max_clock_offset"]) s.max_clock_offset_ns = c.duration(root["max_clock_offset"], "max_clock_offset").value_or(s.max_clock_offset_ns);
-    if (const YAML::Node d = root["discovery"]) {
-        const auto t = c.text(d, "discovery");
-        if (t && *t != "peers") c.error(d, "discovery", "'" + *t + "': only peers (unicast to every host's address) is supported yet");
-    }
 }
 
 /// A process's `host:`: a name of `hosts:` (with did-you-mean), or "" with an error said.
@@ -159,6 +155,32 @@ std::string host_name(Checker& c, const Scenario& s, const YAML::Node& n, const 
     c.error(n, path, "no host '" + *name + "'" + (meant ? " (did you mean '" + *meant + "'?)" : std::string()) +
                          (known.empty() ? "; name the lab's computers under hosts:" : "; hosts: " + list));
     return "";
+}
+
+/// `discovery:` peers (the default) or server, and `discovery_server:` (a host; default the run's own).
+void read_discovery(Checker& c, const YAML::Node& root, Scenario& s)
+{
+    if (!root["hosts"]) {
+        if (root["discovery"] || root["discovery_server"]) {
+            const YAML::Node n = root["discovery"] ? root["discovery"] : root["discovery_server"];
+            c.error(n, root["discovery"] ? "discovery" : "discovery_server", "only for a lab across hosts: name them under hosts:");
+        }
+        return;
+    }
+    if (const YAML::Node d = root["discovery"]) {
+        const auto t = c.text(d, "discovery");
+        if (t && *t == "server") s.discovery_server = true;
+        else if (t && *t != "peers") c.error(d, "discovery", "'" + *t + "': expected peers (unicast to every host's address) or server (fast-discovery-server)");
+    }
+    if (const YAML::Node d = root["discovery_server"]) {
+        if (!s.discovery_server) c.error(d, "discovery_server", "only with discovery: server");
+        else s.discovery_server_host = host_name(c, s, d, "discovery_server");
+    } else if (s.discovery_server && s.local_host()) {
+        s.discovery_server_host = s.local_host()->name;  // the run's own host by default
+    }
+    if (s.discovery_server && root["security"]) {
+        c.error(root["discovery"], "discovery", "server with security: is not supported yet (the server would need a node of its own); use peers");
+    }
 }
 
 /// `history: {host: …}`.
@@ -316,8 +338,9 @@ Scenario load_scenario(const std::string& path)
     Checker c(path);
     if (!root.IsMap()) throw ScenarioError(std::vector<Diagnostic>{{path, "expected a map of keys (name, time, duration, world, vehicles, ...)"}});
     c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor",
-                    "parameters", "security", "hosts", "ssh_config", "max_clock_offset", "discovery", "history"});
+                    "parameters", "security", "hosts", "ssh_config", "max_clock_offset", "discovery", "discovery_server", "history"});
     read_hosts(c, root, s);  // before anything names a host
+    read_discovery(c, root, s);
 
     if (!root["name"]) c.error(root, "name", "missing (the run's name; its folder is runs/<name>-<UTC time>)");
     else if (auto n = c.text(root["name"], "name")) {
@@ -365,6 +388,12 @@ Scenario load_scenario(const std::string& path)
     return s;
 }
 
+std::string Scenario::discovery_server_locator() const
+{
+    const HostSpec* h = host(discovery_server_host);
+    return h ? h->address + ":" + std::to_string(kDiscoveryServerPort) : "";
+}
+
 const HostSpec* Scenario::local_host() const
 {
     for (const auto& h : hosts) {
@@ -408,6 +437,7 @@ void place_on_host(ProcessPlan& p, const Scenario& s, const RunSettings& r, std:
     const HostSpec* here = s.host(p.host);
     if (!here) return;  // named in the scenario's errors
     p.host = here->name;
+    if (p.argv[0].rfind(r.bin_dir + "/", 0) != 0) return;  // not cpm's (fast-discovery-server): as it is, there too
     if (!here->ssh.empty()) {
         const std::string there = remote_run_dir(r);
         p.argv[0] = here->cpm + "/bin/" + fs::path(p.argv[0]).filename().string();
@@ -432,6 +462,10 @@ void place_on_host(ProcessPlan& p, const Scenario& s, const RunSettings& r, std:
         }
     }
     p.argv.insert(p.argv.end(), {"--dds_interface", here->address});
+    if (s.discovery_server) {
+        p.argv.insert(p.argv.end(), {"--dds_discovery_server", s.discovery_server_locator()});
+        return;
+    }
     for (const auto& other : s.hosts) {
         if (other.name != here->name) p.argv.insert(p.argv.end(), {"--dds_initial_peer", other.address});
     }
@@ -452,6 +486,15 @@ public:
             if (t != "*") history.insert(history.end(), {"--include", cpm::cli::glob_regex(t)});
         }
         for (const auto& t : s_.record.exclude) history.insert(history.end(), {"--exclude", cpm::cli::glob_regex(t)});
+        if (s_.discovery_server) {
+            // Started first, stopped last: every participant of the run finds the others through it.
+            ProcessPlan server{.name = "discovery_server",
+                               .argv = {"/usr/bin/fast-discovery-server", "-i", "0", "-l", s_.host(s_.discovery_server_host)->address, "-p",
+                                        std::to_string(Scenario::kDiscoveryServerPort)},
+                               .stop_order = 10,
+                               .host = s_.discovery_server_host};
+            plan_.push_back(server);
+        }
         add("cpm_history", "cpm_history", history, false, 9, 0, s_.history_host);
         if (!s_.parameters.empty()) {
             add("parameters", "parameter_server", {program("cpm"), "param", "serve", s_.parameters, "--dds_domain", domain_}, false, 8, 0, "");

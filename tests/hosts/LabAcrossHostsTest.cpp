@@ -240,6 +240,40 @@ TEST_F(LabAcrossHosts, ASecuredLabGivesEachHostItsOwnNodesAndNeverACaKey)
     EXPECT_FALSE(std::filesystem::exists(there)) << "the run's folder on the car hosts stays";
 }
 
+TEST_F(LabAcrossHosts, WithADiscoveryServerEveryProcessFindsTheOthersThroughIt)
+{
+    const std::string out = dir.file("server");
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario("discovery: server\ndiscovery_server: central\nrecord: {topics: [\"*\"], exclude: [cameraFrame]}\n",
+                                                                               ", camera: " + kRoot + "/scenarios/cameras/sim_640x480.yaml"),
+                                         "--out", out,
+                                         "--monitor", "off", "--time", "simulated", "--duration", "5s"}));
+    auto server_runs = [&] {
+        for (int pid : hosts().pids(0)) {
+            if (command_line(pid).rfind("/usr/bin/fast-discovery-server -i 0 -l " + hosts().address(0) + " -p 11811", 0) == 0) return true;
+        }
+        return false;
+    };
+    std::string bridge_command;
+    EXPECT_TRUE(cpm_test::wait_until([&] {
+        for (int pid : hosts().pids(1)) {
+            if (command_line(pid).find("/bin/vehicle_bridge ") != std::string::npos) bridge_command = command_line(pid);
+        }
+        return server_runs() && !bridge_command.empty();
+    }, 30s)) << "the server on the central host, car_a's bridge";
+    EXPECT_NE(bridge_command.find("--dds_discovery_server " + hosts().address(0) + ":11811"), std::string::npos) << bridge_command;
+    EXPECT_EQ(bridge_command.find("--dds_initial_peer"), std::string::npos) << bridge_command;
+    ASSERT_EQ(run.wait(120s), 0) << run.output() << run.errors();
+    std::ifstream in(out + "/summary.json");
+    const auto summary = nlohmann::json::parse(in);
+    EXPECT_TRUE(summary["ok"].get<bool>()) << summary.dump(2);
+    auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
+    for (int car : {5, 6}) {
+        const auto states = recording.range_of<VehicleState>("vehicleState", car, 0, UINT64_MAX, cpm::HistoryBy::data, 100000);
+        EXPECT_GE(states.samples.size(), 200u) << "car " << car << ": 5 s of lab time at 50 Hz";
+    }
+    EXPECT_TRUE(cpm_test::wait_until([&] { return !server_runs(); }, 10s)) << "the discovery server is left running";
+}
+
 TEST_F(LabAcrossHosts, AHostWithoutSshIsRefusedBeforeAnythingStarts)
 {
     hosts().stop_sshd(2);

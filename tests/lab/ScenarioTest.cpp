@@ -203,7 +203,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
                                        "qos: {vehicleState: {reliable: maybe}}\n"); // 14
     const auto errors = errors_of(file);
     const std::vector<std::string> expected = {
-        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, history",
+        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, discovery_server, history",
         file + ":1: name: 'bad run': use letters, digits, - and _ only",
         file + ":2: time: 'sometimes': expected real or simulated",
         file + ":1: duration: missing (how long the run lasts, e.g. 30s)",
@@ -385,4 +385,42 @@ TEST(Scenario, HostsNameEachProcessesComputerAndEveryMistakeInThemIsNamed)
                                                                "hosts: {a: {address: 10.1.0.1, ssh: a}}\nvehicles: [{id: 2}]\n"));
     ASSERT_EQ(no_local.size(), 1u);
     EXPECT_NE(no_local[0].find("hosts: 0 hosts without ssh; exactly one must be the host the run runs on"), std::string::npos) << no_local[0];
+}
+
+TEST(Scenario, WithADiscoveryServerItRunsOnItsHostAndEveryProcessIsPointedAtIt)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "firmware_sim", "vehicle_bridge"});
+    const std::string hosts = "hosts:\n  central: {address: 10.1.0.1}\n  car_a: {address: 10.1.0.2, ssh: car_a}\n";
+    const auto s = load_scenario(dir.write("server.yaml", "name: h\nduration: 5s\nworld: map.json\n" + hosts +
+                                                              "discovery: server\ndiscovery_server: car_a\nvehicles: [{id: 2, host: car_a}]\n"));
+    ASSERT_TRUE(s.discovery_server);
+    EXPECT_EQ(s.discovery_server_locator(), "10.1.0.2:11811");
+    const auto plan = plan_run(s, RunSettings{.bin_dir = bin, .run_dir = dir.file("run"), .domain = 3});
+    ASSERT_FALSE(plan.empty());
+    // The server first (the history needs it), on its host as the system installs it, stopped last.
+    EXPECT_EQ(plan[0].name, "discovery_server");
+    EXPECT_EQ(plan[0].host, "car_a");
+    EXPECT_EQ(plan[0].argv, (std::vector<std::string>{"/usr/bin/fast-discovery-server", "-i", "0", "-l", "10.1.0.2", "-p", "11811"}));
+    for (const auto& p : plan) {
+        EXPECT_GE(plan[0].stop_order, p.stop_order) << p.name;
+        if (p.name == "discovery_server") continue;
+        const auto at = std::find(p.argv.begin(), p.argv.end(), "--dds_discovery_server");
+        ASSERT_NE(at, p.argv.end()) << p.name;
+        EXPECT_EQ(*(at + 1), "10.1.0.2:11811") << p.name;
+        EXPECT_EQ(std::find(p.argv.begin(), p.argv.end(), "--dds_initial_peer"), p.argv.end()) << p.name;
+    }
+    // Default: on the run's own host.
+    EXPECT_EQ(load_scenario(dir.write("default.yaml", "name: h\nduration: 5s\nworld: map.json\n" + hosts + "discovery: server\nvehicles: [{id: 2}]\n"))
+                  .discovery_server_host, "central");
+
+    const std::string bad = dir.write("bad.yaml", "name: h\nduration: 5s\nworld: map.json\n" + hosts +
+                                                      "discovery: sever\ndiscovery_server: car_b\nvehicles: [{id: 2}]\n");
+    EXPECT_EQ(errors_of(bad), (std::vector<std::string>{
+                                  bad + ":7: discovery: 'sever': expected peers (unicast to every host's address) or server (fast-discovery-server)",
+                                  bad + ":8: discovery_server: only with discovery: server",
+                              }));
+    const std::string alone = dir.write("alone.yaml", "name: h\nduration: 5s\nworld: map.json\ndiscovery: server\nvehicles: [{id: 2}]\n");
+    EXPECT_EQ(errors_of(alone), (std::vector<std::string>{alone + ":4: discovery: only for a lab across hosts: name them under hosts:"}));
 }

@@ -100,6 +100,14 @@ struct Scenario
     std::vector<HostSpec> hosts;  ///< empty: every process on the run's own host
     std::string ssh_config;       ///< an ssh config file for reaching the hosts (ssh -F), or empty
     uint64_t max_clock_offset_ns = 2'000'000;  ///< a host's clock further off refuses the run
+    /// The port fast-discovery-server listens on (its default).
+    static constexpr int kDiscoveryServerPort = 11811;
+    /// `discovery: server`: every participant finds the others through fast-discovery-server,
+    /// which the run starts on this host (a name of hosts:); false: unicast to every host (peers).
+    bool discovery_server = false;
+    std::string discovery_server_host;
+    /// With discovery_server: the server's address:port every participant is pointed at.
+    std::string discovery_server_locator() const;
     /// The host the run runs on (the one without ssh), or nullptr without hosts.
     const HostSpec* local_host() const;
     /// The host of that name ("": the run's own), or nullptr.
