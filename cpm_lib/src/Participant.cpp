@@ -153,16 +153,14 @@ private:
 
 }  // namespace
 
+namespace {
+
 constexpr uint32_t kUdpSocketBufferBytes = 1024 * 1024;
 
-dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
+/// UDPv4 on loopback unless the options open the network (interfaces, peers, a discovery server);
+/// with interfaces named, on those (and loopback) only.
+std::shared_ptr<eprosima::fastdds::rtps::UDPv4TransportDescriptor> udp_transport(const ParticipantOptions& options)
 {
-    dds::DomainParticipantQos qos = dds::PARTICIPANT_QOS_DEFAULT;
-    qos.name(options.name.empty() ? init_settings().node_id : options.name);
-
-    // Never Fast DDS's built-in transports: they multicast discovery on every interface.
-    auto& transport = qos.transport();
-    transport.use_builtin_transports = false;
     auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
     udp->maxInitialPeersRange = static_cast<uint32_t>(std::max(options.max_initial_peers_range, 1));
     // Between hosts the data goes over UDP: the kernel's default socket buffers (208 KiB) drop
@@ -178,21 +176,37 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
         udp->interfaceWhiteList.push_back("127.0.0.1");
         for (const auto& name : options.interfaces) udp->interfaceWhiteList.push_back(name);
     }
-    if (options.shared_memory) {
-        // Fast DDS's defaults (512 KiB, 512 messages) overflow when a reliable writer sends a
-        // window of samples at once; every dropped sample then waits for a repair round
-        // (bench/throughput: 1 KiB keep-all went from ~1-8k to ~75k samples/s).
-        auto shm = std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>();
-        shm->segment_size(4 * 1024 * 1024);
-        shm->port_queue_capacity(2048);
-        // A process started again after a crash gets its predecessor's port; opening it waits
-        // this long for the dead listeners before making the port anew, and its peers' sends go
-        // nowhere meanwhile (Fast DDS's 1 s made a restarted node deaf for about a second). A
-        // live listener that misses the check only re-attaches to the new port.
-        shm->healthy_check_timeout_ms(200);
-        transport.user_transports.push_back(shm);
-    }
-    transport.user_transports.push_back(udp);
+    return udp;
+}
+
+std::shared_ptr<eprosima::fastdds::rtps::SharedMemTransportDescriptor> shared_memory_transport()
+{
+    // Fast DDS's defaults (512 KiB, 512 messages) overflow when a reliable writer sends a
+    // window of samples at once; every dropped sample then waits for a repair round
+    // (bench/throughput: 1 KiB keep-all went from ~1-8k to ~75k samples/s).
+    auto shm = std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>();
+    shm->segment_size(4 * 1024 * 1024);
+    shm->port_queue_capacity(2048);
+    // A process started again after a crash gets its predecessor's port; opening it waits
+    // this long for the dead listeners before making the port anew, and its peers' sends go
+    // nowhere meanwhile (Fast DDS's 1 s made a restarted node deaf for about a second). A
+    // live listener that misses the check only re-attaches to the new port.
+    shm->healthy_check_timeout_ms(200);
+    return shm;
+}
+
+}  // namespace
+
+dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
+{
+    dds::DomainParticipantQos qos = dds::PARTICIPANT_QOS_DEFAULT;
+    qos.name(options.name.empty() ? init_settings().node_id : options.name);
+
+    // Never Fast DDS's built-in transports: they multicast discovery on every interface.
+    auto& transport = qos.transport();
+    transport.use_builtin_transports = false;
+    if (options.shared_memory) transport.user_transports.push_back(shared_memory_transport());
+    transport.user_transports.push_back(udp_transport(options));
 
     auto& builtin = qos.wire_protocol().builtin;
     const auto lease = checked_lease(options.lease, "participant option lease");
