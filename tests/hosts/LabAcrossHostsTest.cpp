@@ -330,3 +330,54 @@ TEST_F(LabAcrossHosts, ACarHostLostMidRunIsNamedAndTheOtherCarDrivesOnToTheEnd)
         << "left on the lost host: " << ::testing::PrintToString(programs_on(hosts(), 2));
     for (size_t h = 0; h < 2; ++h) EXPECT_TRUE(programs_on(hosts(), h).empty()) << "left on host " << h;
 }
+
+TEST_F(LabAcrossHosts, APlannerHostLostMidRunBrakesTheCarsOnTheirOwnHostAndEndsTheRunNamingIt)
+{
+    // Two cars on car_a, routed by central_routing on car_b: car_b carries more than cars.
+    const std::string file = dir.write("routed.yaml", "name: routed\ntime: real\nduration: 30s\nlanes: " + kRoot + "/scenarios/lanes/intersection.json\n"
+                                       "hosts:\n  central: {address: " + hosts().address(0) + "}\n"
+                                       "  car_a: {address: " + hosts().address(1) + ", ssh: car_a, cpm: " + cpm_prefix() + "}\n"
+                                       "  car_b: {address: " + hosts().address(2) + ", ssh: car_b, cpm: " + cpm_prefix() + "}\n"
+                                       "ssh_config: " + hosts().ssh_config() + "\n"
+                                       "history: {host: central}\n"
+                                       "routing: {enabled: true, seed: 1, period: 400ms, host: car_b}\n"
+                                       "vehicles:\n  - {id: 1, host: car_a}\n  - {id: 2, host: car_a}\n");
+    const std::string out = dir.file("routed-" + std::to_string(::getpid()));
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return runs(programs_on(hosts(), 2), "central_routing"); }, 30s)) << run.errors();
+    std::this_thread::sleep_for(5s);  // the cars drive on its trajectories
+    const uint64_t cut_ns = cpm::get_time_ns();
+    ASSERT_TRUE(hosts().cut(2));  // the planner's cable pulled
+    EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
+    EXPECT_NE(run.errors().find("central_routing lost with host car_b"), std::string::npos) << run.output() << run.errors();
+
+    std::ifstream in(out + "/summary.json");
+    const auto summary = nlohmann::json::parse(in);
+    EXPECT_NE(summary["error"].get<std::string>().find("central_routing lost with host car_b"), std::string::npos) << summary.dump(2);
+    EXPECT_LT(summary["lab_time_s"].get<double>(), 25.0) << "the run ended when it lost its planner, not at its duration";
+    for (const auto& h : summary["hosts"]) EXPECT_EQ(h["lost"].get<bool>(), h["name"] == "car_b") << h.dump();
+    // On car_a, still reached, each car drove before the cut and stood by its bridge's watchdog
+    // (the newest trajectory goes stale 1 s after it was made) before the run ended.
+    auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
+    for (int car : {1, 2}) {
+        const auto before = recording.range_of<VehicleState>("vehicleState", car, cut_ns - 3'000'000'000, cut_ns, cpm::HistoryBy::data, 100000);
+        const auto after = recording.range_of<VehicleState>("vehicleState", car, cut_ns, UINT64_MAX, cpm::HistoryBy::data, 100000);
+        ASSERT_FALSE(before.samples.empty() || after.samples.empty()) << "car " << car;
+        double fastest = 0;
+        for (const auto& s : before.samples) fastest = std::max(fastest, std::abs(s.sample.speed()));
+        EXPECT_GT(fastest, 0.2) << "car " << car << " drove before the cut";
+        uint64_t stood_ns = 0;
+        for (const auto& s : after.samples) {
+            if (std::abs(s.sample.speed()) < 0.02) {
+                stood_ns = s.data_ns;
+                break;
+            }
+        }
+        ASSERT_NE(stood_ns, 0u) << "car " << car << " still drove when the run ended: " << after.samples.back().sample.speed() << " m/s";
+        EXPECT_LT(double(stood_ns - cut_ns) * 1e-9, 2.5) << "car " << car << " stood that long after the cut";
+        std::printf("car %d stood %.2f s after its planner's host was cut off\n", car, double(stood_ns - cut_ns) * 1e-9);
+    }
+    for (size_t h = 0; h < 2; ++h) EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s)) << "left on host " << h;
+    EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), 2).empty(); }, cpm::kRemoteLease + 10s))
+        << "left on the lost host: " << ::testing::PrintToString(programs_on(hosts(), 2));
+}
