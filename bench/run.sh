@@ -19,6 +19,8 @@ if [ "$(id -u)" = 0 ]; then
   "$bin/bench_throughput" --link veth
   "$bin/bench_latency" --link veth --sizes 100 --count 4000
   "$bin/bench_large" --camera --link veth --seconds 30
+  echo "== bench_startup (a lab run across three hosts until every car is recorded, vs one host)"
+  "$bin/bench_startup"
 else
   echo "== across hosts (veth): not run, making network namespaces needs root"
 fi

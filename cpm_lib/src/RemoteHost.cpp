@@ -47,13 +47,42 @@ std::string shell_quote(const std::string& text)
     return out + "'";
 }
 
-std::vector<std::string> ssh_command(const RemoteHost& host, const std::vector<std::string>& remote_argv)
+namespace {
+
+/// ssh and the options every command to the host takes, up to its destination.
+std::vector<std::string> ssh_to(const RemoteHost& host)
 {
-    // Never a prompt (BatchMode), a lost host noticed within about 3 s (ServerAlive*), a new
-    // host's key not taken on trust silently (the lab's hosts are in known_hosts: StrictHostKeyChecking stays as configured).
+    // Never a prompt (BatchMode), a lost host noticed within about 3 s (ServerAlive*: the shared
+    // connection's, which ends every command on it), a new host's key not taken on trust
+    // silently (the lab's hosts are in known_hosts: StrictHostKeyChecking stays as configured).
     std::vector<std::string> argv{ssh_program(), "-o", "BatchMode=yes", "-o", "ConnectTimeout=5", "-o", "ServerAliveInterval=1",
                                   "-o", "ServerAliveCountMax=3", "-o", "LogLevel=ERROR"};
+    if (!host.shared_connection_dir.empty()) {
+        // The first command opens it in the background; it outlives a gap between commands
+        // (ControlPersist) and is ended by close_shared_connection.
+        argv.insert(argv.end(), {"-o", "ControlMaster=auto", "-o", "ControlPath=" + host.shared_connection_dir + "/%C", "-o", "ControlPersist=60"});
+    }
     argv.insert(argv.end(), host.ssh_options.begin(), host.ssh_options.end());
+    return argv;
+}
+
+}  // namespace
+
+void close_shared_connection(const RemoteHost& host)
+{
+    if (host.is_local() || host.shared_connection_dir.empty()) return;
+    auto argv = ssh_to(host);
+    argv.insert(argv.end(), {"-O", "exit", host.ssh});
+    try {
+        ChildProcess ssh({.argv = argv, .stdout_path = "/dev/null", .stderr_path = "/dev/null"});
+        (void)ssh.wait(std::chrono::seconds(5));
+    } catch (const Error&) {
+    }
+}
+
+std::vector<std::string> ssh_command(const RemoteHost& host, const std::vector<std::string>& remote_argv)
+{
+    std::vector<std::string> argv = ssh_to(host);
     argv.push_back(host.ssh);
     argv.push_back("--");
     std::string command;

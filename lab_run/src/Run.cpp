@@ -28,13 +28,16 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cerrno>
 #include <csignal>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <future>
 #include <map>
 #include <mutex>
 #include <set>
@@ -159,15 +162,44 @@ private:
 };
 
 /// How the run reaches a host of the scenario (this host: a RemoteHost that is local).
-RemoteHost remote_of(const Scenario& s, const std::string& host_name)
+RemoteHost remote_of(const Scenario& s, const RunSettings& settings, const std::string& host_name)
 {
     const HostSpec* h = s.host(host_name);
     if (!h || h->ssh.empty()) return {};
     return {.name = h->name,
             .ssh = h->ssh,
             .ssh_options = s.ssh_config.empty() ? std::vector<std::string>{} : std::vector<std::string>{"-F", s.ssh_config},
-            .cpm_prefix = h->cpm};
+            .cpm_prefix = h->cpm,
+            .shared_connection_dir = settings.ssh_shared_dir};
 }
+
+/// The run's ssh connections, one per other host, shared by every command the run sends there
+/// (a three-host start made eleven key exchanges, 3 s of it): their private folder, made when
+/// the scenario has other hosts; the connections ended and the folder removed at the end.
+class SharedConnections
+{
+public:
+    SharedConnections(const Scenario& s, RunSettings& settings) : s_(s), settings_(settings)
+    {
+        if (std::none_of(s.hosts.begin(), s.hosts.end(), [](const HostSpec& h) { return !h.ssh.empty(); })) return;
+        char dir[] = "/tmp/cpm-ssh-XXXXXX";  // short: a socket's path has at most 107 bytes
+        if (::mkdtemp(dir) == nullptr) throw cpm::Error(std::string("cannot make a folder for the run's ssh connections in /tmp: ") + std::strerror(errno));
+        settings.ssh_shared_dir = dir;
+    }
+    ~SharedConnections()
+    {
+        if (settings_.ssh_shared_dir.empty()) return;
+        for (const auto& h : s_.hosts) close_shared_connection(remote_of(s_, settings_, h.name));
+        std::error_code ec;
+        fs::remove_all(settings_.ssh_shared_dir, ec);
+    }
+    SharedConnections(const SharedConnections&) = delete;
+    SharedConnections& operator=(const SharedConnections&) = delete;
+
+private:
+    const Scenario& s_;
+    const RunSettings& settings_;
+};
 
 /// The first line a command prints ("" when it prints none or cannot run).
 std::string first_line_of(const std::vector<std::string>& argv)
@@ -189,47 +221,57 @@ std::string milliseconds(int64_t ns)
     return b;
 }
 
-/// Every other host, before anything starts anywhere: reached with ssh, the same cpm as here,
-/// its clock within max_clock_offset. Throws ScenarioError naming each host that is not.
+/// One other host: reached with ssh, the same cpm as here (`ours`), its clock within
+/// max_clock_offset. What is wrong is added to `errors`.
+RunResult::Host check_host(const Scenario& s, const RunSettings& settings, const HostSpec& h, const std::string& ours, std::vector<Diagnostic>& errors)
+{
+    RunResult::Host entry{.name = h.name, .address = h.address};
+    const RemoteHost remote = remote_of(s, settings, h.name);
+    const std::string where = s.file + ": hosts." + h.name;
+    if (remote.is_local()) return entry;
+    const std::string theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}));
+    if (theirs.empty()) {
+        errors.push_back({where, "cannot run " + remote.program("cpm") + " there with ssh " + h.ssh +
+                                     " (the host unreachable, ssh asking for a password or a key, or cpm not installed there)"});
+        return entry;
+    }
+    if (theirs != ours) {
+        errors.push_back({where, "runs " + theirs + ", this host " + ours + ": install the same cpm on every host"});
+        return entry;
+    }
+    try {
+        const auto clock = measure_clock(remote);
+        entry.clock_offset_ns = clock.offset_ns;
+        entry.rtt_ns = clock.rtt_ns;
+        if (uint64_t(std::llabs(clock.offset_ns)) > s.max_clock_offset_ns) {
+            errors.push_back({where, "its clock is " + milliseconds(clock.offset_ns) + " off this host's (measured to ±" +
+                                         milliseconds(clock.rtt_ns / 2) + "), more than max_clock_offset " +
+                                         milliseconds(int64_t(s.max_clock_offset_ns)) +
+                                         ": synchronise the hosts' clocks (chrony or NTP) and run again"});
+        }
+    } catch (const cpm::Error& e) {
+        errors.push_back({where, e.what()});
+    }
+    return entry;
+}
+
+/// Every other host, before anything starts anywhere, each on a thread of its own (a host is
+/// a few ssh round trips): check_host. Throws ScenarioError naming each host that is not fit,
+/// in the scenario's order.
 std::vector<RunResult::Host> check_hosts(const Scenario& s, const RunSettings& settings)
 {
-    std::vector<RunResult::Host> out;
-    std::vector<Diagnostic> errors;
     const std::string ours = first_line_of({(fs::path(settings.bin_dir) / "cpm").string(), "--version"});
-    for (const auto& h : s.hosts) {
-        RunResult::Host entry{.name = h.name, .address = h.address};
-        const RemoteHost remote = remote_of(s, h.name);
-        const std::string where = s.file + ": hosts." + h.name;
-        if (remote.is_local()) {
-            out.push_back(entry);
-            continue;
-        }
-        const std::string theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}));
-        if (theirs.empty()) {
-            errors.push_back({where, "cannot run " + remote.program("cpm") + " there with ssh " + h.ssh +
-                                         " (the host unreachable, ssh asking for a password or a key, or cpm not installed there)"});
-            continue;
-        }
-        if (theirs != ours) {
-            errors.push_back({where, "runs " + theirs + ", this host " + ours + ": install the same cpm on every host"});
-            continue;
-        }
-        try {
-            const auto clock = measure_clock(remote);
-            entry.clock_offset_ns = clock.offset_ns;
-            entry.rtt_ns = clock.rtt_ns;
-            if (uint64_t(std::llabs(clock.offset_ns)) > s.max_clock_offset_ns) {
-                errors.push_back({where, "its clock is " + milliseconds(clock.offset_ns) + " off this host's (measured to ±" +
-                                             milliseconds(clock.rtt_ns / 2) + "), more than max_clock_offset " +
-                                             milliseconds(int64_t(s.max_clock_offset_ns)) +
-                                             ": synchronise the hosts' clocks (chrony or NTP) and run again"});
-            }
-        } catch (const cpm::Error& e) {
-            errors.push_back({where, e.what()});
-        }
-        out.push_back(entry);
+    std::vector<std::vector<Diagnostic>> errors(s.hosts.size());
+    std::vector<std::future<RunResult::Host>> checks;
+    for (size_t i = 0; i < s.hosts.size(); ++i)
+        checks.push_back(std::async(std::launch::async, [&, i] { return check_host(s, settings, s.hosts[i], ours, errors[i]); }));
+    std::vector<RunResult::Host> out;
+    std::vector<Diagnostic> all;
+    for (size_t i = 0; i < checks.size(); ++i) {
+        out.push_back(checks[i].get());
+        all.insert(all.end(), errors[i].begin(), errors[i].end());
     }
-    if (!errors.empty()) throw ScenarioError(errors);
+    if (!all.empty()) throw ScenarioError(all);
     return out;
 }
 
@@ -247,7 +289,7 @@ bool run_there(const RemoteHost& remote, const std::vector<std::string>& argv, c
 void remove_from_hosts(const Scenario& s, const RunSettings& settings)
 {
     for (const auto& h : s.hosts) {
-        const RemoteHost remote = remote_of(s, h.name);
+        const RemoteHost remote = remote_of(s, settings, h.name);
         if (!remote.is_local()) (void)run_there(remote, {"rm", "-rf", remote_run_dir(settings)}, "");
     }
 }
@@ -260,7 +302,7 @@ void copy_to_hosts(const Scenario& s, const std::vector<ProcessPlan>& plan, cons
 {
     std::vector<Diagnostic> errors;
     for (const auto& h : s.hosts) {
-        const RemoteHost remote = remote_of(s, h.name);
+        const RemoteHost remote = remote_of(s, settings, h.name);
         if (remote.is_local()) continue;
         const std::string there = remote_run_dir(settings);
         std::set<std::string> done;
@@ -285,18 +327,18 @@ void copy_to_hosts(const Scenario& s, const std::vector<ProcessPlan>& plan, cons
 }
 
 /// The run's spec of a planned process: its log in the run's folder, the run's domain and QoS.
-ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, int domain, const std::string& qos, const Scenario& s)
+ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, const RunSettings& settings, const std::string& qos, const Scenario& s)
 {
     ProcessSpec spec{.name = p.name,
                      .argv = p.argv,
-                     .env = {"CPM_DOMAIN_ID=" + std::to_string(domain)},
+                     .env = {"CPM_DOMAIN_ID=" + std::to_string(settings.domain)},
                      .log = (dir / (p.name + ".log")).string(),
                      .restart = p.restart,
                      .stop_order = p.stop_order,
                      // The history closes the recording on its way out: it may take a while.
                      .stop_grace = std::chrono::seconds(p.name == "cpm_history" ? 30 : 5)};
     if (!qos.empty()) spec.env.push_back(std::string(kQosOverridesVariable) + "=" + qos);
-    spec.host = remote_of(s, p.host);
+    spec.host = remote_of(s, settings, p.host);
     return spec;
 }
 
@@ -450,7 +492,7 @@ std::string start_processes(ProcessGroup& group, const Scenario& s, const std::v
     if (history_at == plan.end()) throw cpm::Error("a run's plan without cpm_history");
     const size_t first = size_t(history_at - plan.begin()) + 1;
     const std::string& history_name = history_at->name;
-    for (size_t i = 0; i < first; ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos, s));
+    for (size_t i = 0; i < first; ++i) (void)group.start(spec_of(plan[i], dir, settings, qos, s));
     bool up = false;
     const auto deadline = Clock::now() + std::chrono::seconds(15);
     while (!up && Clock::now() < deadline && !stop() && group.find(history_name)->running()) {
@@ -460,7 +502,7 @@ std::string start_processes(ProcessGroup& group, const Scenario& s, const std::v
         }
     }
     if (!up) return "the history service did not answer within 15 s; the end of its log:\n" + group.tail(history_name);
-    for (size_t i = first; i < plan.size(); ++i) (void)group.start(spec_of(plan[i], dir, settings.domain, qos, s));
+    for (size_t i = first; i < plan.size(); ++i) (void)group.start(spec_of(plan[i], dir, settings, qos, s));
     return "";
 }
 
@@ -598,15 +640,19 @@ void stop_in_order(Writer<StopRequest>& stops, LabClock& clock, ProcessGroup& gr
 
 RunResult run_lab(const Scenario& s, const RunOptions& o)
 {
-    const RunSettings settings = settings_of(s, o);
+    RunSettings settings = settings_of(s, o);
     const fs::path dir = settings.run_dir;
     const auto plan = plan_run(s, settings);      // names a missing program before anything starts
-    const auto hosts = check_hosts(s, settings);  // and a host that cannot take part
+    const SharedConnections connections(s, settings);
+    // A host that cannot take part is named before anything starts; checked while the domain
+    // is claimed (its 1.5 s of listening).
+    auto checking = std::async(std::launch::async, [&] { return check_hosts(s, settings); });
     // Every process, this one too, makes its readers and writers with the scenario's QoS.
     const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
     if (!qos.empty()) ::setenv(kQosOverridesVariable, qos.c_str(), 1);
     ParticipantOptions po = participant_options(s, settings);
     const DomainClaim claim(settings.domain, po);
+    const auto hosts = checking.get();
     po.security = prepare_folder(s, settings, plan, dir);  // a secured lab's nodes issued, then copied to their hosts
     copy_to_hosts(s, plan, settings);
 

@@ -60,6 +60,25 @@ std::set<std::string> shared_memory_ports_on(const cpm_test::NamespaceHosts& hos
     return out;
 }
 
+/// The ssh connections a host's sshd serves now (a process "sshd: USER@..." each).
+size_t ssh_connections_to(const cpm_test::NamespaceHosts& hosts, size_t host)
+{
+    size_t n = 0;
+    for (int pid : hosts.pids(host)) n += command_line(pid).rfind("sshd: root@", 0) == 0;
+    return n;
+}
+
+/// ssh's processes on a host (a run's shared connections are "ssh: <path> [mux]").
+std::vector<std::string> ssh_clients_on(const cpm_test::NamespaceHosts& hosts, size_t host)
+{
+    std::vector<std::string> out;
+    for (int pid : hosts.pids(host)) {
+        const std::string cmd = command_line(pid);
+        if (cmd.rfind("ssh", 0) == 0 || cmd.rfind("/usr/bin/ssh ", 0) == 0) out.push_back(cmd);
+    }
+    return out;
+}
+
 bool runs(const std::vector<std::string>& programs, const std::string& name)
 {
     return std::any_of(programs.begin(), programs.end(), [&](const std::string& p) { return std::filesystem::path(p).filename() == name; });
@@ -125,6 +144,8 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
     EXPECT_FALSE(central_ports.empty() || a_ports.empty() || b_ports.empty()) << "shared memory within a host is on";
     for (const auto& port : a_ports) EXPECT_FALSE(central_ports.count(port) || b_ports.count(port)) << port << " of car_a mapped on another host";
     for (const auto& port : b_ports) EXPECT_FALSE(central_ports.count(port)) << port << " of car_b mapped on the central host";
+    // Every command the run sends a car host shares one ssh connection (one key exchange).
+    for (size_t h : {1u, 2u}) EXPECT_EQ(ssh_connections_to(hosts(), h), 1u) << "host " << h;
     EXPECT_NE(fsm_command.find("--fsm /tmp/cpm-runs/across-" + std::to_string(::getpid()) + "/"), std::string::npos) << fsm_command;
     EXPECT_TRUE(seen) << "car_a runs " << ::testing::PrintToString(programs_on(hosts(), 1)) << ", car_b "
                       << ::testing::PrintToString(programs_on(hosts(), 2)) << ", central " << ::testing::PrintToString(programs_on(hosts(), 0));
@@ -160,7 +181,8 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
     const uint64_t central_received = hosts().received_bytes(0) - central_received_before;
     EXPECT_GE(central_received, state_bytes) << "the central host's link received " << central_received << " bytes; the cars' states are " << state_bytes;
     EXPECT_FALSE(std::filesystem::exists("/tmp/cpm-runs/across-" + std::to_string(::getpid()))) << "the run's folder on the car hosts stays";
-    // Nothing of the run is left on any host.
+    // Nothing of the run is left on any host, no ssh connection either.
+    EXPECT_TRUE(ssh_clients_on(hosts(), 0).empty()) << ::testing::PrintToString(ssh_clients_on(hosts(), 0));
     for (size_t h = 0; h < 3; ++h) {
         EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s))
             << "left on host " << h << ": " << ::testing::PrintToString(programs_on(hosts(), h));
@@ -317,7 +339,9 @@ TEST_F(LabAcrossHosts, ACarHostLostMidRunIsNamedAndTheOtherCarDrivesOnToTheEnd)
     EXPECT_NEAR(summary["lab_time_s"].get<double>(), 12.0, 0.5) << summary.dump(2);
     for (const auto& h : summary["hosts"]) EXPECT_EQ(h["lost"].get<bool>(), h["name"] == "car_b") << h.dump();
     for (const auto& p : summary["processes"]) {
-        if (p["host"] == "car_b") EXPECT_EQ(p["end"], "lost with host car_b") << p.dump();
+        if (p["host"] == "car_b") {
+            EXPECT_EQ(p["end"], "lost with host car_b") << p.dump();
+        }
     }
     // car_a drove on after the cut; car_b's states stopped with it.
     auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");

@@ -23,6 +23,10 @@ struct RemoteHost
     std::string ssh;                       ///< ssh's destination: "pi@192.168.1.21", or a Host of an ssh config
     std::vector<std::string> ssh_options;  ///< more options for ssh, e.g. {"-F", "lab_ssh_config"}
     std::string cpm_prefix;                ///< where cpm is installed there: its programs are in PREFIX/bin
+    /// A private folder (mode 0700) where ssh keeps one connection to the host that every
+    /// command shares (OpenSSH's ControlMaster): one key exchange per host instead of one per
+    /// command. "" each command connects on its own. End it with close_shared_connection().
+    std::string shared_connection_dir;
     bool is_local() const { return name.empty(); }
     /// PREFIX/bin/program.
     std::string program(const std::string& name) const;
@@ -40,6 +44,8 @@ std::vector<std::string> remote_command(const RemoteHost& host, const std::vecto
                                         std::chrono::milliseconds grace = std::chrono::seconds(5));
 /// The argv that runs a plain command there and returns (checks: `cpm --version`, `test -x`).
 std::vector<std::string> ssh_command(const RemoteHost& host, const std::vector<std::string>& remote_argv);
+/// Ends the connection the host's commands share (ssh -O exit), when there is one; quietly.
+void close_shared_connection(const RemoteHost& host);
 /// `text` quoted for the remote shell: 'it'\''s'.
 std::string shell_quote(const std::string& text);
 

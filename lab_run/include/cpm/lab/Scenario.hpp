@@ -150,6 +150,7 @@ struct RunSettings
     int domain = 0;
     uint64_t duration_ns = 0; ///< the scenario's unless overridden
     TimeMode time = TimeMode::real;
+    std::string ssh_shared_dir; ///< where ssh keeps the run's one connection per other host ("": none)
 };
 
 /// A secured run's node name for one of its processes ("cpm_lab_run" for the run itself): the
