@@ -9,7 +9,11 @@
 //   - missed deadlines < 1 % of the timers' ticks (the simulator's 250 Hz, the planner's 2.5 Hz);
 //   - no sample of a reliable topic lost (the recording's per-object counts of samples sent and
 //     never received), none dropped by the recording.
-//   bench_soak [--minutes 10] [--dds_domain N]
+// With --hosts (root) the lab runs across three hosts, network namespaces each with its own
+// sshd as the tests make them: the cars' simulator on car_a, central_routing on car_b, the run,
+// the history, the monitor and the parameter server on the central host; every car's states and
+// commands cross the links. The processes on the car hosts are sampled too.
+//   bench_soak [--minutes 10] [--hosts] [--dds_domain N]
 #include "../common/bench_common.hpp"
 
 #include <cpm/ChildProcess.hpp>
@@ -17,6 +21,8 @@
 #include <cpm/init.hpp>
 #include <cpm/topics.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
+
+#include <cpm_test/Hosts.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -29,6 +35,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -43,6 +50,20 @@ struct ProcessSample
     double rss_mib = 0;
     int fds = 0;
 };
+
+/// A process's resident memory and open descriptors.
+ProcessSample sample_of(int pid, const std::string& name)
+{
+    ProcessSample s;
+    s.name = name;
+    std::ifstream statm("/proc/" + std::to_string(pid) + "/statm");
+    long pages = 0, resident = 0;
+    statm >> pages >> resident;
+    s.rss_mib = double(resident) * double(::sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
+    std::error_code ec;
+    for (auto it = fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd", ec); !ec && it != fs::directory_iterator(); ++it) ++s.fds;
+    return s;
+}
 
 /// Every process below `root` (its children, theirs, …), by pid.
 std::map<int, ProcessSample> descendants(int root)
@@ -68,17 +89,7 @@ std::map<int, ProcessSample> descendants(int root)
     for (const auto& [pid, ppid] : parent) {
         int p = ppid;
         while (p > 1 && p != root) p = parent.count(p) ? parent[p] : 0;
-        if (p != root) continue;
-        ProcessSample s;
-        s.name = comm[pid];
-        std::ifstream statm("/proc/" + std::to_string(pid) + "/statm");
-        long pages = 0, resident = 0;
-        statm >> pages >> resident;
-        s.rss_mib = double(resident) * double(::sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
-        std::error_code ec;
-        for (auto it = fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd", ec); !ec && it != fs::directory_iterator(); ++it)
-            ++s.fds;
-        out[pid] = s;
+        if (p == root) out[pid] = sample_of(pid, comm[pid]);
     }
     return out;
 }
@@ -105,17 +116,39 @@ std::string run_command(const std::vector<std::string>& argv, const std::string&
     return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
+/// The run's processes on a host of the namespace hosts (cpm's programs, not `cpm host run`).
+std::map<int, ProcessSample> programs_on(const cpm_test::NamespaceHosts& hosts, size_t host, const std::string& tag)
+{
+    std::map<int, ProcessSample> out;
+    for (int pid : hosts.pids(host)) {
+        const std::string cmd = cpm_test::command_line(pid);
+        if (cmd.rfind(cpm_test::cpm_prefix(), 0) != 0 || cmd.find("/bin/cpm host run ") != std::string::npos) continue;
+        out[pid] = sample_of(pid, tag + ":" + fs::path(cmd.substr(0, cmd.find(' '))).filename().string());
+    }
+    return out;
+}
+
 const char* kHelp =
-    "usage: bench_soak [--minutes 10] [--dds_domain N]\n"
+    "usage: bench_soak [--minutes 10] [--hosts] [--dds_domain N]\n"
     "A whole lab (ten simulated cars, central routing, the history recording every topic, the monitor)\n"
     "for a long time, watched from outside: memory, file descriptors and /dev/shm every 10 s, missed\n"
     "deadlines and lost samples, against their targets.\n"
     "  --minutes M     how long the lab runs\n"
+    "  --hosts         across three hosts (network namespaces with their own sshd; root): the cars on\n"
+    "                  car_a, central_routing on car_b, the rest on the central host\n"
     "  --dds_domain N  its domain (default CPM_DOMAIN_ID, else 0)\n";
 
 int run(int argc, char** argv)
 {
-    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--minutes", true}}, "bench_soak");
+    const auto flags = cpm::cli::parse_flags(argc, argv, {{"--minutes", true}, {"--hosts", false}}, "bench_soak");
+    std::optional<cpm_test::NamespaceHosts> hosts;
+    if (flags.has("--hosts")) {
+        hosts.emplace(std::vector<std::string>{"central", "car_a", "car_b"});
+        if (!hosts->why_not().empty()) {
+            std::printf("not run: %s\n", hosts->why_not().c_str());
+            return 1;
+        }
+    }
     const double minutes = cpm::cli::parse_number("--minutes", flags.get("--minutes", "10"), 0.1, 100'000);
     cpm::init(argc, argv);  // --dds_domain is cpm's own flag
     const std::string domain = std::to_string(cpm::init_settings().domain_id);
@@ -129,16 +162,28 @@ int run(int argc, char** argv)
     std::ostringstream yaml;
     yaml << "name: soak\ntime: real\nduration: " << minutes * 60.0 << "s\nlanes: " << root << "/scenarios/lanes/intersection.json\n"
          << "vehicles:\n";
-    for (int id = 1; id <= 10; ++id) yaml << "  - {id: " << id << "}\n";
-    yaml << "routing: {enabled: true, seed: 1, period: 400ms}\nrecord: {topics: [\"*\"]}\nparameters: " << (dir / "params.json").string()
+    const std::string car_host = hosts ? ", host: car_a" : "";
+    for (int id = 1; id <= 10; ++id) yaml << "  - {id: " << id << car_host << "}\n";
+    if (hosts) {
+        yaml << "hosts:\n  central: {address: " << hosts->address(0) << "}\n";
+        for (size_t h : {1u, 2u}) {
+            const std::string name = h == 1 ? "car_a" : "car_b";
+            yaml << "  " << name << ": {address: " << hosts->address(h) << ", ssh: " << name << ", cpm: " << cpm_test::cpm_prefix() << "}\n";
+        }
+        yaml << "ssh_config: " << hosts->ssh_config() << "\nhistory: {host: central}\n";
+    }
+    yaml << "routing: {enabled: true, seed: 1, period: 400ms" << (hosts ? ", host: car_b" : "") << "}\nrecord: {topics: [\"*\"]}\nparameters: " << (dir / "params.json").string()
          << "\nmonitor: " << 18000 + ::getpid() % 1000 << "\n";
     std::ofstream(dir / "soak.yaml") << yaml.str();
 
     bench::print_machine("ten simulated cars, central_routing (400 ms), cpm_history recording every topic, monitor, parameter "
-                         "server; real time, " + std::to_string(minutes) + " min, domain " + domain);
+                         "server; real time, " + std::to_string(minutes) + " min, domain " + domain +
+                         (hosts ? "; across three hosts: the cars on car_a, central_routing on car_b, the rest central" : ""));
     const std::string out = (dir / "run").string();
     const auto shm_before = shm_usage();  // what the run must leave as it found it
-    cpm::ChildProcess lab({.argv = {bin + "/cpm", "lab", "run", (dir / "soak.yaml").string(), "--out", out, "--dds_domain", domain},
+    std::vector<std::string> lab_argv{bin + "/cpm", "lab", "run", (dir / "soak.yaml").string(), "--out", out, "--dds_domain", domain};
+    if (hosts) lab_argv = hosts->in(0, lab_argv);  // ip netns exec: the same process, in the central host's namespace
+    cpm::ChildProcess lab({.argv = lab_argv,
                            .stdout_path = (dir / "lab.out").string(),
                            .stderr_path = (dir / "lab.err").string()});
 
@@ -155,7 +200,11 @@ int run(int argc, char** argv)
     while (lab.running()) {
         const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         Row row{t, {}, 0, 0};
-        for (const auto& [pid, s] : descendants(lab.pid())) row.processes[s.name + "[" + std::to_string(pid) + "]"] = s;
+        auto processes = descendants(lab.pid());
+        if (hosts) {
+            for (size_t h : {1u, 2u}) processes.merge(programs_on(*hosts, h, h == 1 ? "car_a" : "car_b"));
+        }
+        for (const auto& [pid, s] : processes) row.processes[s.name + "[" + std::to_string(pid) + "]"] = s;
         const auto [files, bytes] = shm_usage();
         row.shm_files = files;
         row.shm_mib = bytes / (1024.0 * 1024.0);

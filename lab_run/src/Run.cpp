@@ -84,7 +84,7 @@ nlohmann::json last_json(const std::string& path)
 class DomainClaim
 {
 public:
-    DomainClaim(int domain, const ParticipantOptions& options)
+    DomainClaim(int domain, const ParticipantOptions& options, const Scenario& s)
     {
         const std::string lock = "/tmp/cpm_lab_run_domain_" + std::to_string(domain) + ".lock";
         fd_ = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
@@ -97,16 +97,26 @@ public:
         std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // discovery over loopback and shared memory
         // A cpm monitor only watches (and sends StopRequests when allowed): one left open on the
         // domain between runs is welcome.
-        auto others = probe.participants();
-        std::erase_if(others, [](const std::string& n) { return n.rfind("cpm_monitor", 0) == 0; });
+        auto others = probe.participants_seen();
+        std::erase_if(others, [](const rtdb::ParticipantSeen& p) { return p.name.rfind("cpm_monitor", 0) == 0; });
         if (!others.empty()) {
             std::string names;
-            for (const auto& n : others) names += (names.empty() ? "" : ", ") + n;
+            for (const auto& p : others) names += (names.empty() ? "" : ", ") + p.name + where(p, s);
             if (fd_ >= 0) ::close(fd_);
             throw cpm::Error("domain " + std::to_string(domain) + " is in use by " + std::to_string(others.size()) +
                                      " participant(s): " + names + "; stop them or give this run another domain (domain: in the scenario, "
                                      "or --dds_domain)");
         }
+    }
+    /// " on host car5 (10.0.0.21)" for a participant that announced a host's address; else "".
+    static std::string where(const rtdb::ParticipantSeen& p, const Scenario& s)
+    {
+        for (const auto& a : p.addresses) {
+            for (const auto& h : s.hosts) {
+                if (h.address == a) return " on host " + h.name + " (" + a + ")";
+            }
+        }
+        return "";
     }
     ~DomainClaim()
     {
@@ -651,7 +661,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
     if (!qos.empty()) ::setenv(kQosOverridesVariable, qos.c_str(), 1);
     ParticipantOptions po = participant_options(s, settings);
-    const DomainClaim claim(settings.domain, po);
+    const DomainClaim claim(settings.domain, po, s);
     const auto hosts = checking.get();
     po.security = prepare_folder(s, settings, plan, dir);  // a secured lab's nodes issued, then copied to their hosts
     copy_to_hosts(s, plan, settings);

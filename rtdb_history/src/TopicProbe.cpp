@@ -39,7 +39,7 @@ struct TopicProbe::Impl : public dds::DataReaderListener
     mutable std::mutex discovery_mutex;
     std::condition_variable discovered;
     std::map<rtps::GUID_t, Seen> endpoints;
-    std::map<rtps::GuidPrefix_t, std::string> participant_names;
+    std::map<rtps::GuidPrefix_t, ParticipantSeen> participants_seen;
 
     // Samples, filled by the reader's listener (which holds the reader's lock: only our mutex
     // is taken under it, and nothing DDS is called under our mutex).
@@ -57,9 +57,18 @@ struct TopicProbe::Impl : public dds::DataReaderListener
         std::lock_guard lock(discovery_mutex);
         const rtps::GUID_t guid = fast_dds_guid(e);
         switch (e.kind) {
-        case DiscoveryEvent::Kind::participant_found: participant_names[guid.guidPrefix] = e.participant_name; return;
+        case DiscoveryEvent::Kind::participant_found: {
+            ParticipantSeen& p = participants_seen[guid.guidPrefix];
+            p.name = e.participant_name.empty() ? "(unnamed)" : e.participant_name;
+            p.addresses.clear();
+            for (const auto& l : e.unicast_locators) {  // "UDPv4:[10.0.0.21]:7411"
+                const auto open = l.find('['), close = l.find(']');
+                if (l.rfind("UDPv4:", 0) == 0 && open != std::string::npos && close > open) p.addresses.push_back(l.substr(open + 1, close - open - 1));
+            }
+            return;
+        }
         case DiscoveryEvent::Kind::participant_gone:
-            participant_names.erase(guid.guidPrefix);
+            participants_seen.erase(guid.guidPrefix);
             std::erase_if(endpoints, [&](const auto& p) { return p.first.guidPrefix == guid.guidPrefix; });
             return;
         case DiscoveryEvent::Kind::writer_gone:
@@ -99,7 +108,7 @@ struct TopicProbe::Impl : public dds::DataReaderListener
 
     std::string name_of(const rtps::GuidPrefix_t& prefix) const
     {
-        if (auto n = participant_names.find(prefix); n != participant_names.end()) return n->second;
+        if (auto n = participants_seen.find(prefix); n != participants_seen.end()) return n->second.name;
         return guid_prefix_text(prefix);
     }
 };
@@ -126,13 +135,20 @@ TopicProbe::~TopicProbe()
 
 std::vector<std::string> TopicProbe::participants() const
 {
+    std::vector<std::string> names;
+    for (const auto& p : participants_seen()) names.push_back(p.name);
+    return names;
+}
+
+std::vector<ParticipantSeen> TopicProbe::participants_seen() const
+{
     std::lock_guard lock(impl_->discovery_mutex);
     const auto own = impl_->participant->native()->guid().guidPrefix;
-    std::vector<std::string> names;
-    for (const auto& [prefix, name] : impl_->participant_names) {
-        if (prefix != own) names.push_back(name.empty() ? "(unnamed)" : name);
+    std::vector<ParticipantSeen> out;
+    for (const auto& [prefix, p] : impl_->participants_seen) {
+        if (prefix != own) out.push_back(p);
     }
-    return names;
+    return out;
 }
 
 std::vector<TopicInfo> TopicProbe::topics() const

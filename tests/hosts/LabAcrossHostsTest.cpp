@@ -405,3 +405,19 @@ TEST_F(LabAcrossHosts, APlannerHostLostMidRunBrakesTheCarsOnTheirOwnHostAndEndsT
     EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), 2).empty(); }, cpm::kRemoteLease + 10s))
         << "left on the lost host: " << ::testing::PrintToString(programs_on(hosts(), 2));
 }
+
+TEST_F(LabAcrossHosts, ADomainInUseOnAnotherHostIsRefusedNamingTheHost)
+{
+    // A car simulator left running on car_b on the lab's domain, reachable from the central host.
+    const std::string domain = std::to_string(cpm_test::test_domain_id());
+    cpm_test::Process stranger(hosts().in(2, {built_program("firmware_sim"), "--vehicle_id", "9", "--dds_domain", domain, "--dds_interface",
+                                              hosts().address(2), "--dds_initial_peer", hosts().address(0)}));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return stranger.output().find("device: ") != std::string::npos; }, 10s)) << stranger.errors();
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", dir.file("run"), "--monitor", "off"}));
+    EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
+    EXPECT_NE(run.errors().find("domain " + domain + " is in use by 1 participant(s): firmware_sim on host car_b (" + hosts().address(2) + ")"),
+              std::string::npos)
+        << run.errors();
+    for (size_t h = 0; h < 2; ++h) EXPECT_TRUE(programs_on(hosts(), h).empty()) << "started on host " << h << " though the run was refused";
+    EXPECT_EQ(programs_on(hosts(), 2), std::vector<std::string>{built_program("firmware_sim")}) << "car_b runs the stranger alone";
+}

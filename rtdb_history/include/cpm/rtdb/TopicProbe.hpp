@@ -28,6 +28,13 @@ struct TopicInfo
     std::vector<Endpoint> writers, readers;
 };
 
+/// Another participant on the domain, as discovery announced it.
+struct ParticipantSeen
+{
+    std::string name;                    ///< "(unnamed)" when it gave none
+    std::vector<std::string> addresses;  ///< the IPv4 addresses it takes UDP on ("10.0.0.21"), as it announced them
+};
+
 /// A sample as received: the payload as serialized (CDR encapsulation included).
 struct ProbeSample
 {
@@ -52,6 +59,8 @@ public:
     std::vector<TopicInfo> topics() const;
     /// The names of the other participants discovered on the domain (and not gone since).
     std::vector<std::string> participants() const;
+    /// The same participants with the addresses they announced (which host each is on).
+    std::vector<ParticipantSeen> participants_seen() const;
     /// Waits up to `timeout` for a writer of `topic` and subscribes to it as that writer offers
     /// (as reliable and as durable), receiving raw payloads. False when no writer appeared.
     /// Throws cpm::Error when the reader cannot be created.
