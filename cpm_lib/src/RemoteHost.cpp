@@ -3,10 +3,14 @@
 #include <cpm/ChildProcess.hpp>
 #include <cpm/Error.hpp>
 
+#include <netinet/in.h>
 #include <poll.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <csignal>
+#include <cstring>
 #include <cstdio>
 #include <ctime>
 #include <iostream>
@@ -141,6 +145,24 @@ int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::mill
     child.signal(SIGINT);
     if (auto end = child.wait(grace)) return with_group_ended(group, shell_code(*end));
     return with_group_ended(group, shell_code(child.stop(std::chrono::seconds(2))));
+}
+
+std::string port_taken(const std::string& protocol, int port)
+{
+    const int fd = ::socket(AF_INET, (protocol == "tcp" ? SOCK_STREAM : SOCK_DGRAM) | SOCK_CLOEXEC, 0);
+    if (fd < 0) return std::strerror(errno);
+    if (protocol == "tcp") {  // as a server does: a connection of an earlier one in TIME_WAIT does not count
+        const int one = 1;
+        ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    }
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_ANY);
+    a.sin_port = htons(uint16_t(port));
+    const bool bound = ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+    const std::string why = bound ? "" : std::strerror(errno);
+    ::close(fd);
+    return why;
 }
 
 void answer_clock_queries()

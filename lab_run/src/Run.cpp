@@ -231,14 +231,67 @@ std::string milliseconds(int64_t ns)
     return b;
 }
 
+/// A port a process of the run listens on: "tcp:8080", the scenario's key that gives it, its host ("" this one).
+struct ListenPort
+{
+    std::string port, key, host, instead;
+};
+
+/// The ports the run's servers take: the monitor's web page, the discovery server's.
+std::vector<ListenPort> listen_ports(const Scenario& s)
+{
+    auto here = [&](const std::string& host) { return s.host(host) && !s.host(host)->ssh.empty() ? host : std::string(); };
+    std::vector<ListenPort> out;
+    if (s.monitor_port)
+        out.push_back({"tcp:" + std::to_string(*s.monitor_port), "monitor", here(s.monitor_host), "choose another port (monitor: N, or --monitor N; none: --monitor off)"});
+    if (s.discovery_server)
+        out.push_back({"udp:" + std::to_string(Scenario::kDiscoveryServerPort), "discovery_server", here(s.discovery_server_host),
+                       "stop what listens there (another discovery server?) or put the server on another host"});
+    return out;
+}
+
+/// "<file>: <key>: <port> cannot be taken on <where> (<why>)..." for each port named in `taken`
+/// ("tcp:8080 Address already in use" lines).
+void name_taken_ports(const Scenario& s, const std::string& host, const std::string& taken, std::vector<Diagnostic>& errors)
+{
+    std::istringstream lines(taken);
+    for (std::string line; std::getline(lines, line);) {
+        const std::string port = line.substr(0, line.find(' ')), why = line.find(' ') == std::string::npos ? "" : line.substr(line.find(' ') + 1);
+        for (const auto& p : listen_ports(s)) {
+            if (p.host != host || p.port != port) continue;
+            errors.push_back({s.file + ": " + p.key, port + " cannot be taken on " + (host.empty() ? std::string("this host") : "host " + host) + " (" +
+                                                         why + "): " + p.instead});
+        }
+    }
+}
+
+/// All a command prints on stdout ("" when it cannot run).
+std::string output_of(const std::vector<std::string>& argv)
+{
+    try {
+        ChildProcess c({.argv = argv, .capture_stdout = true});
+        std::string out;
+        while (auto line = c.read_line()) out += *line + "\n";
+        (void)c.wait(std::chrono::seconds(10));
+        return out;
+    } catch (const cpm::Error&) {
+        return "";
+    }
+}
+
 /// One other host: reached with ssh, the same cpm as here (`ours`), its clock within
-/// max_clock_offset. What is wrong is added to `errors`.
+/// max_clock_offset, the ports the run's servers there take free. What is wrong is added to
+/// `errors`.
 RunResult::Host check_host(const Scenario& s, const RunSettings& settings, const HostSpec& h, const std::string& ours, std::vector<Diagnostic>& errors)
 {
     RunResult::Host entry{.name = h.name, .address = h.address};
     const RemoteHost remote = remote_of(s, settings, h.name);
     const std::string where = s.file + ": hosts." + h.name;
     if (remote.is_local()) return entry;
+    std::vector<std::string> ports;  // that its servers take there
+    for (const auto& p : listen_ports(s)) {
+        if (p.host == h.name) ports.push_back(p.port);
+    }
     const std::string theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}));
     if (theirs.empty()) {
         errors.push_back({where, "cannot run " + remote.program("cpm") + " there with ssh " + h.ssh +
@@ -248,6 +301,10 @@ RunResult::Host check_host(const Scenario& s, const RunSettings& settings, const
     if (theirs != ours) {
         errors.push_back({where, "runs " + theirs + ", this host " + ours + ": install the same cpm on every host"});
         return entry;
+    }
+    if (!ports.empty()) {
+        ports.insert(ports.begin(), {remote.program("cpm"), "host", "ports"});
+        name_taken_ports(s, h.name, output_of(ssh_command(remote, ports)), errors);
     }
     try {
         const auto clock = measure_clock(remote);
@@ -266,7 +323,7 @@ RunResult::Host check_host(const Scenario& s, const RunSettings& settings, const
 }
 
 /// Every other host, before anything starts anywhere, each on a thread of its own (a host is
-/// a few ssh round trips): check_host. Throws ScenarioError naming each host that is not fit,
+/// a few ssh round trips): check_host; the ports this host's servers take. Throws ScenarioError naming each host that is not fit,
 /// in the scenario's order.
 std::vector<RunResult::Host> check_hosts(const Scenario& s, const RunSettings& settings)
 {
@@ -277,6 +334,12 @@ std::vector<RunResult::Host> check_hosts(const Scenario& s, const RunSettings& s
         checks.push_back(std::async(std::launch::async, [&, i] { return check_host(s, settings, s.hosts[i], ours, errors[i]); }));
     std::vector<RunResult::Host> out;
     std::vector<Diagnostic> all;
+    std::string taken_here;
+    for (const auto& p : listen_ports(s)) {
+        if (const std::string why = p.host.empty() ? port_taken(p.port.substr(0, 3), std::stoi(p.port.substr(4))) : ""; !why.empty())
+            taken_here += p.port + " " + why + "\n";
+    }
+    name_taken_ports(s, "", taken_here, all);
     for (size_t i = 0; i < checks.size(); ++i) {
         out.push_back(checks[i].get());
         all.insert(all.end(), errors[i].begin(), errors[i].end());
@@ -680,6 +743,12 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     if (o.progress) {
         std::fprintf(o.progress, "cpm lab run: %s: %zu processes on domain %d, logs and recording in %s\n", s.name.c_str(), plan.size(),
                      settings.domain, dir.c_str());
+        if (const HostSpec* there = s.host(s.monitor_host); s.monitor_port && there && !there->ssh.empty()) {
+            std::fprintf(o.progress, "cpm lab run: the monitor serves on 127.0.0.1:%d on host %s (there, or here through ssh -L %d:127.0.0.1:%d %s)\n",
+                         *s.monitor_port, there->name.c_str(), *s.monitor_port, *s.monitor_port, there->ssh.c_str());
+        } else if (s.monitor_port) {
+            std::fprintf(o.progress, "cpm lab run: watch it live at http://127.0.0.1:%d/ (cpm monitor, while the run lasts)\n", *s.monitor_port);
+        }
     }
     if (result.error.empty()) result.error = clock.start(timers_of(plan), s.routing.enabled);
     supervise(group, died, result, clock, [&] {

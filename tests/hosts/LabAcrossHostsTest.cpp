@@ -421,3 +421,19 @@ TEST_F(LabAcrossHosts, ADomainInUseOnAnotherHostIsRefusedNamingTheHost)
     for (size_t h = 0; h < 2; ++h) EXPECT_TRUE(programs_on(hosts(), h).empty()) << "started on host " << h << " though the run was refused";
     EXPECT_EQ(programs_on(hosts(), 2), std::vector<std::string>{built_program("firmware_sim")}) << "car_b runs the stranger alone";
 }
+
+TEST_F(LabAcrossHosts, AMonitorPortInUseOnItsHostIsRefusedNamingTheHost)
+{
+    std::optional<cpm_test::HeldTcpPort> taken;  // something on car_b listens on the port the monitor wants there
+    {
+        const cpm_test::NamespaceHosts::Inside on_car_b(hosts(), 2);
+        taken.emplace();
+    }
+    const std::string port = std::to_string(taken->port());
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario("monitor: {port: " + port + ", host: car_b}\n"), "--out",
+                                         dir.file("run"), "--monitor", port}));
+    EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
+    EXPECT_NE(run.errors().find("two_cars.yaml: monitor: tcp:" + port + " cannot be taken on host car_b (Address already in use)"), std::string::npos)
+        << run.errors();
+    for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(programs_on(hosts(), h).empty()) << "started on host " << h << " though the run was refused";
+}

@@ -280,6 +280,20 @@ TEST(LabRun, ADomainInUseIsRefusedBeforeAnythingStarts)
     EXPECT_EQ(other.wait(30s), 0);
 }
 
+TEST(LabRun, AMonitorPortInUseIsRefusedBeforeAnythingStarts)
+{
+    TempDir dir;
+    const cpm_test::HeldTcpPort taken;  // something else listens on the port the monitor wants
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--out", dir.file("run"), "--monitor", std::to_string(taken.port())});
+    EXPECT_EQ(run.wait(60s), 1) << run.output();
+    EXPECT_NE(run.errors().find("nothing started"), std::string::npos) << run.errors();
+    EXPECT_NE(run.errors().find("corridor.yaml: monitor: tcp:" + std::to_string(taken.port()) +
+                                " cannot be taken on this host (Address already in use): choose another port"),
+              std::string::npos)
+        << run.errors();
+    EXPECT_FALSE(fs::exists(dir.file("run"))) << "no run folder";
+}
+
 TEST(LabRun, CtrlCStopsEverythingAndLeavesAReadableRecording)
 {
     TempDir dir;

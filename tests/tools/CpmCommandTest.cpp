@@ -135,6 +135,21 @@ TEST(CpmCommand, WithNoHistoryServiceOnTheDomainTheCommandSaysSoAndExitsOne)
     }
 }
 
+TEST(CpmCommand, HostPortsNamesEachPortThatCannotBeTakenAndExitsOne)
+{
+    const cpm_test::HeldTcpPort taken;
+    const std::string busy = "tcp:" + std::to_string(taken.port()), free = "tcp:" + std::to_string(cpm_test::free_tcp_port());
+    cpm_test::Process both({cpm_test::built_program("cpm"), "host", "ports", free, busy});
+    EXPECT_EQ(both.wait(10s), 1);
+    EXPECT_EQ(both.output(), busy + " Address already in use\n");
+    cpm_test::Process none({cpm_test::built_program("cpm"), "host", "ports", free});
+    EXPECT_EQ(none.wait(10s), 0);
+    EXPECT_EQ(none.output(), "");
+    cpm_test::Process wrong({cpm_test::built_program("cpm"), "host", "ports", "sctp:80"});
+    EXPECT_EQ(wrong.wait(10s), 2);
+    EXPECT_THAT(wrong.errors(), HasSubstr("'sctp:80' is not PROTOCOL:PORT with tcp or udp"));
+}
+
 TEST(CpmCommand, OutputThatCannotBeWrittenIsAnError)
 {
     cpm_test::test_domain_id();

@@ -4,6 +4,8 @@
 
 #include <cpm/RemoteHost.hpp>
 
+#include <cstdio>
+
 namespace cpm::tools {
 namespace {
 
@@ -25,6 +27,32 @@ const char* kClockHelp =
     "\n"
     "Answers each line of its input with this host's clock (CLOCK_REALTIME) in nanoseconds, until\n"
     "its input ends. A lab run measures each host's clock offset with it before it starts.\n";
+
+const char* kPortsHelp =
+    "usage: cpm host ports PROTOCOL:PORT...\n"
+    "\n"
+    "Whether each port (tcp:8080, udp:11811) can be taken on this host: prints one line per port\n"
+    "that cannot (`tcp:8080 Address already in use`) and exits 1; exits 0 silently when all are\n"
+    "free. A lab run asks each host for the ports its processes there will listen on.\n";
+
+int host_ports(const std::vector<std::string>& args)
+{
+    const auto parsed = cpm::cli::parse_args(args, {}, "cpm host ports");
+    if (parsed.positional.empty()) throw UsageError("cpm host ports: expected PROTOCOL:PORT (e.g. tcp:8080)");
+    int taken = 0;
+    for (const auto& p : parsed.positional) {
+        const auto colon = p.find(':');
+        const std::string protocol = p.substr(0, colon);
+        if (colon == std::string::npos || (protocol != "tcp" && protocol != "udp"))
+            throw UsageError("cpm host ports: '" + p + "' is not PROTOCOL:PORT with tcp or udp (e.g. tcp:8080)");
+        const int port = int(cpm::cli::parse_integer("port of " + p, p.substr(colon + 1), 1, 65535));
+        if (const std::string why = cpm::port_taken(protocol, port); !why.empty()) {
+            std::printf("%s %s\n", p.c_str(), why.c_str());
+            ++taken;
+        }
+    }
+    return taken == 0 ? 0 : 1;
+}
 
 int host_run(const std::vector<std::string>& args)
 {
@@ -52,7 +80,9 @@ std::vector<Command> host_commands()
     return {{.group = "host", .verb = "run", .summary = "run a program tied to this command's input (a lab run's remote processes)",
              .help = kRunHelp, .run = host_run},
             {.group = "host", .verb = "clock", .summary = "answer clock queries (a lab run measures each host's clock offset)",
-             .help = kClockHelp, .run = host_clock}};
+             .help = kClockHelp, .run = host_clock},
+            {.group = "host", .verb = "ports", .summary = "tell which ports cannot be taken here (a lab run asks each host)",
+             .help = kPortsHelp, .run = host_ports}};
 }
 
 }  // namespace cpm::tools

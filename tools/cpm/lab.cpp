@@ -6,7 +6,6 @@
 #include <cpm/lab/Report.hpp>
 #include <cpm/lab/Run.hpp>
 #include <cpm/lab/Scenario.hpp>
-#include <cpm/monitor/Monitor.hpp>
 #include <cpm/TimeMaster.hpp>
 #include <cpm/get_time_ns.hpp>
 
@@ -174,15 +173,6 @@ int lab_run(const std::vector<std::string>& args)
         } else {
             s.monitor_port = int(cpm::cli::parse_integer(command + ": --monitor (a port, or off)", m, 1, 65535));
         }
-    }
-    if (s.monitor_port) {
-        const std::string problem = cpm::monitor::listen_problem("127.0.0.1", *s.monitor_port);
-        if (!problem.empty()) {
-            std::fprintf(stderr, "%s: nothing started: monitor: cannot serve on 127.0.0.1:%d: %s (another port: --monitor N, none: --monitor off)\n",
-                         command.c_str(), *s.monitor_port, problem.c_str());
-            return 1;
-        }
-        std::fprintf(stderr, "%s: watch it live at http://127.0.0.1:%d/ (cpm monitor, while the run lasts)\n", command.c_str(), *s.monitor_port);
     }
     cpm::cli::stop_on_signals();
     options.progress = stderr;

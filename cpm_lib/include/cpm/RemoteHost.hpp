@@ -57,6 +57,10 @@ std::string shell_quote(const std::string& text);
 int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::milliseconds grace,
                          std::chrono::milliseconds lease = std::chrono::milliseconds(0));
 
+/// Why a port cannot be taken on this host ("tcp" or "udp", on every address, as a server
+/// would): strerror of the bind ("Address already in use"); "" when it is free.
+std::string port_taken(const std::string& protocol, int port);
+
 /// The remote side of measure_clock (`cpm host clock`): answers each line of stdin with this
 /// host's CLOCK_REALTIME in nanoseconds, until stdin ends.
 void answer_clock_queries();

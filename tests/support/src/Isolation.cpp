@@ -114,17 +114,37 @@ bool holds_for(const std::function<bool()>& condition, std::chrono::milliseconds
     return condition();
 }
 
-int free_tcp_port()
+namespace {
+
+/// A TCP socket bound to a port of 127.0.0.1 the system chose; its port.
+int bound_tcp_socket(int& port)
 {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
     sockaddr_in a{};
     a.sin_family = AF_INET;
     a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
     ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
     socklen_t len = sizeof a;
     ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    ::close(fd);
-    return ntohs(a.sin_port);
+    port = ntohs(a.sin_port);
+    return fd;
 }
+
+}  // namespace
+
+int free_tcp_port()
+{
+    int port = 0;
+    ::close(bound_tcp_socket(port));
+    return port;
+}
+
+HeldTcpPort::HeldTcpPort()
+{
+    fd_ = bound_tcp_socket(port_);
+    if (::listen(fd_, 1) != 0) throw std::runtime_error("HeldTcpPort: cannot listen on 127.0.0.1:" + std::to_string(port_));
+}
+
+HeldTcpPort::~HeldTcpPort() { ::close(fd_); }
 
 }  // namespace cpm_test

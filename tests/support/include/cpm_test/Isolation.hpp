@@ -17,6 +17,21 @@ std::string unique_topic(const std::string& base);
 /// A TCP port on 127.0.0.1 nobody listens on now (the system's choice for port 0).
 int free_tcp_port();
 
+/// A TCP port on 127.0.0.1 that this object listens on while it lives (something else on a
+/// port a test's program wants), in the network namespace of the thread that made it.
+class HeldTcpPort
+{
+public:
+    HeldTcpPort();
+    ~HeldTcpPort();
+    HeldTcpPort(const HeldTcpPort&) = delete;
+    HeldTcpPort& operator=(const HeldTcpPort&) = delete;
+    int port() const { return port_; }
+
+private:
+    int fd_ = -1, port_ = 0;
+};
+
 /// Polls `condition` until it is true or `timeout` passes; returns its last value.
 bool wait_until(const std::function<bool()>& condition,
                 std::chrono::milliseconds timeout = std::chrono::seconds(5),
