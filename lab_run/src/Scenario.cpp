@@ -10,6 +10,7 @@
 #include <cpm/vehicle/FirmwareSim.hpp>
 #include <cpm/vehicle/World.hpp>
 
+#include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -428,6 +429,43 @@ std::string remote_run_dir(const RunSettings& settings) { return "/tmp/cpm-runs/
 
 namespace {
 
+/// The files a JSON file names as {"file": "<path relative to it>"} (a state machine's nested
+/// machines, FSMState `file:`), theirs, and so on: each once, absolute. None when it is not JSON.
+std::vector<fs::path> included_files(const fs::path& file)
+{
+    std::vector<fs::path> out;
+    std::vector<fs::path> todo{file};
+    std::set<fs::path> seen{fs::weakly_canonical(file)};
+    while (!todo.empty()) {
+        const fs::path f = todo.back();
+        todo.pop_back();
+        std::vector<const nlohmann::json*> walk;
+        nlohmann::json doc;
+        try {
+            doc = nlohmann::json::parse(read_text_file(f.string(), "file"));
+        } catch (const std::exception&) {
+            continue;  // not JSON (a camera's YAML), or not readable: copied as it is, the program says what is wrong
+        }
+        walk.push_back(&doc);
+        while (!walk.empty()) {
+            const nlohmann::json& j = *walk.back();
+            walk.pop_back();
+            if (j.is_object() && j.contains("file") && j["file"].is_string()) {
+                std::error_code ec;
+                const fs::path inc = fs::weakly_canonical(f.parent_path() / j["file"].get<std::string>(), ec);
+                if (!ec && fs::is_regular_file(inc, ec) && seen.insert(inc).second) {
+                    out.push_back(inc);
+                    todo.push_back(inc);
+                }
+            }
+            if (j.is_structured()) {
+                for (const auto& v : j) walk.push_back(&v);
+            }
+        }
+    }
+    return out;
+}
+
 /// A planned process on its host (a scenario with hosts): the host's address for DDS, the other
 /// hosts' as peers; on another host, the program as installed there, the files it reads copied
 /// into the run's folder there, and what it makes in the run's folder made there.
@@ -448,15 +486,26 @@ void place_on_host(ProcessPlan& p, const Scenario& s, const RunSettings& r, std:
             if (a.rfind(run_dir, 0) == 0) {
                 a = there + "/" + a.substr(run_dir.size());
             } else if (a.size() > 1 && a[0] == '/' && fs::is_regular_file(a, ec)) {
-                // One name there per file here (maps/gates.json and fsm/gates.json are two files).
+                const auto included = included_files(a);
+                // One name there per file here (maps/gates.json and fsm/gates.json are two
+                // files); a file that includes others in a folder of its own, with them as they
+                // lie beside it (their common folder's layout), so that its relative names hold.
                 auto [it, fresh] = copied_as.emplace(a, fs::path(a).filename().string());
-                if (fresh) {
+                fs::path root = fs::weakly_canonical(a).parent_path();
+                for (const auto& f : included) {
+                    while (!root.empty() && root != root.root_path() && fs::relative(f, root).string().rfind("..", 0) == 0) root = root.parent_path();
+                }
+                if (fresh && !included.empty()) {
+                    it->second = "tree_" + std::to_string(copied_as.size()) + "/" + fs::relative(fs::weakly_canonical(a), root).string();
+                } else if (fresh) {
                     for (const auto& [other, name] : copied_as) {
                         if (other != a && name == it->second) it->second = std::to_string(copied_as.size()) + "_" + it->second;
                     }
                 }
                 const std::string copy = there + "/" + it->second;
                 p.copies.emplace_back(a, copy);
+                const std::string tree = copy.substr(0, copy.size() - fs::relative(fs::weakly_canonical(a), root).string().size());
+                for (const auto& f : included) p.copies.emplace_back(f.string(), tree + fs::relative(f, root).string());
                 a = copy;
             }
         }

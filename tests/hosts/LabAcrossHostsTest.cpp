@@ -95,8 +95,8 @@ protected:
     }
     cpm_test::NamespaceHosts& hosts() { return *hosts_; }
     /// A scenario with one car on each car host, the history and this run on the central host;
-    /// `car_a_extra`: more of car 5's keys (its camera).
-    std::string scenario(const std::string& extra = "", const std::string& car_a_extra = "")
+    /// `car_a_extra`, `car_b_extra`: more of car 5's keys (its camera), of car 6's.
+    std::string scenario(const std::string& extra = "", const std::string& car_a_extra = "", const std::string& car_b_extra = "")
     {
         std::string hosts_yaml = "hosts:\n  central: {address: " + hosts().address(0) + "}\n";
         for (size_t i = 1; i < 3; ++i) {
@@ -108,7 +108,7 @@ protected:
                                               "history: {host: central}\n"
                                               "vehicles:\n"
                                               "  - {id: 5, host: car_a, start: [0.0, 0.0, 0.3], fsm: " + kRoot + "/scenarios/fsm/gates.json" + car_a_extra + "}\n"
-                                              "  - {id: 6, host: car_b, start: [0.0, 0.6, 0.3]}\n");
+                                              "  - {id: 6, host: car_b, start: [0.0, 0.6, 0.3]" + car_b_extra + "}\n");
     }
     cpm_test::TempDir dir;
 
@@ -193,10 +193,15 @@ TEST_F(LabAcrossHosts, InSimulatedTimeTheClockWaitsForTheCarsOnTheirHostsAndEver
 {
     // Car 5 looks for gates with its camera: the camera, its marker finder and the state
     // machine on car_a step with the lab clock too.
-    const std::string file = scenario("record: {topics: [\"*\"], exclude: [cameraFrame]}\n", ", camera: " + kRoot + "/scenarios/cameras/sim_640x480.yaml");
+    // Car 6's machine includes another file (FSMState file:), which goes to car_b beside it.
+    std::filesystem::create_directories(dir.path / "fsm" / "parts");
+    dir.write("fsm/parts/corridor.json", cpm_test::file_text(kRoot + "/scenarios/fsm/corridor.json"));
+    dir.write("fsm/car6.json", R"({"root": 0, "tick_period": 0.02, "states": [{"id": 0, "type": "FSMState", "file": "parts/corridor.json", "final": true}], "transitions": []})");
+    const std::string file = scenario("record: {topics: [\"*\"], exclude: [cameraFrame]}\n", ", camera: " + kRoot + "/scenarios/cameras/sim_640x480.yaml",
+                                      ", fsm: " + dir.file("fsm/car6.json"));
     const std::string out = dir.file("simulated");
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off", "--time", "simulated", "--duration", "10s"}));
-    ASSERT_EQ(run.wait(120s), 0) << run.output() << run.errors() << cpm_test::file_text(out + "/fsm_5.log");
+    ASSERT_EQ(run.wait(120s), 0) << run.output() << run.errors() << cpm_test::file_text(out + "/fsm_5.log") << cpm_test::file_text(out + "/fsm_6.log");
     std::ifstream in(out + "/summary.json");
     const auto summary = nlohmann::json::parse(in);
     EXPECT_TRUE(summary["ok"].get<bool>()) << summary.dump(2);
@@ -210,6 +215,12 @@ TEST_F(LabAcrossHosts, InSimulatedTimeTheClockWaitsForTheCarsOnTheirHostsAndEver
         EXPECT_GE(span_ns, 9'000'000'000u) << "car " << car;
         EXPECT_EQ(states.samples.size(), span_ns / 20'000'000 + 1) << "car " << car << ": one state per 20 ms tick of lab time";
     }
+    // Car 6 on car_b ran the machine its file included (its wall follower drove it; the outer
+    // machine alone has nothing that moves a car).
+    double fastest = 0;
+    for (const auto& s : recording.range_of<VehicleState>("vehicleState", 6, 0, UINT64_MAX, cpm::HistoryBy::data, 100000).samples)
+        fastest = std::max(fastest, s.sample.speed());
+    EXPECT_GT(fastest, 0.2) << "car 6 never drove";
     for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s)) << "left on host " << h;
 }
 

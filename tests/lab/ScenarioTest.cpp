@@ -365,7 +365,9 @@ TEST(Scenario, HostsNameEachProcessesComputerAndEveryMistakeInThemIsNamed)
         };
         EXPECT_EQ(flag("--dds_interface"), own) << p.name;
         EXPECT_EQ(flag("--dds_initial_peer"), other) << p.name;
-        if (on_car) EXPECT_EQ(p.argv[0].rfind("/opt/cpm/bin/", 0), 0u) << p.argv[0];
+        if (on_car) {
+            EXPECT_EQ(p.argv[0].rfind("/opt/cpm/bin/", 0), 0u) << p.argv[0];
+        }
     }
 
     const auto errors = errors_of(dir.write("bad_hosts.yaml",
@@ -385,6 +387,36 @@ TEST(Scenario, HostsNameEachProcessesComputerAndEveryMistakeInThemIsNamed)
                                                                "hosts: {a: {address: 10.1.0.1, ssh: a}}\nvehicles: [{id: 2}]\n"));
     ASSERT_EQ(no_local.size(), 1u);
     EXPECT_NE(no_local[0].find("hosts: 0 hosts without ssh; exactly one must be the host the run runs on"), std::string::npos) << no_local[0];
+}
+
+TEST(Scenario, AStateMachineThatIncludesOthersGoesToAnotherHostWithThemAsTheyLie)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    // fsm/car.json includes fsm/parts/turn.json, which includes common/stop.json (../../common).
+    fs::create_directories(dir.path / "fsm" / "parts");
+    fs::create_directories(dir.path / "common");
+    dir.write("fsm/car.json", R"({"root": 0, "states": [{"id": 0, "type": "FSMState", "file": "parts/turn.json", "final": true}], "transitions": []})");
+    dir.write("fsm/parts/turn.json", R"({"root": 0, "states": [{"id": 0, "type": "FSMState", "file": "../../common/stop.json", "final": true}], "transitions": []})");
+    dir.write("common/stop.json", R"({"root": 0, "states": [{"id": 0, "type": "Stop", "final": true}], "transitions": []})");
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "firmware_sim", "vehicle_bridge", "fsm_node"});
+    const auto s = load_scenario(dir.write("nested.yaml", "name: n\nduration: 5s\nworld: map.json\n"
+                                                          "hosts:\n  central: {address: 10.1.0.1}\n  car_a: {address: 10.1.0.2, ssh: car_a, cpm: /opt/cpm}\n"
+                                                          "vehicles: [{id: 2, host: car_a, fsm: fsm/car.json}]\n"));
+    const auto plan = plan_run(s, RunSettings{.bin_dir = bin, .run_dir = dir.file("run7"), .domain = 3});
+    const auto fsm = std::find_if(plan.begin(), plan.end(), [](const ProcessPlan& p) { return p.name == "fsm_2"; });
+    ASSERT_NE(fsm, plan.end());
+    const auto at = std::find(fsm->argv.begin(), fsm->argv.end(), "--fsm");
+    ASSERT_NE(at, fsm->argv.end());
+    const std::string given = *(at + 1);  // /tmp/cpm-runs/run7/tree_N/fsm/car.json
+    ASSERT_EQ(given.rfind("/tmp/cpm-runs/run7/tree_", 0), 0u) << given;
+    const std::string tree = given.substr(0, given.size() - std::string("fsm/car.json").size());
+    EXPECT_EQ(given.substr(tree.size()), "fsm/car.json");
+    std::map<std::string, std::string> copies(fsm->copies.begin(), fsm->copies.end());
+    const std::string root = fs::weakly_canonical(dir.path).string();
+    EXPECT_EQ(copies, (std::map<std::string, std::string>{{root + "/fsm/car.json", given},
+                                                          {root + "/fsm/parts/turn.json", tree + "fsm/parts/turn.json"},
+                                                          {root + "/common/stop.json", tree + "common/stop.json"}}));
 }
 
 TEST(Scenario, WithADiscoveryServerItRunsOnItsHostAndEveryProcessIsPointedAtIt)
