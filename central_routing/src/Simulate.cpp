@@ -107,6 +107,7 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
     const size_t samples_per_cycle = size_t(std::llround(options.period / options.sample));
     const size_t cycles = size_t(std::ceil(options.duration / options.period - 1e-9));
     std::vector<PlanSample> now(n);
+    std::vector<Pose> poses;  // for options.observe
     for (size_t cycle = 0; cycle < cycles; ++cycle) {
         const double t_cycle = double(cycle) * options.period;
         const auto t0 = std::chrono::steady_clock::now();
@@ -140,6 +141,11 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
                 const int z = table.zone_of(table.sample(now[i].edge, now[i].edge_s));
                 if (z >= 0 && z != zone[i]) ++zone_entries[size_t(z)];
                 zone[i] = z;
+            }
+            if (options.observe) {
+                poses.clear();
+                for (const auto& sample : now) poses.push_back(sample.pose);
+                options.observe(t, poses);
             }
             for (size_t i = 0; i < n; ++i) {
                 for (size_t j = i + 1; j < n; ++j) {

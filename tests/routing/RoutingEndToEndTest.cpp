@@ -1,6 +1,8 @@
 // Real processes: simulated cars (firmware_sim + vehicle_bridge behind ptys) driven by
 // central_routing over DDS, judged by the simulator's true poses (vehicleObservation); a car
 // off the graph, a car that goes silent, and bad input.
+#include "BodyGap.hpp"
+
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/get_time_ns.hpp>
@@ -19,6 +21,7 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <thread>
 
@@ -97,6 +100,20 @@ TEST(RoutingEndToEnd, EightCarsDriveTwoSimulatedMinutesWithoutTouchingAndNoneSta
     for (const auto& o : all) watch.add(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
     EXPECT_EQ(watch.overlaps(), 0u) << watch.report();
     EXPECT_GT(watch.min_distance(), 0.0) << watch.report();
+    // The tests' own referee of the bodies' gap (not the planner's): each car's pose against
+    // every other car's newest, as the observations came.
+    const cpm::routing::Footprint f;
+    std::map<int, cpm::routing::Pose> newest;
+    double gap = std::numeric_limits<double>::infinity();
+    for (const auto& o : all) {
+        const cpm::routing::Pose p{o.pose().x(), o.pose().y(), o.pose().yaw()};
+        for (const auto& [id, q] : newest) {
+            if (id != o.vehicle_id()) gap = routing_test::least_gap(f, p, q, gap);
+        }
+        newest[o.vehicle_id()] = p;
+    }
+    EXPECT_GT(gap, 0.0) << "two bodies touched (the tests' referee)";
+    EXPECT_NEAR(gap, watch.min_distance(), 0.0005);
     for (const auto& [id, car] : watch.cars()) {
         EXPECT_GE(car.distance, 20.0) << "vehicle " << id;
         EXPECT_LE(car.longest_standstill, 10.0) << "vehicle " << id;

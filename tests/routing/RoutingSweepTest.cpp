@@ -1,11 +1,15 @@
 // The planner on the lab map for N = 1..20 cars and five seeds, 60 simulated seconds each,
 // against ideal cars: what it sends stays within the limits and no two bodies come closer than
 // the margin at any 20 ms sample; every plan ends standing; every car drives on.
+#include "BodyGap.hpp"
+
 #include <cpm/routing/Simulate.hpp>
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <future>
+#include <limits>
 #include <vector>
 
 using namespace cpm::routing;
@@ -17,11 +21,22 @@ class RoutingSweep : public ::testing::TestWithParam<size_t>
 TEST_P(RoutingSweep, SixtySecondsWithinTheMarginAndTheLimitsForFiveSeeds)
 {
     const auto graph = load_lane_graph_or_throw(std::string(CPM_SOURCE_DIR) + "/scenarios/lanes/intersection.json");
+    // The tests' own referee of the gap between bodies (not the planner's footprint_distance):
+    // the least gap of every pair at every sample, per seed.
+    std::array<double, 5> referee_gap;
+    referee_gap.fill(std::numeric_limits<double>::infinity());
     auto options_for = [&](uint64_t seed) {
         SimulationOptions options;
         options.vehicles = GetParam();
         options.duration = 60;
         options.planner.seed = seed;
+        options.observe = [&gap = referee_gap[seed - 1], f = options.planner.footprint](double, const std::vector<Pose>& poses) {
+            for (size_t i = 0; i < poses.size(); ++i) {
+                for (size_t j = i + 1; j < poses.size(); ++j) {
+                    gap = routing_test::least_gap(f, poses[i], poses[j], gap);
+                }
+            }
+        };
         return options;
     };
     // The five seeds are independent simulations: run side by side, judged in order.
@@ -36,6 +51,9 @@ TEST_P(RoutingSweep, SixtySecondsWithinTheMarginAndTheLimitsForFiveSeeds)
         EXPECT_EQ(s.collisions, 0u);
         if (options.vehicles > 1) {
             EXPECT_GE(s.min_distance_m, options.planner.margin);
+            // The referee agrees: no two bodies closer than the margin (to within its half millimetre).
+            EXPECT_GE(referee_gap[seed - 1], options.planner.margin - 0.0005);
+            EXPECT_NEAR(referee_gap[seed - 1], s.min_distance_m, 0.0005);
         }
         EXPECT_LE(s.max_speed, options.planner.v_max + 1e-9);
         EXPECT_LE(s.max_acceleration, options.planner.a_max + 1e-6);

@@ -2,6 +2,8 @@
 #include <cpm/Error.hpp>
 #include <cpm/routing/Simulate.hpp>
 
+#include "BodyGap.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -140,6 +142,33 @@ TEST(Footprint, DistanceBetweenBodies)
     EXPECT_EQ(footprint_distance(f, {0, 0, 0}, {0.1, 0.05, 0.3}), 0.0);      // overlapping
     // Crossing like a plus, no corner of either inside the other: still an overlap.
     EXPECT_EQ(footprint_distance(f, {-0.13, 0, 0}, {0, -0.13, M_PI / 2}), 0.0);
+}
+
+TEST(Footprint, TheTestsRefereeAndTheFootprintDistanceAgreeOnHandComputedCases)
+{
+    const Footprint f;  // body from x = -0.07 to 0.33, y = -0.1 to 0.1 about a car at the origin facing +x
+    struct Case
+    {
+        const char* what;
+        Pose a, b;
+        double gap;  // by hand
+    };
+    const double c = std::cos(M_PI / 4), sn = std::sin(M_PI / 4);
+    // A corner of b (along -0.07, across -0.1) 3 cm ahead of and 4 cm beside a's front-left corner (0.33, 0.1).
+    const Pose corner_to_corner{0.36 + 0.07 * c - 0.1 * sn, 0.14 + 0.07 * sn + 0.1 * c, M_PI / 4};
+    const Case cases[] = {
+        {"turned 90 degrees, 7 cm ahead of a's nose", {0, 0, 0}, {0.5, 0, M_PI / 2}, 0.07},
+        {"turned 45 degrees, corner to corner 5 cm", {0, 0, 0}, corner_to_corner, 0.05},
+        {"side by side, 1 mm apart", {0, 0, 0}, {0, 0.201, 0}, 0.001},
+        {"the same, turned together by 30 degrees", {1, 1, M_PI / 6}, {1 - 0.201 * std::sin(M_PI / 6), 1 + 0.201 * std::cos(M_PI / 6), M_PI / 6}, 0.001},
+        {"facing each other, nose to nose 2 cm", {0, 0, 0}, {0.68, 0, M_PI}, 0.02},
+        {"crossing like a plus", {-0.13, 0, 0}, {0, -0.13, M_PI / 2}, 0.0},
+        {"overlapping by 1 mm", {0, 0, 0}, {0, 0.199, 0}, 0.0},
+    };
+    for (const auto& k : cases) {
+        EXPECT_NEAR(routing_test::body_gap(f, k.a, k.b), k.gap, 0.0005) << k.what;
+        EXPECT_NEAR(footprint_distance(f, k.a, k.b), k.gap, 1e-9) << k.what;
+    }
 }
 
 TEST(Planner, TheSameSeedGivesByteIdenticalTrajectories)

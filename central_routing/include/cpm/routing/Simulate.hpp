@@ -3,7 +3,9 @@
 // What `cpm routing simulate` prints, and what the tests and the benchmark measure.
 #include <cpm/routing/Planner.hpp>
 
+#include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace cpm::routing {
@@ -18,6 +20,9 @@ struct SimulationOptions
     /// Its seed also places the cars. No time slack: ideal cars keep their plans to the
     /// microsecond, and the slack is for real cars' lag.
     PlannerOptions planner = ideal_cars();
+    /// Sees every car's pose (id order) at every sample, with its time: for a referee of the
+    /// tests' own (the distances above are the planner's own footprint_distance).
+    std::function<void(double t, const std::vector<Pose>& poses)> observe;
 
     static PlannerOptions ideal_cars()
     {
@@ -65,7 +70,7 @@ size_t central_zone(const ConflictTable& table);
 SimulationSummary simulate(const LaneGraph& graph, const SimulationOptions& options, const std::vector<Pose>& starts = {});
 
 /// The same loop on a planner the caller set up (its cars placed, goals set): for tests that
-/// build their own situations. `observe` (optional) sees every sample's time.
+/// build their own situations.
 SimulationSummary simulate(Planner& planner, const SimulationOptions& options);
 
 }  // namespace cpm::routing
