@@ -197,20 +197,25 @@ std::vector<std::string> on_far_side(std::vector<std::string> argv) { return g_l
 std::string cyclone_env_here() { return g_link ? g_link->cyclone_env(0) : cyclone_loopback_env(); }
 std::string cyclone_env_far() { return g_link ? g_link->cyclone_env(1) : cyclone_loopback_env(); }
 
-bool cyclone_ping_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us,
-                        const std::vector<std::string>& extra)
+CyclonePinger::CyclonePinger(int domain, size_t size, const std::vector<std::string>& extra)
+    : ping_([&] {
+          std::vector<std::string> argv{cpm::sibling_executable("cyclone_bench"), "ping", "--domain", std::to_string(domain), "--size",
+                                        std::to_string(size), "--blocks"};
+          argv.insert(argv.end(), extra.begin(), extra.end());
+          return cpm::ProcessOptions{.argv = argv, .env = {cyclone_env_here()}, .capture_stdout = true, .pipe_stdin = true};
+      }())
 {
-    const std::string out = "/tmp/bench_cyclone_ping_" + std::to_string(getpid());
-    std::vector<std::string> argv{cpm::sibling_executable("cyclone_bench"), "ping", "--domain", std::to_string(domain), "--size",
-                                  std::to_string(size), "--count", std::to_string(count), "--warmup", std::to_string(warmup)};
-    argv.insert(argv.end(), extra.begin(), extra.end());
-    auto ping = spawn(argv, {cyclone_env_here()}, out);
-    const int code = wait_child(ping, 120);
+}
+
+bool CyclonePinger::block(int count, int warmup, std::vector<double>& one_way_us)
+{
+    if (!ok_ || !ping_.write_stdin(std::to_string(count) + " " + std::to_string(warmup) + "\n")) return ok_ = false;
     const size_t before = one_way_us.size();
-    std::ifstream in(out);
-    for (double v; in >> v;) one_way_us.push_back(v);
-    std::remove(out.c_str());
-    return code == 0 && one_way_us.size() - before == size_t(count);
+    while (auto line = ping_.read_line()) {
+        if (*line == "done") return ok_ = one_way_us.size() - before == size_t(count);
+        one_way_us.push_back(std::atof(line->c_str()));
+    }
+    return ok_ = false;  // it ended: no pong, or a pong out of order (its stderr says which)
 }
 
 Rate cyclone_pub_sub(int domain, size_t size, int seconds, const std::vector<std::string>& pub_extra,

@@ -83,11 +83,21 @@ std::vector<std::string> on_far_side(std::vector<std::string> argv);
 std::string cyclone_env_here();
 std::string cyclone_env_far();
 
-/// One block of round trips from a fresh `cyclone_bench ping` (loopback UDP) against the pong on
-/// `domain`; appends its one-way latencies (µs). False when the block did not complete. `extra`:
-/// more arguments (e.g. --type blob).
-bool cyclone_ping_block(int domain, size_t size, int count, int warmup, std::vector<double>& one_way_us,
-                        const std::vector<std::string>& extra = {});
+/// Cyclone's side of a ping-pong: one `cyclone_bench ping --blocks` (loopback UDP, or this side
+/// of the link) against the pong on `domain`, kept running between blocks as cpm's pingers are.
+/// `extra`: more arguments (e.g. --type blob).
+class CyclonePinger
+{
+public:
+    CyclonePinger(int domain, size_t size, const std::vector<std::string>& extra = {});
+    /// `warmup` round trips, then `count` whose one-way latencies (µs) are appended. False when the
+    /// block did not complete (the process then has ended: every later block is false too).
+    bool block(int count, int warmup, std::vector<double>& one_way_us);
+
+private:
+    cpm::ChildProcess ping_;
+    bool ok_ = true;
+};
 
 /// What one throughput run measured (cyclone_bench's pub and sub report these too).
 struct Rate

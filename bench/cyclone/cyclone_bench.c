@@ -3,8 +3,9 @@
  * work and not only beside ddsperf (which always batches its writes).
  *
  *   cyclone_bench pong   [--domain D]                      echoes bench_ping on bench_pong until SIGTERM
- *   cyclone_bench ping   [--domain D] [--size B] [--count N] [--warmup W]
- *                        prints one one-way latency (round trip / 2) in µs per line, after W warm-up
+ *   cyclone_bench ping   [--domain D] [--size B] [--count N] [--warmup W] [--blocks]
+ *                        prints one one-way latency (round trip / 2) in µs per line, after W warm-up;
+ *                        --blocks: stays warm, one block per line "COUNT WARMUP" of stdin, each ended by "done"
  *   cyclone_bench sub    [--domain D] [--listener]         counts until the end marker, then prints
  *                        "received N lost L rate R complete 1" (samples/s between first and last
  *                        arrival); --listener takes samples in Cyclone's receive thread
@@ -185,34 +186,59 @@ static int pong(dds_entity_t participant)
     return 0;
 }
 
-static int ping(dds_entity_t participant, size_t size, long count, long warmup)
+/* `warmup` + `count` round trips on a matched side, numbered from *seq on; prints each counted
+ * one-way time (µs) on a line of its own. */
+static int ping_block(const struct side* s, BenchPayload* msg, uint64_t* seq, long count, long warmup)
 {
-    const struct side s = open_side(participant, "bench_pong", "bench_ping");
-    const dds_entity_t reader = s.reader, writer = s.writer, ws = s.waitset;
-    wait_matched(writer, 1);
-    wait_matched(reader, 0); /* the pong's writer must see this reader before the first ping counts */
-    BenchPayload msg;
-    fill(&msg, size);
     void* sample[1];
-    for (long i = 0; i < warmup + count && !g_stop; ++i) {
-        msg.seq = (uint64_t)i;
+    for (long i = 0; i < warmup + count && !g_stop; ++i, ++*seq) {
+        msg->seq = *seq;
         const int64_t t0 = now_ns();
-        check(dds_write(writer, &msg), "write ping");
-        if (!take_one(ws, reader, sample, DDS_SECS(5))) {
-            fprintf(stderr, "cyclone_bench: no pong for ping %ld within 5 s\n", i);
+        check(dds_write(s->writer, msg), "write ping");
+        if (!take_one(s->waitset, s->reader, sample, DDS_SECS(5))) {
+            fprintf(stderr, "cyclone_bench: no pong for ping %llu within 5 s\n", (unsigned long long)*seq);
             return 1;
         }
         const int64_t t1 = now_ns();
-        const uint64_t seq = ((BenchPayload*)sample[0])->seq;
-        dds_return_loan(reader, sample, 1);
-        if (seq != (uint64_t)i) {
-            fprintf(stderr, "cyclone_bench: pong %llu for ping %ld\n", (unsigned long long)seq, i);
+        const uint64_t got = ((BenchPayload*)sample[0])->seq;
+        dds_return_loan(s->reader, sample, 1);
+        if (got != *seq) {
+            fprintf(stderr, "cyclone_bench: pong %llu for ping %llu\n", (unsigned long long)got, (unsigned long long)*seq);
             return 1;
         }
         if (i >= warmup) printf("%.3f\n", (double)(t1 - t0) / 2000.0);
     }
-    BenchPayload_free(&msg, DDS_FREE_CONTENTS);
     return 0;
+}
+
+/* One block, or with `blocks` one block per line of stdin ("COUNT WARMUP"), each ended by a
+ * line "done", the process staying warm in between (as the cpm side's pingers do), until stdin ends. */
+static int ping(dds_entity_t participant, size_t size, long count, long warmup, int blocks)
+{
+    const struct side s = open_side(participant, "bench_pong", "bench_ping");
+    wait_matched(s.writer, 1);
+    wait_matched(s.reader, 0); /* the pong's writer must see this reader before the first ping counts */
+    BenchPayload msg;
+    fill(&msg, size);
+    uint64_t seq = 0;
+    int rc = 0;
+    if (!blocks) {
+        rc = ping_block(&s, &msg, &seq, count, warmup);
+    } else {
+        char line[64];
+        while (rc == 0 && fgets(line, sizeof line, stdin)) {
+            if (sscanf(line, "%ld %ld", &count, &warmup) != 2) {
+                fprintf(stderr, "cyclone_bench: expected 'COUNT WARMUP', got '%s'\n", line);
+                rc = 1;
+                break;
+            }
+            rc = ping_block(&s, &msg, &seq, count, warmup);
+            printf("done\n");
+            fflush(stdout);
+        }
+    }
+    BenchPayload_free(&msg, DDS_FREE_CONTENTS);
+    return rc;
 }
 
 /* What the subscriber counts; taken from the reader on a waiting thread or in the listener. */
@@ -347,7 +373,7 @@ int main(int argc, char** argv)
     if (strcmp(role, "pong") == 0)
         rc = pong(participant);
     else if (strcmp(role, "ping") == 0)
-        rc = ping(participant, size, atol(arg(argc, argv, "--count", "10000")), atol(arg(argc, argv, "--warmup", "1000")));
+        rc = ping(participant, size, atol(arg(argc, argv, "--count", "10000")), atol(arg(argc, argv, "--warmup", "1000")), flag(argc, argv, "--blocks"));
     else if (strcmp(role, "sub") == 0)
         rc = sub(participant, flag(argc, argv, "--listener"));
     else if (strcmp(role, "pub") == 0)
