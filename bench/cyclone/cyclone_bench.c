@@ -13,6 +13,7 @@
  *                        writes as fast as the writer accepts for S seconds, then the end marker;
  *                        --batch packs writes into fewer messages (dds_write_set_batch), as ddsperf does
  *
+ * --touch: every sample taken has all its bytes read (a checksum), on whichever side takes it.
  * --type blob sends BenchBlob (BenchLarge.idl, up to 1 MiB) instead of BenchPayload (up to 70,000 B):
  * the same layout, so the code below handles both as BenchPayload.
  *
@@ -36,6 +37,19 @@
 #define END_MARKER UINT64_MAX
 
 static volatile sig_atomic_t g_stop = 0;
+/* --touch: every sample taken has each of its bytes read (a checksum), as a reader that uses
+ * what it receives does; bench_large asks for it on both sides of every case. */
+static int g_touch = 0;
+static volatile uint64_t g_checksum = 0;
+
+static void touch(const void* sample)
+{
+    if (!g_touch) return;
+    const BenchPayload* p = (const BenchPayload*)sample;
+    uint64_t sum = 0;
+    for (uint32_t i = 0; i < p->data._length; ++i) sum += p->data._buffer[i];
+    g_checksum += sum;
+}
 static void on_signal(int sig)
 {
     (void)sig;
@@ -125,7 +139,10 @@ static int take_one(dds_entity_t waitset, dds_entity_t reader, void** sample, dd
         const dds_return_t n = dds_take(reader, sample, &info, 1, 1);
         check(n, "take");
         if (n == 1) {
-            if (info.valid_data) return 1;
+            if (info.valid_data) {
+                touch(sample[0]);
+                return 1;
+            }
             dds_return_loan(reader, sample, 1);
             continue;
         }
@@ -262,6 +279,7 @@ static void take_all(dds_entity_t reader, struct counter* c)
         const int64_t t = now_ns();
         for (dds_return_t i = 0; i < n; ++i) {
             if (!infos[i].valid_data) continue;
+            touch(samples[i]);
             const uint64_t seq = ((BenchPayload*)samples[i])->seq;
             if (seq == END_MARKER) {
                 c->done = 1;
@@ -350,6 +368,7 @@ int main(int argc, char** argv)
         return argc < 2 ? 2 : 0;
     }
     const char* role = argv[1];
+    g_touch = flag(argc, argv, "--touch");
     const int domain = atoi(arg(argc, argv, "--domain", "0"));
     const char* type = arg(argc, argv, "--type", "payload");
     size_t bound = 70000;
