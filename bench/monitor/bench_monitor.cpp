@@ -204,13 +204,13 @@ int run(int argc, char** argv)
         std::printf("%-28s %10.2f %10.2f %10.3f %10.3f %12.1f %10.1f\n", label, r.monitor.p50 * 1e-3, r.monitor.p99 * 1e-3, r.dds.p50 * 1e-3,
                     r.dds.p99 * 1e-3, r.updates_per_watcher, r.cpu_percent);
         std::fflush(stdout);
-        met = met && r.monitor.p99 <= 50'000 && (c.cars != 20 || c.watchers != 1 || r.cpu_percent <= 10.0);
+        met = met && r.monitor.p99 <= 50'000 && (c.cars != 20 || r.cpu_percent <= 10.0);
         bench::record({"monitor", std::string(label) + ": create_stamp -> watcher p99", "ms", r.monitor.p99 * 1e-3, "plain cpm reader (DDS floor)",
                        r.dds.p99 * 1e-3, "<= 50 ms", r.monitor.p99 <= 50'000 ? 1 : 0});
         bench::record({"monitor", std::string(label) + ": monitor CPU", "% of a core", r.cpu_percent, "", 0,
-                       c.cars == 20 && c.watchers == 1 ? "<= 10 %" : "", c.cars == 20 && c.watchers == 1 ? (r.cpu_percent <= 10.0 ? 1 : 0) : -1});
+                       c.cars == 20 ? "<= 10 %" : "", c.cars == 20 ? (r.cpu_percent <= 10.0 ? 1 : 0) : -1});
     }
-    std::printf("\ntargets: p99 <= 50 ms (every case), monitor CPU <= 10 %% of one core (20 cars, 1 watcher): %s\n", met ? "met" : "NOT met");
+    std::printf("\ntargets: p99 <= 50 ms (every case), monitor CPU <= 10 %% of one core (20 cars, 1 and 10 watchers): %s\n", met ? "met" : "NOT met");
     monitor.stop();
     ::unlink(out.c_str());
     return 0;
