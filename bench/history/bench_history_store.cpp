@@ -392,15 +392,17 @@ void print_rounds()
         auto [slo, shi] = std::minmax_element(store.begin(), store.end());
         auto [qlo, qhi] = std::minmax_element(sqlite.begin(), sqlite.end());
         auto [rlo, rhi] = std::minmax_element(ratio.begin(), ratio.end());
-        const double median = cpm::percentile(ratio, 0.5);
+        // One estimator, printed, recorded and judged alike: the median store block against the
+        // median SQLite block (the per-round ratios show how steady the rounds were).
+        const double store_median = cpm::percentile(store, 0.5), sqlite_median = cpm::percentile(sqlite, 0.5);
+        const double median = sqlite_median / store_median;
         // The >= 50x target is the in-place `at`'s; a copy is judged against memory (print_percentiles).
         const bool judged = c.store == store_in_place;
-        std::printf("%-20s store %6.0f-%-6.0f ns | sqlite %6.0f-%-6.0f ns | sqlite/store per round %5.1f-%-5.1fx, median %5.1fx%s\n",
+        std::printf("%-20s store %6.0f-%-6.0f ns | sqlite %6.0f-%-6.0f ns | sqlite/store per round %5.1f-%-5.1fx; medians' ratio %5.1fx%s\n",
                     c.what, *slo, *shi, *qlo, *qhi, *rlo, *rhi, median,
                     !judged ? "" : median >= 50 ? " (target >= 50x: met)" : " (target >= 50x: not met)");
-        bench::record({"history_store", std::string(c.what) + ", median of rounds", "ns", cpm::percentile(store, 0.5),
-                       "SQLite (in-memory, indexed)", cpm::percentile(sqlite, 0.5), judged ? "<= 0.02x peer (50x faster)" : "",
-                       judged ? int(median >= 50) : -1});
+        bench::record({"history_store", std::string(c.what) + ", median of rounds", "ns", store_median, "SQLite (in-memory, indexed)", sqlite_median,
+                       judged ? "<= 0.02x peer (50x faster)" : "", judged ? int(median >= 50) : -1});
     }
 }
 
@@ -434,7 +436,7 @@ void print_percentiles()
     std::printf("single calls; raw p50 (clock read included, %.0f ns) and less it; targets judged on raw p50:\n", clock);
     // `verdict`: the store's raw p50 against the in-place target (200 ns) or, for a copy,
     // against one random load in the held data (1.5x).
-    enum Verdict { none, in_place, copied };
+    enum Verdict { none, in_place, copied, append };
     auto line = [&](const char* what, auto&& store_op, auto&& sqlite_op, int n = 200'000, Verdict verdict = none) {
         const auto store = percentiles(store_op, n), sqlite = percentiles(sqlite_op, n);
         std::string judged;
@@ -444,6 +446,10 @@ void print_percentiles()
             std::snprintf(b, sizeof b, " (p50 <= 1.5 x %.0f ns DRAM load: %s)", dram_ns, store.p50 <= 1.5 * dram_ns ? "met" : "not met");
             judged = b;
         }
+        if (verdict == append) judged = sqlite.p50 >= 20 * store.p50 ? " (>= 20x: met)" : " (>= 20x: not met)";
+        if (verdict == append)
+            bench::record({"history_store", std::string(what) + " p50", "ns", store.p50, "SQLite (in-memory, indexed), same work", sqlite.p50,
+                           "<= 0.05x peer (20x faster)", int(sqlite.p50 >= 20 * store.p50)});
         if (verdict == in_place) bench::record({"history_store", std::string(what) + " p50", "ns", store.p50, "", 0, "<= 200 ns", int(store.p50 <= 200)});
         if (verdict == copied)
             bench::record({"history_store", std::string(what) + " p50", "ns", store.p50, "one random DRAM load in the held data", dram_ns,
@@ -452,8 +458,8 @@ void print_percentiles()
                     what, store.p50, store.p50 - clock, store.p99, sqlite.p50, sqlite.p50 - clock, sqlite.p99, sqlite.p50 / store.p50,
                     judged.c_str());
     };
-    line("append (sqlite: txn a row)", [&] { sa.put(2, sa.next++); }, [&] { qa.append(2); });
-    line("append (sqlite: 1000/txn)", [&] { sa.put(3, sa.next++); }, [&] { qb.append(3); });
+    line("append (sqlite: txn a row)", [&] { sa.put(2, sa.next++); }, [&] { qa.append(2); }, 200'000, append);
+    line("append (sqlite: 1000/txn)", [&] { sa.put(3, sa.next++); }, [&] { qb.append(3); }, 200'000, append);
     for (const AtCase& c : kAtCases) {
         line(c.what, [&] { times.ask(c.store, c.by); }, [&] { times.ask(c.sqlite, c.by); }, 200'000,
              c.store == store_in_place ? in_place : copied);
