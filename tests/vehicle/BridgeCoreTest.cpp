@@ -1,5 +1,7 @@
 #include <cpm/vehicle/BridgeCore.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
+#include <cpm/vehicle/VehicleModel.hpp>
+#include <cpm/vehicle/Calibration.hpp>
 
 #include <gtest/gtest.h>
 
@@ -117,6 +119,24 @@ TEST(Controllers, SteeringForCurvatureInvertsTheBicycleModel)
     EXPECT_NEAR(std::tan(angle) / c.wheelbase, curvature, 1e-12);
     EXPECT_EQ(steering_for_curvature(c, 100.0), 1.0);
     EXPECT_EQ(steering_for_curvature(c, -100.0), -1.0);
+}
+
+TEST(BridgeCore, CalibrationDescribesTheSimulatedCar)
+{
+    // The bridge's default calibration and the simulated car's parameters are two files' worth of
+    // numbers about one car: the e2e tests' tight tolerances (a commanded circle to 2.5 %) rest on them agreeing.
+    const Calibration c;
+    const VehicleParameters p;
+    EXPECT_EQ(c.wheelbase, p.wheelbase);
+    EXPECT_EQ(c.max_steering_angle, p.max_steering_angle);
+    EXPECT_EQ(c.ticks_per_metre, p.ticks_per_metre);
+    EXPECT_DOUBLE_EQ(c.throttle_per_speed, 1 / p.max_speed);
+    // Full left at 2000 µs, full right at 1000 µs (the model's servo).
+    EXPECT_EQ(c.servo_centre_us + c.servo_range_us, 2000);
+    EXPECT_EQ(c.servo_centre_us - c.servo_range_us, 1000);
+    VehicleModel model(p);
+    EXPECT_NEAR(model.steering_for_servo(2000), p.max_steering_angle, 1e-12);
+    EXPECT_NEAR(model.steering_for_servo(1000), -p.max_steering_angle, 1e-12);
 }
 
 TEST(BridgeCore, DirectBeatsSpeedCurvatureAndAStaleCommandIsIgnored)

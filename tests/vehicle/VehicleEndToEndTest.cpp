@@ -286,8 +286,11 @@ TEST_F(VehicleEndToEnd, SpeedCurvatureCommandDrivesACircleOfTheCommandedRadius)
     std::this_thread::sleep_for(3s);
     auto points = watch.observations_between(t0, cpm::get_time_ns());
     ASSERT_GT(points.size(), 100u);
-    EXPECT_NEAR(fitted_radius(points), 0.8, 0.08);
-    EXPECT_NEAR(mean_speed(points), 1.0, 0.1);
+    // The bridge's calibration describes the simulated car (BridgeCore.CalibrationDescribesTheSimulatedCar):
+    // steady on the circle, only the servo's 1 µs steps and the speed loop's ripple are left.
+    EXPECT_NEAR(fitted_radius(points), 0.8, 0.02);
+    EXPECT_NEAR(mean_speed(points), 1.0, 0.03);
+    std::printf("commanded circle: radius %.4f m (0.8), speed %.4f m/s (1.0)\n", fitted_radius(points), mean_speed(points));
 }
 
 TEST_F(VehicleEndToEnd, DirectCommandOverridesATrajectoryUntilItIsStale)
@@ -572,7 +575,9 @@ TEST_F(VehicleEndToEnd, ABridgeLeavesALineWhoseControllerBelongsToAnotherVehicle
     car.start_bridge({}, 9);
     EXPECT_TRUE(cpm_test::wait_until([&] { return car.bridge->errors().find("belongs to vehicle 7") != std::string::npos; }))
         << car.bridge->errors();
-    EXPECT_TRUE(watch.states().empty());
+    // And it stays off the line: no state for a whole second after it said so (one look at once
+    // would pass a bridge that published a moment later).
+    EXPECT_TRUE(cpm_test::holds_for([&] { return watch.states().empty(); }, 1000ms)) << watch.states().size() << " states published";
 }
 
 TEST_F(VehicleEndToEnd, ASecondBridgeOnTheSameLineIsRefusedAndTheFirstKeepsDriving)
@@ -662,8 +667,7 @@ TEST_F(VehicleEndToEnd, InSimulatedTimeTheCarsWaitForTheLabClockAndStillStopOnCt
     ASSERT_TRUE(cpm_test::wait_until([&] {
         return sut.output().find("cpm lab clock --simulated --nodes firmware_sim_4,vehicle_bridge_4") != std::string::npos;
     }, 10s)) << sut.output() << sut.errors();
-    std::this_thread::sleep_for(1s);
-    EXPECT_TRUE(states.take().empty()) << "no lab clock runs: no car may tick";
+    EXPECT_TRUE(cpm_test::holds_for([&] { return states.take().empty(); }, 1000ms)) << "no lab clock runs: no car may tick";
     // Ctrl-C while the clock stands still: every process ends at once and reports.
     const auto t0 = std::chrono::steady_clock::now();
     sut.kill(SIGINT);
