@@ -76,7 +76,8 @@ TEST(FsmClosedLoop, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCornerA
     // Around the corner: heading up the second leg (+y), between its walls (x = 6.4 .. 8.0),
     // stopped before its end wall (y = 5).
     EXPECT_NEAR(end.pose.yaw, M_PI / 2, 0.1);
-    EXPECT_NEAR(end.pose.x, 7.41, 0.05);
+    // 0.5 m from the right wall (x = 8.0) at the right ranger, which sits 0.09 m right of the car's centre line.
+    EXPECT_NEAR(end.pose.x, 8.0 - 0.5 + cpm::vehicle::VehicleParameters{}.ultrasonic[2].y, 0.05);
     EXPECT_GT(end.pose.y, 3.8);
     EXPECT_LT(end.pose.y, 4.6);
     std::printf("first leg: clearance within %.1f mm of 0.5 m; |steering| up to %.3f on the straight, %.3f at the niche; "

@@ -2,6 +2,7 @@
 // vehicle_bridge over a pty) through the shipped corridor with the shipped machine.
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
+#include <cpm/vehicle/VehicleModel.hpp>
 
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
@@ -29,6 +30,10 @@ namespace {
 /// One run of a shipped machine on simulated car 5 starting at (0, -0.01, 0) in the corridor,
 /// where its right ranger is 0.5 m from the right wall: the true track, fsm_node's commands and
 /// its states, until fsm_node ends in its final state.
+/// The simulated car's rangers (VehicleParameters: the right one 0.20 m ahead of the rear axle, 0.09 m right).
+const cpm::vehicle::UltrasonicMount kRight = cpm::vehicle::VehicleParameters{}.ultrasonic[2];
+const cpm::vehicle::UltrasonicMount kFront = cpm::vehicle::VehicleParameters{}.ultrasonic[0];
+
 struct Drive
 {
     std::vector<VehicleObservation> track;
@@ -37,10 +42,12 @@ struct Drive
     std::vector<FsmStatus> statuses;
     std::string output;
 
-    /// Ground truth: the right ranger's distance to the first leg's right wall (y = -0.6).
+    /// Ground truth: the right ranger's distance to the first leg's right wall (y = -0.6), from
+    /// where the simulated car carries it.
     static double clearance(const VehicleObservation& o)
     {
-        return o.pose().y() + 0.20 * std::sin(o.pose().yaw()) - 0.09 * std::cos(o.pose().yaw()) + 0.6;
+        const auto& r = kRight;
+        return o.pose().y() + r.x * std::sin(o.pose().yaw()) + r.y * std::cos(o.pose().yaw()) + 0.6;
     }
     /// The car's true x when the command was written (the observation nearest in time).
     double x_at(const VehicleCommandDirect& c) const
@@ -153,7 +160,7 @@ TEST_P(FsmNodeTicking, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCorn
     for (auto& o : run.track) {
         const double x = o.pose().x(), y = o.pose().y(), yaw = o.pose().yaw();
         if (x < 6.4 || y < 2.8 || y > end_y - 0.05) continue;
-        const double ranger_x = x + 0.20 * std::cos(yaw) + 0.09 * std::sin(yaw);
+        const double ranger_x = x + kRight.x * std::cos(yaw) - kRight.y * std::sin(yaw);
         worst_second = std::max(worst_second, std::abs((8.0 - ranger_x) - 0.5));
         ++checked_second;
     }
@@ -165,8 +172,8 @@ TEST_P(FsmNodeTicking, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCorn
     // delay and the braking (~0.1 s): about 0.05 m.
     const auto& end = run.track.back().pose();
     EXPECT_NEAR(end.yaw(), M_PI / 2, 0.1) << run.output;
-    EXPECT_NEAR(end.x(), 8.0 - 0.5 - 0.09, 0.1) << run.output;
-    EXPECT_NEAR(end.y(), 5.0 - 0.6 - 0.30 + 0.05, 0.1) << run.output;
+    EXPECT_NEAR(end.x(), 8.0 - 0.5 + kRight.y, 0.1) << run.output;
+    EXPECT_NEAR(end.y(), 5.0 - 0.6 - kFront.x + 0.05, 0.1) << run.output;
     std::printf("first leg: clearance within %.0f mm of 0.5 m over %zu observations; second leg within %.0f mm over %zu; "
                 "|steering| (0.2 s mean) up to %.2f on the straight, %.2f at the niche; stopped at (%.2f, %.2f, %.2f)\n",
                 worst * 1000, checked, worst_second * 1000, checked_second, steer_straight, steer_niche, end.x(), end.y(),
