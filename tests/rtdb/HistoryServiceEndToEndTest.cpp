@@ -17,6 +17,8 @@
 #include <Log.h>
 #include <Parameter.h>
 #include <LabOnlyThingPubSubTypes.h>
+#include <cpm/base64.hpp>
+#include <fastrtps/rtps/common/SerializedPayload.h>
 #include <VehicleState.h>
 
 #include "history_e2e.hpp"
@@ -166,7 +168,8 @@ TEST_F(HistoryService, TheCommandWaitsForAnObjectToAppearAndListsWhatChangedSinc
 {
     const uint64_t before = cpm::get_time_ns();
     Process waiting({built_program("cpm"), "history", "wait-object", "--name", "^lateThing/", "--timeout", "30s", "--json"});
-    std::this_thread::sleep_for(500ms);  // asking before the object exists
+    // Asking before the object exists: for half a second it has no answer (it waits, checked).
+    ASSERT_TRUE(cpm_test::holds_for([&] { return waiting.wait(0ms) == -1; }, 500ms)) << waiting.output() << waiting.errors();
     Process w = writer({"--type", "lab_only", "--topic", "lateThing", "--vehicle", "2", "--count", "3"});
     ASSERT_EQ(w.wait(30s), 0) << w.errors();
     ASSERT_EQ(waiting.wait(30s), 0) << waiting.errors() << service.errors();
@@ -209,7 +212,19 @@ TEST_F(HistoryService, RecordsATypeItWasNeverCompiledWith)
     EXPECT_EQ(j["type"], "LabOnlyThing");
     EXPECT_EQ(j["data_ns"], kBase + 4 * kMs);
     EXPECT_FALSE(j.contains("data"));
-    EXPECT_GT(j["payload_base64"].get<std::string>().size(), 40u);
+    // The payload as the writer put it on the wire: decoded and read back with the type (which
+    // the command does not know), it is the writer's fifth sample (k = 4).
+    const auto bytes = cpm::base64_decode(j["payload_base64"].get<std::string>());
+    LabOnlyThingPubSubType type;
+    eprosima::fastrtps::rtps::SerializedPayload_t payload(uint32_t(bytes.size()));
+    std::copy(bytes.begin(), bytes.end(), payload.data);
+    payload.length = uint32_t(bytes.size());
+    LabOnlyThing decoded;
+    ASSERT_TRUE(type.deserialize(&payload, &decoded)) << bytes.size() << " bytes";
+    EXPECT_EQ(decoded.note(), "thing 4");
+    EXPECT_EQ(decoded.value(), 4 / 2.0);  // the writer's value k/2
+    EXPECT_EQ(decoded.vehicle_id(), 7);
+    EXPECT_EQ(decoded.header().create_stamp().nanoseconds(), kBase + 4 * kMs);
 }
 
 TEST_F(HistoryService, TruncatedSamplesAreCountedAndSkippedAndBadRequestsAnsweredWithErrors)
@@ -251,25 +266,34 @@ TEST_F(HistoryService, SeveralClientsAtOnceAndAWaitingOrStoppedClientStallsNeith
     // A client frozen in the middle of a wait (SIGSTOP: it reads no reply), and one in this
     // process waiting 3 s for a sample that does not come.
     Process frozen({built_program("cpm"), "history", "wait", "--topic", "vehicleState", "--key", "2", "--timeout", "20s"});
-    std::this_thread::sleep_for(300ms);
+    ASSERT_TRUE(cpm_test::holds_for([&] { return frozen.wait(0ms) == -1; }, 300ms)) << frozen.errors();  // waiting, not answered
     frozen.kill(SIGSTOP);
-    std::atomic<bool> waited{false};
+    using Steady = std::chrono::steady_clock;
+    std::atomic<int64_t> wait_began{0}, wait_ended{0};  // steady_clock ns
+    auto now = [] { return Steady::now().time_since_epoch().count(); };
     std::thread waiter([&] {
         cpm::HistoryClient slow(participant);
+        wait_began = now();
         auto r = slow.wait_next<VehicleState>("vehicleState", 2, cpm::get_time_ns(), 3s);
+        wait_ended = now();
         EXPECT_EQ(r.status, cpm::history::Status::timeout);
-        waited = true;
     });
-    // Meanwhile another client is answered at once, and a writer's samples are all recorded.
+    // Meanwhile, once that wait is asked and a moment old, another client is answered at once
+    // (all 20 questions within the wait), and a writer's samples are all recorded.
+    ASSERT_TRUE(cpm_test::wait_until([&] { return wait_began != 0; }, 5s));
+    std::this_thread::sleep_for(200ms);  // its request on its way to the service
     cpm::HistoryClient other(participant);
-    const auto t0 = std::chrono::steady_clock::now();
+    const int64_t asked = now();
     for (int i = 0; i < 20; ++i) EXPECT_EQ(other.latest<VehicleState>("vehicleState", 2).sample.pose().x(), 4);
-    EXPECT_FALSE(waited) << "20 queries answered only after the 3 s wait: "
-                         << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s";
+    const int64_t answered = now();
     Process second = writer({"--type", "vehicle", "--vehicle", "6", "--count", "200"});
     ASSERT_EQ(second.wait(30s), 0) << second.errors();
     EXPECT_TRUE(wait_for_samples("vehicleState", "6", 200));
     waiter.join();
+    // The 20 answers came while the wait was pending, and the wait ran its full 3 s.
+    EXPECT_LT(answered, wait_ended.load()) << "the 20 questions were answered " << double(answered - wait_ended) * 1e-9 << " s after the wait ended";
+    EXPECT_GT(asked, wait_began.load());
+    EXPECT_GE(double(wait_ended - wait_began) * 1e-9, 2.9) << "the wait did not wait";
     frozen.kill(SIGKILL);
 }
 
