@@ -1,5 +1,6 @@
 // cpm_history --record as a real process: the recording of a run answers `cpm history --file`
-// byte for byte as the live service answered the same questions; a recording survives Ctrl-C
+// byte for byte as the live service answered the same questions, and each answers with the
+// status and content the writers' samples call for; a recording survives Ctrl-C
 // and kill -9; a full disk ends the recording with an error naming the file while the live
 // history goes on serving; cpm record writes the same file.
 #include <cpm/HistoryClient.hpp>
@@ -23,6 +24,8 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <set>
 #include <tuple>
 #include <sstream>
 
@@ -104,26 +107,95 @@ TEST(RecordingEndToEnd, ARecordedRunAnswersEveryVerbAsTheLiveServiceDid)
     for (std::string line; std::getline(lines, line);) commits.push_back(nlohmann::json::parse(line)["commit_ns"].get<uint64_t>());
     ASSERT_EQ(commits.size(), 80u);
     const auto t = [](uint64_t v) { return std::to_string(v); };
-    const std::vector<std::vector<std::string>> questions = {
-        {"latest", "--topic", "vehicleState", "--key", "3", "--json"},
-        {"latest", "--topic", "labThing", "--key", "2", "--json"},
-        {"latest", "--topic", "vehicleState", "--key", "4", "--json"},
-        {"at", "--topic", "vehicleState", "--key", "3", "--time", t(commits[40]), "--json"},
-        {"at", "--topic", "vehicleState", "--key", "3", "--time", t(commits[40] - 1)},
-        {"older", "--topic", "vehicleState", "--key", "3", "--time", t(commits[10]), "--json"},
-        {"younger", "--topic", "vehicleState", "--key", "3", "--time", t(commits[79]), "--json"},  // not_yet
-        {"at", "--topic", "vehicleState", "--key", "3", "--time", t(kBase + 33 * kMs + 1), "--by", "data", "--json"},
-        {"at", "--topic", "vehicleState", "--key", "3", "--time", t(kBase - 1), "--by", "data", "--json"},  // not_found
-        {"older", "--topic", "labThing", "--key", "2", "--time", t(kBase + 20 * kMs), "--by", "data", "--json"},
-        {"younger", "--topic", "labThing", "--key", "2", "--time", t(kBase + 20 * kMs), "--by", "data"},
-        {"range", "--topic", "vehicleState", "--key", "3", "--from", t(kBase + 5 * kMs), "--to", t(kBase + 25 * kMs), "--by", "data", "--json"},
-        {"range", "--topic", "labThing", "--key", "2", "--from", t(commits[0]), "--to", t(commits[79]), "--limit", "7", "--json"},
-        {"successor", "--topic", "vehicleState", "--key", "3", "--time", t(commits[50]), "--json"},
-        {"snapshot", "--objects", "vehicleState/3,labThing/2,vehicleState/4", "--time", t(commits[60]), "--json"},
-        {"snapshot", "--objects", "vehicleState/3,labThing/2", "--time", t(commits[60])},
+    // Each question with what the writers' samples say it must answer: its exit code and one
+    // content check (the history_writer's k-th sample has data time kBase + k ms and, for
+    // vehicleState, pose.x = k; commit order is write order within an object).
+    const auto data_of = [](const nlohmann::json& j) { return (j["data_ns"].get<uint64_t>() - kBase) / kMs; };  // k
+    const auto first = [](const Answer& a) { return nlohmann::json::parse(a.out.substr(0, a.out.find('\n'))); };
+    const auto lines_of = [](const Answer& a) {
+        std::vector<nlohmann::json> out;
+        std::istringstream in(a.out);
+        for (std::string line; std::getline(in, line);) out.push_back(nlohmann::json::parse(line));
+        return out;
+    };
+    const auto sample_k = [&](uint64_t k) {  // a JSON answer holding vehicleState/3's sample k
+        return [&, k](const Answer& a) {
+            const auto j = first(a);
+            EXPECT_EQ(j["status"], "ok") << a.out;
+            EXPECT_EQ(data_of(j), k) << a.out;
+            if (j.contains("data")) {
+                EXPECT_EQ(j["data"]["pose"]["x"], double(k)) << a.out;
+            }
+        };
+    };
+    const auto status_is = [&](const char* status) { return [&, status](const Answer& a) { EXPECT_EQ(first(a)["status"], status) << a.out; }; };
+    const auto text_holds = [](const std::string& what) {
+        return [what](const Answer& a) { EXPECT_NE(a.out.find(what), std::string::npos) << "no '" << what << "' in\n" << a.out; };
+    };
+    const std::string data_time = "data time                        2023-11-14T22:13:20.0";  // kBase + k ms, k as two digits
+    struct Question
+    {
+        std::vector<std::string> args;
+        int code;
+        std::function<void(const Answer&)> check;
+    };
+    const std::vector<Question> questions = {
+        {{"latest", "--topic", "vehicleState", "--key", "3", "--json"}, 0, sample_k(79)},
+        {{"latest", "--topic", "labThing", "--key", "2", "--json"}, 0, [&](const Answer& a) { EXPECT_EQ(data_of(first(a)), 39u) << a.out; }},
+        {{"latest", "--topic", "vehicleState", "--key", "4", "--json"}, 0, [&](const Answer& a) {  // disposed: its last sample stays
+             EXPECT_EQ(data_of(first(a)), 19u) << a.out;
+             EXPECT_EQ(first(a)["data"]["vehicle_id"], 4) << a.out;
+         }},
+        {{"at", "--topic", "vehicleState", "--key", "3", "--time", t(commits[40]), "--json"}, 0, sample_k(40)},
+        {{"at", "--topic", "vehicleState", "--key", "3", "--time", t(commits[40] - 1)}, 0, text_holds(data_time + "39000000Z")},
+        {{"older", "--topic", "vehicleState", "--key", "3", "--time", t(commits[10]), "--json"}, 0, sample_k(9)},
+        {{"younger", "--topic", "vehicleState", "--key", "3", "--time", t(commits[79]), "--json"}, 1, status_is("not_yet")},
+        {{"at", "--topic", "vehicleState", "--key", "3", "--time", t(kBase + 33 * kMs + 1), "--by", "data", "--json"}, 0, sample_k(33)},
+        {{"at", "--topic", "vehicleState", "--key", "3", "--time", t(kBase - 1), "--by", "data", "--json"}, 1, status_is("not_found")},
+        {{"older", "--topic", "labThing", "--key", "2", "--time", t(kBase + 20 * kMs), "--by", "data", "--json"}, 0,
+         [&](const Answer& a) { EXPECT_EQ(data_of(first(a)), 19u) << a.out; }},
+        {{"younger", "--topic", "labThing", "--key", "2", "--time", t(kBase + 20 * kMs), "--by", "data"}, 0, text_holds(data_time + "21000000Z")},
+        {{"range", "--topic", "vehicleState", "--key", "3", "--from", t(kBase + 5 * kMs), "--to", t(kBase + 25 * kMs), "--by", "data", "--json"}, 0,
+         [&](const Answer& a) {  // [from, to): samples 5 to 24
+             const auto lines = lines_of(a);
+             ASSERT_EQ(lines.size(), 20u) << a.out;
+             for (size_t i = 0; i < lines.size(); ++i) EXPECT_EQ(lines[i]["data"]["pose"]["x"], double(5 + i)) << lines[i].dump();
+         }},
+        {{"range", "--topic", "labThing", "--key", "2", "--from", t(commits[0]), "--to", t(commits[79]), "--limit", "7", "--json"}, 0,
+         [&](const Answer& a) {  // seven consecutive samples, then where the rest starts
+             const auto lines = lines_of(a);
+             ASSERT_EQ(lines.size(), 8u) << a.out;
+             for (size_t i = 1; i < 7; ++i) EXPECT_EQ(data_of(lines[i]), data_of(lines[i - 1]) + 1) << a.out;
+             EXPECT_EQ(lines[7]["status"], "truncated") << a.out;
+         }},
+        {{"successor", "--topic", "vehicleState", "--key", "3", "--time", t(commits[50]), "--json"}, 0, sample_k(51)},
+        {{"snapshot", "--objects", "vehicleState/3,labThing/2,vehicleState/4", "--time", t(commits[60]), "--json"}, 0,
+         [&](const Answer& a) {  // each object as it was then: vehicleState/3's sample 60, the others committed no later
+             const auto lines = lines_of(a);
+             ASSERT_EQ(lines.size(), 3u) << a.out;
+             std::set<std::string> objects;
+             for (const auto& j : lines) {
+                 objects.insert(j["topic"].get<std::string>() + "/" + j["key"].get<std::string>());
+                 EXPECT_EQ(j["status"], "ok") << j.dump();
+                 EXPECT_LE(j["commit_ns"].get<uint64_t>(), commits[60]) << j.dump();
+                 if (j["topic"] == "vehicleState" && j["key"] == "3") {
+                     EXPECT_EQ(data_of(j), 60u) << j.dump();
+                 }
+             }
+             EXPECT_EQ(objects, (std::set<std::string>{"vehicleState/3", "labThing/2", "vehicleState/4"}));
+         }},
+        {{"snapshot", "--objects", "vehicleState/3,labThing/2", "--time", t(commits[60])}, 0, text_holds(data_time + "60000000Z")},
     };
     std::vector<Answer> live;
-    for (const auto& q : questions) live.push_back(ask(q));
+    for (const auto& q : questions) live.push_back(ask(q.args));
+    // Live, each answers what the writers wrote.
+    for (size_t i = 0; i < questions.size(); ++i) {
+        std::string q;
+        for (const auto& a : questions[i].args) q += a + " ";
+        SCOPED_TRACE("live: cpm history " + q);
+        EXPECT_EQ(live[i].code, questions[i].code) << live[i].err;
+        if (live[i].code == questions[i].code) questions[i].check(live[i]);
+    }
     const Answer live_search = ask({"search", "--name", "vehicleState|labThing", "--json"});
     ASSERT_EQ(live_search.code, 0) << live_search.err;
 
@@ -136,9 +208,9 @@ TEST(RecordingEndToEnd, ARecordedRunAnswersEveryVerbAsTheLiveServiceDid)
     EXPECT_FALSE(fs::exists(file + "-wal")) << "a closed recording is one file";
 
     for (size_t i = 0; i < questions.size(); ++i) {
-        const Answer recorded = ask(questions[i], file);
+        const Answer recorded = ask(questions[i].args, file);
         std::string q;
-        for (const auto& a : questions[i]) q += a + " ";
+        for (const auto& a : questions[i].args) q += a + " ";
         EXPECT_EQ(recorded.code, live[i].code) << q << recorded.err;
         EXPECT_EQ(recorded.out, live[i].out) << q;
         EXPECT_FALSE(recorded.out.empty() && recorded.code == 0) << q;
