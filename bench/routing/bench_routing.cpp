@@ -90,9 +90,14 @@ int run(int argc, char** argv)
     std::printf("%6s | %12s %10s %8s | %12s %10s %8s | %8s\n", "cars", "ours /min", "delay", "stalled", "cpm_lab /min", "delay",
                 "stalled", "ratio");
     const size_t centre = central_zone(table);
+    // The stall-free figure: over the time before the model of cpm_lab's scheme stalled (its
+    // whole run when it did not), cars into the centre per minute for both planners.
+    std::vector<std::string> before_stall;
     for (size_t n : {2, 4, 6, 8}) {
         double through[2] = {0, 0}, delay[2] = {0, 0};
         int stalls[2] = {0, 0};
+        double entries_before[2] = {0, 0}, window_s = 0;  // summed over the seeds
+        SimulationSummary runs[2];
         for (uint64_t seed = 1; seed <= 5; ++seed) {
             for (int m = 0; m < 2; ++m) {
                 SimulationOptions o;
@@ -105,14 +110,34 @@ int run(int argc, char** argv)
                 through[m] += double(s.zone_entries[centre]) / (o.duration / 60.0) / 5;
                 delay[m] += s.mean_delay / 5;
                 stalls[m] += s.stalled;
+                runs[m] = s;
             }
+            // cpm_lab's model ran second: its stall (if any) bounds the window for both.
+            const double window = runs[1].stall_began_s >= 0 ? runs[1].stall_began_s : 120.0;
+            window_s += window;
+            for (int m = 0; m < 2; ++m) {
+                for (const auto& [t, z] : runs[m].zone_entry_log) entries_before[m] += z == centre && t < window;
+            }
+        }
+        if (window_s > 0) {
+            char line[200];
+            std::snprintf(line, sizeof line, "%6zu | %8.1f s | %12.1f | %12.1f | %7.2fx", n, window_s / 5, entries_before[0] / window_s * 60,
+                          entries_before[1] / window_s * 60, entries_before[1] > 0 ? entries_before[0] / entries_before[1] : 0.0);
+            before_stall.push_back(line);
+            bench::record({"routing", std::to_string(n) + " cars into the central zone before cpm_lab's model stalled", "cars/min",
+                           entries_before[0] / window_s * 60, "cpm's model of cpm_lab's scheme, same window", entries_before[1] / window_s * 60,
+                           "", -1});
         }
         std::printf("%6zu | %12.1f %10.2f %6d/5 | %12.1f %10.2f %6d/5 | %7.2fx\n", n, through[0], delay[0], stalls[0], through[1], delay[1],
                     stalls[1], through[1] > 0 ? through[0] / through[1] : 0.0);
-        bench::record({"routing", std::to_string(n) + " cars into the central zone", "cars/min", through[0], "cpm_lab's scheme", through[1],
-                       ">= 1.30x peer", int(through[0] >= 1.3 * through[1])});
+        bench::record({"routing", std::to_string(n) + " cars into the central zone", "cars/min", through[0], "cpm's model of cpm_lab's scheme",
+                       through[1], ">= 1.30x peer", int(through[0] >= 1.3 * through[1])});
     }
-    std::printf("(target: at least 1.3x cpm_lab's throughput, and no stall where it stalls)\n");
+    std::printf("(target: at least 1.3x cpm_lab's throughput, and no stall where it stalls; the peer is cpm's own model of\n"
+                " cpm_lab's scheme, not cpm_lab's code, and its stalls decide most of the ratio: see the next table)\n");
+    std::printf("\nbefore the model of cpm_lab's scheme stalled (mean window over seeds 1-5; the whole 120 s when it did not):\n"
+                "%6s | %10s | %12s | %12s | %8s\n", "cars", "window", "ours /min", "cpm_lab /min", "ratio");
+    for (const auto& line : before_stall) std::printf("%s\n", line.c_str());
     return 0;
 }
 

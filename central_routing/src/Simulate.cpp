@@ -132,6 +132,8 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
                 out.max_acceleration = std::max(out.max_acceleration, std::abs(now[i].speed - last_v[i]) / options.sample);
                 if (now[i].speed < 0.01) {
                     out.max_wait_s = std::max(out.max_wait_s, t - standing_since[i]);
+                    if (t - standing_since[i] > 10.0 && (out.stall_began_s < 0 || standing_since[i] < out.stall_began_s))
+                        out.stall_began_s = standing_since[i];
                 } else {
                     standing_since[i] = t;
                 }
@@ -139,7 +141,10 @@ SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
                 last_s[i] = now[i].s;
                 // Entries into conflict zones, by the sample under the car's pose.
                 const int z = table.zone_of(table.sample(now[i].edge, now[i].edge_s));
-                if (z >= 0 && z != zone[i]) ++zone_entries[size_t(z)];
+                if (z >= 0 && z != zone[i]) {
+                    ++zone_entries[size_t(z)];
+                    out.zone_entry_log.emplace_back(t, size_t(z));
+                }
                 zone[i] = z;
             }
             if (options.observe) {

@@ -40,6 +40,7 @@ struct SimulationSummary
     double min_distance_m = 0;    ///< between any two bodies at any sample
     double max_wait_s = 0;        ///< the longest any car stood still
     bool stalled = false;         ///< a car stood still for more than 10 s
+    double stall_began_s = -1;    ///< when the first standstill that grew over 10 s began (-1: none)
     std::vector<double> distance_m;  ///< per car, in id order
     double throughput_per_min = 0;   ///< cars into the busiest conflict zone per minute
     double plan_ms_p50 = 0, plan_ms_p99 = 0;
@@ -51,6 +52,7 @@ struct SimulationSummary
     double mean_delay = 0;        ///< time taken over free-flow time at v_max, less one, mean over cars
     size_t busiest_zone = 0;
     std::vector<size_t> zone_entries;  ///< cars into each conflict zone (ConflictTable::zones order)
+    std::vector<std::pair<double, size_t>> zone_entry_log;  ///< every entry: (s, zone)
     std::vector<double> plan_ms;  ///< every cycle's planning time
     std::vector<std::pair<int, Pose>> final_poses;  ///< every car (id, pose) at the end
 
