@@ -83,18 +83,6 @@ std::string RunReport::text() const
 
 namespace {
 
-/// Whether a state or transition of the machine works on ArUco markers.
-bool uses_markers(const Machine& m)
-{
-    for (const auto& st : m.states()) {
-        if (st->type().find("Aruco") != std::string::npos) return true;
-    }
-    for (const auto& t : m.transitions()) {
-        if (t->type().find("Aruco") != std::string::npos) return true;
-    }
-    return false;
-}
-
 /// The states that follow a wall: id → (side, clearance), from the checked machine's JSON.
 std::map<int, std::pair<std::string, double>> walls_of(const std::string& machine_json)
 {

@@ -52,4 +52,15 @@ Output Machine::tick(const Inputs& in, double dt)
     return out;
 }
 
+bool uses_markers(const Machine& m)
+{
+    for (const auto& st : m.states()) {
+        if (st->type().find("Aruco") != std::string::npos) return true;
+    }
+    for (const auto& t : m.transitions()) {
+        if (t->type().find("Aruco") != std::string::npos) return true;
+    }
+    return false;
+}
+
 }  // namespace cpm::fsm

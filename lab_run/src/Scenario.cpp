@@ -5,6 +5,8 @@
 #include <cpm/checkers/YamlChecker.hpp>
 #include <cpm/Security.hpp>
 #include <cpm/read_text_file.hpp>
+#include <cpm/fsm/Loader.hpp>
+#include <cpm/fsm/Machine.hpp>
 #include <cpm/nodes.hpp>
 #include <cpm/timer_ids.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
@@ -231,6 +233,13 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
             if (v["restart"]) spec.restart = c.boolean(v["restart"], p + ".restart").value_or(false);
             if (v["host"]) spec.host = host_name(c, s, v["host"], p + ".host");
             if (v["camera"] && !root["world"]) c.error(v["camera"], p + ".camera", "a camera needs the world's markers: give world");
+            if (!spec.fsm.empty() && spec.camera.empty()) {
+                // A machine that looks for gates waits for a camera's markers: without one the car
+                // never starts (and on the simulated clock the whole lab waits for it).
+                const auto machine = fsm::load_file(spec.fsm);
+                if (machine.ok() && fsm::uses_markers(*machine.machine))
+                    c.error(v["fsm"], p + ".fsm", "its machine works on ArUco markers, but the car has no camera: give it one (camera: FILE)");
+            }
             s.vehicles.push_back(spec);
         }
     }

@@ -95,9 +95,11 @@ protected:
     }
     cpm_test::NamespaceHosts& hosts() { return *hosts_; }
     /// A scenario with one car on each car host, the history and this run on the central host;
-    /// `car_a_extra`, `car_b_extra`: more of car 5's keys (its camera), of car 6's.
+    /// `car_a_extra`, `car_b_extra`: more of car 5's keys, of car 6's. Car 5 follows the corridor's
+    /// walls; with a camera in `car_a_extra` it looks for the gates (a machine that needs one).
     std::string scenario(const std::string& extra = "", const std::string& car_a_extra = "", const std::string& car_b_extra = "")
     {
+        const std::string car_a_fsm = ", fsm: " + kRoot + "/scenarios/fsm/" + (car_a_extra.find("camera:") != std::string::npos ? "gates.json" : "corridor.json");
         std::string hosts_yaml = "hosts:\n  central: {address: " + hosts().address(0) + "}\n";
         for (size_t i = 1; i < 3; ++i) {
             hosts_yaml += "  " + std::string(i == 1 ? "car_a" : "car_b") + ": {address: " + hosts().address(i) + ", ssh: " +
@@ -107,7 +109,7 @@ protected:
                                               hosts_yaml + "ssh_config: " + hosts().ssh_config() + "\n" + extra +
                                               "history: {host: central}\n"
                                               "vehicles:\n"
-                                              "  - {id: 5, host: car_a, start: [0.0, 0.0, 0.3], fsm: " + kRoot + "/scenarios/fsm/gates.json" + car_a_extra + "}\n"
+                                              "  - {id: 5, host: car_a, start: [0.0, 0.0, 0.3]" + car_a_fsm + car_a_extra + "}\n"
                                               "  - {id: 6, host: car_b, start: [0.0, 0.6, 0.3]" + car_b_extra + "}\n");
     }
     cpm_test::TempDir dir;
@@ -132,8 +134,7 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
                runs(b, "vehicle_bridge") && !runs(central, "firmware_sim") && runs(central, "cpm_history");
         return seen;
     }, 30s, 200ms);
-    // What a car's programs read comes from the run's folder on its host (copied there; the
-    // world and the state machine are both gates.json: two files, two names).
+    // What a car's programs read comes from the run's folder on its host (copied there).
     std::string fsm_command;
     for (int pid : hosts().pids(1)) {
         if (command_line(pid).find("/bin/fsm_node ") != std::string::npos) fsm_command = command_line(pid);

@@ -344,20 +344,37 @@ TEST(LabRun, CtrlCInSimulatedTimeSaysHowMuchLabTimeRanAndWhyTheRunEndedEarly)
 
 TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
 {
-    // A state machine that looks for gates on a car without a camera: its fsm_node waits for a
-    // marker finder before it joins the clock, and the clock for it.
+    // A state machine frozen (SIGSTOP) before it joins the simulated clock: the clock waits for
+    // it in vain, and the run names it with the end of its log.
+    TempDir dir;
+    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string file = dir.write("frozen.yaml", "name: frozen\ntime: simulated\nduration: 5s\nworld: " + source +
+                                                          "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0], fsm: " + source +
+                                                          "fsm/corridor.json}\n");
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
+    int pid = 0;
+    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with("/bin/fsm_node ", run_tag(out))) != 0; }, 30s, 1ms)) << run.errors();
+    ::kill(pid, SIGSTOP);  // it waits for its car's first state before it announces its timer: stopped well before
+    EXPECT_EQ(run.wait(90s), 1) << run.output() << run.errors();
+    const std::string said = run.output() + run.errors();
+    EXPECT_NE(said.find("no announcement from 'fsm_node_5'"), std::string::npos) << said;
+    EXPECT_NE(said.find("fsm_5's log (" + out + "/fsm_5.log) ends:"), std::string::npos) << said;
+    EXPECT_EQ(pid_with("/bin/fsm_node ", run_tag(out)), 0) << "the frozen node is stopped with the run";
+}
+
+TEST(LabRun, AMachineThatLooksForGatesOnACarWithoutACameraIsRefusedBeforeAnythingStarts)
+{
     TempDir dir;
     const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
     const std::string file = dir.write("no_camera.yaml", "name: no_camera\ntime: simulated\nduration: 5s\nworld: " + source +
                                                              "maps/gates.json\nvehicles:\n  - {id: 5, start: [0.0, 0.0, 0.3], fsm: " + source +
                                                              "fsm/gates.json}\n");
-    const std::string out = dir.file("run");
-    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"});
-    EXPECT_EQ(run.wait(90s), 1) << run.output() << run.errors();
-    const std::string said = run.output() + run.errors();
-    EXPECT_NE(said.find("no announcement from 'fsm_node_5'"), std::string::npos) << said;
-    EXPECT_NE(said.find("fsm_5's log (" + out + "/fsm_5.log) ends:"), std::string::npos) << said;
-    EXPECT_NE(said.find("waiting for a writer of arucoMarkers"), std::string::npos) << said;
+    Process run({built_program("cpm"), "lab", "run", file, "--out", dir.file("run"), "--monitor", "off"});
+    EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
+    EXPECT_NE(run.errors().find("nothing started"), std::string::npos) << run.errors();
+    EXPECT_NE(run.errors().find("vehicles[0].fsm: its machine works on ArUco markers, but the car has no camera"), std::string::npos) << run.errors();
+    EXPECT_FALSE(fs::exists(dir.file("run")));
 }
 
 TEST(LabRun, AWrongScenarioStartsNothing)

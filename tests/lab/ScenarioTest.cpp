@@ -389,6 +389,22 @@ TEST(Scenario, HostsNameEachProcessesComputerAndEveryMistakeInThemIsNamed)
     EXPECT_NE(no_local[0].find("hosts: 0 hosts without ssh; exactly one must be the host the run runs on"), std::string::npos) << no_local[0];
 }
 
+TEST(Scenario, AMachineThatLooksForGatesOnACarWithoutACameraIsRefused)
+{
+    TempDir dir;
+    const std::string root = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string file = dir.write("blind.yaml", "name: b\nduration: 5s\nworld: " + root + "maps/gates.json\n"
+                                                     "vehicles:\n  - {id: 5, start: [0.0, 0.0, 0.3], fsm: " + root + "fsm/gates.json}\n"
+                                                     "  - {id: 6, start: [0.0, 0.6, 0.3], fsm: " + root + "fsm/corridor.json}\n");
+    const auto errors = errors_of(file);
+    ASSERT_EQ(errors.size(), 1u) << ::testing::PrintToString(errors);
+    EXPECT_EQ(errors[0], file + ":5: vehicles[0].fsm: its machine works on ArUco markers, but the car has no camera: give it one (camera: FILE)");
+    // With its camera it is fine.
+    EXPECT_TRUE(errors_of(dir.write("seeing.yaml", "name: b\nduration: 5s\nworld: " + root + "maps/gates.json\n"
+                                                   "vehicles:\n  - {id: 5, start: [0.0, 0.0, 0.3], fsm: " + root + "fsm/gates.json, camera: " +
+                                                   root + "cameras/sim_640x480.yaml}\n")).empty());
+}
+
 TEST(Scenario, AStateMachineThatIncludesOthersGoesToAnotherHostWithThemAsTheyLie)
 {
     TempDir dir;

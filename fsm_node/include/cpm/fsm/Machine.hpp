@@ -133,4 +133,8 @@ private:
     double entered_t_ = 0;
 };
 
+/// Whether a state or transition of the machine works on ArUco markers (needs a camera's
+/// ArucoMarkers to run).
+bool uses_markers(const Machine& m);
+
 }  // namespace cpm::fsm
