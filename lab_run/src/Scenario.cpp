@@ -105,7 +105,6 @@ void check_starts(Checker& c, const Scenario& s, const YAML::Node& vehicles)
     }
 }
 
-/// The cars: each one's id (once), start, camera, state machine and restart.
 /// `hosts:`: each computer's address and how to reach it; the one without ssh is the run's own.
 void read_hosts(Checker& c, const YAML::Node& root, Scenario& s)
 {
@@ -199,6 +198,7 @@ void read_history(Checker& c, const YAML::Node& root, Scenario& s)
     if (h["host"]) s.history_host = host_name(c, s, h["host"], "history.host");
 }
 
+/// The cars: each one's id (once), start, camera, state machine, restart and host.
 void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicles, Scenario& s)
 {
     if (!vehicles) c.error(root, "vehicles", "missing (a list of cars, each with an id)");
