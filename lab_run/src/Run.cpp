@@ -322,9 +322,9 @@ RunResult::Host check_host(const Scenario& s, const RunSettings& settings, const
     return entry;
 }
 
-/// Every other host, before anything starts anywhere, each on a thread of its own (a host is
-/// a few ssh round trips): check_host; the ports this host's servers take. Throws ScenarioError naming each host that is not fit,
-/// in the scenario's order.
+/// Every other host, before anything starts anywhere, each on a thread of its own (a host is a
+/// few ssh round trips): check_host; and the ports this host's servers take. Throws
+/// ScenarioError naming each host that is not fit, in the scenario's order.
 std::vector<RunResult::Host> check_hosts(const Scenario& s, const RunSettings& settings)
 {
     const std::string ours = first_line_of({(fs::path(settings.bin_dir) / "cpm").string(), "--version"});
