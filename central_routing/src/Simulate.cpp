@@ -87,106 +87,150 @@ SimulationSummary simulate(const LaneGraph& graph, const SimulationOptions& opti
     return simulate(planner, options);
 }
 
-SimulationSummary simulate(Planner& planner, const SimulationOptions& options)
+namespace {
+
+/// One simulation's running state: what each car did so far and the summary being filled.
+class Simulation
 {
-    const auto ids = planner.car_ids();
-    const auto& table = planner.conflicts();
-    const Footprint& f = planner.options().footprint;
-    SimulationSummary out;
-    out.vehicles = ids.size();
-    out.duration_s = options.duration;
-    out.min_distance_m = std::numeric_limits<double>::infinity();
-    // The farthest point of a body from its reference point (the rear axle's centre).
-    const double reach = std::max(std::hypot(f.length - f.rear_overhang, f.width / 2), std::hypot(f.rear_overhang, f.width / 2));
-    const size_t n = ids.size();
-    std::vector<double> start_s(n), standing_since(n, 0), last_s(n), last_v(n, 0);
-    std::vector<int> zone(n, -1);
-    std::vector<size_t> zone_entries(table.zones().size(), 0);
-    std::vector<std::vector<bool>> overlapping(n, std::vector<bool>(n, false));
-    for (size_t i = 0; i < n; ++i) start_s[i] = last_s[i] = planner.sample(ids[i], 0).s;
-    const size_t samples_per_cycle = size_t(std::llround(options.period / options.sample));
-    const size_t cycles = size_t(std::ceil(options.duration / options.period - 1e-9));
-    std::vector<PlanSample> now(n);
-    std::vector<Pose> poses;  // for options.observe
-    for (size_t cycle = 0; cycle < cycles; ++cycle) {
-        const double t_cycle = double(cycle) * options.period;
-        const auto t0 = std::chrono::steady_clock::now();
-        planner.plan(t_cycle);
-        out.plan_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-        // What central_routing would send: points 0.1 s apart from now to the plan's end.
-        for (int id : ids) {
-            const auto points = planner.trajectory(id, t_cycle, 0.1);
+public:
+    Simulation(Planner& planner, const SimulationOptions& options)
+        : planner_(planner), options_(options), ids_(planner.car_ids()), table_(planner.conflicts()), f_(planner.options().footprint),
+          n_(ids_.size()), start_s_(n_), standing_since_(n_, 0), last_s_(n_), last_v_(n_, 0), zone_(n_, -1),
+          zone_entries_(table_.zones().size(), 0), overlapping_(n_, std::vector<bool>(n_, false)), now_(n_)
+    {
+        out_.vehicles = n_;
+        out_.duration_s = options.duration;
+        out_.min_distance_m = std::numeric_limits<double>::infinity();
+        for (size_t i = 0; i < n_; ++i) start_s_[i] = last_s_[i] = planner.sample(ids_[i], 0).s;
+    }
+
+    SimulationSummary run()
+    {
+        const size_t samples_per_cycle = size_t(std::llround(options_.period / options_.sample));
+        const size_t cycles = size_t(std::ceil(options_.duration / options_.period - 1e-9));
+        for (size_t cycle = 0; cycle < cycles; ++cycle) {
+            const double t_cycle = double(cycle) * options_.period;
+            const auto t0 = std::chrono::steady_clock::now();
+            planner_.plan(t_cycle);
+            out_.plan_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+            check_trajectories(t_cycle, cycle == 0);
+            for (size_t k = 1; k <= samples_per_cycle; ++k) {
+                const double t = t_cycle + double(k) * options_.sample;
+                if (t > options_.duration + 1e-9) break;
+                move_cars(t);
+                if (options_.observe) {
+                    poses_.clear();
+                    for (const auto& sample : now_) poses_.push_back(sample.pose);
+                    options_.observe(t, poses_);
+                }
+                measure_gaps();
+            }
+        }
+        return finish();
+    }
+
+private:
+    /// What central_routing would send: points 0.1 s apart from now to the plan's end.
+    void check_trajectories(double t_cycle, bool first)
+    {
+        for (int id : ids_) {
+            const auto points = planner_.trajectory(id, t_cycle, 0.1);
             for (size_t k = 1; k < points.size(); ++k) {
-                out.max_point_spacing = std::max(out.max_point_spacing, std::hypot(points[k].x - points[k - 1].x, points[k].y - points[k - 1].y));
+                out_.max_point_spacing = std::max(out_.max_point_spacing, std::hypot(points[k].x - points[k - 1].x, points[k].y - points[k - 1].y));
             }
-            out.max_end_speed = std::max(out.max_end_speed, planner.sample(id, planner.plan_end()).speed);
-            const double reach = points.empty() ? 0 : points.back().t - t_cycle;
-            out.min_reach_s = cycle == 0 && id == ids.front() ? reach : std::min(out.min_reach_s, reach);
-        }
-        for (size_t k = 1; k <= samples_per_cycle; ++k) {
-            const double t = t_cycle + double(k) * options.sample;
-            if (t > options.duration + 1e-9) break;
-            for (size_t i = 0; i < n; ++i) {
-                now[i] = planner.sample(ids[i], t);
-                out.max_speed = std::max(out.max_speed, now[i].speed);
-                out.max_acceleration = std::max(out.max_acceleration, std::abs(now[i].speed - last_v[i]) / options.sample);
-                if (now[i].speed < 0.01) {
-                    out.max_wait_s = std::max(out.max_wait_s, t - standing_since[i]);
-                    if (t - standing_since[i] > 10.0 && (out.stall_began_s < 0 || standing_since[i] < out.stall_began_s))
-                        out.stall_began_s = standing_since[i];
-                } else {
-                    standing_since[i] = t;
-                }
-                last_v[i] = now[i].speed;
-                last_s[i] = now[i].s;
-                // Entries into conflict zones, by the sample under the car's pose.
-                const int z = table.zone_of(table.sample(now[i].edge, now[i].edge_s));
-                if (z >= 0 && z != zone[i]) {
-                    ++zone_entries[size_t(z)];
-                    out.zone_entry_log.emplace_back(t, size_t(z));
-                }
-                zone[i] = z;
-            }
-            if (options.observe) {
-                poses.clear();
-                for (const auto& sample : now) poses.push_back(sample.pose);
-                options.observe(t, poses);
-            }
-            for (size_t i = 0; i < n; ++i) {
-                for (size_t j = i + 1; j < n; ++j) {
-                    const Pose &a = now[i].pose, &b = now[j].pose;
-                    // Bodies at least this far apart: a pair that can neither touch nor come
-                    // closer than the closest pair yet is not measured (every pair is, once).
-                    const double apart = std::hypot(a.x - b.x, a.y - b.y) - 2 * reach;
-                    if (apart > 0 && apart >= out.min_distance_m) {
-                        overlapping[i][j] = false;
-                        continue;
-                    }
-                    const double d = footprint_distance(f, a, b);
-                    out.min_distance_m = std::min(out.min_distance_m, d);
-                    if (d <= 0 && !overlapping[i][j]) ++out.collisions;
-                    overlapping[i][j] = d <= 0;
-                }
-            }
+            out_.max_end_speed = std::max(out_.max_end_speed, planner_.sample(id, planner_.plan_end()).speed);
+            const double ahead = points.empty() ? 0 : points.back().t - t_cycle;
+            out_.min_reach_s = first && id == ids_.front() ? ahead : std::min(out_.min_reach_s, ahead);
         }
     }
-    for (size_t i = 0; i < n; ++i) {
-        out.distance_m.push_back(last_s[i] - start_s[i]);
-        out.final_poses.emplace_back(ids[i], planner.sample(ids[i], options.duration).pose);
+
+    /// Every car at time t: its speed and acceleration, how long it stood, the zone it entered.
+    void move_cars(double t)
+    {
+        for (size_t i = 0; i < n_; ++i) {
+            now_[i] = planner_.sample(ids_[i], t);
+            out_.max_speed = std::max(out_.max_speed, now_[i].speed);
+            out_.max_acceleration = std::max(out_.max_acceleration, std::abs(now_[i].speed - last_v_[i]) / options_.sample);
+            if (now_[i].speed < 0.01) {
+                out_.max_wait_s = std::max(out_.max_wait_s, t - standing_since_[i]);
+                if (t - standing_since_[i] > 10.0 && (out_.stall_began_s < 0 || standing_since_[i] < out_.stall_began_s))
+                    out_.stall_began_s = standing_since_[i];
+            } else {
+                standing_since_[i] = t;
+            }
+            last_v_[i] = now_[i].speed;
+            last_s_[i] = now_[i].s;
+            // Entries into conflict zones, by the sample under the car's pose.
+            const int z = table_.zone_of(table_.sample(now_[i].edge, now_[i].edge_s));
+            if (z >= 0 && z != zone_[i]) {
+                ++zone_entries_[size_t(z)];
+                out_.zone_entry_log.emplace_back(t, size_t(z));
+            }
+            zone_[i] = z;
+        }
     }
-    out.stalled = out.max_wait_s > 10.0;
-    out.zone_entries = zone_entries;
-    if (!zone_entries.empty()) {
-        out.busiest_zone = size_t(std::max_element(zone_entries.begin(), zone_entries.end()) - zone_entries.begin());
-        out.throughput_per_min = double(zone_entries[out.busiest_zone]) / (options.duration / 60.0);
+
+    /// The least distance between two bodies now, and the overlaps that began.
+    void measure_gaps()
+    {
+        // The farthest point of a body from its reference point (the rear axle's centre).
+        const double reach = std::max(std::hypot(f_.length - f_.rear_overhang, f_.width / 2), std::hypot(f_.rear_overhang, f_.width / 2));
+        for (size_t i = 0; i < n_; ++i) {
+            for (size_t j = i + 1; j < n_; ++j) {
+                const Pose &a = now_[i].pose, &b = now_[j].pose;
+                // Bodies at least this far apart: a pair that can neither touch nor come
+                // closer than the closest pair yet is not measured (every pair is, once).
+                const double apart = std::hypot(a.x - b.x, a.y - b.y) - 2 * reach;
+                if (apart > 0 && apart >= out_.min_distance_m) {
+                    overlapping_[i][j] = false;
+                    continue;
+                }
+                const double d = footprint_distance(f_, a, b);
+                out_.min_distance_m = std::min(out_.min_distance_m, d);
+                if (d <= 0 && !overlapping_[i][j]) ++out_.collisions;
+                overlapping_[i][j] = d <= 0;
+            }
+        }
     }
-    out.plan_ms_p50 = percentile(out.plan_ms, 0.5);
-    out.plan_ms_p99 = percentile(out.plan_ms, 0.99);
-    double delay = 0;
-    const double v_max = planner.options().v_max;
-    for (double d : out.distance_m) delay += d > 0 ? options.duration * v_max / d - 1 : 0;
-    out.mean_delay = n ? delay / double(n) : 0;
-    return out;
-}
+
+    SimulationSummary finish()
+    {
+        for (size_t i = 0; i < n_; ++i) {
+            out_.distance_m.push_back(last_s_[i] - start_s_[i]);
+            out_.final_poses.emplace_back(ids_[i], planner_.sample(ids_[i], options_.duration).pose);
+        }
+        out_.stalled = out_.max_wait_s > 10.0;
+        out_.zone_entries = zone_entries_;
+        if (!zone_entries_.empty()) {
+            out_.busiest_zone = size_t(std::max_element(zone_entries_.begin(), zone_entries_.end()) - zone_entries_.begin());
+            out_.throughput_per_min = double(zone_entries_[out_.busiest_zone]) / (options_.duration / 60.0);
+        }
+        out_.plan_ms_p50 = percentile(out_.plan_ms, 0.5);
+        out_.plan_ms_p99 = percentile(out_.plan_ms, 0.99);
+        double delay = 0;
+        const double v_max = planner_.options().v_max;
+        for (double d : out_.distance_m) delay += d > 0 ? options_.duration * v_max / d - 1 : 0;
+        out_.mean_delay = n_ ? delay / double(n_) : 0;
+        return std::move(out_);
+    }
+
+    Planner& planner_;
+    const SimulationOptions& options_;
+    const std::vector<int> ids_;
+    const ConflictTable& table_;
+    const Footprint& f_;
+    const size_t n_;
+    std::vector<double> start_s_, standing_since_, last_s_, last_v_;
+    std::vector<int> zone_;
+    std::vector<size_t> zone_entries_;
+    std::vector<std::vector<bool>> overlapping_;
+    std::vector<PlanSample> now_;
+    std::vector<Pose> poses_;  // for options.observe
+    SimulationSummary out_;
+};
+
+}  // namespace
+
+SimulationSummary simulate(Planner& planner, const SimulationOptions& options) { return Simulation(planner, options).run(); }
 
 }  // namespace cpm::routing
