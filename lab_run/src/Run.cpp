@@ -211,19 +211,6 @@ private:
     const RunSettings& settings_;
 };
 
-/// The first line a command prints ("" when it prints none or cannot run).
-std::string first_line_of(const std::vector<std::string>& argv)
-{
-    try {
-        ChildProcess c({.argv = argv, .capture_stdout = true});
-        auto line = c.read_line();
-        (void)c.wait(std::chrono::seconds(10));
-        return line.value_or("");
-    } catch (const cpm::Error&) {
-        return "";
-    }
-}
-
 std::string milliseconds(int64_t ns)
 {
     char b[32];
@@ -277,6 +264,13 @@ std::string output_of(const std::vector<std::string>& argv)
     } catch (const cpm::Error&) {
         return "";
     }
+}
+
+/// The first line a command prints ("" when it prints none or cannot run).
+std::string first_line_of(const std::vector<std::string>& argv)
+{
+    const std::string out = output_of(argv);
+    return out.substr(0, out.find('\n'));
 }
 
 /// One other host: reached with ssh, the same cpm as here (`ours`), its clock within

@@ -66,6 +66,15 @@ int pid_with(const std::string& needle, const std::string& tag)
     return 0;
 }
 
+/// A scenario file `name`.yaml in `dir`: car 5 at `start` on map `course` (corridor, gates) with
+/// the state machine of the same name, no camera, 5 s of simulated time.
+std::string one_car_in_simulated_time(const TempDir& dir, const std::string& name, const std::string& course, const std::string& start)
+{
+    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    return dir.write(name + ".yaml", "name: " + name + "\ntime: simulated\nduration: 5s\nworld: " + source + "maps/" + course +
+                                         ".json\nvehicles:\n  - {id: 5, start: " + start + ", fsm: " + source + "fsm/" + course + ".json}\n");
+}
+
 /// The environment entry that marks a run's processes for pid_with.
 std::string run_tag(const std::string& out) { return "CPM_TEST_LAB_RUN=" + out; }
 
@@ -347,10 +356,7 @@ TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
     // A state machine frozen (SIGSTOP) before it joins the simulated clock: the clock waits for
     // it in vain, and the run names it with the end of its log.
     TempDir dir;
-    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
-    const std::string file = dir.write("frozen.yaml", "name: frozen\ntime: simulated\nduration: 5s\nworld: " + source +
-                                                          "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0], fsm: " + source +
-                                                          "fsm/corridor.json}\n");
+    const std::string file = one_car_in_simulated_time(dir, "frozen", "corridor", "[0.0, -0.01, 0.0]");
     const std::string out = dir.file("run");
     Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
     int pid = 0;
@@ -366,10 +372,7 @@ TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
 TEST(LabRun, AMachineThatLooksForGatesOnACarWithoutACameraIsRefusedBeforeAnythingStarts)
 {
     TempDir dir;
-    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
-    const std::string file = dir.write("no_camera.yaml", "name: no_camera\ntime: simulated\nduration: 5s\nworld: " + source +
-                                                             "maps/gates.json\nvehicles:\n  - {id: 5, start: [0.0, 0.0, 0.3], fsm: " + source +
-                                                             "fsm/gates.json}\n");
+    const std::string file = one_car_in_simulated_time(dir, "no_camera", "gates", "[0.0, 0.0, 0.3]");
     Process run({built_program("cpm"), "lab", "run", file, "--out", dir.file("run"), "--monitor", "off"});
     EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
     EXPECT_NE(run.errors().find("nothing started"), std::string::npos) << run.errors();
