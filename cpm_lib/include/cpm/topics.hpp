@@ -89,6 +89,11 @@ inline constexpr TopicSpec stop_request{"stopRequest", "StopRequest", {}, qos::n
 inline constexpr TopicSpec fsm_status{"fsmStatus", "FsmStatus", qos::reliable_writer(1, true), qos::reliable_reader(1, true),
                                       "a state machine's current state and since when"};
 
+/// A high-level controller's input each period (hlc_middleware → the controller, on the
+/// controller's own domain; cpm/hlc/Communicator.hpp).
+inline constexpr TopicSpec vehicle_state_list{"vehicleStateList", "VehicleStateList", qos::reliable_writer(1, false),
+                                              qos::reliable_reader(1, false), "a controller's cars' newest states, each period"};
+
 // ---- every process ---------------------------------------------------------------------------
 inline constexpr TopicSpec log{"log", "Log", qos::reliable_writer(100, true), qos::reliable_reader(100, true, true),
                                "log lines of every process"};
@@ -128,7 +133,8 @@ inline constexpr TopicSpec history_status{"historyStatus", "HistoryStatus", qos:
 inline constexpr std::array all{&vehicle_state,          &range_sensors,          &vehicle_observation,
                                 &aruco_markers,          &camera_frame,           &vehicle_command_direct,
                                 &vehicle_command_speed_curvature, &vehicle_command_trajectory, &vehicle_command_path_tracking,
-                                &stop_request,           &fsm_status,             &log,
+                                &stop_request,           &fsm_status,             &vehicle_state_list,
+                                &log,
                                 &log_level,              &parameter,              &parameter_request,
                                 &ready_status,           &system_trigger,         &history_request,
                                 &history_reply,          &history_status};
