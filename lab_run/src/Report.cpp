@@ -187,6 +187,23 @@ RunFigures outline_of(const nlohmann::json& summary)
                            .rtt_ms = double(h.value("rtt_ns", int64_t(0))) / 1e6,
                            .lost = h.value("lost", false)});
     }
+    for (const auto& c : summary.value("controllers", nlohmann::json::array())) {
+        ControllerFigures cf{.name = c.value("controller", std::string("?"))};
+        for (const auto& v : c.value("vehicles", nlohmann::json::array())) cf.vehicles += (cf.vehicles.empty() ? "" : ", ") + v.dump();
+        cf.periods = c.value("periods", uint64_t{0});
+        cf.answered = c.value("answered", uint64_t{0});
+        cf.unanswered = c.value("unanswered", uint64_t{0});
+        cf.forwarded = c.value("forwarded", uint64_t{0});
+        cf.refused = c.value("refused", uint64_t{0});
+        cf.response_ms_p50 = c.value("response_ms_p50", 0.0);
+        cf.response_ms_p99 = c.value("response_ms_p99", 0.0);
+        const nlohmann::json first = c.value("first_refusals", nlohmann::json::object());  // kept: items() refers to it
+        for (const auto& [kind, text] : first.items()) {
+            cf.refusals += (cf.refusals.empty() ? "" : "; ") + kind + ": " + text.get<std::string>();
+        }
+        if (c.contains("error")) cf.refusals = c.value("error", std::string());
+        f.controllers.push_back(std::move(cf));
+    }
     return f;
 }
 
@@ -611,7 +628,7 @@ detail::PageValues log_row(const LogLine& l)
 void fill_lists(detail::PageValues& v, const RunFigures& f, const std::vector<std::string>& images)
 {
     auto& lists = v.lists;
-    for (const char* key : {"images", "cars", "topics", "timers", "log", "hosts"}) lists[key];
+    for (const char* key : {"images", "cars", "topics", "timers", "log", "hosts", "controllers"}) lists[key];
     for (const auto& file : images) lists["images"].push_back({.text = {{"file", file}}});
     // In the order summary.json's "report" lists the cars: by id as text (12 before 6).
     std::map<std::string, std::pair<int, const CarFigures*>> by_text;
@@ -626,6 +643,19 @@ void fill_lists(detail::PageValues& v, const RunFigures& f, const std::vector<st
                                            {"clock_offset_ms", fixed(h.clock_offset_ms, 3)},
                                            {"rtt_ms", fixed(h.rtt_ms, 3)}},
                                   .flags = {{"lost", h.lost}}});
+    }
+    for (const auto& c : f.controllers) {
+        lists["controllers"].push_back({.text = {{"controller", c.name},
+                                                 {"vehicles", c.vehicles},
+                                                 {"periods", std::to_string(c.periods)},
+                                                 {"answered", std::to_string(c.answered)},
+                                                 {"unanswered", std::to_string(c.unanswered)},
+                                                 {"response_ms_p50", fixed(c.response_ms_p50, 2)},
+                                                 {"response_ms_p99", fixed(c.response_ms_p99, 2)},
+                                                 {"forwarded", std::to_string(c.forwarded)},
+                                                 {"refused", std::to_string(c.refused)},
+                                                 {"refusals", c.refusals}},
+                                        .flags = {{"late", c.unanswered > 0}, {"refusing", c.refused > 0}}});
     }
 }
 
@@ -665,7 +695,8 @@ std::string report_page(const RunFigures& f, const std::vector<std::string>& ima
                                    {"simulated", f.simulated()},
                                    {"any_missed", !f.missed_ticks_by_timer.empty()},
                                    {"any_log", !f.log.empty()},
-                                   {"across_hosts", !f.hosts.empty()}}};
+                                   {"across_hosts", !f.hosts.empty()},
+                                   {"with_controllers", !f.controllers.empty()}}};
     fill_lists(v, f, images);
     return detail::fill(detail::kReportPage, v);
 }

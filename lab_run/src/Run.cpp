@@ -84,14 +84,16 @@ nlohmann::json last_json(const std::string& path)
 class DomainClaim
 {
 public:
-    DomainClaim(int domain, const ParticipantOptions& options, const Scenario& s)
+    DomainClaim(int domain, const ParticipantOptions& options, const Scenario& s, const std::string& what = "")
     {
+        const std::string named = what.empty() ? "domain " + std::to_string(domain) : what + " " + std::to_string(domain);
+        const std::string remedy = what.empty() ? "give this one another domain (domain: in the scenario, or --dds_domain)"
+                                                : "give it another one (domain: of the controller in the scenario)";
         const std::string lock = "/tmp/cpm_lab_run_domain_" + std::to_string(domain) + ".lock";
         fd_ = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
         if (fd_ >= 0 && ::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
             ::close(fd_);
-            throw cpm::Error("domain " + std::to_string(domain) + " is taken by another cpm lab run on this host (" + lock +
-                                     " is locked); give this one another domain (domain: in the scenario, or --dds_domain)");
+            throw cpm::Error(named + " is taken by another cpm lab run on this host (" + lock + " is locked); " + remedy);
         }
         rtdb::TopicProbe probe(options);
         std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // discovery over loopback and shared memory
@@ -103,9 +105,7 @@ public:
             std::string names;
             for (const auto& p : others) names += (names.empty() ? "" : ", ") + p.name + where(p, s);
             if (fd_ >= 0) ::close(fd_);
-            throw cpm::Error("domain " + std::to_string(domain) + " is in use by " + std::to_string(others.size()) +
-                                     " participant(s): " + names + "; stop them or give this run another domain (domain: in the scenario, "
-                                     "or --dds_domain)");
+            throw cpm::Error(named + " is in use by " + std::to_string(others.size()) + " participant(s): " + names + "; stop them or " + remedy);
         }
     }
     /// " on host car5 (10.0.0.21)" for a participant that announced a host's address; else "".
@@ -420,7 +420,7 @@ public:
     LabClock& operator=(const LabClock&) = delete;
 
     /// Starts it; an error message when it cannot start ("" when it did).
-    std::string start(const std::vector<std::string>& timers, bool wait_for_planner)
+    std::string start(const std::vector<std::string>& timers, const std::vector<std::string>& planners)
     {
         real_start_ = cpm::get_time_ns();
         if (simulated()) {
@@ -433,9 +433,9 @@ public:
                 }
                 done_ = true;
             });
-        } else if (wait_for_planner) {
+        } else if (!planners.empty()) {
             try {
-                real_start_ = master_.start_real_time({timer_ids::central_routing}, std::chrono::milliseconds(1000), std::chrono::seconds(30));
+                real_start_ = master_.start_real_time(planners, std::chrono::milliseconds(1000), std::chrono::seconds(30));
             } catch (const std::exception& e) {
                 return std::string("the lab clock could not start: ") + e.what();
             }
@@ -549,6 +549,73 @@ std::vector<std::string> timers_of(const std::vector<ProcessPlan>& plan)
     return timers;
 }
 
+/// The timers that a run in real time waits for before it starts the lab a second ahead: those
+/// of the nodes that plan for the cars (central routing, the controllers' middlewares).
+std::vector<std::string> planners_of(const Scenario& s)
+{
+    std::vector<std::string> out;
+    if (s.routing.enabled) out.push_back(timer_ids::central_routing);
+    for (const auto& c : s.controllers) out.push_back(timer_ids::hlc_middleware(c.name));
+    return out;
+}
+
+/// Each controller's own domain where the scenario names none: the first after the run's that
+/// neither the run, another controller nor another cpm lab run on this host (its lock file) has.
+std::map<std::string, int> choose_controller_domains(const Scenario& s, const RunSettings& settings)
+{
+    std::set<int> taken{settings.domain};
+    for (const auto& c : s.controllers) {
+        if (c.domain) taken.insert(*c.domain);
+    }
+    auto locked = [](int d) {
+        const std::string lock = "/tmp/cpm_lab_run_domain_" + std::to_string(d) + ".lock";
+        const int fd = ::open(lock.c_str(), O_RDWR | O_CLOEXEC);
+        if (fd < 0) return false;
+        const bool held = ::flock(fd, LOCK_EX | LOCK_NB) != 0;
+        ::close(fd);
+        return held;
+    };
+    std::map<std::string, int> out;
+    int next = settings.domain;
+    for (const auto& c : s.controllers) {
+        if (c.domain) continue;
+        for (int tries = 0; tries < 233; ++tries) {
+            next = (next + 1) % 233;
+            if (!taken.count(next) && !locked(next)) break;
+        }
+        taken.insert(next);
+        out[c.name] = next;
+    }
+    return out;
+}
+
+/// Each controller's domain claimed as the run's own is (no other run, nobody on it), all at once.
+std::vector<std::unique_ptr<DomainClaim>> claim_controller_domains(const Scenario& s, const RunSettings& settings)
+{
+    const auto domains = controller_domains(s, settings);
+    std::vector<std::future<std::unique_ptr<DomainClaim>>> claims;
+    for (const auto& [name, domain] : domains) {
+        claims.push_back(std::async(std::launch::async, [&s, name = name, domain = domain] {
+            ParticipantOptions po;  // this host only, as the controller's and its middleware's
+            po.domain_id = domain;
+            po.name = "cpm_lab_run";
+            po.shared_memory = false;
+            return std::make_unique<DomainClaim>(domain, po, s, "controller " + name + "'s domain");
+        }));
+    }
+    std::vector<std::unique_ptr<DomainClaim>> out;
+    std::string errors;
+    for (auto& c : claims) {
+        try {
+            out.push_back(c.get());
+        } catch (const std::exception& e) {
+            errors += (errors.empty() ? "" : "; ") + std::string(e.what());
+        }
+    }
+    if (!errors.empty()) throw cpm::Error(errors);
+    return out;
+}
+
 /// The history first (after a discovery server, which it needs), so that the recording holds the
 /// run from its first sample, then the rest. An error message when the history does not answer
 /// ("" when all started).
@@ -624,6 +691,19 @@ nlohmann::json hosts_json(const std::vector<RunResult::Host>& hosts)
     return out;
 }
 
+/// Each controller's figures as its middleware counted them (the last JSON line of its log):
+/// periods, answered and unanswered ones, response times, forwarded and refused commands.
+nlohmann::json controllers_json(const Scenario& s, const RunSettings& settings)
+{
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& c : s.controllers) {
+        nlohmann::json figures = last_json((fs::path(settings.run_dir) / ("hlc_" + c.name + ".log")).string());
+        if (!figures.is_object()) figures = {{"controller", c.name}, {"error", "its middleware left no figures (see hlc_" + c.name + ".log)"}};
+        out.push_back(figures);
+    }
+    return out;
+}
+
 void write_summary(const Scenario& s, const RunSettings& settings, const std::string& qos, const RunResult& result,
                    const nlohmann::json& processes, const RunWatch& watch, const std::string& history_log)
 {
@@ -648,7 +728,8 @@ void write_summary(const Scenario& s, const RunSettings& settings, const std::st
                                                                                : watch.recorded()},
                            {"qos", qos.empty() ? nlohmann::json::object() : nlohmann::json::parse(qos)},
                            {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()},
-                           {"hosts", hosts_json(result.hosts)}};
+                           {"hosts", hosts_json(result.hosts)},
+                           {"controllers", controllers_json(s, settings)}};
     std::ofstream(fs::path(settings.run_dir) / "summary.json") << summary.dump(2) << "\n";
 }
 
@@ -708,6 +789,7 @@ void stop_in_order(Writer<StopRequest>& stops, LabClock& clock, ProcessGroup& gr
 RunResult run_lab(const Scenario& s, const RunOptions& o)
 {
     RunSettings settings = settings_of(s, o);
+    settings.controller_domains = choose_controller_domains(s, settings);
     const fs::path dir = settings.run_dir;
     const auto plan = plan_run(s, settings);      // names a missing program before anything starts
     const SharedConnections connections(s, settings);
@@ -718,7 +800,9 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     const std::string qos = s.qos.empty() ? "" : to_json(s.qos);
     if (!qos.empty()) ::setenv(kQosOverridesVariable, qos.c_str(), 1);
     ParticipantOptions po = participant_options(s, settings);
+    auto controller_claims = std::async(std::launch::async, [&] { return claim_controller_domains(s, settings); });
     const DomainClaim claim(settings.domain, po, s);
+    const auto controller_domains_claimed = controller_claims.get();
     const auto hosts = checking.get();
     po.security = prepare_folder(s, settings, plan, dir);  // a secured lab's nodes issued, then copied to their hosts
     copy_to_hosts(s, plan, settings);
@@ -744,7 +828,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
             std::fprintf(o.progress, "cpm lab run: watch it live at http://127.0.0.1:%d/ (cpm monitor, while the run lasts)\n", *s.monitor_port);
         }
     }
-    if (result.error.empty()) result.error = clock.start(timers_of(plan), s.routing.enabled);
+    if (result.error.empty()) result.error = clock.start(timers_of(plan), planners_of(s));
     supervise(group, died, result, clock, [&] {
         const double real = std::chrono::duration<double>(Clock::now() - t0).count();
         char line[240];

@@ -247,7 +247,7 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
 }
 
 /// central_routing: enabled, seed, period, restart, and what it asks of the cars.
-void read_routing(Checker& c, const YAML::Node& root, const YAML::Node& vehicles, Scenario& s)
+void read_routing(Checker& c, const YAML::Node& root, Scenario& s)
 {
     if (const YAML::Node r = root["routing"]) {
         if (!r.IsMap()) c.error(r, "routing", "expected a map (enabled, seed, period, restart, host)");
@@ -263,23 +263,124 @@ void read_routing(Checker& c, const YAML::Node& root, const YAML::Node& vehicles
                 }
             }
             if (r["restart"]) s.routing.restart = c.boolean(r["restart"], "routing.restart").value_or(false);
-            if (s.routing.enabled) {
-                if (!root["lanes"]) c.error(r, "routing.enabled", "central routing needs a lane graph: give lanes");
-                for (size_t i = 0; vehicles.IsSequence() && i < vehicles.size(); ++i) {
-                    const std::string p = "vehicles[" + std::to_string(i) + "]";
-                    if (!vehicles[i].IsMap()) continue;  // said above
-                    if (vehicles[i]["fsm"]) c.error(vehicles[i]["fsm"], p + ".fsm", "a car either follows its fsm or central routing, not both");
-                    if (vehicles[i]["start"]) c.error(vehicles[i]["start"], p + ".start", "with routing the cars are spread over the lanes; leave start out");
-                }
-                std::vector<int> ids;
-                for (const auto& v : s.vehicles) ids.push_back(v.id);
-                std::sort(ids.begin(), ids.end());
-                const bool valid = !ids.empty() && ids.front() > 0 && std::adjacent_find(ids.begin(), ids.end()) == ids.end();  // else said above
-                if (valid && ids.back() - ids.front() + 1 != int(ids.size())) {
-                    c.error(vehicles, "vehicles", "with routing the cars run in one simulator and need consecutive ids (e.g. 1, 2, 3)");
-                }
+        }
+    }
+}
+
+/// A controller's `program:` that names one of cpm's programs (hlc_platoon): a bare name, neither a
+/// file beside the scenario nor a Python script.
+bool is_cpm_program(const std::string& name, const std::string& dir)
+{
+    std::error_code ec;
+    return !name.empty() && name.find('/') == std::string::npos && fs::path(name).extension() != ".py" && !fs::exists(fs::path(dir) / name, ec);
+}
+
+/// `controllers:`, users' high-level controllers: each a program or Python script, its cars and
+/// period; a car is driven by one of them only.
+void read_controllers(Checker& c, const YAML::Node& root, Scenario& s)
+{
+    const YAML::Node list = root["controllers"];
+    if (!list) return;
+    if (!list.IsSequence()) {
+        c.error(list, "controllers", "expected a list of controllers (program, vehicles, period, …)");
+        return;
+    }
+    std::map<int, std::string> driven_by;
+    std::map<std::string, std::string> names;
+    for (size_t i = 0; i < list.size(); ++i) {
+        const std::string p = "controllers[" + std::to_string(i) + "]";
+        const YAML::Node n = list[i];
+        if (!n.IsMap()) {
+            c.error(n, p, "expected a map (program, name, args, vehicles, period, domain)");
+            continue;
+        }
+        c.keys(n, p, {"program", "name", "args", "vehicles", "period", "domain", "host"});
+        ControllerSpec spec;
+        if (!n["program"]) c.error(n, p + ".program", "missing (the controller: a program, or a Python script)");
+        else if (auto t = c.text(n["program"], p + ".program"); t && is_cpm_program(*t, s.dir)) spec.program = *t;
+        else spec.program = c.file(n["program"], p + ".program", s.dir, "controller program");
+        if (n["name"]) {
+            if (auto t = c.text(n["name"], p + ".name")) spec.name = *t;
+        } else {
+            spec.name = fs::path(spec.program).stem().string();
+        }
+        if (n["name"] || !spec.program.empty()) {
+            if (spec.name.empty() || spec.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") != std::string::npos) {
+                c.error(n["name"] ? n["name"] : n, p + ".name", "'" + spec.name + "': use letters, digits, - and _ only");
+            } else if (auto [at, fresh] = names.emplace(spec.name, p); !fresh) {
+                c.error(n, p + ".name", "'" + spec.name + "' is the name of " + at->second + " too (give each a name:)");
             }
         }
+        if (spec.program.find('/') != std::string::npos && !spec.python() && ::access(spec.program.c_str(), X_OK) != 0) {
+            c.error(n["program"], p + ".program", spec.program + " is not executable (nor a Python script ending in .py)");
+        }
+        if (const YAML::Node a = n["args"]) {
+            if (!a.IsSequence()) c.error(a, p + ".args", "expected a list of texts, e.g. [\"--gap\", \"1.0s\"]");
+            for (size_t k = 0; a.IsSequence() && k < a.size(); ++k) {
+                const auto t = c.text(a[k], p + ".args[" + std::to_string(k) + "]");
+                if (!t) continue;
+                // A file beside the scenario is given by its full path (the controller runs elsewhere).
+                std::error_code ec;
+                const bool file = !t->empty() && (*t)[0] != '-' && fs::path(*t).is_relative() && fs::exists(fs::path(s.dir) / *t, ec);
+                spec.args.push_back(file ? fs::weakly_canonical(fs::path(s.dir) / *t).string() : *t);
+            }
+        }
+        const YAML::Node v = n["vehicles"];
+        if (!v) c.error(n, p + ".vehicles", "missing (the ids of the cars it drives, e.g. [1, 2])");
+        else if (!v.IsSequence() || v.size() == 0) c.error(v, p + ".vehicles", "expected a list of car ids, e.g. [1, 2]");
+        for (size_t k = 0; v && v.IsSequence() && k < v.size(); ++k) {
+            const std::string vp = p + ".vehicles[" + std::to_string(k) + "]";
+            const auto id = c.integer(v[k], vp, 1, 255);
+            if (!id) continue;
+            if (std::none_of(s.vehicles.begin(), s.vehicles.end(), [&](const VehicleSpec& car) { return car.id == *id; })) {
+                c.error(v[k], vp, std::to_string(*id) + " is no car of vehicles:");
+            } else if (auto [at, fresh] = driven_by.emplace(int(*id), p); !fresh) {
+                c.error(v[k], vp, "car " + std::to_string(*id) + " is driven by " + at->second + " already");
+            } else {
+                spec.vehicles.push_back(int(*id));
+            }
+        }
+        if (n["period"]) {
+            if (auto d = c.duration(n["period"], p + ".period")) {
+                if (*d < 10'000'000ull || *d % 1'000'000ull) c.error(n["period"], p + ".period", "must be whole milliseconds, at least 10ms");
+                else spec.period_ns = *d;
+            }
+        }
+        if (n["domain"]) {
+            if (auto d = c.integer(n["domain"], p + ".domain", 0, 232)) {
+                if (s.domain && *d == *s.domain) c.error(n["domain"], p + ".domain", std::to_string(*d) + " is the lab's own domain: a controller needs one of its own");
+                else spec.domain = int(*d);
+            }
+        }
+        if (n["host"] && host_name(c, s, n["host"], p + ".host") != (s.local_host() ? s.local_host()->name : "")) {
+            c.error(n["host"], p + ".host", "a controller on another host is not supported yet; run it on the run's own host");
+        }
+        s.controllers.push_back(std::move(spec));
+    }
+    if (root["security"]) c.error(list, "controllers", "controllers in a secured lab are not supported yet (their own domain is not secured)");
+}
+
+/// With routing or controllers the cars run in one simulator, spread over the lanes.
+void check_cars_on_lanes(Checker& c, const YAML::Node& root, const YAML::Node& vehicles, const Scenario& s)
+{
+    if (!s.cars_on_lanes()) return;
+    const std::string who = s.routing.enabled ? "routing" : "controllers";
+    const std::string driver = s.routing.enabled ? "central routing" : "controllers";
+    const YAML::Node at = s.routing.enabled ? root["routing"] : root["controllers"];
+    if (!root["lanes"]) c.error(at, s.routing.enabled ? "routing.enabled" : "controllers", driver + " need" + (s.routing.enabled ? "s" : "") + " a lane graph: give lanes");
+    if (s.routing.enabled && !s.controllers.empty()) c.error(root["controllers"], "controllers", "either central routing or controllers drive the cars, not both");
+    for (size_t i = 0; vehicles.IsSequence() && i < vehicles.size(); ++i) {
+        const std::string p = "vehicles[" + std::to_string(i) + "]";
+        if (!vehicles[i].IsMap()) continue;  // said above
+        if (vehicles[i]["fsm"]) c.error(vehicles[i]["fsm"], p + ".fsm", "a car either follows its fsm or " + driver + ", not both");
+        if (vehicles[i]["start"]) c.error(vehicles[i]["start"], p + ".start", "with " + who + " the cars are spread over the lanes; leave start out");
+    }
+    std::vector<int> ids;
+    for (const auto& v : s.vehicles) ids.push_back(v.id);
+    std::sort(ids.begin(), ids.end());
+    const bool valid = !ids.empty() && ids.front() > 0 && std::adjacent_find(ids.begin(), ids.end()) == ids.end();  // else said above
+    if (valid && ids.back() - ids.front() + 1 != int(ids.size())) {
+        c.error(vehicles, "vehicles", "with " + who + " the cars run in one simulator and need consecutive ids (e.g. 1, 2, 3)");
     }
 }
 
@@ -348,7 +449,8 @@ Scenario load_scenario(const std::string& path)
     Checker c(path);
     if (!root.IsMap()) throw ScenarioError(std::vector<Diagnostic>{{path, "expected a map of keys (name, time, duration, world, vehicles, ...)"}});
     c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor",
-                    "parameters", "security", "hosts", "ssh_config", "max_clock_offset", "discovery", "discovery_server", "history"});
+                    "parameters", "security", "hosts", "ssh_config", "max_clock_offset", "discovery", "discovery_server", "history",
+                    "controllers"});
     read_hosts(c, root, s);  // before anything names a host
     read_discovery(c, root, s);
 
@@ -388,14 +490,30 @@ Scenario load_scenario(const std::string& path)
 
     const YAML::Node vehicles = root["vehicles"];
     read_vehicles(c, root, vehicles, s);
-    read_routing(c, root, vehicles, s);
-    if (!s.routing.enabled && !root["world"]) c.error(root, "world", "missing (the map the cars drive in)");
+    read_routing(c, root, s);
+    read_controllers(c, root, s);
+    check_cars_on_lanes(c, root, vehicles, s);
+    if (!s.cars_on_lanes() && !root["world"]) c.error(root, "world", "missing (the map the cars drive in)");
 
     read_run_options(c, root, s);
     read_history(c, root, s);
-    if (c.ok() && !s.world.empty() && !s.routing.enabled) check_starts(c, s, vehicles);
+    if (c.ok() && !s.world.empty() && !s.cars_on_lanes()) check_starts(c, s, vehicles);
     if (!c.ok()) throw ScenarioError(c.errors());
     return s;
+}
+
+bool ControllerSpec::python() const { return fs::path(program).extension() == ".py"; }
+
+std::map<std::string, int> controller_domains(const Scenario& s, const RunSettings& settings)
+{
+    std::map<std::string, int> out;
+    for (const auto& p : plan_run(s, settings)) {
+        if (p.argv.empty() || fs::path(p.argv[0]).filename() != "hlc_middleware") continue;
+        const auto name = std::find(p.argv.begin(), p.argv.end(), "--name");
+        const auto domain = std::find(p.argv.begin(), p.argv.end(), "--controller_domain");
+        if (name + 1 < p.argv.end() && domain + 1 < p.argv.end()) out[*(name + 1)] = std::stoi(*(domain + 1));
+    }
+    return out;
 }
 
 std::string Scenario::discovery_server_locator() const
@@ -573,7 +691,7 @@ public:
     /// the run's folder; stopped bridge first, so that it never reports a lost link.
     void cars()
     {
-        if (s_.routing.enabled) {
+        if (s_.cars_on_lanes()) {
             int first = 255;
             bool restart = false;
             for (const auto& v : s_.vehicles) first = std::min(first, v.id), restart = restart || v.restart;
@@ -618,10 +736,44 @@ public:
                         std::to_string(s_.routing.period_ns / 1'000'000) + "ms"}),
                 s_.routing.restart, 1, 0, s_.routing.host);
         }
+        controllers();
         for (const auto& v : s_.vehicles) {
             if (v.fsm.empty()) continue;
             const std::string id = std::to_string(v.id);
             add("fsm_" + id, "fsm_node", common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}), v.restart, 1, v.id, v.host);
+        }
+    }
+
+    /// Each controller on its own domain with its middleware, which the lab clock waits for. The
+    /// controller is given its cars, its domain and the lab's clock after its own arguments.
+    void controllers()
+    {
+        std::set<int> taken{r_.domain};
+        for (const auto& c : s_.controllers) {
+            if (c.domain) taken.insert(*c.domain);
+        }
+        for (const auto& c : s_.controllers) {
+            int domain = c.domain.value_or(-1);
+            if (domain < 0) {
+                const auto chosen = r_.controller_domains.find(c.name);
+                domain = chosen != r_.controller_domains.end() ? chosen->second : r_.domain;
+                while (taken.count(domain)) domain = (domain + 1) % 233;
+                taken.insert(domain);
+            }
+            std::string ids;
+            for (int v : c.vehicles) ids += (ids.empty() ? "" : ",") + std::to_string(v);
+            add("hlc_" + c.name, "hlc_middleware",
+                common({program("hlc_middleware"), "--vehicle_ids", ids, "--controller_domain", std::to_string(domain), "--name", c.name,
+                        "--period", std::to_string(c.period_ns / 1'000'000) + "ms"}),
+                false, 2, c.vehicles.front(), "", false);
+            plan_.back().timer = timer_ids::hlc_middleware(c.name);
+            std::vector<std::string> argv;
+            if (c.python()) argv = {"/usr/bin/python3", c.program};
+            else argv = {c.program.find('/') == std::string::npos ? program(c.program) : c.program};
+            argv.insert(argv.end(), c.args.begin(), c.args.end());
+            argv.insert(argv.end(), {"--vehicle_ids", ids, "--dds_domain", std::to_string(domain)});
+            if (simulated()) argv.push_back("--simulated_time");
+            add("controller_" + c.name, "hlc_controller", argv, false, 1, c.vehicles.front(), "", false);
         }
     }
 

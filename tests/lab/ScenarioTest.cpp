@@ -203,7 +203,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
                                        "qos: {vehicleState: {reliable: maybe}}\n"); // 14
     const auto errors = errors_of(file);
     const std::vector<std::string> expected = {
-        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, discovery_server, history",
+        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, discovery_server, history, controllers",
         file + ":1: name: 'bad run': use letters, digits, - and _ only",
         file + ":2: time: 'sometimes': expected real or simulated",
         file + ":1: duration: missing (how long the run lasts, e.g. 30s)",
@@ -471,4 +471,63 @@ TEST(Scenario, WithADiscoveryServerItRunsOnItsHostAndEveryProcessIsPointedAtIt)
                               }));
     const std::string alone = dir.write("alone.yaml", "name: h\nduration: 5s\nworld: map.json\ndiscovery: server\nvehicles: [{id: 2}]\n");
     EXPECT_EQ(errors_of(alone), (std::vector<std::string>{alone + ":4: discovery: only for a lab across hosts: name them under hosts:"}));
+}
+
+TEST(Scenario, AControllerRunsOnADomainOfItsOwnWithItsMiddlewareAndItsFilesByTheirFullPaths)
+{
+    TempDir dir;
+    dir.write("lanes.json", "{}");
+    dir.write("gaps.json", "{}");
+    dir.write("ctl.py", "print('hello')\n");
+    const std::string file = dir.write("c.yaml", "name: c\ntime: simulated\nduration: 10s\nlanes: lanes.json\ndomain: 30\n"
+                                                 "vehicles:\n  - {id: 1}\n  - {id: 2}\n"
+                                                 "controllers:\n  - program: ctl.py\n    args: [\"--gaps\", \"gaps.json\"]\n"
+                                                 "    vehicles: [1, 2]\n    period: 200ms\n");
+    const Scenario s = load_scenario(file);
+    ASSERT_EQ(s.controllers.size(), 1u);
+    EXPECT_EQ(s.controllers[0].name, "ctl");
+    EXPECT_TRUE(s.controllers[0].python());
+    const std::string bin = fake_bin(dir, {"cpm_history", "cpm", "hlc_middleware"});
+    RunSettings r{.bin_dir = bin, .run_dir = dir.file("run"), .domain = 30, .time = TimeMode::simulated};
+    const auto plan = plan_run(s, r);
+    auto named = [&](const std::string& n) { return *std::find_if(plan.begin(), plan.end(), [&](const ProcessPlan& p) { return p.name == n; }); };
+    const auto middleware = named("hlc_ctl"), controller = named("controller_ctl");
+    EXPECT_EQ(middleware.timer, "hlc_middleware_ctl") << "the lab clock waits for it";
+    EXPECT_EQ(middleware.argv, (std::vector<std::string>{bin + "/hlc_middleware", "--vehicle_ids", "1,2", "--controller_domain", "31", "--name", "ctl",
+                                                         "--period", "200ms", "--dds_domain", "30", "--simulated_time"}));
+    EXPECT_EQ(controller.argv, (std::vector<std::string>{"/usr/bin/python3", dir.file("ctl.py"), "--gaps", dir.file("gaps.json"), "--vehicle_ids",
+                                                         "1,2", "--dds_domain", "31", "--simulated_time"}));
+    EXPECT_LT(controller.stop_order, middleware.stop_order) << "the controller stops before its middleware";
+    EXPECT_EQ(named("cars").argv[1], "vehicle") << "the cars are spread over the lanes in one simulator";
+    EXPECT_EQ(controller_domains(s, r), (std::map<std::string, int>{{"ctl", 31}}));
+    r.controller_domains = {{"ctl", 44}};
+    EXPECT_EQ(controller_domains(s, r), (std::map<std::string, int>{{"ctl", 44}})) << "as the run chose it";
+}
+
+TEST(Scenario, EveryMistakeInAControllerIsNamedWithItsPath)
+{
+    TempDir dir;
+    dir.write("lanes.json", "{}");
+    dir.write("ctl.py", "");
+    dir.write("not_executable", "");
+    const std::string file = dir.write("c.yaml", "name: c\nduration: 10s\nlanes: lanes.json\ndomain: 30\n"
+                                                 "vehicles:\n  - {id: 1}\n  - {id: 2, fsm: x.json}\n"
+                                                 "controllers:\n"
+                                                 "  - {program: ctl.py, vehicles: [1, 7], period: 5ms, domain: 30}\n"
+                                                 "  - {program: not_executable, name: ctl, vehicles: [1], perod: 1s}\n"
+                                                 "  - {program: missing.py}\n");
+    const auto errors = errors_of(file);
+    auto has = [&](const std::string& text) {
+        return std::any_of(errors.begin(), errors.end(), [&](const std::string& e) { return e.find(text) != std::string::npos; });
+    };
+    EXPECT_TRUE(has(file + ":9: controllers[0].vehicles[1]: 7 is no car of vehicles:")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has(file + ":9: controllers[0].period: must be whole milliseconds, at least 10ms")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has(file + ":9: controllers[0].domain: 30 is the lab's own domain: a controller needs one of its own")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has(":10: controllers[1].perod: unknown key (did you mean 'period'?)")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has(":10: controllers[1].name: 'ctl' is the name of controllers[0] too")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has(":10: controllers[1].vehicles[0]: car 1 is driven by controllers[0] already")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has("controllers[1].program: " + dir.file("not_executable") + " is not executable")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has(":11: controllers[2].program: controller program 'missing.py' does not exist")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has(":11: controllers[2].vehicles: missing")) << testing::PrintToString(errors);
+    EXPECT_TRUE(has(":7: vehicles[1].fsm: a car either follows its fsm or controllers, not both")) << testing::PrintToString(errors);
 }

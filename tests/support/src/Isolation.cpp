@@ -63,28 +63,43 @@ void remove_stale_shared_memory(int domain)
 
 }  // namespace
 
+namespace {
+/// A domain id no other test process holds, locked for the life of this process.
+int claim_free_domain()
+{
+    const std::string dir = "/tmp/cpm_test_domains";
+    ::mkdir(dir.c_str(), 0777);
+    const int start = static_cast<int>(::getpid() % 232);
+    for (int i = 0; i < 232; ++i) {
+        const int candidate = 1 + (start + i) % 232;
+        const std::string path = dir + "/" + std::to_string(candidate) + ".lock";
+        const int fd = ::open(path.c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0666);
+        if (fd < 0) continue;
+        if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+            // Kept open (and locked) for the life of the process.
+            remove_stale_shared_memory(candidate);
+            return candidate;
+        }
+        ::close(fd);
+    }
+    throw std::runtime_error("no free DDS domain id in 1..232 for this test process");
+}
+}  // namespace
+
 int test_domain_id()
 {
     static const int id = [] {
-        const std::string dir = "/tmp/cpm_test_domains";
-        ::mkdir(dir.c_str(), 0777);
-        const int start = static_cast<int>(::getpid() % 232);
-        for (int i = 0; i < 232; ++i) {
-            const int candidate = 1 + (start + i) % 232;
-            const std::string path = dir + "/" + std::to_string(candidate) + ".lock";
-            const int fd = ::open(path.c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0666);
-            if (fd < 0) continue;
-            if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
-                // Kept open (and locked) for the life of the process.
-                ::setenv("CPM_DOMAIN_ID", std::to_string(candidate).c_str(), 1);
-                remove_stale_shared_memory(candidate);
-                return candidate;
-            }
-            ::close(fd);
-        }
-        throw std::runtime_error("no free DDS domain id in 1..232 for this test process");
+        const int candidate = claim_free_domain();
+        ::setenv("CPM_DOMAIN_ID", std::to_string(candidate).c_str(), 1);
+        return candidate;
     }();
     return id;
+}
+
+int extra_test_domain_id()
+{
+    (void)test_domain_id();  // the process's own first
+    return claim_free_domain();
 }
 
 std::string unique_topic(const std::string& base)

@@ -132,6 +132,15 @@ struct HostFigures
     bool lost = false;
 };
 
+/// A user's controller as its middleware counted it (summary.json's "controllers").
+struct ControllerFigures
+{
+    std::string name, vehicles;  ///< vehicles as "1, 2, 3"
+    uint64_t periods = 0, answered = 0, unanswered = 0, forwarded = 0, refused = 0;
+    double response_ms_p50 = 0, response_ms_p99 = 0;
+    std::string refusals;  ///< the first refusal of each kind, "; " between
+};
+
 /// What a run's report shows: summary.json's outline of the run and the recording's figures.
 struct RunFigures
 {
@@ -152,6 +161,7 @@ struct RunFigures
     std::vector<LogLine> log;        ///< the log's warnings and errors, in recorded order
     size_t log_errors = 0, log_warnings = 0;
     std::vector<HostFigures> hosts;  ///< a run across computers: each host; empty on one host
+    std::vector<ControllerFigures> controllers;  ///< users' controllers (cpm::hlc), as their middlewares counted
 
     bool simulated() const { return time == "simulated"; }
 };

@@ -20,6 +20,14 @@
 //   parameters: ../params/lab.yaml  # served to every node (cpm param serve)
 //   security: ../lab-sec            # a secured lab (a folder from `cpm security init`): each
 //                                   # process runs as a node of its own, allowed the topics it uses
+//   controllers:                    # users' high-level controllers (cpm::hlc), each with its
+//     - program: ../controllers/platoon.py   # hlc_middleware; a program, a Python script, or the
+//                                   # name of one of cpm's programs (hlc_platoon)
+//       name: platoon               # default: the program's file name without extension
+//       args: ["--gap", "1.0s"]     # then --vehicle_ids 1,2,… --dds_domain D [--simulated_time]
+//       vehicles: [1, 2, 3, 4]      # the cars it drives (on the lanes, as with routing)
+//       period: 100ms
+//       domain: 40                  # the domain it shares with its middleware; default: chosen
 //   monitor: 8080                   # cpm monitor on this port while the run lasts, or
 //                                   # {port: 8080, allow_stop: true} for its stop buttons; off: none
 //
@@ -67,6 +75,18 @@ struct RoutingSpec
     std::string host;  ///< where central_routing runs; "" the run's own
 };
 
+/// A user's high-level controller and what it drives (`controllers:`).
+struct ControllerSpec
+{
+    std::string name;               ///< unique in the run: its processes are controller_<name>, hlc_<name>
+    std::string program;            ///< absolute path: an executable, or a Python script (.py); a bare name: cpm's program
+    std::vector<std::string> args;  ///< given before the run's own flags; files beside the scenario by their full path
+    std::vector<int> vehicles;      ///< the cars it drives
+    uint64_t period_ns = 100'000'000;
+    std::optional<int> domain;      ///< the controller's own domain; unset: the run chooses one
+    bool python() const;
+};
+
 /// Per-topic QoS a run applies to every node (unset: each node's own choice); the run passes
 /// them on in CPM_QOS_OVERRIDES.
 using QosOverride = cpm::QosOverride;
@@ -91,6 +111,9 @@ struct Scenario
     std::string security;    ///< absolute path of the lab's security folder (`cpm security init`), or empty
     std::vector<VehicleSpec> vehicles;
     RoutingSpec routing;
+    std::vector<ControllerSpec> controllers;
+    /// The cars run in one simulator spread over the lanes (with routing or controllers).
+    bool cars_on_lanes() const { return routing.enabled || !controllers.empty(); }
     std::map<std::string, QosOverride> qos;
     RecordSpec record;
     std::optional<int> monitor_port;  ///< cpm monitor on 127.0.0.1 at this port during the run
@@ -151,6 +174,9 @@ struct RunSettings
     uint64_t duration_ns = 0; ///< the scenario's unless overridden
     TimeMode time = TimeMode::real;
     std::string ssh_shared_dir; ///< where ssh keeps the run's one connection per other host ("": none)
+    /// Each controller's own domain (by name) where the scenario names none; a controller found
+    /// in neither gets the first domain after the run's that no other controller has.
+    std::map<std::string, int> controller_domains;
 };
 
 /// A secured run's node name for one of its processes ("cpm_lab_run" for the run itself): the
@@ -163,9 +189,13 @@ std::string remote_run_dir(const RunSettings& settings);
 /// log, the history's status and the timers' readiness it reads.
 ProcessPlan lab_run_process();
 
+/// The domain each controller of the run shares with its middleware (by name).
+std::map<std::string, int> controller_domains(const Scenario& s, const RunSettings& settings);
+
 /// The processes of a run, in the order they start: the history recording first, the parameter
 /// server, the monitor, then the cars
-/// (simulator and bridge), their cameras and aruco_nodes, routing, the fsm_nodes. Throws
+/// (simulator and bridge), their cameras and aruco_nodes, routing, the controllers with their
+/// middlewares, the fsm_nodes. Throws
 /// ScenarioError naming every program that is missing from bin_dir.
 std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& settings);
 

@@ -10,6 +10,9 @@ namespace cpm_test {
 /// an flock on a file in /tmp/cpm_test_domains and held until the process ends. Also
 /// exported as CPM_DOMAIN_ID so child processes and the default participant use it.
 int test_domain_id();
+/// One more domain id no other test process holds (a new one each call, held as the first): for
+/// a second DDS domain of the test's own, such as a controller's.
+int extra_test_domain_id();
 
 /// A topic name unique to this process and call ("base_<pid>_<n>").
 std::string unique_topic(const std::string& base);
