@@ -91,6 +91,7 @@ each aruco_node cpm/aruco/ArucoNode.hpp 'std::string why; return int(cpm::aruco:
 each fsm cpm/fsm/Loader.hpp 'return int(cpm::fsm::load_file("x").errors.size())'
 each fsm_node cpm/fsm/FsmNode.hpp 'return int(cpm::fsm::inputs_from(VehicleState{}, RangeSensors{}, nullptr, 0).t)'
 each routing cpm/routing/Conflicts.hpp 'return int(cpm::routing::footprint_distance({}, {}, {}))'
+each hlc cpm/hlc/Middleware.hpp 'return int(cpm::hlc::to_string(cpm::hlc::Refusal::bad_value)[0])'
 each routing_node cpm/routing/RoutingNode.hpp 'cpm::routing::RoutingNode node(cpm::routing::LaneGraph{}, {}); return 0'
 targets=$(grep -c '^add_executable' "$work/each/CMakeLists.txt")
 exported=$(grep -c '^add_library(cpm::' "$work/prefix/lib/cmake/cpm/cpmTargets.cmake")
@@ -98,3 +99,14 @@ exported=$(grep -c '^add_library(cpm::' "$work/prefix/lib/cmake/cpm/cpmTargets.c
 cmake -S "$work/each" -B "$work/each/build" -G Ninja -DCMAKE_PREFIX_PATH="$work/prefix" > "$work/each.log" 2>&1 \
   && cmake --build "$work/each/build" >> "$work/each.log" 2>&1 || { echo "an exported target does not link from outside:"; cat "$work/each.log"; exit 1; }
 echo "every exported target ($targets) builds into a program outside this tree"
+
+# Python finds the installed package under the prefix, its module the installed libraries.
+out=$(PYTHONPATH="$work/prefix/lib/python3/dist-packages" /usr/bin/python3 -c "
+import cpm, cpm.types
+s = cpm.types.VehicleState(vehicle_id=7, speed=1.25)
+assert cpm.types.VehicleState.from_dict(s.to_dict()) == s
+print(cpm.__file__)") || { echo "the installed Python package does not import"; exit 1; }
+case "$out" in "$work/prefix/"*) ;; *) echo "python imported cpm from $out, not from the prefix"; exit 1 ;; esac
+ldd "$work/prefix/lib/python3/dist-packages/cpm/"_cpm*.so | grep libcpm | grep -q "$work/prefix" \
+  || { echo "the installed Python module does not use the installed libcpm:"; ldd "$work/prefix/lib/python3/dist-packages/cpm/"_cpm*.so; exit 1; }
+echo "python: import cpm from the prefix"

@@ -1,0 +1,53 @@
+// For the Python tests: every lab topic type read by a typed C++ reader from "py_in_<Type>" and
+// written back by a typed C++ writer on "py_out_<Type>", until SIGINT/SIGTERM. Proves a Python
+// sample is what a C++ program reads, field for field, and back.
+#include <cpm/AsyncReader.hpp>
+#include <cpm/CommandLine.hpp>
+#include <cpm/Writer.hpp>
+#include <cpm/init.hpp>
+
+#include <cpm_topic_types.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <thread>
+#include <vector>
+
+namespace {
+
+struct Echo
+{
+    virtual ~Echo() = default;
+};
+
+template <class T>
+struct EchoOf : Echo
+{
+    cpm::Writer<T> out;
+    cpm::AsyncReader<T> in;
+    explicit EchoOf(const std::string& name)
+        : out("py_out_" + name, cpm::WriterOptions{.reliable = true, .keep_all = true}),
+          in([this](std::vector<T>& samples) {
+              for (const auto& s : samples) (void)out.write(s);
+          },
+             "py_in_" + name, cpm::ReaderOptions{.reliable = true, .keep_all = true})
+    {
+    }
+};
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    cpm::init(argc, argv);
+    cpm::cli::stop_on_signals();
+    std::vector<std::unique_ptr<Echo>> echoes;
+#define CPM_PY_TOPIC(T) echoes.push_back(std::make_unique<EchoOf<T>>(#T));
+#include <topic_types.inc>
+#undef CPM_PY_TOPIC
+    std::printf("echoing %zu types\n", echoes.size());
+    std::fflush(stdout);
+    while (!cpm::cli::stop_requested()) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    return 0;
+}
