@@ -768,7 +768,13 @@ public:
                 false, 2, c.vehicles.front(), "", false);
             plan_.back().timer = timer_ids::hlc_middleware(c.name);
             std::vector<std::string> argv;
-            if (c.python()) argv = {"/usr/bin/python3", c.program};
+            // Python finds cpm beside the run's programs: the build tree's, or the installed one.
+            if (c.python()) {
+                const fs::path bin(r_.bin_dir);
+                argv = {"/usr/bin/env", "PYTHONPATH=" + (bin.parent_path() / "python").string() + ":" +
+                                            (bin.parent_path() / "lib/python3/dist-packages").string(),
+                        "/usr/bin/python3", c.program};
+            }
             else argv = {c.program.find('/') == std::string::npos ? program(c.program) : c.program};
             argv.insert(argv.end(), c.args.begin(), c.args.end());
             argv.insert(argv.end(), {"--vehicle_ids", ids, "--dds_domain", std::to_string(domain)});

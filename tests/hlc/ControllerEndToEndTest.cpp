@@ -72,6 +72,25 @@ TEST(ControllerRun, ACppPlatoonControllerDrivesFourCarsOnTheRingAndEveryCommandG
         << "the report's row of the controller";
 }
 
+TEST(ControllerRun, APythonPlatoonControllerDrivesFourCarsOnTheRingAndEveryCommandGoesThrough)
+{
+    TempDir dir;
+    const std::string out = dir.file("run");
+    const auto s = run(ring_scenario(dir, "simulated", "12s", 4, std::string(CPM_SOURCE_DIR) + "/examples/python/platoon.py",
+                                     "[\"--lanes\", \"" + kRing + "\", \"--speed\", \"0.6\"]", "[1, 2, 3, 4]"),
+                       out);
+    ASSERT_TRUE(s["ok"].get<bool>()) << s.dump(2);
+    const auto& c = s["controllers"].at(0);
+    EXPECT_GE(c["periods"].get<int>(), 115) << c.dump(2);
+    EXPECT_EQ(c["answered"], c["periods"]) << c.dump(2);
+    EXPECT_EQ(c["refused"], 0) << c.dump(2);
+    for (const char* id : {"1", "2", "3", "4"}) EXPECT_GT(s["report"]["cars"][id]["driven_m"].get<double>(), 5.0) << "car " << id;
+    EXPECT_GT(s["report"]["min_distance_between_cars_m"].get<double>(), 0.45);
+    std::ifstream log(out + "/controller_ctl.log");
+    const std::string text((std::istreambuf_iterator<char>(log)), {});
+    EXPECT_NE(text.find("\"failed\": 0"), std::string::npos) << "no step raised: " << text;
+}
+
 TEST(ControllerRun, AControllerThatSleepsPastItsPeriodHasItsStepsCancelledAndItsCarsStand)
 {
     TempDir dir;

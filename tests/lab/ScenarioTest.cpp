@@ -495,7 +495,8 @@ TEST(Scenario, AControllerRunsOnADomainOfItsOwnWithItsMiddlewareAndItsFilesByThe
     EXPECT_EQ(middleware.timer, "hlc_middleware_ctl") << "the lab clock waits for it";
     EXPECT_EQ(middleware.argv, (std::vector<std::string>{bin + "/hlc_middleware", "--vehicle_ids", "1,2", "--controller_domain", "31", "--name", "ctl",
                                                          "--period", "200ms", "--dds_domain", "30", "--simulated_time"}));
-    EXPECT_EQ(controller.argv, (std::vector<std::string>{"/usr/bin/python3", dir.file("ctl.py"), "--gaps", dir.file("gaps.json"), "--vehicle_ids",
+    EXPECT_EQ(controller.argv, (std::vector<std::string>{"/usr/bin/env", "PYTHONPATH=" + dir.file("python") + ":" + dir.file("lib/python3/dist-packages"),
+                                                         "/usr/bin/python3", dir.file("ctl.py"), "--gaps", dir.file("gaps.json"), "--vehicle_ids",
                                                          "1,2", "--dds_domain", "31", "--simulated_time"}));
     EXPECT_LT(controller.stop_order, middleware.stop_order) << "the controller stops before its middleware";
     EXPECT_EQ(named("cars").argv[1], "vehicle") << "the cars are spread over the lanes in one simulator";
