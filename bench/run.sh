@@ -46,6 +46,9 @@ echo
 echo "== bench_aruco (perception: aruco_node vs plain OpenCV and AprilTag 3; detection, pose, latency, CameraFrame over DDS)"
 "$bin/bench_aruco"
 echo
+echo "== bench_hlc (a user's controller: the list built, a step from list to answer, 20 cars)"
+"$bin/bench_hlc"
+echo
 echo "== bench_routing (central routing: planning time per cycle, start-up, intersection throughput vs cpm_lab's scheme)"
 "$bin/bench_routing"
 echo
