@@ -17,10 +17,11 @@ cpm::ReaderOptions). Wrong types or values raise TypeError/ValueError naming the
 from . import _cpm
 from . import types
 from . import hlc
+from .history import HistoryClient, open_recording
 from ._cpm import Error, Participant, get_time_ns, simulated_time, domain_id
 
 __all__ = ["Error", "Participant", "Writer", "Reader", "ReaderAbstract", "AsyncReader", "MultiVehicleReader", "Timer", "init",
-           "get_time_ns", "stamp_message", "log", "simulated_time", "domain_id", "types", "hlc"]
+           "get_time_ns", "stamp_message", "log", "simulated_time", "domain_id", "types", "hlc", "HistoryClient", "open_recording"]
 
 
 def init(argv):

@@ -3,6 +3,7 @@
 // value checked against its IDL type with an error naming the field, lists to and from IDL
 // sequences and arrays, and the typed readers and writers of one topic type.
 #include <cpm/AsyncReader.hpp>
+#include <cpm/HistoryClient.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/MultiVehicleReader.hpp>
 #include <cpm/Participant.hpp>
@@ -255,6 +256,13 @@ void bind_topic(py::module_& m, const std::string& name)
             py::gil_scoped_release release;
             return w.wait_for_matched(n, std::chrono::milliseconds(int64_t(timeout_s * 1000)));
         });
+    // A history sample's payload (CDR, encapsulation included) as T; None when it is not one.
+    m.def(("decode_" + name).c_str(), [](py::bytes payload) -> py::object {
+        const std::string b = payload;
+        T out;
+        if (!cpm::HistoryClient::decode_payload(std::vector<uint8_t>(b.begin(), b.end()), out)) return py::none();
+        return py::cast(std::move(out));
+    });
     py::class_<PyAsyncReader<T>>(m, ("AsyncReader_" + name).c_str())
         .def(py::init<py::function, const std::string&, cpm::ReaderOptions, cpm::Participant*>(), py::arg("callback"), py::arg("topic"),
              py::arg("options"), py::arg("participant") = nullptr, py::keep_alive<1, 5>())

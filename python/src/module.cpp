@@ -4,12 +4,16 @@
 #include "cpm_py.hpp"
 
 #include <cpm/Error.hpp>
+#include <cpm/HistoryClient.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/hlc/Communicator.hpp>
 #include <cpm/init.hpp>
 
 #include <pybind11/stl.h>
+
+#include <HistoryReply.h>
+#include <HistoryRequest.h>
 
 namespace py = pybind11;
 
@@ -114,6 +118,21 @@ PYBIND11_MODULE(_cpm, m)
         .def_readwrite("data_sharing", &cpm::ReaderOptions::data_sharing);
 
     cpm_py_bind_topics(m);
+
+    py::class_<cpm::HistoryClient>(m, "HistoryClient")
+        .def(py::init([](cpm::Participant* p, double reply_timeout_s) {
+                 py::gil_scoped_release release;
+                 return std::make_unique<cpm::HistoryClient>(cpm_py::participant_of(p), std::chrono::milliseconds(int64_t(reply_timeout_s * 1000)));
+             }),
+             py::arg("participant") = nullptr, py::arg("reply_timeout_s") = 3.0, py::keep_alive<1, 2>())
+        .def_static("open_recording", [](const std::string& path) {
+            py::gil_scoped_release release;
+            return std::make_unique<cpm::HistoryClient>(cpm::HistoryClient::open_recording(path));
+        })
+        .def("request", [](cpm::HistoryClient& c, const HistoryRequest& rq) {
+            py::gil_scoped_release release;
+            return c.request(rq);
+        });
 
     py::class_<cpm::Timer, std::shared_ptr<cpm::Timer>>(m, "Timer")
         .def(py::init([](const std::string& node_id, uint64_t period_ns, uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed) {
