@@ -145,6 +145,24 @@ void from_list(py::handle list, const std::string& what, size_t bound, bool fixe
     }
 }
 
+/// The GIL for a call into Python from one of cpm's threads. The thread's Python state is made
+/// once and kept (pybind11 would make and delete one per call: tens of microseconds each).
+class CallbackGil
+{
+public:
+    CallbackGil()
+    {
+        thread_local bool kept = false;
+        if (!kept) {
+            gil_.inc_ref();
+            kept = true;
+        }
+    }
+
+private:
+    py::gil_scoped_acquire gil_;
+};
+
 /// A Python function C++ keeps (in a callback): shared by the copies, deleted with the GIL held
 /// whichever thread lets go of it last.
 inline std::shared_ptr<py::function> keep(py::function f)
@@ -173,7 +191,7 @@ public:
         py::gil_scoped_release release;
         reader_ = std::make_unique<cpm::AsyncReader<T>>(
             [cb, where](std::vector<T>& samples) {
-                py::gil_scoped_acquire gil;
+                CallbackGil gil;
                 try {
                     (*cb)(samples);
                 } catch (py::error_already_set& e) {

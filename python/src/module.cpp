@@ -42,7 +42,7 @@ std::function<void(Args...)> from_python(py::function f, const char* what)
 {
     auto shared = cpm_py::keep(std::move(f));
     return [shared, what](Args... args) {
-        py::gil_scoped_acquire gil;
+        cpm_py::CallbackGil gil;
         try {
             (*shared)(args...);
         } catch (py::error_already_set& e) {

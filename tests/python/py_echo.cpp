@@ -8,7 +8,10 @@
 
 #include <cpm_topic_types.hpp>
 
+#include <sys/prctl.h>
+
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <memory>
 #include <thread>
@@ -42,6 +45,7 @@ int main(int argc, char** argv)
 {
     cpm::init(argc, argv);
     cpm::cli::stop_on_signals();
+    ::prctl(PR_SET_PDEATHSIG, SIGTERM);  // never outlives the test that started it
     std::vector<std::unique_ptr<Echo>> echoes;
 #define CPM_PY_TOPIC(T) echoes.push_back(std::make_unique<EchoOf<T>>(#T));
 #include <topic_types.inc>

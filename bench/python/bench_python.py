@@ -1,0 +1,69 @@
+#!/usr/bin/env python3
+"""bench_python: one-way latency of cpm's Python package against C++ in the same run.
+
+A ping sends a VehicleState (156 bytes of CDR) on bench_ping, a pong sends it back on
+bench_pong, one at a time; one-way = round trip / 2. Python ping with Python pong against C++
+ping with C++ pong (pingpong.cpp), same QoS (reliable, keep last 1), same transports (this
+host: shared memory), interleaved in blocks so that the machine's state is shared.
+Target: Python p50 <= 1.5x C++ p50.
+
+usage: bench_python.py BUILD_DIR [--count 2000] [--blocks 3]
+"""
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+
+here = os.path.dirname(os.path.abspath(__file__))
+parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+parser.add_argument("build")
+parser.add_argument("--count", type=int, default=2000)
+parser.add_argument("--blocks", type=int, default=3)
+args = parser.parse_args()
+env = dict(os.environ, PYTHONPATH=os.path.join(args.build, "python"))
+env.setdefault("CPM_DOMAIN_ID", "97")
+
+
+def block(kind):
+    if kind == "cpp":
+        pong = [os.path.join(args.build, "bin", "bench_pingpong"), "pong"]
+        ping = [os.path.join(args.build, "bin", "bench_pingpong"), "ping", str(args.count)]
+    else:
+        pong = ["/usr/bin/python3", os.path.join(here, "pingpong.py"), "pong"]
+        ping = ["/usr/bin/python3", os.path.join(here, "pingpong.py"), "ping", str(args.count)]
+    p = subprocess.Popen(pong, stdout=subprocess.PIPE, text=True, env=env)
+    assert p.stdout.readline().strip() == "ready"
+    out = subprocess.run(ping, capture_output=True, text=True, env=env, timeout=300)
+    p.send_signal(2)
+    p.wait(10)
+    if out.returncode != 0:
+        sys.exit(f"bench_python: {kind} ping failed: {out.stderr}")
+    return [int(x) / 2 / 1000 for x in out.stdout.split()]  # one-way, µs
+
+
+def pct(values, p):
+    values = sorted(values)
+    return values[min(len(values) - 1, int(p * len(values)))]
+
+
+results = {"cpp": [], "python": []}
+for b in range(args.blocks):
+    for kind in ("cpp", "python"):
+        results[kind] += block(kind)
+print(f"one-way latency, µs ({args.blocks} blocks of {args.count}, interleaved)")
+print(f"{'case':24} {'n':>6} {'p50':>8} {'p90':>8} {'p99':>8}")
+for kind, label in (("cpp", "C++ ping / C++ pong"), ("python", "Python ping / Python pong")):
+    v = results[kind]
+    print(f"{label:24} {len(v):6d} {pct(v, .5):8.1f} {pct(v, .9):8.1f} {pct(v, .99):8.1f}")
+ratio = pct(results["python"], .5) / pct(results["cpp"], .5)
+met = ratio <= 1.5
+print(f"Python / C++ p50: {ratio:.2f} (target <= 1.5x): {'met' if met else 'NOT met'}")
+if os.environ.get("CPM_BENCH_JSON"):
+    with open(os.environ["CPM_BENCH_JSON"], "a") as f:
+        for what, p in (("one-way p50", .5), ("one-way p99", .99)):
+            c, py = pct(results["cpp"], p), pct(results["python"], p)
+            f.write(json.dumps({"bench": "python", "case": f"VehicleState {what}", "unit": "µs", "cpm": py, "peer": "cpm C++",
+                                "peer_value": c, "ratio": py / c, "target": "<= 1.5x peer" if p == .5 else "",
+                                "met": (1 if met else 0) if p == .5 else -1}) + "\n")
