@@ -49,6 +49,9 @@ echo
 echo "== bench_hlc (a user's controller: the list built, a step from list to answer, 20 cars)"
 "$bin/bench_hlc"
 echo
+echo "== bench_python (cpm from Python: one-way latency vs C++, a 100k-sample recording into columns vs C++)"
+/usr/bin/python3 "$(dirname "$0")/python/bench_python.py" "$build"
+echo
 echo "== bench_routing (central routing: planning time per cycle, start-up, intersection throughput vs cpm_lab's scheme)"
 "$bin/bench_routing"
 echo
