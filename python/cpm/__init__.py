@@ -11,6 +11,9 @@ high-level-controller contract (cpm.hlc), over the same C++ library as cpm's pro
     r = cpm.Reader(VehicleState, "vehicleState", vehicle_id=3)
     result = r.get_sample(cpm.get_time_ns())             # .sample, .valid, .age_ns
 
+Parameters of the lab (cpm param serve): cpm.parameter_double("max_speed"), parameter_int, …
+(they wait up to timeout_s, 5 s, then raise cpm.Error naming the parameter).
+
 Options are keyword arguments named as the C++ options' members (cpm::WriterOptions,
 cpm::ReaderOptions). Wrong types or values raise TypeError/ValueError naming the field.
 """
@@ -18,10 +21,12 @@ from . import _cpm
 from . import types
 from . import hlc
 from .history import HistoryClient, open_recording
-from ._cpm import Error, Participant, get_time_ns, simulated_time, domain_id
+from ._cpm import (Error, Participant, domain_id, get_time_ns, parameter_bool, parameter_double, parameter_doubles, parameter_int,
+                   parameter_ints, parameter_string, parameter_uint64_t, simulated_time)
 
 __all__ = ["Error", "Participant", "Writer", "Reader", "ReaderAbstract", "AsyncReader", "MultiVehicleReader", "Timer", "init",
-           "get_time_ns", "stamp_message", "log", "simulated_time", "domain_id", "types", "hlc", "HistoryClient", "open_recording"]
+           "get_time_ns", "stamp_message", "log", "simulated_time", "domain_id", "types", "hlc", "HistoryClient", "open_recording",
+           "parameter_bool", "parameter_int", "parameter_uint64_t", "parameter_double", "parameter_string", "parameter_ints", "parameter_doubles"]
 
 
 def init(argv):

@@ -6,6 +6,7 @@
 #include <cpm/Error.hpp>
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/get_parameter.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/hlc/Communicator.hpp>
 #include <cpm/init.hpp>
@@ -87,6 +88,21 @@ PYBIND11_MODULE(_cpm, m)
         if (level < 1 || level > 4) throw py::value_error("log level " + std::to_string(level) + " is not 1 (error) .. 4 (debug)");
         cpm::Logging::instance().write(cpm::Severity(level), "%s", text.c_str());
     });
+
+    // The lab's parameters (cpm param serve): blocking reads, the GIL released while they wait.
+    auto parameter = [&m](const char* name, auto getter) {
+        m.def(name, [getter](const std::string& p, double timeout_s) {
+            py::gil_scoped_release release;
+            return getter(p, std::chrono::milliseconds(int64_t(timeout_s * 1000)));
+        }, py::arg("name"), py::arg("timeout_s") = 5.0);
+    };
+    parameter("parameter_bool", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_bool(p, t); });
+    parameter("parameter_int", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_int(p, t); });
+    parameter("parameter_uint64_t", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_uint64_t(p, t); });
+    parameter("parameter_double", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_double(p, t); });
+    parameter("parameter_string", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_string(p, t); });
+    parameter("parameter_ints", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_ints(p, t); });
+    parameter("parameter_doubles", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_doubles(p, t); });
 
     py::class_<cpm::Participant>(m, "Participant")
         .def(py::init([](int domain_id, const std::string& name) {

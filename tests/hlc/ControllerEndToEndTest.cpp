@@ -124,4 +124,21 @@ TEST(ControllerRun, ACommandForACarTheControllerWasNotGivenIsRefusedCountedAndNa
     EXPECT_NE(text.find("refused a command (not_assigned): vehicle 2 is not assigned"), std::string::npos) << text;
 }
 
+TEST(ControllerRun, AControllerThatCrashesEndsTheRunNamedWithTheEndOfItsLog)
+{
+    TempDir dir;
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run",
+                 ring_scenario(dir, "simulated", "20s", 2, built_program("test_controller"), "[\"--crash_after\", \"30\"]", "[1, 2]"), "--out", out,
+                 "--monitor", "off"});
+    EXPECT_NE(run.wait(120s), 0);
+    const auto s = summary_of(out);
+    EXPECT_FALSE(s["ok"].get<bool>());
+    const std::string error = s["error"];
+    EXPECT_NE(error.find("controller_ctl"), std::string::npos) << error;
+    EXPECT_NE(error.find("crashing on purpose in step 30"), std::string::npos) << "the end of its log: " << error;
+    EXPECT_LT(s["lab_time_s"].get<double>(), 10.0) << "the run ended when the controller died";
+    EXPECT_EQ(s["controllers"].at(0)["answered"], 29) << s["controllers"].dump(2);
+}
+
 }  // namespace

@@ -1,6 +1,7 @@
 // A controller for the tests of users' controllers: drives each of its cars straight ahead at
 // 0.3 m/s; --sleep makes every step take that long (a controller too slow for its period);
-// --also_command N sends car N a command too (a car it was not given).
+// --also_command N sends car N a command too (a car it was not given); --crash_after N aborts in
+// its N-th step.
 #include <cpm/CommandLine.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/hlc/Communicator.hpp>
@@ -11,6 +12,8 @@
 #include <VehicleCommandTrajectory.h>
 
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <cmath>
 #include <thread>
 
@@ -36,18 +39,24 @@ VehicleCommandTrajectory straight_ahead(uint8_t id, uint64_t t_now, double x, do
 
 int run(int argc, char** argv)
 {
-    auto parsed = cpm::cli::parse_flags(argc, argv, {{"--vehicle_ids", true}, {"--sleep", true}, {"--also_command", true}}, "test_controller");
+    auto parsed = cpm::cli::parse_flags(argc, argv, {{"--vehicle_ids", true}, {"--sleep", true}, {"--also_command", true}, {"--crash_after", true}}, "test_controller");
     std::vector<uint8_t> ids;
     for (const auto& id : cpm::cli::split_list("--vehicle_ids", parsed.get("--vehicle_ids"))) {
         ids.push_back(uint8_t(cpm::cli::parse_integer("--vehicle_ids", id, 1, 255)));
     }
     const auto sleep = std::chrono::nanoseconds(cpm::cli::parse_duration("--sleep", parsed.get("--sleep", "0s")));
     const int also = int(cpm::cli::parse_integer("--also_command", parsed.get("--also_command", "0"), 0, 255));
+    const long long crash_after = cpm::cli::parse_integer("--crash_after", parsed.get("--crash_after", "0"), 0, 1'000'000);
+    long long steps = 0;
     cpm::init(argc, argv);
     cpm::hlc::Communicator hlc(ids);
     cpm::Writer<VehicleCommandTrajectory> out(cpm::topics::vehicle_command_trajectory.name, cpm::topics::vehicle_command_trajectory.writer);
     hlc.on_each_timestep([&](const VehicleStateList& list) {
         std::this_thread::sleep_for(sleep);
+        if (crash_after && ++steps == crash_after) {
+            std::fprintf(stderr, "test_controller: crashing on purpose in step %lld\n", steps);
+            std::abort();
+        }
         for (const auto& s : list.state_list()) {
             (void)out.write(straight_ahead(s.vehicle_id(), list.t_now(), s.pose().x(), s.pose().y(), s.pose().yaw(), 0.3));
         }

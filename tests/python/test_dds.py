@@ -88,11 +88,12 @@ def test_an_exception_in_a_callback_is_logged_and_the_reader_goes_on(capfd):
 class Middleware:
     """The middleware's side of the HLC contract, played by the test."""
 
-    def __init__(self):
+    def __init__(self, participant):
         self.answers = []
-        self.lists = cpm.Writer(T.VehicleStateList, "vehicleStateList", reliable=True)
-        self.triggers = cpm.Writer(T.SystemTrigger, "systemTrigger", reliable=True, transient_local=True)
-        self.ready = cpm.AsyncReader(T.ReadyStatus, "readyStatus", self.on_ready, reliable=True, transient_local=True, history_depth=64)
+        self.lists = cpm.Writer(T.VehicleStateList, "vehicleStateList", participant, reliable=True)
+        self.triggers = cpm.Writer(T.SystemTrigger, "systemTrigger", participant, reliable=True, transient_local=True)
+        self.ready = cpm.AsyncReader(T.ReadyStatus, "readyStatus", self.on_ready, participant, reliable=True, transient_local=True,
+                                     history_depth=64)
 
     def on_ready(self, samples):
         self.answers.extend(s.next_start_stamp.nanoseconds for s in samples if s.source_id == "hlc")
@@ -106,9 +107,12 @@ class Middleware:
         assert self.triggers.write(s)
 
 
-def test_a_python_controller_answers_each_list_and_a_step_that_raises_is_counted_and_the_controller_goes_on(capfd):
-    lab = Middleware()
-    hlc = cpm.hlc.Communicator([1, 2])
+def test_a_python_controller_answers_each_list_and_a_step_that_raises_is_counted_and_the_controller_goes_on(capfd, extra_domain):
+    # A domain of its own, as a controller has: the lab's stop it is sent would stop this
+    # process's other timers too.
+    own = cpm.Participant(domain_id=extra_domain)
+    lab = Middleware(own)
+    hlc = cpm.hlc.Communicator([1, 2], own)
     seen, stopped = [], []
 
     def step(state_list):
@@ -150,3 +154,45 @@ def test_ctrl_c_stops_a_python_controller_that_waits_in_cpm(extra_domain):
     _, err = p.communicate(timeout=10)
     assert time.monotonic() - t0 < 3
     assert p.returncode != 0 and "KeyboardInterrupt" in err
+
+
+def test_a_timer_calls_back_on_its_period_and_stop_ends_it():
+    timer = cpm.Timer("py_timer", 10_000_000, 0, wait_for_start=False)
+    ticks = []
+
+    def tick(t):
+        ticks.append(t)
+        if len(ticks) == 5:
+            timer.stop()
+
+    timer.start(tick)  # returns once stopped
+    assert len(ticks) == 5
+    assert all(b - a == 10_000_000 for a, b in zip(ticks, ticks[1:])), ticks
+    assert all(t % 10_000_000 == 0 for t in ticks)
+
+
+def test_an_exception_in_a_timer_callback_ends_start_with_it():
+    timer = cpm.Timer("py_timer_raises", 10_000_000, 0, wait_for_start=False)
+
+    def tick(t):
+        raise ValueError("bad tick")
+
+    with pytest.raises(cpm.Error, match="ValueError: bad tick"):
+        timer.start(tick)
+
+
+def test_the_labs_parameters_are_read_from_python(tmp_path):
+    params = tmp_path / "params.json"
+    params.write_text('{"max_speed": 1.5, "lanes": 3, "name": "ring", "gains": [0.5, 2.0], "on": true}')
+    server = subprocess.Popen([f"{BIN}/cpm", "param", "serve", str(params)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        assert cpm.parameter_double("max_speed", 10.0) == 1.5
+        assert cpm.parameter_int("lanes") == 3
+        assert cpm.parameter_string("name") == "ring"
+        assert cpm.parameter_doubles("gains") == [0.5, 2.0]
+        assert cpm.parameter_bool("on") is True
+        with pytest.raises(cpm.Error, match="max_speed"):
+            cpm.parameter_int("max_speed")  # another type: named
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.wait(10)
