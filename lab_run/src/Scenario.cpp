@@ -599,6 +599,7 @@ std::vector<fs::path> included_files(const fs::path& file)
 void place_on_host(ProcessPlan& p, const Scenario& s, const RunSettings& r, std::map<std::string, std::string>& copied_as)
 {
     if (s.hosts.empty()) return;
+    if (p.name.rfind("controller_", 0) == 0) return;  // on a domain of its own with its middleware: this host only
     const HostSpec* here = s.host(p.host);
     if (!here) return;  // named in the scenario's errors
     p.host = here->name;

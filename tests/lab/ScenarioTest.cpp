@@ -532,3 +532,22 @@ TEST(Scenario, EveryMistakeInAControllerIsNamedWithItsPath)
     EXPECT_TRUE(has(":11: controllers[2].vehicles: missing")) << testing::PrintToString(errors);
     EXPECT_TRUE(has(":7: vehicles[1].fsm: a car either follows its fsm or controllers, not both")) << testing::PrintToString(errors);
 }
+
+TEST(Scenario, InALabAcrossHostsAControllerStaysOnThisHostAndItsMiddlewareJoinsTheLab)
+{
+    TempDir dir;
+    dir.write("lanes.json", "{}");
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "hlc_middleware", "hlc_platoon"});
+    const std::string file = dir.write("h.yaml", "name: h\nduration: 5s\nlanes: lanes.json\n"
+                                                 "hosts:\n  central: {address: 10.1.0.1}\n  car_a: {address: 10.1.0.2, ssh: pi@10.1.0.2, cpm: /opt/cpm}\n"
+                                                 "vehicles: [{id: 1, host: car_a}]\n"
+                                                 "controllers: [{program: hlc_platoon, vehicles: [1], host: central}]\n");
+    const auto plan = plan_run(load_scenario(file), RunSettings{.bin_dir = bin, .run_dir = dir.file("run"), .domain = 3});
+    auto argv_of = [&](const std::string& n) {
+        return std::find_if(plan.begin(), plan.end(), [&](const ProcessPlan& p) { return p.name == n; })->argv;
+    };
+    const auto controller = argv_of("controller_hlc_platoon"), middleware = argv_of("hlc_hlc_platoon");
+    EXPECT_EQ(controller[0], bin + "/hlc_platoon") << "cpm's program by its name";
+    EXPECT_EQ(std::count(controller.begin(), controller.end(), "--dds_interface"), 0) << "its own domain: this host only";
+    EXPECT_EQ(std::count(middleware.begin(), middleware.end(), "--dds_interface"), 1) << "the lab's domain: across the hosts";
+}
