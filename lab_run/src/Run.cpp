@@ -595,6 +595,9 @@ std::vector<std::unique_ptr<DomainClaim>> claim_controller_domains(const Scenari
     const auto domains = controller_domains(s, settings);
     std::vector<std::future<std::unique_ptr<DomainClaim>>> claims;
     for (const auto& [name, domain] : domains) {
+        // One on another host has its domain there, this host only: nothing to see from here.
+        const auto spec = std::find_if(s.controllers.begin(), s.controllers.end(), [&](const ControllerSpec& c) { return c.name == name; });
+        if (const HostSpec* h = spec == s.controllers.end() ? nullptr : s.host(spec->host); h && !h->ssh.empty()) continue;
         claims.push_back(std::async(std::launch::async, [&s, name = name, domain = domain] {
             ParticipantOptions po;  // this host only, as the controller's and its middleware's
             po.domain_id = domain;

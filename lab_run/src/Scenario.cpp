@@ -352,8 +352,9 @@ void read_controllers(Checker& c, const YAML::Node& root, Scenario& s)
                 else spec.domain = int(*d);
             }
         }
-        if (n["host"] && host_name(c, s, n["host"], p + ".host") != (s.local_host() ? s.local_host()->name : "")) {
-            c.error(n["host"], p + ".host", "a controller on another host is not supported yet; run it on the run's own host");
+        if (n["host"]) spec.host = host_name(c, s, n["host"], p + ".host");
+        if (const HostSpec* h = s.host(spec.host); h && !h->ssh.empty() && !spec.python() && !is_cpm_program(spec.program, s.dir)) {
+            c.error(n["program"], p + ".program", "on another host a controller is one of cpm's programs or a Python script (copied there)");
         }
         s.controllers.push_back(std::move(spec));
     }
@@ -599,18 +600,22 @@ std::vector<fs::path> included_files(const fs::path& file)
 void place_on_host(ProcessPlan& p, const Scenario& s, const RunSettings& r, std::map<std::string, std::string>& copied_as)
 {
     if (s.hosts.empty()) return;
-    if (p.name.rfind("controller_", 0) == 0) return;  // on a domain of its own with its middleware: this host only
     const HostSpec* here = s.host(p.host);
     if (!here) return;  // named in the scenario's errors
     p.host = here->name;
-    if (p.argv[0].rfind(r.bin_dir + "/", 0) != 0) return;  // not cpm's (fast-discovery-server): as it is, there too
+    // A user's controller is on a domain of its own with its middleware, this host only: no DDS
+    // flags; on another host its files go there as cpm's programs' do.
+    const bool controller = p.name.rfind("controller_", 0) == 0;
+    const bool cpms = p.argv[0].rfind(r.bin_dir + "/", 0) == 0;
+    if (!cpms && !controller) return;  // not cpm's (fast-discovery-server): as it is, there too
     if (!here->ssh.empty()) {
         const std::string there = remote_run_dir(r);
-        p.argv[0] = here->cpm + "/bin/" + fs::path(p.argv[0]).filename().string();
+        if (cpms) p.argv[0] = here->cpm + "/bin/" + fs::path(p.argv[0]).filename().string();
         const std::string run_dir = r.run_dir + "/";
         for (size_t i = 1; i < p.argv.size(); ++i) {
             std::string& a = p.argv[i];
             std::error_code ec;
+            if (a.rfind("/usr/bin/", 0) == 0) continue;  // a system program (python3), there too
             if (a.rfind(run_dir, 0) == 0) {
                 a = there + "/" + a.substr(run_dir.size());
             } else if (a.size() > 1 && a[0] == '/' && fs::is_regular_file(a, ec)) {
@@ -638,6 +643,7 @@ void place_on_host(ProcessPlan& p, const Scenario& s, const RunSettings& r, std:
             }
         }
     }
+    if (controller) return;
     p.argv.insert(p.argv.end(), {"--dds_interface", here->address});
     if (s.discovery_server) {
         p.argv.insert(p.argv.end(), {"--dds_discovery_server", s.discovery_server_locator()});
@@ -766,21 +772,22 @@ public:
             add("hlc_" + c.name, "hlc_middleware",
                 common({program("hlc_middleware"), "--vehicle_ids", ids, "--controller_domain", std::to_string(domain), "--name", c.name,
                         "--period", std::to_string(c.period_ns / 1'000'000) + "ms"}),
-                false, 2, c.vehicles.front(), "", false);
+                false, 2, c.vehicles.front(), c.host, false);
             plan_.back().timer = timer_ids::hlc_middleware(c.name);
             std::vector<std::string> argv;
-            // Python finds cpm beside the run's programs: the build tree's, or the installed one.
+            // Python finds cpm beside the run's programs: the build tree's, or the installed one
+            // (on another host, beside cpm's programs there).
             if (c.python()) {
-                const fs::path bin(r_.bin_dir);
-                argv = {"/usr/bin/env", "PYTHONPATH=" + (bin.parent_path() / "python").string() + ":" +
-                                            (bin.parent_path() / "lib/python3/dist-packages").string(),
+                const HostSpec* h = s_.host(c.host);
+                const fs::path prefix = h && !h->ssh.empty() ? fs::path(h->cpm) : fs::path(r_.bin_dir).parent_path();
+                argv = {"/usr/bin/env", "PYTHONPATH=" + (prefix / "python").string() + ":" + (prefix / "lib/python3/dist-packages").string(),
                         "/usr/bin/python3", c.program};
             }
             else argv = {c.program.find('/') == std::string::npos ? program(c.program) : c.program};
             argv.insert(argv.end(), c.args.begin(), c.args.end());
             argv.insert(argv.end(), {"--vehicle_ids", ids, "--dds_domain", std::to_string(domain)});
             if (simulated()) argv.push_back("--simulated_time");
-            add("controller_" + c.name, "hlc_controller", argv, false, 1, c.vehicles.front(), "", false);
+            add("controller_" + c.name, "hlc_controller", argv, false, 1, c.vehicles.front(), c.host, false);
         }
     }
 

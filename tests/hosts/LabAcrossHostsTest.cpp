@@ -449,3 +449,34 @@ TEST_F(LabAcrossHosts, AMonitorPortInUseOnItsHostIsRefusedNamingTheHost)
         << run.errors();
     for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(programs_on(hosts(), h).empty()) << "started on host " << h << " though the run was refused";
 }
+
+TEST_F(LabAcrossHosts, APythonControllerOnItsOwnHostDrivesTheCarsOfAnother)
+{
+    // Two cars on car_a; the platoon controller in Python with its middleware on car_b; the
+    // history and this run on central.
+    const std::string file = dir.write("platoon.yaml", "name: platoon\ntime: real\nduration: 8s\nlanes: " + kRoot + "/scenarios/lanes/ring.json\n"
+                                       "hosts:\n  central: {address: " + hosts().address(0) + "}\n"
+                                       "  car_a: {address: " + hosts().address(1) + ", ssh: car_a, cpm: " + cpm_prefix() + "}\n"
+                                       "  car_b: {address: " + hosts().address(2) + ", ssh: car_b, cpm: " + cpm_prefix() + "}\n"
+                                       "ssh_config: " + hosts().ssh_config() + "\n"
+                                       "history: {host: central}\n"
+                                       "vehicles:\n  - {id: 1, host: car_a}\n  - {id: 2, host: car_a}\n"
+                                       "controllers:\n  - {program: " + kRoot + "/examples/python/platoon.py, name: platoon, host: car_b,\n"
+                                       "     args: [\"--lanes\", \"" + kRoot + "/scenarios/lanes/ring.json\"], vehicles: [1, 2], period: 100ms}\n");
+    const std::string out = dir.file("platoon-" + std::to_string(::getpid()));
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
+    ASSERT_TRUE(cpm_test::wait_until([&] { return runs(programs_on(hosts(), 2), "hlc_middleware"); }, 30s)) << run.errors();
+    EXPECT_EQ(run.wait(90s), 0) << run.output() << run.errors();
+    std::ifstream in(out + "/summary.json");
+    const auto summary = nlohmann::json::parse(in);
+    const auto& c = summary["controllers"].at(0);
+    EXPECT_GE(c["periods"].get<int>(), 70) << c.dump(2);
+    EXPECT_GE(c["answered"].get<int>(), c["periods"].get<int>() - 2) << "real time: the first may come before the cars" << c.dump(2);
+    EXPECT_EQ(c["refused"], 0) << c.dump(2);
+    std::printf("the controller on car_b: %s\n", c.dump().c_str());
+    for (const char* car : {"1", "2"}) EXPECT_GT(summary["report"]["cars"][car]["driven_m"].get<double>(), 2.0) << "car " << car;
+    for (const auto& p : summary["processes"]) {
+        if (p["name"] == "controller_platoon" || p["name"] == "hlc_platoon") EXPECT_EQ(p["host"], "car_b") << p.dump();
+    }
+    for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s)) << "left on host " << h;
+}

@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <filesystem>
 #include <fstream>
 
@@ -550,4 +552,35 @@ TEST(Scenario, InALabAcrossHostsAControllerStaysOnThisHostAndItsMiddlewareJoinsT
     EXPECT_EQ(controller[0], bin + "/hlc_platoon") << "cpm's program by its name";
     EXPECT_EQ(std::count(controller.begin(), controller.end(), "--dds_interface"), 0) << "its own domain: this host only";
     EXPECT_EQ(std::count(middleware.begin(), middleware.end(), "--dds_interface"), 1) << "the lab's domain: across the hosts";
+}
+
+TEST(Scenario, AControllerOnAnotherHostRunsThereWithItsScriptCopiedAndFindsCpmThere)
+{
+    TempDir dir;
+    dir.write("lanes.json", "{}");
+    dir.write("ctl.py", "");
+    dir.write("ctl", "");
+    const std::string bin = fake_bin(dir, {"cpm", "cpm_history", "hlc_middleware"});
+    const std::string hosts = "hosts:\n  central: {address: 10.1.0.1}\n  car_a: {address: 10.1.0.2, ssh: pi@10.1.0.2, cpm: /opt/cpm}\n";
+    const std::string file = dir.write("h.yaml", "name: h\nduration: 5s\nlanes: lanes.json\n" + hosts + "vehicles: [{id: 1, host: car_a}]\n"
+                                                 "controllers: [{program: ctl.py, vehicles: [1], host: car_a}]\n");
+    const RunSettings r{.bin_dir = bin, .run_dir = dir.file("run"), .domain = 3};
+    const auto plan = plan_run(load_scenario(file), r);
+    auto named = [&](const std::string& n) { return *std::find_if(plan.begin(), plan.end(), [&](const ProcessPlan& p) { return p.name == n; }); };
+    const auto controller = named("controller_ctl"), middleware = named("hlc_ctl");
+    EXPECT_EQ(controller.host, "car_a");
+    EXPECT_EQ(middleware.host, "car_a");
+    EXPECT_EQ(controller.argv[1], "PYTHONPATH=/opt/cpm/python:/opt/cpm/lib/python3/dist-packages") << "cpm's Python package there";
+    EXPECT_EQ(controller.argv[2], "/usr/bin/python3");
+    EXPECT_EQ(controller.argv[3], remote_run_dir(r) + "/ctl.py") << "the script copied there";
+    ASSERT_EQ(controller.copies.size(), 1u);
+    EXPECT_EQ(controller.copies[0], std::make_pair(dir.file("ctl.py"), remote_run_dir(r) + "/ctl.py"));
+    EXPECT_EQ(std::count(controller.argv.begin(), controller.argv.end(), "--dds_interface"), 0);
+    EXPECT_EQ(middleware.argv[0], "/opt/cpm/bin/hlc_middleware");
+    EXPECT_EQ(std::count(middleware.argv.begin(), middleware.argv.end(), "10.1.0.2"), 1) << "its host's address for the lab";
+    ::chmod(dir.file("ctl").c_str(), 0755);
+    const std::string other = dir.write("o.yaml", "name: o\nduration: 5s\nlanes: lanes.json\n" + hosts + "vehicles: [{id: 1, host: car_a}]\n"
+                                                  "controllers: [{program: ctl, vehicles: [1], host: car_a}]\n");
+    EXPECT_EQ(errors_of(other), std::vector<std::string>{other + ":8: controllers[0].program: on another host a controller is one of cpm's programs "
+                                                                 "or a Python script (copied there)"});
 }

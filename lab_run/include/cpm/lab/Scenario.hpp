@@ -28,6 +28,7 @@
 //       vehicles: [1, 2, 3, 4]      # the cars it drives (on the lanes, as with routing)
 //       period: 100ms
 //       domain: 40                  # the domain it shares with its middleware; default: chosen
+//       host: car5                  # where it and its middleware run (default: the run's host)
 //   monitor: 8080                   # cpm monitor on this port while the run lasts, or
 //                                   # {port: 8080, allow_stop: true} for its stop buttons; off: none
 //
@@ -84,6 +85,7 @@ struct ControllerSpec
     std::vector<int> vehicles;      ///< the cars it drives
     uint64_t period_ns = 100'000'000;
     std::optional<int> domain;      ///< the controller's own domain; unset: the run chooses one
+    std::string host;               ///< where it and its middleware run (a name of hosts:); "" the run's own
     bool python() const;
 };
 
