@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <condition_variable>
 #include <thread>
 
@@ -256,8 +257,9 @@ struct Middleware::Impl
     std::mutex mutex;
     std::condition_variable changed;
     bool announced = false;
-    LogThrottle refusal_log;
-    uint64_t refused_writes = 0;
+    std::array<LogThrottle, kRefusals> refusal_log;  // each reason said at once, then once a second
+    std::atomic<uint64_t> refused_writes{0};         // the command readers' threads count
+
 
     // Last: their callbacks use what is above.
     AsyncReader<ReadyStatus> answers{[this](std::vector<ReadyStatus>& s) { on_answers(s); }, local, topics::ready_status.name,
@@ -296,7 +298,7 @@ struct Middleware::Impl
             }
             uint64_t held = 0;
             std::lock_guard<std::mutex> lock(mutex);
-            if (refusal_log.allow(get_time_ns(), held)) {
+            if (refusal_log[size_t(verdict.reason)].allow(get_time_ns(), held)) {
                 CPM_LOG_WARN("hlc %s: refused a command (%s): %s (%llu refused in all)", options.name.c_str(), to_string(verdict.reason),
                              verdict.why.c_str(), (unsigned long long)core.refused());
             }
@@ -387,7 +389,7 @@ const MiddlewareCore& Middleware::core() const { return impl_->core; }
 std::string Middleware::stats_json() const
 {
     auto j = nlohmann::ordered_json::parse(impl_->core.stats_json());
-    j["refused_writes"] = impl_->refused_writes;
+    j["refused_writes"] = impl_->refused_writes.load();
     return j.dump();
 }
 
