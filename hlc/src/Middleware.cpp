@@ -263,7 +263,7 @@ struct Middleware::Impl
 
     // Last: their callbacks use what is above.
     AsyncReader<ReadyStatus> answers{[this](std::vector<ReadyStatus>& s) { on_answers(s); }, local, topics::ready_status.name,
-                                     topics::ready_status.reader};
+                                     in_arrival_order(topics::ready_status.reader)};
     AsyncReader<VehicleCommandDirect> direct_in{[this](std::vector<VehicleCommandDirect>& s) { relay(s, direct_out); }, local,
                                                 topics::vehicle_command_direct.name, controller_reader()};
     AsyncReader<VehicleCommandSpeedCurvature> speed_in{[this](std::vector<VehicleCommandSpeedCurvature>& s) { relay(s, speed_out); }, local,
@@ -275,13 +275,23 @@ struct Middleware::Impl
 
     explicit Impl(MiddlewareOptions o) : options(std::move(o)), core(options), local(controller_side(options)) {}
 
+    /// The controller's answer to a period comes after its commands of that period, from one
+    /// participant: DDS delivers them to this participant in that order on one receive thread.
+    /// Handled on that thread, each command is checked and forwarded before the answer closes
+    /// its period (on their readers' own threads an answer overtook a command under load, and
+    /// the command was refused as answering a period already past).
+    static ReaderOptions in_arrival_order(ReaderOptions r)
+    {
+        r.dds_thread_callback = true;
+        return r;
+    }
     /// Every command the controller writes (its writers are best effort by default: a reader
     /// that keeps all of them loses none to a burst of several cars' commands).
     static ReaderOptions controller_reader()
     {
         ReaderOptions r;
         r.keep_all = true;
-        return r;
+        return in_arrival_order(r);
     }
 
     /// Lab time now: the open period's while the simulated clock waits for the answer.
