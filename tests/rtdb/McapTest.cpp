@@ -1,0 +1,111 @@
+// cpm's MCAP writer and reader: a file written with several channels and chunks reads back
+// message for message, with every CRC checked and the summary a viewer seeks with (a Chunk Index
+// per chunk, a Message Index per channel and chunk, Statistics); damage is named with its offset.
+#include <cpm/Error.hpp>
+#include <cpm/rtdb/Mcap.hpp>
+
+#include <cpm_test/TempDir.hpp>
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <iterator>
+
+namespace {
+
+namespace mcap = cpm::rtdb::mcap;
+
+TEST(Mcap, Crc32IsZlibs)
+{
+    const std::string text = "123456789";
+    EXPECT_EQ(mcap::crc32(reinterpret_cast<const uint8_t*>(text.data()), text.size()), 0xCBF43926u);  // the CRC-32 check value
+    EXPECT_EQ(mcap::crc32(nullptr, 0), 0u);
+}
+
+TEST(Mcap, AFileOfTwoChannelsAndManyChunksReadsBackMessageForMessage)
+{
+    cpm_test::TempDir dir;
+    const std::string path = dir.file("run.mcap");
+    {
+        mcap::Writer w(path, "cpm test", 300);  // small chunks: many of them
+        const auto state = w.add_schema("VehicleState", "omgidl", "struct VehicleState { double speed; };");
+        const auto log = w.add_schema("Log", "omgidl", "struct Log { string content; };");
+        const auto a = w.add_channel(state, "vehicleState", "cdr", {{"cpm.keyed", "true"}, {"cpm.type", "VehicleState"}});
+        const auto b = w.add_channel(log, "log", "cdr");
+        for (uint8_t i = 0; i < 50; ++i) {
+            const std::vector<uint8_t> payload{0, 1, 0, 0, i, uint8_t(i * 3)};
+            w.write(i % 5 == 0 ? b : a, 1000 + i, 900 + i, payload.data(), payload.size());
+        }
+        w.add_metadata("cpm.run", {{"scenario", "name: x"}, {"summary", "{}"}});
+        EXPECT_EQ(w.messages(), 50u);
+        w.close();
+    }
+    const auto f = mcap::read(path);
+    EXPECT_EQ(f.profile, "");
+    EXPECT_EQ(f.library, "cpm test");
+    ASSERT_EQ(f.schemas.size(), 2u);
+    EXPECT_EQ(f.schemas.at(1).name, "VehicleState");
+    EXPECT_EQ(f.schemas.at(1).encoding, "omgidl");
+    EXPECT_EQ(f.schemas.at(2).data, "struct Log { string content; };");
+    ASSERT_EQ(f.channels.size(), 2u);
+    EXPECT_EQ(f.channels.at(0).topic, "vehicleState");
+    EXPECT_EQ(f.channels.at(0).metadata.at("cpm.keyed"), "true");
+    EXPECT_EQ(f.channels.at(1).message_encoding, "cdr");
+    ASSERT_EQ(f.messages.size(), 50u);
+    uint32_t seq_a = 0, seq_b = 0;
+    for (uint8_t i = 0; i < 50; ++i) {
+        const auto& m = f.messages[i];
+        EXPECT_EQ(m.channel_id, i % 5 == 0 ? 1 : 0);
+        EXPECT_EQ(m.sequence, i % 5 == 0 ? seq_b++ : seq_a++) << "a sequence number per channel";
+        EXPECT_EQ(m.log_time, 1000u + i);
+        EXPECT_EQ(m.publish_time, 900u + i);
+        EXPECT_EQ(m.data, (std::vector<uint8_t>{0, 1, 0, 0, i, uint8_t(i * 3)}));
+    }
+    EXPECT_GT(f.chunk_count, 5u);
+    EXPECT_EQ(f.chunk_indexes, f.chunk_count) << "a Chunk Index per chunk in the summary";
+    EXPECT_GE(f.message_indexes, f.chunk_count) << "a Message Index per channel after each chunk";
+    EXPECT_GT(f.summary_start, 0u);
+    EXPECT_EQ(f.statistics_messages, 50u);
+    EXPECT_EQ(f.statistics_channel_counts, (std::map<uint16_t, uint64_t>{{0, 40}, {1, 10}}));
+    ASSERT_EQ(f.metadata.size(), 1u);
+    EXPECT_EQ(f.metadata[0].name, "cpm.run");
+    EXPECT_EQ(f.metadata[0].values.at("scenario"), "name: x");
+}
+
+TEST(Mcap, DamageIsNamedWithItsOffsetAndAnExistingFileIsNeverOverwritten)
+{
+    cpm_test::TempDir dir;
+    const std::string path = dir.file("run.mcap");
+    {
+        mcap::Writer w(path, "cpm test");
+        const auto c = w.add_channel(w.add_schema("T", "omgidl", "struct T { long x; };"), "t", "cdr");
+        const std::vector<uint8_t> payload(64, 7);
+        w.write(c, 1, 1, payload.data(), payload.size());
+    }  // closed by its destructor
+    EXPECT_THROW(mcap::Writer(path, "again"), cpm::Error);
+    std::ifstream in(path, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), {});
+    EXPECT_EQ(mcap::read(path).messages.size(), 1u);
+
+    std::string flipped = bytes;
+    flipped[120] = char(flipped[120] ^ 0x40);  // inside the chunk's records
+    std::ofstream(dir.file("flipped.mcap"), std::ios::binary) << flipped;
+    try {
+        (void)mcap::read(dir.file("flipped.mcap"));
+        FAIL() << "a flipped bit went unnoticed";
+    } catch (const cpm::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("CRC does not match"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("flipped.mcap: at byte"), std::string::npos) << e.what();
+    }
+    std::ofstream(dir.file("cut.mcap"), std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+    try {
+        (void)mcap::read(dir.file("cut.mcap"));
+        FAIL() << "a file cut in half went unnoticed";
+    } catch (const cpm::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("no closing magic"), std::string::npos) << e.what();
+    }
+    std::ofstream(dir.file("not.mcap")) << "hello, this is not a recording";
+    EXPECT_THROW((void)mcap::read(dir.file("not.mcap")), cpm::Error);
+}
+
+}  // namespace
