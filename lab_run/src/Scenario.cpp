@@ -275,6 +275,86 @@ bool is_cpm_program(const std::string& name, const std::string& dir)
     return !name.empty() && name.find('/') == std::string::npos && fs::path(name).extension() != ".py" && !fs::exists(fs::path(dir) / name, ec);
 }
 
+/// A controller's program and its name (default: the program's file name); names are unique.
+void read_controller_program(Checker& c, const YAML::Node& n, const std::string& p, const Scenario& s, ControllerSpec& spec,
+                             std::map<std::string, std::string>& names)
+{
+    if (!n["program"]) c.error(n, p + ".program", "missing (the controller: a program, or a Python script)");
+    else if (auto t = c.text(n["program"], p + ".program"); t && is_cpm_program(*t, s.dir)) spec.program = *t;
+    else spec.program = c.file(n["program"], p + ".program", s.dir, "controller program");
+    if (n["name"]) {
+        if (auto t = c.text(n["name"], p + ".name")) spec.name = *t;
+    } else {
+        spec.name = fs::path(spec.program).stem().string();
+    }
+    if (n["name"] || !spec.program.empty()) {
+        if (spec.name.empty() || spec.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") != std::string::npos) {
+            c.error(n["name"] ? n["name"] : n, p + ".name", "'" + spec.name + "': use letters, digits, - and _ only");
+        } else if (auto [at, fresh] = names.emplace(spec.name, p); !fresh) {
+            c.error(n, p + ".name", "'" + spec.name + "' is the name of " + at->second + " too (give each a name:)");
+        }
+    }
+    if (spec.program.find('/') != std::string::npos && !spec.python() && ::access(spec.program.c_str(), X_OK) != 0) {
+        c.error(n["program"], p + ".program", spec.program + " is not executable (nor a Python script ending in .py)");
+    }
+}
+
+/// A controller's arguments; a file beside the scenario is given by its full path (the
+/// controller runs elsewhere).
+void read_controller_args(Checker& c, const YAML::Node& a, const std::string& p, const Scenario& s, ControllerSpec& spec)
+{
+    if (!a.IsSequence()) c.error(a, p + ".args", "expected a list of texts, e.g. [\"--gap\", \"1.0s\"]");
+    for (size_t k = 0; a.IsSequence() && k < a.size(); ++k) {
+        const auto t = c.text(a[k], p + ".args[" + std::to_string(k) + "]");
+        if (!t) continue;
+        std::error_code ec;
+        const bool file = !t->empty() && (*t)[0] != '-' && fs::path(*t).is_relative() && fs::exists(fs::path(s.dir) / *t, ec);
+        spec.args.push_back(file ? fs::weakly_canonical(fs::path(s.dir) / *t).string() : *t);
+    }
+}
+
+/// The cars a controller drives: cars of vehicles:, each driven by one controller only.
+void read_controller_vehicles(Checker& c, const YAML::Node& n, const std::string& p, const Scenario& s, ControllerSpec& spec,
+                              std::map<int, std::string>& driven_by)
+{
+    const YAML::Node v = n["vehicles"];
+    if (!v) c.error(n, p + ".vehicles", "missing (the ids of the cars it drives, e.g. [1, 2])");
+    else if (!v.IsSequence() || v.size() == 0) c.error(v, p + ".vehicles", "expected a list of car ids, e.g. [1, 2]");
+    for (size_t k = 0; v && v.IsSequence() && k < v.size(); ++k) {
+        const std::string vp = p + ".vehicles[" + std::to_string(k) + "]";
+        const auto id = c.integer(v[k], vp, 1, 255);
+        if (!id) continue;
+        if (std::none_of(s.vehicles.begin(), s.vehicles.end(), [&](const VehicleSpec& car) { return car.id == *id; })) {
+            c.error(v[k], vp, std::to_string(*id) + " is no car of vehicles:");
+        } else if (auto [at, fresh] = driven_by.emplace(int(*id), p); !fresh) {
+            c.error(v[k], vp, "car " + std::to_string(*id) + " is driven by " + at->second + " already");
+        } else {
+            spec.vehicles.push_back(int(*id));
+        }
+    }
+}
+
+/// A controller's period, its own domain and its host.
+void read_controller_placing(Checker& c, const YAML::Node& n, const std::string& p, const Scenario& s, ControllerSpec& spec)
+{
+    if (n["period"]) {
+        if (auto d = c.duration(n["period"], p + ".period")) {
+            if (*d < 10'000'000ull || *d % 1'000'000ull) c.error(n["period"], p + ".period", "must be whole milliseconds, at least 10ms");
+            else spec.period_ns = *d;
+        }
+    }
+    if (n["domain"]) {
+        if (auto d = c.integer(n["domain"], p + ".domain", 0, 232)) {
+            if (s.domain && *d == *s.domain) c.error(n["domain"], p + ".domain", std::to_string(*d) + " is the lab's own domain: a controller needs one of its own");
+            else spec.domain = int(*d);
+        }
+    }
+    if (n["host"]) spec.host = host_name(c, s, n["host"], p + ".host");
+    if (const HostSpec* h = s.host(spec.host); h && !h->ssh.empty() && !spec.python() && !is_cpm_program(spec.program, s.dir)) {
+        c.error(n["program"], p + ".program", "on another host a controller is one of cpm's programs or a Python script (copied there)");
+    }
+}
+
 /// `controllers:`, users' high-level controllers: each a program or Python script, its cars and
 /// period; a car is driven by one of them only.
 void read_controllers(Checker& c, const YAML::Node& root, Scenario& s)
@@ -296,66 +376,10 @@ void read_controllers(Checker& c, const YAML::Node& root, Scenario& s)
         }
         c.keys(n, p, {"program", "name", "args", "vehicles", "period", "domain", "host"});
         ControllerSpec spec;
-        if (!n["program"]) c.error(n, p + ".program", "missing (the controller: a program, or a Python script)");
-        else if (auto t = c.text(n["program"], p + ".program"); t && is_cpm_program(*t, s.dir)) spec.program = *t;
-        else spec.program = c.file(n["program"], p + ".program", s.dir, "controller program");
-        if (n["name"]) {
-            if (auto t = c.text(n["name"], p + ".name")) spec.name = *t;
-        } else {
-            spec.name = fs::path(spec.program).stem().string();
-        }
-        if (n["name"] || !spec.program.empty()) {
-            if (spec.name.empty() || spec.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") != std::string::npos) {
-                c.error(n["name"] ? n["name"] : n, p + ".name", "'" + spec.name + "': use letters, digits, - and _ only");
-            } else if (auto [at, fresh] = names.emplace(spec.name, p); !fresh) {
-                c.error(n, p + ".name", "'" + spec.name + "' is the name of " + at->second + " too (give each a name:)");
-            }
-        }
-        if (spec.program.find('/') != std::string::npos && !spec.python() && ::access(spec.program.c_str(), X_OK) != 0) {
-            c.error(n["program"], p + ".program", spec.program + " is not executable (nor a Python script ending in .py)");
-        }
-        if (const YAML::Node a = n["args"]) {
-            if (!a.IsSequence()) c.error(a, p + ".args", "expected a list of texts, e.g. [\"--gap\", \"1.0s\"]");
-            for (size_t k = 0; a.IsSequence() && k < a.size(); ++k) {
-                const auto t = c.text(a[k], p + ".args[" + std::to_string(k) + "]");
-                if (!t) continue;
-                // A file beside the scenario is given by its full path (the controller runs elsewhere).
-                std::error_code ec;
-                const bool file = !t->empty() && (*t)[0] != '-' && fs::path(*t).is_relative() && fs::exists(fs::path(s.dir) / *t, ec);
-                spec.args.push_back(file ? fs::weakly_canonical(fs::path(s.dir) / *t).string() : *t);
-            }
-        }
-        const YAML::Node v = n["vehicles"];
-        if (!v) c.error(n, p + ".vehicles", "missing (the ids of the cars it drives, e.g. [1, 2])");
-        else if (!v.IsSequence() || v.size() == 0) c.error(v, p + ".vehicles", "expected a list of car ids, e.g. [1, 2]");
-        for (size_t k = 0; v && v.IsSequence() && k < v.size(); ++k) {
-            const std::string vp = p + ".vehicles[" + std::to_string(k) + "]";
-            const auto id = c.integer(v[k], vp, 1, 255);
-            if (!id) continue;
-            if (std::none_of(s.vehicles.begin(), s.vehicles.end(), [&](const VehicleSpec& car) { return car.id == *id; })) {
-                c.error(v[k], vp, std::to_string(*id) + " is no car of vehicles:");
-            } else if (auto [at, fresh] = driven_by.emplace(int(*id), p); !fresh) {
-                c.error(v[k], vp, "car " + std::to_string(*id) + " is driven by " + at->second + " already");
-            } else {
-                spec.vehicles.push_back(int(*id));
-            }
-        }
-        if (n["period"]) {
-            if (auto d = c.duration(n["period"], p + ".period")) {
-                if (*d < 10'000'000ull || *d % 1'000'000ull) c.error(n["period"], p + ".period", "must be whole milliseconds, at least 10ms");
-                else spec.period_ns = *d;
-            }
-        }
-        if (n["domain"]) {
-            if (auto d = c.integer(n["domain"], p + ".domain", 0, 232)) {
-                if (s.domain && *d == *s.domain) c.error(n["domain"], p + ".domain", std::to_string(*d) + " is the lab's own domain: a controller needs one of its own");
-                else spec.domain = int(*d);
-            }
-        }
-        if (n["host"]) spec.host = host_name(c, s, n["host"], p + ".host");
-        if (const HostSpec* h = s.host(spec.host); h && !h->ssh.empty() && !spec.python() && !is_cpm_program(spec.program, s.dir)) {
-            c.error(n["program"], p + ".program", "on another host a controller is one of cpm's programs or a Python script (copied there)");
-        }
+        read_controller_program(c, n, p, s, spec, names);
+        if (const YAML::Node a = n["args"]) read_controller_args(c, a, p, s, spec);
+        read_controller_vehicles(c, n, p, s, spec, driven_by);
+        read_controller_placing(c, n, p, s, spec);
         s.controllers.push_back(std::move(spec));
     }
     if (root["security"]) c.error(list, "controllers", "controllers in a secured lab are not supported yet (their own domain is not secured)");

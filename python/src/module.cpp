@@ -67,15 +67,9 @@ struct HlcCommunicator
     HlcCommunicator(HlcCommunicator&&) = default;
 };
 
-}  // namespace
-
-PYBIND11_MODULE(_cpm, m)
+/// cpm::init, the clock, the log and the lab's parameters.
+void bind_process(py::module_& m)
 {
-    m.doc() = "cpm's compiled core; use the package: import cpm";
-    py::register_exception<cpm::Error>(m, "Error", PyExc_RuntimeError);
-
-    cpm_py_bind_types(m);
-
     m.def("init", [](std::vector<std::string> argv) {
         std::vector<char*> args;
         for (auto& a : argv) args.push_back(a.data());
@@ -103,7 +97,11 @@ PYBIND11_MODULE(_cpm, m)
     parameter("parameter_string", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_string(p, t); });
     parameter("parameter_ints", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_ints(p, t); });
     parameter("parameter_doubles", [](const std::string& p, std::chrono::milliseconds t) { return cpm::parameter_doubles(p, t); });
+}
 
+/// Participants and the options of readers and writers.
+void bind_participant(py::module_& m)
+{
     py::class_<cpm::Participant>(m, "Participant")
         .def(py::init([](int domain_id, const std::string& name) {
                  cpm::ParticipantOptions o = cpm::ParticipantOptions::from_init();
@@ -132,9 +130,11 @@ PYBIND11_MODULE(_cpm, m)
         .def_readwrite("buffer_capacity", &cpm::ReaderOptions::buffer_capacity)
         .def_readwrite("vehicle_id", &cpm::ReaderOptions::vehicle_id)
         .def_readwrite("data_sharing", &cpm::ReaderOptions::data_sharing);
+}
 
-    cpm_py_bind_topics(m);
-
+/// The history client, live or from a recording.
+void bind_history(py::module_& m)
+{
     py::class_<cpm::HistoryClient>(m, "HistoryClient")
         .def(py::init([](cpm::Participant* p, double reply_timeout_s) {
                  py::gil_scoped_release release;
@@ -149,7 +149,11 @@ PYBIND11_MODULE(_cpm, m)
             py::gil_scoped_release release;
             return c.request(rq);
         });
+}
 
+/// cpm::Timer: its callback in Python, Ctrl-C ends start().
+void bind_timer(py::module_& m)
+{
     py::class_<cpm::Timer, std::shared_ptr<cpm::Timer>>(m, "Timer")
         .def(py::init([](const std::string& node_id, uint64_t period_ns, uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed) {
                  py::gil_scoped_release release;
@@ -179,7 +183,11 @@ PYBIND11_MODULE(_cpm, m)
         .def_property_readonly("start_time", &cpm::Timer::start_time)
         .def_property_readonly("missed_deadlines", &cpm::Timer::missed_deadlines)
         .def_property_readonly("period_ns", &cpm::Timer::period_ns);
+}
 
+/// cpm::hlc::Communicator: a controller in Python.
+void bind_hlc(py::module_& m)
+{
     py::class_<HlcCommunicator>(m, "HlcCommunicator")
         .def(py::init([](std::vector<uint8_t> ids, cpm::Participant* p) {
                  auto watch = std::make_shared<SignalWatch>();
@@ -208,4 +216,19 @@ PYBIND11_MODULE(_cpm, m)
         .def_property_readonly("steps", [](const HlcCommunicator& c) { return c.hlc->steps(); })
         .def_property_readonly("cancelled_steps", [](const HlcCommunicator& c) { return c.hlc->cancelled_steps(); })
         .def_property_readonly("failed_steps", [](const HlcCommunicator& c) { return c.hlc->failed_steps(); });
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_cpm, m)
+{
+    m.doc() = "cpm's compiled core; use the package: import cpm";
+    py::register_exception<cpm::Error>(m, "Error", PyExc_RuntimeError);
+    cpm_py_bind_types(m);
+    bind_process(m);
+    bind_participant(m);
+    cpm_py_bind_topics(m);
+    bind_history(m);
+    bind_timer(m);
+    bind_hlc(m);
 }
