@@ -142,46 +142,14 @@ bool MiddlewareCore::answered(uint64_t t_now, uint64_t steady_ns)
     return true;
 }
 
-bool MiddlewareCore::open_period_answered() const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return answered_;
-}
-uint64_t MiddlewareCore::open_period() const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return open_t_;
-}
-uint64_t MiddlewareCore::periods() const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return periods_;
-}
-uint64_t MiddlewareCore::answered_periods() const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return answered_periods_;
-}
-uint64_t MiddlewareCore::unanswered_periods() const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return unanswered_;
-}
-uint64_t MiddlewareCore::late_answers() const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return late_answers_;
-}
-uint64_t MiddlewareCore::forwarded() const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return forwarded_;
-}
-uint64_t MiddlewareCore::refused(Refusal reason) const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return refused_[size_t(reason)];
-}
+bool MiddlewareCore::open_period_answered() const { return locked(answered_); }
+uint64_t MiddlewareCore::open_period() const { return locked(open_t_); }
+uint64_t MiddlewareCore::periods() const { return locked(periods_); }
+uint64_t MiddlewareCore::answered_periods() const { return locked(answered_periods_); }
+uint64_t MiddlewareCore::unanswered_periods() const { return locked(unanswered_); }
+uint64_t MiddlewareCore::late_answers() const { return locked(late_answers_); }
+uint64_t MiddlewareCore::forwarded() const { return locked(forwarded_); }
+uint64_t MiddlewareCore::refused(Refusal reason) const { return locked(refused_[size_t(reason)]); }
 uint64_t MiddlewareCore::refused() const
 {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -189,11 +157,7 @@ uint64_t MiddlewareCore::refused() const
     for (uint64_t r : refused_) n += r;
     return n;
 }
-std::vector<double> MiddlewareCore::response_ms() const
-{
-    std::lock_guard<std::mutex> lock(mutex_);
-    return response_ms_;
-}
+std::vector<double> MiddlewareCore::response_ms() const { return locked(response_ms_); }
 
 std::string MiddlewareCore::stats_json() const
 {

@@ -267,29 +267,19 @@ public:
     std::map<std::string, std::string> string_map()
     {
         std::map<std::string, std::string> m;
-        const uint32_t n = u32();  // before at_ is read: the map begins after its length
-        In inner(path_, b_, at_, at_ + n);
-        const size_t after = inner.end_;
-        if (after > end_) fail("a map runs past its record");
-        while (!inner.done()) {
-            std::string k = inner.str();
-            m[k] = inner.str();
-        }
-        at_ = after;
+        each_pair([&m](In& in) {
+            std::string k = in.str();
+            m[k] = in.str();
+        });
         return m;
     }
     std::map<uint16_t, uint64_t> offsets_map()
     {
         std::map<uint16_t, uint64_t> m;
-        const uint32_t n = u32();  // before at_ is read: the map begins after its length
-        In inner(path_, b_, at_, at_ + n);
-        const size_t after = inner.end_;
-        if (after > end_) fail("a map runs past its record");
-        while (!inner.done()) {
-            const uint16_t k = inner.u16();
-            m[k] = inner.u64();
-        }
-        at_ = after;
+        each_pair([&m](In& in) {
+            const uint16_t k = in.u16();
+            m[k] = in.u64();
+        });
         return m;
     }
     bool done() const { return at_ >= end_; }
@@ -300,6 +290,16 @@ public:
     }
 
 private:
+    /// A map's entries: its byte length, then `read_pair` until those bytes are read.
+    template <class ReadPair>
+    void each_pair(ReadPair read_pair)
+    {
+        const uint32_t n = u32();  // before at_ is read: the map begins after its length
+        In inner(path_, b_, at_, at_ + n);
+        if (inner.end_ > end_) fail("a map runs past its record");
+        while (!inner.done()) read_pair(inner);
+        at_ = inner.end_;
+    }
     std::string take(size_t n)
     {
         if (n > end_ - at_) fail("cut short (" + std::to_string(n) + " bytes wanted, " + std::to_string(end_ - at_) + " left)");

@@ -99,6 +99,13 @@ public:
     std::string stats_json() const;
 
 private:
+    /// A copy of a member, read under the lock.
+    template <class T>
+    T locked(const T& member) const
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return member;
+    }
     template <class Command>
     Check check_common(const Command& command, uint64_t now_ns, const std::string& value_problem);
 
