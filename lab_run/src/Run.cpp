@@ -78,6 +78,9 @@ nlohmann::json last_json(const std::string& path)
     return found;
 }
 
+/// The lock file a cpm lab run holds on its domain (and on its controllers') while it lasts.
+std::string run_lock_path(int domain) { return "/tmp/cpm_lab_run_domain_" + std::to_string(domain) + ".lock"; }
+
 /// The domain, claimed for the run: no other cpm lab run on this host has it (a lock file held
 /// while the run lasts), and discovery sees nobody on it. Throws std::runtime_error naming who
 /// is there.
@@ -89,7 +92,7 @@ public:
         const std::string named = what.empty() ? "domain " + std::to_string(domain) : what + " " + std::to_string(domain);
         const std::string remedy = what.empty() ? "give this one another domain (domain: in the scenario, or --dds_domain)"
                                                 : "give it another one (domain: of the controller in the scenario)";
-        const std::string lock = "/tmp/cpm_lab_run_domain_" + std::to_string(domain) + ".lock";
+        const std::string lock = run_lock_path(domain);
         fd_ = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
         if (fd_ >= 0 && ::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
             ::close(fd_);
@@ -559,34 +562,14 @@ std::vector<std::string> planners_of(const Scenario& s)
     return out;
 }
 
-/// Each controller's own domain where the scenario names none: the first after the run's that
-/// neither the run, another controller nor another cpm lab run on this host (its lock file) has.
-std::map<std::string, int> choose_controller_domains(const Scenario& s, const RunSettings& settings)
+/// Whether another cpm lab run on this host holds the domain (its lock file is locked).
+bool held_by_another_run(int domain)
 {
-    std::set<int> taken{settings.domain};
-    for (const auto& c : s.controllers) {
-        if (c.domain) taken.insert(*c.domain);
-    }
-    auto locked = [](int d) {
-        const std::string lock = "/tmp/cpm_lab_run_domain_" + std::to_string(d) + ".lock";
-        const int fd = ::open(lock.c_str(), O_RDWR | O_CLOEXEC);
-        if (fd < 0) return false;
-        const bool held = ::flock(fd, LOCK_EX | LOCK_NB) != 0;
-        ::close(fd);
-        return held;
-    };
-    std::map<std::string, int> out;
-    int next = settings.domain;
-    for (const auto& c : s.controllers) {
-        if (c.domain) continue;
-        for (int tries = 0; tries < 233; ++tries) {
-            next = (next + 1) % 233;
-            if (!taken.count(next) && !locked(next)) break;
-        }
-        taken.insert(next);
-        out[c.name] = next;
-    }
-    return out;
+    const int fd = ::open(run_lock_path(domain).c_str(), O_RDWR | O_CLOEXEC);
+    if (fd < 0) return false;
+    const bool held = ::flock(fd, LOCK_EX | LOCK_NB) != 0;
+    ::close(fd);
+    return held;
 }
 
 /// Each controller's domain claimed as the run's own is (no other run, nobody on it), all at once.
@@ -792,7 +775,7 @@ void stop_in_order(Writer<StopRequest>& stops, LabClock& clock, ProcessGroup& gr
 RunResult run_lab(const Scenario& s, const RunOptions& o)
 {
     RunSettings settings = settings_of(s, o);
-    settings.controller_domains = choose_controller_domains(s, settings);
+    settings.controller_domains = controller_domains(s, settings, held_by_another_run);
     const fs::path dir = settings.run_dir;
     const auto plan = plan_run(s, settings);      // names a missing program before anything starts
     const SharedConnections connections(s, settings);

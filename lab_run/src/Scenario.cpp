@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <set>
 #include <tuple>
 #include <arpa/inet.h>
@@ -529,14 +530,27 @@ Scenario load_scenario(const std::string& path)
 
 bool ControllerSpec::python() const { return fs::path(program).extension() == ".py"; }
 
-std::map<std::string, int> controller_domains(const Scenario& s, const RunSettings& settings)
+std::map<std::string, int> controller_domains(const Scenario& s, const RunSettings& settings, const std::function<bool(int)>& unavailable)
 {
+    std::set<int> taken{settings.domain};
+    for (const auto& c : s.controllers) {
+        if (c.domain) taken.insert(*c.domain);
+    }
     std::map<std::string, int> out;
-    for (const auto& p : plan_run(s, settings)) {
-        if (p.argv.empty() || fs::path(p.argv[0]).filename() != "hlc_middleware") continue;
-        const auto name = std::find(p.argv.begin(), p.argv.end(), "--name");
-        const auto domain = std::find(p.argv.begin(), p.argv.end(), "--controller_domain");
-        if (name + 1 < p.argv.end() && domain + 1 < p.argv.end()) out[*(name + 1)] = std::stoi(*(domain + 1));
+    int next = settings.domain;
+    for (const auto& c : s.controllers) {
+        if (c.domain) {
+            out[c.name] = *c.domain;
+        } else if (const auto chosen = settings.controller_domains.find(c.name); chosen != settings.controller_domains.end()) {
+            out[c.name] = chosen->second;
+        } else {
+            for (int tries = 0; tries < 233; ++tries) {
+                next = (next + 1) % 233;
+                if (!taken.count(next) && !(unavailable && unavailable(next))) break;
+            }
+            taken.insert(next);
+            out[c.name] = next;
+        }
     }
     return out;
 }
@@ -779,18 +793,9 @@ public:
     /// controller is given its cars, its domain and the lab's clock after its own arguments.
     void controllers()
     {
-        std::set<int> taken{r_.domain};
+        const auto domains = controller_domains(s_, r_);
         for (const auto& c : s_.controllers) {
-            if (c.domain) taken.insert(*c.domain);
-        }
-        for (const auto& c : s_.controllers) {
-            int domain = c.domain.value_or(-1);
-            if (domain < 0) {
-                const auto chosen = r_.controller_domains.find(c.name);
-                domain = chosen != r_.controller_domains.end() ? chosen->second : r_.domain;
-                while (taken.count(domain)) domain = (domain + 1) % 233;
-                taken.insert(domain);
-            }
+            const int domain = domains.at(c.name);
             std::string ids;
             for (int v : c.vehicles) ids += (ids.empty() ? "" : ",") + std::to_string(v);
             add("hlc_" + c.name, "hlc_middleware",

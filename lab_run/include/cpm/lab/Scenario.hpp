@@ -38,6 +38,7 @@
 #include <cpm/QosOverrides.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <stdexcept>
@@ -176,8 +177,8 @@ struct RunSettings
     uint64_t duration_ns = 0; ///< the scenario's unless overridden
     TimeMode time = TimeMode::real;
     std::string ssh_shared_dir; ///< where ssh keeps the run's one connection per other host ("": none)
-    /// Each controller's own domain (by name) where the scenario names none; a controller found
-    /// in neither gets the first domain after the run's that no other controller has.
+    /// Each controller's own domain (by name) where the scenario names none, as the run chose
+    /// it (controller_domains()).
     std::map<std::string, int> controller_domains;
 };
 
@@ -191,8 +192,11 @@ std::string remote_run_dir(const RunSettings& settings);
 /// log, the history's status and the timers' readiness it reads.
 ProcessPlan lab_run_process();
 
-/// The domain each controller of the run shares with its middleware (by name).
-std::map<std::string, int> controller_domains(const Scenario& s, const RunSettings& settings);
+/// The domain each controller of the run shares with its middleware (by name): its own
+/// `domain:`, else the run's choice (settings.controller_domains), else the first after the run's
+/// domain that neither the run nor another controller has and `unavailable` does not refuse.
+std::map<std::string, int> controller_domains(const Scenario& s, const RunSettings& settings,
+                                              const std::function<bool(int)>& unavailable = {});
 
 /// The processes of a run, in the order they start: the history recording first, the parameter
 /// server, the monitor, then the cars
