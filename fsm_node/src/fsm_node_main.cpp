@@ -64,6 +64,11 @@ int run(int argc, char** argv)
 
     cpm::fsm::FsmNode node(options, std::move(loaded.machine), loaded.json);
     cpm::cli::stop_on_signals();
+    // Said at once (the log is a file, fully buffered): a node that runs says so before it acts.
+    std::printf("fsm_node: vehicle %u runs %s (%zu states, %zu transitions) from state %d (%s)\n", unsigned(options.vehicle_id),
+                parsed.get("--fsm").c_str(), node.machine().states().size(), node.machine().transitions().size(), node.machine().active().id(),
+                node.machine().active().type().c_str());
+    std::fflush(stdout);
     node.run(cpm::cli::stop_requested);
     if (parsed.has("--report")) std::fputs(node.report().text().c_str(), stdout);
     std::printf("fsm_node: vehicle %u ended in state %d (%s)\n", unsigned(options.vehicle_id), node.machine().active().id(),

@@ -13,9 +13,11 @@
 
 #include <algorithm>
 #include <csignal>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <sstream>
 
 using namespace std::chrono_literals;
 using cpm_test::built_program;
@@ -62,6 +64,16 @@ int pid_with(const std::string& needle, const std::string& tag)
         if (name.find_first_not_of("0123456789") != std::string::npos) continue;
         if (text_of(e.path() / "cmdline").find(needle) == std::string::npos) continue;
         if (text_of(e.path() / "environ").find(tag + ' ') != std::string::npos) return std::stoi(name);
+    }
+    return 0;
+}
+
+/// The parent's pid of process `pid` (0 when it is gone).
+int parent_of(int pid)
+{
+    std::istringstream status(cpm_test::file_text("/proc/" + std::to_string(pid) + "/status"));
+    for (std::string line; std::getline(status, line);) {
+        if (line.rfind("PPid:", 0) == 0) return std::stoi(line.substr(5));
     }
     return 0;
 }
@@ -196,10 +208,13 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json").string();
     int pid = 0;
     ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args, run_tag(out))) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
-    // Driving, and saying so in its log (on a loaded machine that can take longer than a moment).
-    EXPECT_TRUE(cpm_test::wait_until([&] { return cpm_test::file_text(out + "/fsm_5.log").find("fsm_node: vehicle 5") != std::string::npos; }, 30s))
+    // Running, and saying so in its log (on a loaded machine that can take longer than a moment);
+    // its machine ends by itself some 20 s into the run, the node with it.
+    EXPECT_TRUE(cpm_test::wait_until([&] { return cpm_test::file_text(out + "/fsm_5.log").find("fsm_node: vehicle 5 runs") != std::string::npos; }, 15s))
         << cpm_test::file_text(out + "/fsm_5.log");
-    ::kill(pid, SIGKILL);
+    // The run's own child, and the signal taken: else the test, not the run, is at fault.
+    EXPECT_EQ(parent_of(pid), run.pid()) << "pid " << pid << ": " << cpm_test::file_text("/proc/" + std::to_string(pid) + "/status");
+    ASSERT_EQ(::kill(pid, SIGKILL), 0) << "pid " << pid << ": " << std::strerror(errno);
     EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
     EXPECT_NE(run.errors().find("fsm_5 killed by SIGKILL during the run"), std::string::npos) << run.errors();
     EXPECT_NE(run.errors().find("fsm_node: vehicle 5"), std::string::npos) << "the end of its log is shown\n" << run.errors();
