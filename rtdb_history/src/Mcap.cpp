@@ -3,6 +3,7 @@
 #include <cpm/Error.hpp>
 
 #include <array>
+#include <cstdio>
 #include <cstring>
 #include <fcntl.h>
 #include <fstream>
@@ -92,11 +93,11 @@ static uint32_t crc_of(const std::string& s, uint32_t crc = 0) { return crc32(re
 
 // ---- Writer -------------------------------------------------------------------------------------
 
-Writer::Writer(const std::string& path, const std::string& library, size_t chunk_size) : path_(path), chunk_size_(chunk_size)
+Writer::Writer(const std::string& path, const std::string& library, size_t chunk_size, uint64_t max_bytes)
+    : path_(path), chunk_size_(chunk_size), max_bytes_(max_bytes)
 {
-    const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    if (fd < 0) throw cpm::Error("mcap: cannot make " + path + ": " + std::strerror(errno) + (errno == EEXIST ? " (never overwritten)" : ""));
-    file_ = ::fdopen(fd, "wb");
+    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (fd_ < 0) throw cpm::Error("mcap: cannot make " + path + ": " + std::strerror(errno) + (errno == EEXIST ? " (never overwritten)" : ""));
     put(std::string(kMagic, kMagicSize));
     put(record(header, Out().str("").str(library).b));
 }
@@ -112,8 +113,18 @@ Writer::~Writer()
 
 void Writer::put(const std::string& bytes)
 {
-    if (std::fwrite(bytes.data(), 1, bytes.size(), file_) != bytes.size()) {
-        throw cpm::Error("mcap: cannot write " + path_ + ": " + std::strerror(errno));
+    for (size_t done = 0; done < bytes.size();) {
+        const ssize_t n = ::write(fd_, bytes.data() + done, bytes.size() - done);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) {
+            // What did not fit is taken back: the file ends with whole records, and close() can
+            // still write the summary (the space of the record cut short is free again).
+            const std::string why = std::strerror(n < 0 ? errno : ENOSPC);
+            (void)!::ftruncate(fd_, off_t(offset_));
+            (void)::lseek(fd_, off_t(offset_), SEEK_SET);
+            throw cpm::Error("mcap: cannot write " + path_ + ": " + why);
+        }
+        done += size_t(n);
     }
     if (in_data_) data_crc_ = crc_of(bytes, data_crc_);  // the data section: from the magic to Data End
     offset_ += bytes.size();
@@ -129,18 +140,19 @@ uint16_t Writer::add_schema(const std::string& name, const std::string& encoding
 uint16_t Writer::add_channel(uint16_t schema_id, const std::string& topic, const std::string& message_encoding,
                              const std::map<std::string, std::string>& metadata)
 {
-    if (schema_id == 0 || schema_id > schemas_.size()) throw cpm::Error("mcap: channel " + topic + ": no schema " + std::to_string(schema_id));
+    if (schema_id > schemas_.size()) throw cpm::Error("mcap: channel " + topic + ": no schema " + std::to_string(schema_id));
     channels_.push_back({uint16_t(channels_.size()), schema_id, topic, message_encoding, metadata});
     channel_in_chunk_.push_back(false);
     return channels_.back().id;
 }
 
-void Writer::write(uint16_t channel_id, uint64_t log_time, uint64_t publish_time, const uint8_t* data, size_t size)
+void Writer::write(uint16_t channel_id, uint64_t log_time, uint64_t publish_time, const uint8_t* data, size_t size,
+                   std::optional<uint32_t> sequence)
 {
     if (channel_id >= channels_.size()) throw cpm::Error("mcap: no channel " + std::to_string(channel_id));
     const Channel& c = channels_[channel_id];
     // A chunk holds the schema and channel of its messages before them (for streaming readers).
-    if (!schema_in_chunk_[c.schema_id - 1]) {
+    if (c.schema_id != 0 && !schema_in_chunk_[c.schema_id - 1]) {  // 0: a channel without a schema
         chunk_ += schema_record(schemas_[c.schema_id - 1]);
         schema_in_chunk_[c.schema_id - 1] = true;
     }
@@ -150,15 +162,26 @@ void Writer::write(uint16_t channel_id, uint64_t log_time, uint64_t publish_time
     }
     chunk_index_[channel_id].emplace_back(log_time, chunk_.size());
     Out m;
-    m.u16(channel_id).u32(sequences_[channel_id]++).u64(log_time).u64(publish_time).raw(std::string(reinterpret_cast<const char*>(data), size));
+    uint32_t& next = sequences_[channel_id];
+    if (sequence) next = *sequence;
+    m.u16(channel_id).u32(next++).u64(log_time).u64(publish_time).raw(std::string(reinterpret_cast<const char*>(data), size));
     chunk_ += record(message, m.b);
     chunk_start_ = std::min(chunk_start_, log_time);
     chunk_end_ = std::max(chunk_end_, log_time);
-    message_start_ = std::min(message_start_, log_time);
-    message_end_ = std::max(message_end_, log_time);
-    ++message_count_;
-    ++channel_counts_[channel_id];
+
     if (chunk_.size() >= chunk_size_) flush_chunk();
+}
+
+void Writer::write_private(uint8_t op, const std::string& body)
+{
+    if (op < 0x80) throw cpm::Error("mcap: op " + std::to_string(op) + " is the spec's, not a private one");
+    chunk_ += record(op, body);
+    if (chunk_.size() >= chunk_size_) flush_chunk();
+}
+
+void Writer::flush()
+{
+    flush_chunk();
 }
 
 void Writer::flush_chunk()
@@ -168,7 +191,25 @@ void Writer::flush_chunk()
     Out body;
     body.u64(chunk_start_).u64(chunk_end_).u64(chunk_.size()).u32(crc_of(chunk_)).str("").u64(chunk_.size()).raw(chunk_);
     const std::string chunk_record = record(chunk, body.b);
-    put(chunk_record);
+    // Room is kept for the summary (its chunk indexes grow with the chunks, about 100 bytes each).
+    const uint64_t summary_room = 64 * 1024 + chunk_indexes_.size() * 2;
+    if (max_bytes_ && offset_ + chunk_record.size() + summary_room > max_bytes_) {
+        drop_chunk();
+        throw cpm::Error("mcap: " + path_ + " reached its size limit of " + std::to_string(max_bytes_) + " bytes");
+    }
+    try {
+        put(chunk_record);
+    } catch (const cpm::Error&) {
+        drop_chunk();
+        throw;
+    }
+    // Its messages count once the chunk is in the file.
+    for (const auto& [id, entries] : chunk_index_) {
+        message_count_ += entries.size();
+        channel_counts_[id] += entries.size();
+    }
+    message_start_ = std::min(message_start_, chunk_start_);
+    message_end_ = std::max(message_end_, chunk_end_);
     const uint64_t indexes_offset = offset_;
     std::map<uint16_t, uint64_t> index_offsets;
     std::string indexes;
@@ -184,6 +225,11 @@ void Writer::flush_chunk()
         .u64(chunk_.size()).u64(chunk_.size());
     chunk_indexes_ += record(chunk_index, ci.b);
     ++chunk_count_;
+    drop_chunk();
+}
+
+void Writer::drop_chunk()
+{
     chunk_.clear();
     chunk_index_.clear();
     chunk_start_ = UINT64_MAX;
@@ -203,9 +249,24 @@ void Writer::add_metadata(const std::string& name, const std::map<std::string, s
 
 void Writer::close()
 {
-    if (closed_ || !file_) return;
+    if (closed_ || fd_ < 0) return;
     closed_ = true;
-    flush_chunk();
+    try {
+        finish();
+    } catch (...) {
+        ::close(fd_);
+        fd_ = -1;
+        throw;
+    }
+}
+
+void Writer::finish()
+{
+    try {
+        flush_chunk();
+    } catch (const cpm::Error&) {
+        // The last chunk did not fit (its size limit, a full disk): the file ends before it.
+    }
     put(record(data_end, Out().u32(data_crc_).b));
     in_data_ = false;
     const uint64_t summary_start = offset_;
@@ -241,9 +302,9 @@ void Writer::close()
     put(offsets);
     put(footer_head.b + Out().u32(summary_crc).b);
     put(std::string(kMagic, kMagicSize));
-    const bool ok = std::fflush(file_) == 0 && ::fsync(::fileno(file_)) == 0;
-    std::fclose(file_);
-    file_ = nullptr;
+    const bool ok = ::fsync(fd_) == 0;
+    ::close(fd_);
+    fd_ = -1;
     if (!ok) throw cpm::Error("mcap: cannot finish " + path_ + ": " + std::strerror(errno));
 }
 
@@ -387,7 +448,9 @@ void read_records(const std::string& path, const std::string& bytes, size_t at, 
             break;
         }
         case message_index: ++f.message_indexes; break;
-        default: break;  // attachments and what a later version adds: skipped
+        default:
+            if (op >= 0x80) f.privates.push_back({op, r.bytes(len), f.messages.size()});
+            break;  // attachments and what a later version adds: skipped
         }
         at = body + len;
     }
@@ -395,54 +458,78 @@ void read_records(const std::string& path, const std::string& bytes, size_t at, 
 
 }  // namespace
 
-File read(const std::string& path)
+bool is_mcap(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    char head[kMagicSize] = {};
+    return in.read(head, kMagicSize) && std::memcmp(head, kMagic, kMagicSize) == 0;
+}
+
+File read(const std::string& path, Damage damage)
 {
     std::ifstream in(path, std::ios::binary);
     if (!in) throw cpm::Error("mcap: cannot read " + path);
     const std::string b((std::istreambuf_iterator<char>(in)), {});
     const std::string magic(kMagic, kMagicSize);
-    if (b.size() < 2 * kMagicSize || b.compare(0, kMagicSize, magic) != 0) In(path, b, 0, b.size()).fail("not an MCAP file (no magic)");
-    if (b.compare(b.size() - kMagicSize, kMagicSize, magic) != 0) {
-        In(path, b, b.size() - kMagicSize, b.size()).fail("no closing magic (the file was not finished)");
-    }
+    if (b.size() < kMagicSize || b.compare(0, kMagicSize, magic) != 0) In(path, b, 0, b.size()).fail("not an MCAP file (no magic)");
+    const bool finished = b.size() >= 2 * kMagicSize && b.compare(b.size() - kMagicSize, kMagicSize, magic) == 0;
     File f;
-    const size_t end = b.size() - kMagicSize;
+    if (!finished) {
+        if (damage == Damage::refuse) In(path, b, b.size(), b.size()).fail("no closing magic (the file was not finished)");
+        f.damage = "it was not finished (no summary, no closing magic: its writer was stopped or killed)";
+    }
+    const size_t end = finished ? b.size() - kMagicSize : b.size();
     size_t at = kMagicSize;
     bool data_section = true;
     while (at < end) {
-        In h(path, b, at, end);
-        const uint8_t op = h.u8();
-        const uint64_t len = h.u64();
-        const size_t body = h.at();
-        if (len > end - body) h.fail("a record (op " + std::to_string(op) + ") of " + std::to_string(len) + " bytes runs past the file's end");
-        In r(path, b, body, body + len);
-        if (op == header) {
-            f.profile = r.str();
-            f.library = r.str();
-        } else if (op == data_end) {
-            const uint32_t crc = r.u32();
-            if (crc != 0 && crc_of(b.substr(0, at)) != crc) r.fail("the data section's CRC does not match");
-            data_section = false;
-        } else if (op == footer) {
-            f.summary_start = r.u64();
-            (void)r.u64();
-            const uint32_t crc = r.u32();
-            if (crc != 0 && f.summary_start != 0 && crc_of(b.substr(f.summary_start, body + 16 - f.summary_start)) != crc) {
-                r.fail("the summary's CRC does not match");
-            }
-        } else if (op == statistics) {
-            f.statistics_messages = r.u64();
-            (void)r.u16();
-            for (int i = 0; i < 4; ++i) (void)r.u32();  // channel, attachment, metadata, chunk counts
-            (void)r.u64();
-            (void)r.u64();
-            f.statistics_channel_counts = r.offsets_map();
-        } else if (op == chunk_index) {
-            ++f.chunk_indexes;
-        } else if (data_section) {
-            read_records(path, b, at, body + len, f, false);
-        }  // the summary's copies of Schemas and Channels: the data section's are kept
-        at = body + len;
+        // What a damaged record had added is taken back: a chunk reads whole or not at all.
+        const size_t messages = f.messages.size(), privates = f.privates.size(), metadata = f.metadata.size();
+        try {
+            In h(path, b, at, end);
+            const uint8_t op = h.u8();
+            const uint64_t len = h.u64();
+            const size_t body = h.at();
+            if (len > end - body) h.fail("a record (op " + std::to_string(op) + ") of " + std::to_string(len) + " bytes runs past the file's end");
+            In r(path, b, body, body + len);
+            if (op == header) {
+                f.profile = r.str();
+                f.library = r.str();
+            } else if (op == data_end) {
+                const uint32_t crc = r.u32();
+                if (crc != 0 && crc_of(b.substr(0, at)) != crc) r.fail("the data section's CRC does not match");
+                data_section = false;
+            } else if (op == footer) {
+                f.summary_start = r.u64();
+                (void)r.u64();
+                const uint32_t crc = r.u32();
+                if (crc != 0 && f.summary_start != 0 && crc_of(b.substr(f.summary_start, body + 16 - f.summary_start)) != crc) {
+                    r.fail("the summary's CRC does not match");
+                }
+            } else if (op == statistics) {
+                f.statistics_messages = r.u64();
+                (void)r.u16();
+                for (int i = 0; i < 4; ++i) (void)r.u32();  // channel, attachment, metadata, chunk counts
+                (void)r.u64();
+                (void)r.u64();
+                f.statistics_channel_counts = r.offsets_map();
+            } else if (op == chunk_index) {
+                ++f.chunk_indexes;
+            } else if (data_section) {
+                read_records(path, b, at, body + len, f, false);
+            }  // the summary's copies of Schemas and Channels: the data section's are kept
+            at = body + len;
+        } catch (const cpm::Error& e) {
+            if (damage == Damage::refuse) throw;
+            f.messages.resize(messages);
+            f.privates.resize(privates);
+            f.metadata.resize(metadata);
+            const std::string why = e.what();
+            // Named by where its record starts: the file's whole records end there.
+            const size_t what = why.find(": ", why.find(": at byte ") + 2);
+            f.damage = (finished ? "" : f.damage + "; ") + "at byte " + std::to_string(at) + why.substr(what) + " (" +
+                       std::to_string(b.size() - at) + " bytes from there on are not read)";
+            break;
+        }
     }
     return f;
 }

@@ -8,11 +8,16 @@
 #include <cpm/CommandLine.hpp>
 #include <cpm/HistoryClient.hpp>
 
+#include "RecordingFile.hpp"
 #include "Sqlite.hpp"
+
+#include <cpm/rtdb/Mcap.hpp>
 
 #include <cctype>
 #include <filesystem>
 #include <limits>
+#include <mutex>
+#include <set>
 #include <stdexcept>
 #include <sys/resource.h>
 #include <sys/stat.h>
@@ -29,18 +34,45 @@ using sqlite::exec;
 using sqlite::file_exists;
 using sqlite::sqlite_error;
 
-constexpr const char* kFormat = "cpm-recording";
-constexpr const char* kVersion = "1";
 
-const char* const kSchema =
-    "CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);"
-    "CREATE TABLE types(file TEXT PRIMARY KEY, idl TEXT NOT NULL);"
-    "CREATE TABLE objects(oid INTEGER PRIMARY KEY, kind TEXT NOT NULL, name TEXT NOT NULL, topic TEXT NOT NULL,"
-    " key TEXT NOT NULL, type_name TEXT NOT NULL, parent INTEGER NOT NULL, creator TEXT NOT NULL,"
-    " creator_guid TEXT NOT NULL, created_ns INTEGER NOT NULL, deleted_ns INTEGER NOT NULL,"
-    " history_interval_ns INTEGER NOT NULL, data_time TEXT NOT NULL);"
-    "CREATE TABLE samples(oid INTEGER NOT NULL, commit_ns INTEGER NOT NULL, data_ns INTEGER NOT NULL,"
-    " valid_after_ns INTEGER NOT NULL, source_ns INTEGER NOT NULL, lost_before INTEGER NOT NULL, payload BLOB NOT NULL);";
+/// An MCAP file as a recording's tables in an SQLite database in memory, made once per file
+/// (and again when the file changed) and kept for the process's life; its URI.
+std::string mcap_as_tables(const std::string& path)
+{
+    struct Copy
+    {
+        std::string uri;
+        sqlite3* keeper = nullptr;  // the memory database lives while a connection is open
+        std::filesystem::file_time_type written;
+        uintmax_t size = 0;
+    };
+    static std::mutex mutex;
+    static std::map<std::string, Copy> copies;
+    static int made = 0;
+    std::lock_guard lock(mutex);
+    const std::string key = std::filesystem::absolute(path).lexically_normal().string();
+    std::error_code ec;
+    const auto written = std::filesystem::last_write_time(path, ec);
+    const auto size = std::filesystem::file_size(path, ec);
+    auto it = copies.find(key);
+    if (it != copies.end() && it->second.written == written && it->second.size == size) return it->second.uri;
+    Copy c{"file:cpm_mcap_" + std::to_string(::getpid()) + "_" + std::to_string(++made) + "?mode=memory&cache=shared", nullptr, written, size};
+    if (sqlite3_open_v2(c.uri.c_str(), &c.keeper, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_URI, nullptr) != SQLITE_OK) {
+        const std::string why = sqlite_error(c.keeper, SQLITE_ERROR);
+        sqlite3_close(c.keeper);
+        throw Error("recording " + path + ": cannot make a database in memory to read it into: " + why);
+    }
+    try {
+        copy_mcap_into(path, c.keeper);
+    } catch (const std::exception& e) {
+        sqlite3_close(c.keeper);
+        const std::string why = e.what();
+        throw Error(why.rfind("recording ", 0) == 0 ? why : "recording " + path + ": " + why);
+    }
+    if (it != copies.end()) sqlite3_close(it->second.keeper);
+    copies[key] = c;
+    return c.uri;
+}
 
 }  // namespace
 
@@ -54,12 +86,17 @@ sqlite3* open_recording_file(const std::string& path, std::map<std::string, std:
                                  (run ? " (a run's folder? its recording is " + (std::filesystem::path(path) / "recording.db").string() + ")" : ""));
     }
     sqlite3* db = nullptr;
-    // Read-write when it may (a recording left with its WAL beside it is then read whole), else
-    // read-only; nothing is changed either way.
-    int rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr);
-    if (rc != SQLITE_OK) {
-        sqlite3_close(db);
-        rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
+    int rc = SQLITE_OK;
+    if (mcap::is_mcap(path)) {
+        rc = sqlite3_open_v2(mcap_as_tables(path).c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_URI, nullptr);
+    } else {
+        // Read-write when it may (a recording left with its WAL beside it is then read whole),
+        // else read-only; nothing is changed either way.
+        rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr);
+        if (rc != SQLITE_OK) {
+            sqlite3_close(db);
+            rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
+        }
     }
     std::unique_ptr<sqlite3, int (*)(sqlite3*)> owner(db, sqlite3_close);
     auto fail = [&](const std::string& what) { return Error("recording " + path + ": " + what); };
@@ -83,8 +120,8 @@ sqlite3* open_recording_file(const std::string& path, std::map<std::string, std:
             throw fail(std::string("not a cpm recording (") + e.what() + ")");
         }
     }
-    if (meta["format"] != kFormat) throw fail("not a cpm recording (its meta table names no format '" + std::string(kFormat) + "')");
-    if (meta["version"] != kVersion) throw fail("recording format version " + meta["version"] + ", this cpm reads version " + kVersion);
+    if (meta["format"] != kRecordingFormat) throw fail("not a cpm recording (its meta table names no format '" + std::string(kRecordingFormat) + "')");
+    if (meta["version"] != kRecordingVersion) throw fail("recording format version " + meta["version"] + ", this cpm reads version " + kRecordingVersion);
     return owner.release();
 }
 
@@ -101,46 +138,13 @@ struct RecordingWriter::Event
 
 RecordingWriter::RecordingWriter(std::string path, RecordingOptions options) : path_(std::move(path)), options_(std::move(options))
 {
-    if (file_exists(path_)) throw Error("recording " + path_ + ": the file exists already (a recording is never overwritten)");
-    int rc = sqlite3_open_v2(path_.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX, nullptr);
-    auto give_up = [&](const std::string& what) {
-        const std::string e = "recording " + path_ + ": " + what + ": " + sqlite_error(db_, rc);
-        sqlite3_close(db_);
-        db_ = nullptr;
-        ::unlink(path_.c_str());
-        throw Error(e);
-    };
-    if (rc != SQLITE_OK) give_up("cannot create it");
-    if ((rc = exec(db_, "PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL;")) != SQLITE_OK) give_up("cannot set WAL mode");
-    if (options_.max_bytes) {
-        Statement size(db_, "PRAGMA page_size");
-        const uint64_t page = size.step() == SQLITE_ROW ? std::max<uint64_t>(size.u64(0), 512) : 4096;
-        exec(db_, "PRAGMA max_page_count=" + std::to_string(std::max<uint64_t>(options_.max_bytes / page, 16)) + ";");
-    }
-    if ((rc = exec(db_, std::string("BEGIN;") + kSchema)) != SQLITE_OK) give_up("cannot make its tables");
     started_ns_ = cpm::get_time_ns();
-    try {
-        Statement meta(db_, "INSERT INTO meta VALUES(?, ?)");
-        char host[256] = {};
-        ::gethostname(host, sizeof host - 1);
-        for (const auto& [k, v] : std::map<std::string, std::string>{{"format", kFormat},
-                                                                    {"version", kVersion},
-                                                                    {"name", options_.name},
-                                                                    {"host", host},
-                                                                    {"started_ns", std::to_string(started_ns_)}}) {
-            if ((rc = meta.bind(1, k).bind(2, v).run()) != SQLITE_OK) give_up("cannot write its meta table");
-        }
-        Statement type(db_, "INSERT INTO types VALUES(?, ?)");
-        if (const IdlDecoder* lab = IdlDecoder::lab_types()) {
-            for (const auto& [file, text] : lab->sources()) {
-                if ((rc = type.bind(1, file).bind(2, text).run()) != SQLITE_OK) give_up("cannot write the IDL");
-            }
-        }
-    } catch (const std::runtime_error& e) {
-        rc = SQLITE_ERROR;
-        give_up(e.what());
-    }
-    if ((rc = exec(db_, "COMMIT;")) != SQLITE_OK) give_up("cannot write it");
+    char host[256] = {};
+    ::gethostname(host, sizeof host - 1);
+    std::map<std::string, std::string> idl;
+    if (const IdlDecoder* lab = IdlDecoder::lab_types()) idl = lab->sources();
+    file_ = create_recording_file(path_, recording_format(path_, options_.format),
+                                  {{"name", options_.name}, {"host", host}, {"started_ns", std::to_string(started_ns_)}}, idl, options_.max_bytes);
     thread_ = std::thread([this] { run(); });
 }
 
@@ -216,66 +220,42 @@ void RecordingWriter::run()
 
 bool RecordingWriter::write(std::deque<Event>& batch)
 {
-    int rc = exec(db_, "BEGIN");
-    uint64_t samples = 0;
+    const uint64_t added_before = added_;
     try {
-        Statement add(db_, "INSERT OR REPLACE INTO objects VALUES(?,?,?,?,?,?,?,?,?,?,?,?,?)");
-        Statement sample(db_, "INSERT INTO samples VALUES(?,?,?,?,?,?,?)");
-        Statement del(db_, "UPDATE objects SET deleted_ns = ? WHERE oid = ?");
         for (const Event& e : batch) {
-            if (rc != SQLITE_OK) break;
             switch (e.kind) {
-                case Event::added: {
-                    const ObjectInfo& i = e.info;
-                    rc = add.bind(1, i.oid)
-                             .bind(2, std::string(i.kind == ObjectKind::process ? "process" : "instance"))
-                             .bind(3, i.name)
-                             .bind(4, i.topic)
-                             .bind(5, i.key)
-                             .bind(6, i.type_name)
-                             .bind(7, i.parent)
-                             .bind(8, i.creator)
-                             .bind(9, i.creator_guid)
-                             .bind(10, i.created_ts)
-                             .bind(11, i.deleted_ts)
-                             .bind(12, i.history_interval_ns)
-                             .bind(13, i.data_time)
-                             .run();
-                    break;
-                }
+                case Event::added: file_->add_object(e.info); break;
                 case Event::sample:
-                    rc = sample.bind(1, e.oid)
-                             .bind(2, e.t0)
-                             .bind(3, e.t1)
-                             .bind(4, e.t2)
-                             .bind(5, e.t3)
-                             .bind(6, e.lost)
-                             .bind_blob(7, e.payload.data(), e.payload.size())
-                             .run();
-                    ++samples;
+                    file_->add_sample(e.oid, {.commit_ns = e.t0,
+                                              .data_ns = e.t1,
+                                              .valid_after_ns = e.t2,
+                                              .source_ns = e.t3,
+                                              .lost_before = e.lost,
+                                              .payload = e.payload.data(),
+                                              .size = e.payload.size()});
+                    ++added_;
                     break;
-                case Event::deleted: rc = del.bind(1, e.t0).bind(2, e.oid).run(); break;
+                case Event::deleted: file_->delete_object(e.oid, e.t0); break;
             }
         }
+        file_->commit();
     } catch (const std::runtime_error& e) {
-        fail(std::string("cannot write to it: ") + e.what());
-        rc = SQLITE_ERROR;
-    }
-    if (rc == SQLITE_OK) rc = exec(db_, "COMMIT");
-    if (rc != SQLITE_OK) {
-        const std::string why = sqlite_error(db_, rc);
-        exec(db_, "ROLLBACK");
-        uint64_t lost = 0;
-        for (const Event& e : batch) lost += e.kind == Event::sample;
+        // What did not reach the file is lost (SQLite rolls the batch back; MCAP loses its open
+        // chunk and keeps the chunks before it).
+        uint64_t in_batch = 0;
+        for (const Event& ev : batch) in_batch += ev.kind == Event::sample;
+        const uint64_t in_file = file_->samples_in_file();
         {
             std::lock_guard lock(mutex_);
-            counters_.dropped += lost;
+            counters_.dropped += (in_batch - (added_ - added_before)) + (added_ - in_file);
+            counters_.written = in_file;
         }
-        fail((rc == SQLITE_FULL ? "the disk is full (or the recording reached its size limit): " : "cannot write to it: ") + why);
+        added_ = in_file;
+        fail(dynamic_cast<const RecordingFull*>(&e) ? e.what() : std::string("cannot write to it: ") + e.what());
         return false;
     }
     std::lock_guard lock(mutex_);
-    counters_.written += samples;
+    counters_.written = file_->samples_in_file();
     return !failed_;
 }
 
@@ -294,22 +274,24 @@ void RecordingWriter::close()
 {
     {
         std::lock_guard lock(mutex_);
-        if (!db_) return;
+        if (!file_) return;
         closing_ = true;
     }
     cv_.notify_one();
     if (thread_.joinable()) thread_.join();
-    // The end, an index for people who open the file with sqlite3, and one file again (no WAL).
-    // After a failure these may fail too: what was committed is kept either way.
-    const uint64_t end = cpm::get_time_ns();
-    exec(db_, "INSERT OR REPLACE INTO meta VALUES('ended_ns', '" + std::to_string(end) + "');"
-              "INSERT OR REPLACE INTO meta VALUES('samples', '" + std::to_string(counters().written) + "');"
-              "INSERT OR REPLACE INTO meta VALUES('dropped', '" + std::to_string(counters().dropped) + "');");
-    exec(db_, "CREATE INDEX IF NOT EXISTS samples_by_object ON samples(oid, commit_ns)");
-    exec(db_, "PRAGMA wal_checkpoint(TRUNCATE); PRAGMA journal_mode=DELETE;");
-    sqlite3_close(db_);
+    // What the file holds once closed (an MCAP file's last chunk is written at its close).
+    const RecordingCounters c = counters();
+    try {
+        file_->finish({{"ended_ns", std::to_string(cpm::get_time_ns())},
+                       {"samples", std::to_string(added_)},
+                       {"dropped", std::to_string(c.dropped)}});
+    } catch (const std::exception& e) {
+        fail(std::string("cannot close it: ") + e.what());
+    }
     std::lock_guard lock(mutex_);
-    db_ = nullptr;
+    counters_.dropped += added_ - file_->samples_in_file();
+    counters_.written = file_->samples_in_file();
+    file_.reset();
 }
 
 RecordingCounters RecordingWriter::counters() const
@@ -472,6 +454,7 @@ LoadedRecording load_recording(const std::string& path)
     out.store = std::make_unique<Store>(keeping_everything());
     read_meta(meta, out);
     std::vector<std::string> damage;
+    if (meta.count("damage")) damage.push_back(meta["damage"]);  // an MCAP file's, read up to it
     read_types(db.get(), out, damage);
 
     std::map<Oid, Oid> oids;  // as recorded → as loaded (differs only where the live store reused a slot)
@@ -556,6 +539,71 @@ uint64_t recording_time(const std::string& path, const RunClock& clock, const st
     first.bind(1, data).bind(2, clock.lab_clock ? lab_clock_limit(clock.started_ns) : uint64_t(INT64_MAX));
     if (first.step() == SQLITE_ROW && !first.null(0)) return first.u64(0);
     return clock.lab_clock ? clock.ended_ns + 1 : data;  // past the run's end
+}
+
+ExportCounts export_recording(const std::string& path, const std::string& out, const ExportOptions& o)
+{
+    std::map<std::string, std::string> meta;
+    std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_recording_file(path, meta), sqlite3_close);
+    std::map<std::string, std::string> idl;
+    {
+        Statement t(db.get(), "SELECT file, idl FROM types");
+        while (t.step() == SQLITE_ROW) idl[t.text(0)] = t.text(1);
+    }
+    std::vector<std::string> damage;
+    RecordedObjects rows = read_objects(db.get(), damage);
+    std::set<std::string> wanted(o.topics.begin(), o.topics.end()), held;
+    for (const auto& [i, deleted] : rows) held.insert(i.topic);
+    for (const auto& t : wanted) {
+        if (!held.count(t)) throw Error("recording " + path + ": no topic '" + t + "' in it");
+    }
+    std::set<Oid> oids;
+    std::map<std::string, std::string> begin;
+    for (const char* k : {"name", "host", "started_ns"}) begin[k] = meta[k];
+    ExportCounts counts;
+    const RecordingFormat format = recording_format(out, o.format);
+    auto file = create_recording_file(out, format, begin, idl);
+    try {
+        for (const auto& [info, deleted] : rows) {
+            if (info.kind == ObjectKind::instance && !wanted.empty() && !wanted.count(info.topic)) continue;
+            file->add_object(info);
+            oids.insert(info.oid);
+            ++counts.objects;
+        }
+        const std::string by = o.by_data ? "data_ns" : "commit_ns";
+        Statement samples(db.get(), ("SELECT oid, commit_ns, data_ns, valid_after_ns, source_ns, lost_before, payload FROM samples WHERE " + by +
+                                     " >= ? AND " + by + " < ? ORDER BY rowid").c_str());
+        samples.bind(1, std::min<uint64_t>(o.from_ns, INT64_MAX)).bind(2, std::min<uint64_t>(o.to_ns, INT64_MAX));
+        while (samples.step() == SQLITE_ROW) {
+            if (!oids.count(samples.u64(0))) continue;
+            file->add_sample(samples.u64(0), {.commit_ns = samples.u64(1),
+                                              .data_ns = samples.u64(2),
+                                              .valid_after_ns = samples.u64(3),
+                                              .source_ns = samples.u64(4),
+                                              .lost_before = samples.u64(5),
+                                              .payload = samples.blob(6),
+                                              .size = samples.bytes(6)});
+            if (++counts.samples % 4096 == 0) file->commit();
+        }
+        for (const auto& [info, deleted] : rows) {
+            if (deleted && oids.count(info.oid)) file->delete_object(info.oid, deleted);
+        }
+        file->commit();
+        std::map<std::string, std::string> end;
+        for (const char* k : {"ended_ns", "samples", "dropped"}) {
+            if (meta.count(k)) end[k] = meta[k];
+        }
+        if (meta.count("ended_ns")) end["samples"] = std::to_string(counts.samples);
+        if (format == RecordingFormat::mcap) {
+            for (const auto& [name, values] : o.metadata) file->add_metadata(name, values);
+        }
+        file->finish(end);
+    } catch (const std::exception& e) {
+        file.reset();
+        std::filesystem::remove(out);
+        throw Error("export to " + out + ": " + e.what());
+    }
+    return counts;
 }
 
 namespace {

@@ -9,7 +9,8 @@ namespace {
 const char* kHelp =
     "usage: cpm_history [--include REGEX]... [--exclude REGEX]... [--window 10s] [--topic-window TOPIC=DURATION]...\n"
     "                   [--max-bytes-total N] [--max-bytes-per-topic N] [--status-period 1s]\n"
-    "                   [--record FILE [--record-max-bytes N] [--record-name NAME]] [--dds_domain N]\n"
+    "                   [--record FILE [--record-format sqlite|mcap] [--record-max-bytes N] [--record-name NAME]]\n"
+    "                   [--dds_domain N]\n"
     "\n"
     "Finds topics by DDS discovery and records every one whose name matches an --include pattern\n"
     "(all when none is given) and no --exclude pattern (full-match ECMAScript regexes), types it\n"
@@ -21,13 +22,15 @@ const char* kHelp =
     "(disposed, or their writers gone) stay readable for the window.\n"
     "Answers historyRequest on historyReply (cpm history ..., cpm dump, cpm::HistoryClient) and\n"
     "publishes historyStatus every --status-period. Ends on SIGINT/SIGTERM.\n"
-    "--record FILE: also writes every sample it ingests to FILE (SQLite; a new file, never\n"
-    "overwritten), with every object's info block and the IDL of cpm's types, kept whole beyond\n"
+    "--record FILE: also writes every sample it ingests to FILE (a new file, never overwritten):\n"
+    "SQLite, or MCAP for a FILE named *.mcap (or --record-format mcap), which Foxglove and every\n"
+    "MCAP tool open. Either holds every object's info block and the IDL of cpm's types, kept whole beyond\n"
     "the window: cpm history --file FILE asks it the same questions, cpm play replays it. A writer\n"
     "thread batches the disk writes, so ingest never waits on the disk. --record-max-bytes N: the\n"
     "file stops growing at N bytes. A full disk (or that limit) ends the recording with an error\n"
     "naming the file; what was written stays readable and the live history goes on serving.\n"
-    "The file is closed on SIGINT/SIGTERM; after a SIGKILL it still reads up to its last batch.\n";
+    "The file is closed on SIGINT/SIGTERM; after a SIGKILL it still reads up to its last batch\n"
+    "(SQLite) or its last chunk (MCAP: written at least once a second).\n";
 
 int run(int argc, char** argv)
 {

@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 
@@ -106,6 +107,97 @@ TEST(Mcap, DamageIsNamedWithItsOffsetAndAnExistingFileIsNeverOverwritten)
     }
     std::ofstream(dir.file("not.mcap")) << "hello, this is not a recording";
     EXPECT_THROW((void)mcap::read(dir.file("not.mcap")), cpm::Error);
+}
+
+TEST(Mcap, PrivateRecordsAndSequenceGapsReadBackWhereTheyWereWritten)
+{
+    cpm_test::TempDir dir;
+    const std::string path = dir.file("private.mcap");
+    {
+        mcap::Writer w(path, "cpm test", 200);
+        const auto c = w.add_channel(w.add_schema("T", "omgidl", "struct T { long x; };"), "t", "cdr");
+        const auto raw = w.add_channel(0, "unknown", "cdr");  // a type without a schema
+        EXPECT_THROW(w.write_private(0x0C, "x"), cpm::Error) << "0x0C is the spec's Metadata";
+        for (uint8_t i = 0; i < 20; ++i) {
+            w.write_private(0x81, std::string(1, char(i)));
+            const std::vector<uint8_t> payload{0, 1, 0, 0, i, 0, 0, 0};
+            w.write(i % 4 == 3 ? raw : c, 10 + i, 10 + i, payload.data(), payload.size(), i == 10 ? std::optional<uint32_t>(100) : std::nullopt);
+        }
+    }
+    const auto f = mcap::read(path);
+    ASSERT_EQ(f.messages.size(), 20u);
+    ASSERT_EQ(f.privates.size(), 20u);
+    for (size_t i = 0; i < 20; ++i) {
+        EXPECT_EQ(f.privates[i].op, 0x81);
+        EXPECT_EQ(f.privates[i].body, std::string(1, char(i)));
+        EXPECT_EQ(f.privates[i].before_message, i) << "each before the message written after it";
+    }
+    EXPECT_EQ(f.channels.at(1).schema_id, 0);
+    EXPECT_EQ(f.messages[9].sequence, 7u);   // channel t's eighth message
+    EXPECT_EQ(f.messages[10].sequence, 100u) << "a sequence given";
+    EXPECT_EQ(f.messages[12].sequence, 101u) << "and counted on from there";
+}
+
+TEST(Mcap, AFileCutShortReadsItsWholeChunksAndNamesWhereItStopped)
+{
+    cpm_test::TempDir dir;
+    const std::string path = dir.file("killed.mcap");
+    std::string bytes;
+    std::vector<size_t> chunk_ends;  // the file's size after each flush
+    {
+        mcap::Writer w(path, "cpm test", 1 << 20);
+        const auto c = w.add_channel(w.add_schema("T", "omgidl", "struct T { long x; };"), "t", "cdr");
+        for (uint8_t i = 0; i < 30; ++i) {
+            const std::vector<uint8_t> payload(40, i);
+            w.write(c, 100 + i, 100 + i, payload.data(), payload.size());
+            if (i % 10 == 9) {
+                w.flush();  // as the recorder does once a second
+                chunk_ends.push_back(std::filesystem::file_size(path));
+            }
+        }
+        std::ifstream in(path, std::ios::binary);
+        bytes.assign((std::istreambuf_iterator<char>(in)), {});  // the file as a SIGKILL would leave it
+    }
+    ASSERT_EQ(bytes.size(), chunk_ends.back());
+    std::ofstream(dir.file("unfinished.mcap"), std::ios::binary) << bytes;
+    EXPECT_THROW((void)mcap::read(dir.file("unfinished.mcap")), cpm::Error) << "refused unless damage is asked to be kept";
+    const auto whole = mcap::read(dir.file("unfinished.mcap"), mcap::Damage::keep_what_reads);
+    EXPECT_EQ(whole.messages.size(), 30u);
+    EXPECT_NE(whole.damage.find("not finished"), std::string::npos) << whole.damage;
+    // Cut inside the third chunk: the first two read, the third not at all.
+    std::ofstream(dir.file("cut.mcap"), std::ios::binary) << bytes.substr(0, chunk_ends[1] + 30);
+    const auto cut = mcap::read(dir.file("cut.mcap"), mcap::Damage::keep_what_reads);
+    EXPECT_EQ(cut.messages.size(), 20u);
+    EXPECT_EQ(cut.messages.back().log_time, 119u);
+    EXPECT_NE(cut.damage.find("at byte " + std::to_string(chunk_ends[1])), std::string::npos) << cut.damage << " (chunk ends " << chunk_ends[0] << ", " << chunk_ends[1] << ")";
+    EXPECT_NE(cut.damage.find("30 bytes from there on are not read"), std::string::npos) << cut.damage;
+}
+
+TEST(Mcap, AChunkPastTheSizeLimitIsRefusedAndTheFileClosesValidWithoutIt)
+{
+    cpm_test::TempDir dir;
+    const std::string path = dir.file("capped.mcap");
+    mcap::Writer w(path, "cpm test", 4096, 100 * 1024);
+    const auto c = w.add_channel(w.add_schema("T", "omgidl", "struct T { long x; };"), "t", "cdr");
+    const std::vector<uint8_t> payload(1000, 1);
+    uint64_t refused_at = 0;
+    for (uint64_t i = 0; i < 1000 && !refused_at; ++i) {
+        try {
+            w.write(c, i, i, payload.data(), payload.size());
+        } catch (const cpm::Error& e) {
+            EXPECT_NE(std::string(e.what()).find("size limit of 102400 bytes"), std::string::npos) << e.what();
+            refused_at = i + 1;
+        }
+    }
+    ASSERT_GT(refused_at, 0u) << "100 KiB cannot hold a thousand samples of 1000 bytes";
+    const uint64_t kept = w.messages();
+    EXPECT_GT(kept, 10u);
+    EXPECT_LT(kept, refused_at);
+    w.close();
+    EXPECT_LE(std::filesystem::file_size(path), 100u * 1024);
+    const auto f = mcap::read(path);
+    EXPECT_EQ(f.messages.size(), kept);
+    EXPECT_EQ(f.statistics_messages, kept) << "the statistics count what is in the file";
 }
 
 }  // namespace

@@ -77,67 +77,70 @@ std::string text(const HistoryReply& r)
 
 TEST(Recording, AnswersEveryQueryAsTheStoreItRecorded)
 {
-    TempDir dir;
-    const std::string path = dir.file("recording.db");
-    std::vector<HistoryRequest> questions;
-    std::vector<std::string> live;
-    {
-        Lab lab(path, {.name = "unit"});
-        const Oid proc = lab.add({.kind = ObjectKind::process, .name = "fsm_node_5", .type_name = "participant", .created_ts = 900});
-        const Oid car = lab.add({.topic = "vehicleState", .key = "5", .type_name = "VehicleState", .parent = proc, .creator = "fsm_node_5",
-                                 .created_ts = 1000});
-        const Oid other = lab.add({.topic = "vehicleState", .key = "6", .type_name = "VehicleState", .created_ts = 1000});
-        const Oid gone = lab.add({.topic = "log", .type_name = "Log", .created_ts = 1100});
-        std::mt19937 rng(7);
-        for (uint64_t i = 0; i < 400; ++i) {
-            std::vector<uint8_t> payload(8 + rng() % 64);
-            for (auto& b : payload) b = uint8_t(rng());
-            const uint64_t now = 2000 + i * 10;
-            // Data times out of order now and then; a tie in commit time; a gap of lost samples.
-            lab.commit(car, now - (i % 7 == 3 ? 40 : 2), payload, i == 50 ? 2000 + 49 * 10 : now, i == 120 ? 3 : 0);
-            if (i % 3 == 0) lab.commit(other, now - 1, payload, now + 1);
-            if (i < 20) lab.commit(gone, now, payload, now + 2);
-        }
-        lab.remove(gone, 2500);
-        lab.writer.close();
-        EXPECT_EQ(lab.writer.counters().written, 400u + 134u + 20u);
-        EXPECT_EQ(lab.writer.counters().dropped, 0u);
-        for (const std::string by : {"commit", "data"}) {
-            for (uint64_t t : {0ull, 1999ull, 2000ull, 2005ull, 2490ull, 2491ull, 3000ull, 5990ull, 6000ull, 9000ull}) {
-                for (const std::string kind : {"at", "older", "younger"}) {
-                    for (const std::string key : {"5", "6"}) questions.push_back(request(kind, "vehicleState", key, t, 0, by));
-                    questions.push_back(request(kind, "log", "", t, 0, by));
-                }
+    for (const std::string format : {"db", "mcap"}) {
+        SCOPED_TRACE("a recording in " + format);
+        TempDir dir;
+        const std::string path = dir.file("recording." + format);
+        std::vector<HistoryRequest> questions;
+        std::vector<std::string> live;
+        {
+            Lab lab(path, {.name = "unit"});
+            const Oid proc = lab.add({.kind = ObjectKind::process, .name = "fsm_node_5", .type_name = "participant", .created_ts = 900});
+            const Oid car = lab.add({.topic = "vehicleState", .key = "5", .type_name = "VehicleState", .parent = proc, .creator = "fsm_node_5",
+                                     .created_ts = 1000});
+            const Oid other = lab.add({.topic = "vehicleState", .key = "6", .type_name = "VehicleState", .created_ts = 1000});
+            const Oid gone = lab.add({.topic = "log", .type_name = "Log", .created_ts = 1100});
+            std::mt19937 rng(7);
+            for (uint64_t i = 0; i < 400; ++i) {
+                std::vector<uint8_t> payload(8 + rng() % 64);
+                for (auto& b : payload) b = uint8_t(rng());
+                const uint64_t now = 2000 + i * 10;
+                // Data times out of order now and then; a tie in commit time; a gap of lost samples.
+                lab.commit(car, now - (i % 7 == 3 ? 40 : 2), payload, i == 50 ? 2000 + 49 * 10 : now, i == 120 ? 3 : 0);
+                if (i % 3 == 0) lab.commit(other, now - 1, payload, now + 1);
+                if (i < 20) lab.commit(gone, now, payload, now + 2);
             }
-            questions.push_back(request("range", "vehicleState", "5", 2100, 3300, by));
-            questions.push_back(request("range", "log", "", 0, 10000, by));
+            lab.remove(gone, 2500);
+            lab.writer.close();
+            EXPECT_EQ(lab.writer.counters().written, 400u + 134u + 20u);
+            EXPECT_EQ(lab.writer.counters().dropped, 0u);
+            for (const std::string by : {"commit", "data"}) {
+                for (uint64_t t : {0ull, 1999ull, 2000ull, 2005ull, 2490ull, 2491ull, 3000ull, 5990ull, 6000ull, 9000ull}) {
+                    for (const std::string kind : {"at", "older", "younger"}) {
+                        for (const std::string key : {"5", "6"}) questions.push_back(request(kind, "vehicleState", key, t, 0, by));
+                        questions.push_back(request(kind, "log", "", t, 0, by));
+                    }
+                }
+                questions.push_back(request("range", "vehicleState", "5", 2100, 3300, by));
+                questions.push_back(request("range", "log", "", 0, 10000, by));
+            }
+            questions.push_back(request("latest", "vehicleState", "5", 0));
+            questions.push_back(request("successor", "vehicleState", "5", 3180));  // the gap before i == 120
+            questions.push_back(request("successor", "vehicleState", "5", 3000));
+            auto snap = request("snapshot", "", "", 2500);
+            snap.objects({"vehicleState/5", "vehicleState/6", "log"});
+            questions.push_back(snap);
+            questions.push_back(request("list", "", "", 0));
+            auto search = request("search", "", "", 0);
+            search.name_regex("VEHICLE");
+            questions.push_back(search);
+            auto alive = request("search", "", "", 0);
+            alive.alive_at(2600);
+            questions.push_back(alive);
+            for (const auto& q : questions) live.push_back(text(answer(lab.store, q)));
         }
-        questions.push_back(request("latest", "vehicleState", "5", 0));
-        questions.push_back(request("successor", "vehicleState", "5", 3180));  // the gap before i == 120
-        questions.push_back(request("successor", "vehicleState", "5", 3000));
-        auto snap = request("snapshot", "", "", 2500);
-        snap.objects({"vehicleState/5", "vehicleState/6", "log"});
-        questions.push_back(snap);
-        questions.push_back(request("list", "", "", 0));
-        auto search = request("search", "", "", 0);
-        search.name_regex("VEHICLE");
-        questions.push_back(search);
-        auto alive = request("search", "", "", 0);
-        alive.alive_at(2600);
-        questions.push_back(alive);
-        for (const auto& q : questions) live.push_back(text(answer(lab.store, q)));
-    }
-    const LoadedRecording rec = load_recording(path);
-    EXPECT_TRUE(rec.complete) << rec.warning;
-    EXPECT_EQ(rec.warning, "");
-    EXPECT_EQ(rec.name, "unit");
-    EXPECT_EQ(rec.samples, 554u);
-    ASSERT_TRUE(rec.types) << "the recording carries the IDL of cpm's types";
-    EXPECT_TRUE(rec.types->knows("VehicleState"));
-    for (size_t i = 0; i < questions.size(); ++i) {
-        EXPECT_EQ(text(answer(*rec.store, questions[i])), live[i]) << "question " << i << ": " << questions[i].kind() << " "
-                                                                   << questions[i].topic() << "/" << questions[i].key() << " t0=" << questions[i].t0()
-                                                                   << " by " << questions[i].by();
+        const LoadedRecording rec = load_recording(path);
+        EXPECT_TRUE(rec.complete) << rec.warning;
+        EXPECT_EQ(rec.warning, "");
+        EXPECT_EQ(rec.name, "unit");
+        EXPECT_EQ(rec.samples, 554u);
+        ASSERT_TRUE(rec.types) << "the recording carries the IDL of cpm's types";
+        EXPECT_TRUE(rec.types->knows("VehicleState"));
+        for (size_t i = 0; i < questions.size(); ++i) {
+            EXPECT_EQ(text(answer(*rec.store, questions[i])), live[i]) << "question " << i << ": " << questions[i].kind() << " "
+                                                                       << questions[i].topic() << "/" << questions[i].key() << " t0=" << questions[i].t0()
+                                                                       << " by " << questions[i].by();
+        }
     }
 }
 
@@ -211,90 +214,99 @@ TEST(Recording, AFileThatIsNoRecordingIsNamedInTheError)
 
 TEST(Recording, AFullDiskStopsTheRecordingWithAnErrorAndKeepsWhatWasWritten)
 {
-    TempDir dir;
-    const std::string path = dir.file("full.db");
-    Lab lab(path, {.max_bytes = 256 * 1024, .flush_period_ns = 1'000'000});
-    const Oid o = lab.add({.topic = "big", .type_name = "Blob", .created_ts = 1});
-    const std::vector<uint8_t> payload(1000, 0xab);
-    uint64_t now = 1000;
-    for (int i = 0; i < 2000 && !lab.writer.counters().failed; ++i) {
+    for (const std::string format : {"db", "mcap"}) {
+        SCOPED_TRACE("a recording in " + format);
+        TempDir dir;
+        const std::string path = dir.file("full." + format);
+        Lab lab(path, {.max_bytes = 256 * 1024, .flush_period_ns = 1'000'000});
+        const Oid o = lab.add({.topic = "big", .type_name = "Blob", .created_ts = 1});
+        const std::vector<uint8_t> payload(1000, 0xab);
+        uint64_t now = 1000;
+        for (int i = 0; i < 2000 && !lab.writer.counters().failed; ++i) {
+            lab.commit(o, now, payload, now);
+            now += 1000;
+            if (i % 50 == 49) std::this_thread::sleep_for(std::chrono::milliseconds(5));  // let batches reach the disk
+        }
+        for (int i = 0; i < 200 && !lab.writer.counters().failed; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        const auto c = lab.writer.counters();
+        ASSERT_TRUE(c.failed) << "256 KiB cannot hold 2000 samples of 1000 bytes";
+        EXPECT_NE(c.error.find(path), std::string::npos) << c.error;
+        EXPECT_NE(c.error.find("full"), std::string::npos) << c.error;
+        EXPECT_GT(c.written, 50u);
+        EXPECT_GT(c.dropped, 0u);
+        // The live store still has everything; the file what it says it wrote.
         lab.commit(o, now, payload, now);
-        now += 1000;
-        if (i % 50 == 49) std::this_thread::sleep_for(std::chrono::milliseconds(5));  // let batches reach the disk
+        EXPECT_EQ(lab.store.info(o)->samples_total, c.queued + 1);
+        lab.writer.close();
+        const auto rec = load_recording(path);
+        EXPECT_EQ(rec.samples, lab.writer.counters().written);
+        auto first = answer(*rec.store, request("at", "big", "", 1000));
+        ASSERT_EQ(first.status(), "ok");
+        EXPECT_EQ(first.samples()[0].payload(), payload);
     }
-    for (int i = 0; i < 200 && !lab.writer.counters().failed; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    const auto c = lab.writer.counters();
-    ASSERT_TRUE(c.failed) << "256 KiB cannot hold 2000 samples of 1000 bytes";
-    EXPECT_NE(c.error.find(path), std::string::npos) << c.error;
-    EXPECT_NE(c.error.find("full"), std::string::npos) << c.error;
-    EXPECT_GT(c.written, 50u);
-    EXPECT_GT(c.dropped, 0u);
-    // The live store still has everything; the file what it says it wrote.
-    lab.commit(o, now, payload, now);
-    EXPECT_EQ(lab.store.info(o)->samples_total, c.queued + 1);
-    lab.writer.close();
-    const auto rec = load_recording(path);
-    EXPECT_EQ(rec.samples, lab.writer.counters().written);
-    auto first = answer(*rec.store, request("at", "big", "", 1000));
-    ASSERT_EQ(first.status(), "ok");
-    EXPECT_EQ(first.samples()[0].payload(), payload);
 }
 
 TEST(Recording, ATruncatedFileAnswersUpToTheDamageAndSaysSo)
 {
-    TempDir dir;
-    const std::string path = dir.file("cut.db");
-    {
-        Lab lab(path);
-        const Oid o = lab.add({.topic = "t", .type_name = "Blob", .created_ts = 1});
-        const std::vector<uint8_t> payload(200, 7);
-        for (uint64_t i = 1; i <= 5000; ++i) lab.commit(o, i * 1000, payload, i * 1000);
+    for (const std::string format : {"db", "mcap"}) {
+        SCOPED_TRACE("a recording in " + format);
+        TempDir dir;
+        const std::string path = dir.file("cut." + format);
+        {
+            Lab lab(path);
+            const Oid o = lab.add({.topic = "t", .type_name = "Blob", .created_ts = 1});
+            const std::vector<uint8_t> payload(200, 7);
+            for (uint64_t i = 1; i <= 5000; ++i) lab.commit(o, i * 1000, payload, i * 1000);
+        }
+        const auto whole = load_recording(path);
+        ASSERT_EQ(whole.samples, 5000u);
+        fs::resize_file(path, fs::file_size(path) / 2);
+        const auto cut = load_recording(path);
+        EXPECT_FALSE(cut.complete);
+        EXPECT_NE(cut.warning.find(path), std::string::npos) << cut.warning;
+        EXPECT_NE(cut.warning.find("damaged"), std::string::npos) << cut.warning;
+        EXPECT_GT(cut.samples, 1000u) << cut.warning;
+        EXPECT_LT(cut.samples, 5000u);
+        auto r = answer(*cut.store, request("at", "t", "", 1000 * 500));
+        ASSERT_EQ(r.status(), "ok") << cut.warning;
+        EXPECT_EQ(r.samples()[0].commit_ns(), 500'000u);
     }
-    const auto whole = load_recording(path);
-    ASSERT_EQ(whole.samples, 5000u);
-    fs::resize_file(path, fs::file_size(path) / 2);
-    const auto cut = load_recording(path);
-    EXPECT_FALSE(cut.complete);
-    EXPECT_NE(cut.warning.find(path), std::string::npos) << cut.warning;
-    EXPECT_NE(cut.warning.find("damaged"), std::string::npos) << cut.warning;
-    EXPECT_GT(cut.samples, 1000u) << cut.warning;
-    EXPECT_LT(cut.samples, 5000u);
-    auto r = answer(*cut.store, request("at", "t", "", 1000 * 500));
-    ASSERT_EQ(r.status(), "ok") << cut.warning;
-    EXPECT_EQ(r.samples()[0].commit_ns(), 500'000u);
 }
 
 TEST(Recording, ObjectsKeepTheirOidsEvenWhereTheLiveStoreReusedASlot)
 {
-    TempDir dir;
-    const std::string path = dir.file("slots.db");
-    Oid first, second, child;
-    {
-        Store store({.default_retention = {.window_ns = 100}});
-        RecordingWriter writer(path);
-        auto add = [&](ObjectInfo i) {
-            const Oid oid = store.add_object(std::move(i));
-            writer.object_added(*store.info(oid));
-            return oid;
-        };
-        first = add({.kind = ObjectKind::process, .name = "a", .type_name = "participant", .created_ts = 1});
-        store.mark_deleted(first, 10);
-        writer.object_deleted(first, 10);
-        store.expire(1000);  // purged: its slot is free for the next object
-        second = add({.kind = ObjectKind::process, .name = "b", .type_name = "participant", .created_ts = 1001});
-        ASSERT_EQ(uint32_t(second), uint32_t(first)) << "the store reuses the slot";
-        child = add({.topic = "x", .type_name = "X", .parent = second, .created_ts = 1002});
+    for (const std::string format : {"db", "mcap"}) {
+        SCOPED_TRACE("a recording in " + format);
+        TempDir dir;
+        const std::string path = dir.file("slots." + format);
+        Oid first, second, child;
+        {
+            Store store({.default_retention = {.window_ns = 100}});
+            RecordingWriter writer(path);
+            auto add = [&](ObjectInfo i) {
+                const Oid oid = store.add_object(std::move(i));
+                writer.object_added(*store.info(oid));
+                return oid;
+            };
+            first = add({.kind = ObjectKind::process, .name = "a", .type_name = "participant", .created_ts = 1});
+            store.mark_deleted(first, 10);
+            writer.object_deleted(first, 10);
+            store.expire(1000);  // purged: its slot is free for the next object
+            second = add({.kind = ObjectKind::process, .name = "b", .type_name = "participant", .created_ts = 1001});
+            ASSERT_EQ(uint32_t(second), uint32_t(first)) << "the store reuses the slot";
+            child = add({.topic = "x", .type_name = "X", .parent = second, .created_ts = 1002});
+        }
+        const auto rec = load_recording(path);
+        auto b = rec.store->info(second);
+        ASSERT_TRUE(b) << "the newer object keeps the oid the live store knew last";
+        EXPECT_EQ(b->name, "b");
+        auto c = rec.store->info(child);
+        ASSERT_TRUE(c);
+        EXPECT_EQ(c->topic, "x");
+        EXPECT_EQ(c->parent, second);
+        auto objects = rec.store->search({.name_regex = "^a$"});
+        ASSERT_EQ(objects.size(), 1u) << "the purged object is in the recording, under another oid";
+        EXPECT_NE(objects[0].oid, second);
+        EXPECT_EQ(objects[0].deleted_ts, 10u);
     }
-    const auto rec = load_recording(path);
-    auto b = rec.store->info(second);
-    ASSERT_TRUE(b) << "the newer object keeps the oid the live store knew last";
-    EXPECT_EQ(b->name, "b");
-    auto c = rec.store->info(child);
-    ASSERT_TRUE(c);
-    EXPECT_EQ(c->topic, "x");
-    EXPECT_EQ(c->parent, second);
-    auto objects = rec.store->search({.name_regex = "^a$"});
-    ASSERT_EQ(objects.size(), 1u) << "the purged object is in the recording, under another oid";
-    EXPECT_NE(objects[0].oid, second);
-    EXPECT_EQ(objects[0].deleted_ts, 10u);
 }

@@ -9,6 +9,7 @@
 #include <cpm/CommandLine.hpp>
 #include <cpm/HistoryClient.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/read_text_file.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -16,6 +17,9 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
+#include <map>
+#include <sstream>
 #include <memory>
 #include <regex>
 #include <set>
@@ -53,6 +57,11 @@ const char* const kHistoryHelp =
     "                                       every sample (of every key without --key) as CSV, in\n"
     "                                       commit order: commit_ns, data_ns, valid_after_ns, key, then\n"
     "                                       the fields by IDL path (pose.x); cpm record import reads it\n"
+    "  export --mcap|--sqlite OUT [--topics A,B] [--from T] [--to T] [--by commit|data]   (with --file)\n"
+    "                                       a new recording OUT of the topics asked for (all without\n"
+    "                                       --topics), every sample byte for byte: MCAP opens in\n"
+    "                                       Foxglove (IDL schemas, CDR messages, indexed); a run\n"
+    "                                       folder's scenario and summary go with it as metadata\n"
     "--key: a vehicle id, or the key as `cpm history list` prints it. Times: nanoseconds,\n"
     "ISO-8601 UTC (2026-11-23T14:05:00.25Z) or relative to now (-2s). --by commit (default):\n"
     "when the service received it; data: the sample's create_stamp.\n"
@@ -444,12 +453,52 @@ int dump_command(const std::vector<std::string>& args)
 
 /// `cpm history export --topic T [--key K] --csv`: every sample of the object (or of every key
 /// of the topic), in commit order, as CSV (cpm::rtdb::csv).
+/// `cpm history --file REC export --mcap|--sqlite OUT`: the recording (some topics, a span of
+/// it) into a new recording file.
+int export_recording_command(const cpm::cli::ParsedArgs& parsed, const std::string& file, const std::string& command)
+{
+    if (file.empty()) throw UsageError(command + ": --mcap and --sqlite copy a recording: give it with --file REC");
+    for (const char* f : {"--topic", "--key", "--csv"}) {
+        if (parsed.has(f)) throw UsageError(command + ": " + f + " goes with --csv; a recording is exported by --topics A,B");
+    }
+    const bool mcap = parsed.has("--mcap");
+    if (mcap && parsed.has("--sqlite")) throw UsageError(command + ": --mcap or --sqlite, not both");
+    const std::string out = parsed.get(mcap ? "--mcap" : "--sqlite");
+    const Source source = open_source(file, command);
+    cpm::rtdb::ExportOptions o{.format = mcap ? "mcap" : "sqlite"};
+    o.by_data = parsed.get("--by", "commit") == "data";
+    if (!o.by_data && parsed.get("--by", "commit") != "commit") throw UsageError(command + ": --by '" + parsed.get("--by") + "': expected commit or data");
+    if (parsed.has("--from")) o.from_ns = source.time("--from", parsed.get("--from"), o.by_data);
+    if (parsed.has("--to")) o.to_ns = source.time("--to", parsed.get("--to"), o.by_data);
+    if (o.to_ns < o.from_ns) throw UsageError(command + ": --to is before --from");
+    std::stringstream topics(parsed.get("--topics"));
+    for (std::string t; std::getline(topics, t, ',');) {
+        if (!t.empty()) o.topics.push_back(t);
+    }
+    // A run folder's scenario and summary travel with its recording.
+    const std::filesystem::path dir = std::filesystem::path(file).parent_path();
+    std::map<std::string, std::string> run;
+    for (const char* f : {"scenario.yaml", "summary.json"}) {
+        if (std::filesystem::is_regular_file(dir / f)) run[std::filesystem::path(f).stem().string()] = cpm::read_text_file((dir / f).string(), "run file");
+    }
+    if (!run.empty()) o.metadata["cpm.run"] = run;
+    const auto counts = cpm::rtdb::export_recording(file, out, o);
+    std::printf("%s: %llu samples of %llu objects from %s\n", out.c_str(), (unsigned long long)counts.samples, (unsigned long long)counts.objects,
+                file.c_str());
+    return 0;
+}
+
 int export_command(const std::vector<std::string>& args, const std::string& file)
 {
     const std::string command = "cpm history export";
-    auto parsed = cpm::cli::parse_flags(args, {{"--topic", true}, {"--key", true}, {"--from", true}, {"--to", true}, {"--csv", false}}, command);
+    auto parsed = cpm::cli::parse_flags(args, {{"--topic", true}, {"--key", true}, {"--from", true}, {"--to", true}, {"--csv", false},
+                                               {"--mcap", true}, {"--sqlite", true}, {"--topics", true}, {"--by", true}}, command);
+    if (parsed.has("--mcap") || parsed.has("--sqlite")) return export_recording_command(parsed, file, command);
+    for (const char* f : {"--topics", "--by"}) {
+        if (parsed.has(f)) throw UsageError(command + ": " + f + " goes with --mcap or --sqlite");
+    }
     if (!parsed.has("--topic")) throw UsageError(command + ": --topic NAME is required");
-    if (!parsed.has("--csv")) throw UsageError(command + ": --csv is required (the one format export writes)");
+    if (!parsed.has("--csv")) throw UsageError(command + ": which format? --csv (with --topic), or --mcap OUT or --sqlite OUT (with --file)");
     const Source source = open_source(file, command);
     const uint64_t from = parsed.has("--from") ? source.time("--from", parsed.get("--from")) : 0;
     const uint64_t to = parsed.has("--to") ? source.time("--to", parsed.get("--to")) : uint64_t(INT64_MAX);

@@ -27,16 +27,20 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 struct sqlite3;
 
 namespace cpm::rtdb {
 
 class IdlDecoder;
+class RecordingFile;
 
 struct RecordingOptions
 {
     std::string name;  ///< the run's name, kept in the file's meta table
+    /// "sqlite" or "mcap"; "" (the default): MCAP for a file named *.mcap, else SQLite.
+    std::string format;
     /// The file stops growing here: the recording ends with an error, as on a full disk. 0: no
     /// limit but the disk's.
     uint64_t max_bytes = 0;
@@ -84,7 +88,7 @@ private:
 
     std::string path_;
     RecordingOptions options_;
-    sqlite3* db_ = nullptr;
+    std::unique_ptr<RecordingFile> file_;
     mutable std::mutex mutex_;
     std::condition_variable cv_;
     std::deque<Event> queue_;
@@ -92,6 +96,7 @@ private:
     bool closing_ = false, failed_ = false;
     RecordingCounters counters_;
     uint64_t started_ns_ = 0;
+    uint64_t added_ = 0;  // samples handed to the file (its writer thread's)
     std::thread thread_;
 };
 
@@ -133,6 +138,28 @@ uint64_t recording_time(const std::string& path, const RunClock& clock, const st
 
 /// Whether `text` is a time into a run ("20s", "1.5s", "90s": a duration without a sign).
 bool is_time_into_run(const std::string& text);
+
+/// What `cpm history --file REC export --mcap|--sqlite OUT` copies.
+struct ExportOptions
+{
+    std::string format;               ///< "sqlite", "mcap", "" for by OUT's extension
+    std::vector<std::string> topics;  ///< none: every topic
+    uint64_t from_ns = 0, to_ns = UINT64_MAX;  ///< the samples of [from, to)
+    bool by_data = false;             ///< from/to are data times (else commit times)
+    /// Metadata records for an MCAP file (name → values; cpm.run: the scenario and summary).
+    std::map<std::string, std::map<std::string, std::string>> metadata;
+};
+
+struct ExportCounts
+{
+    uint64_t objects = 0, samples = 0;
+};
+
+/// Copies a recording (SQLite or MCAP) into a new file `out` (SQLite or MCAP): its meta and IDL,
+/// the objects of the topics asked for (every process too) and their samples in commit order,
+/// byte for byte with every time. Throws cpm::Error naming the file (`out` exists already, a
+/// topic the recording does not hold, a write that fails: then `out` is removed).
+ExportCounts export_recording(const std::string& path, const std::string& out, const ExportOptions& options);
 
 /// A HistoryClient's backend answering from a loaded recording as the live service answers
 /// (the kinds that wait answer at once: nothing new comes to a finished run).

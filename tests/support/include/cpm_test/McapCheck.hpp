@@ -1,0 +1,16 @@
+#pragma once
+// An independent referee for every MCAP file the tests write: the format's reference reader
+// (@mcap/core, in Node) opens it indexed and streamed, checks every CRC, reads each message in
+// log time order and decodes it with the IDL the file embeds (Foxglove's omgidl parser and CDR
+// reader), and each message is compared, field by field, with what `cpm history --file FILE
+// --json` answers for it.
+#include <string>
+
+namespace cpm_test {
+
+/// "" when the reference reader reads `file` whole and every message equals cpm's answer (and
+/// cpm answers no sample the reader did not read); else what differs, naming the topic, key,
+/// commit time and field. `expected_messages` (when not negative) is the count both must read.
+std::string mcap_differences(const std::string& file, long expected_messages = -1);
+
+}  // namespace cpm_test
