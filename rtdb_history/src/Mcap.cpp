@@ -191,8 +191,12 @@ void Writer::flush_chunk()
     Out body;
     body.u64(chunk_start_).u64(chunk_end_).u64(chunk_.size()).u32(crc_of(chunk_)).str("").u64(chunk_.size()).raw(chunk_);
     const std::string chunk_record = record(chunk, body.b);
-    // Room is kept for the summary (its chunk indexes grow with the chunks, about 100 bytes each).
-    const uint64_t summary_room = 64 * 1024 + chunk_indexes_.size() * 2;
+    // Room is kept for what close() writes after it: the summary (the schemas and channels
+    // again, the chunk indexes, this chunk's among them, statistics, metadata indexes, offsets),
+    // the footer and a last Metadata record or two.
+    uint64_t summary_room = chunk_indexes_.size() + 2048 + 64 * (channels_.size() + metadata_.size());
+    for (const auto& x : schemas_) summary_room += schema_record(x).size();
+    for (const auto& x : channels_) summary_room += channel_record(x).size();
     if (max_bytes_ && offset_ + chunk_record.size() + summary_room > max_bytes_) {
         drop_chunk();
         throw cpm::Error("mcap: " + path_ + " reached its size limit of " + std::to_string(max_bytes_) + " bytes");

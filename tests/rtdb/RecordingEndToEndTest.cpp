@@ -9,6 +9,7 @@
 
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
+#include <cpm_test/McapCheck.hpp>
 #include <cpm_test/Process.hpp>
 
 #include <VehicleState.h>
@@ -18,6 +19,7 @@
 #include <cpm_test/TempDir.hpp>
 
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -61,6 +63,43 @@ Answer ask(std::vector<std::string> args, const std::string& file = "")
     Process p(args);
     const int code = p.wait(30s);
     return {code, p.output(), p.errors()};
+}
+
+/// Every row of a recording's table in its order, as text (blobs in hex), read with SQLite itself.
+std::vector<std::string> recorded_rows(const std::string& file, const std::string& table)
+{
+    sqlite3* db = nullptr;
+    std::vector<std::string> rows;
+    if (sqlite3_open_v2(file.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
+        sqlite3_close(db);
+        return {"cannot open " + file};
+    }
+    sqlite3_stmt* q = nullptr;
+    if (sqlite3_prepare_v2(db, ("SELECT * FROM " + table + " ORDER BY rowid").c_str(), -1, &q, nullptr) == SQLITE_OK) {
+        while (sqlite3_step(q) == SQLITE_ROW) {
+            std::string row;
+            for (int c = 0; c < sqlite3_column_count(q); ++c) {
+                if (sqlite3_column_type(q, c) == SQLITE_BLOB) {
+                    const auto* b = static_cast<const uint8_t*>(sqlite3_column_blob(q, c));
+                    char hex[3];
+                    for (int i = 0; i < sqlite3_column_bytes(q, c); ++i) {
+                        std::snprintf(hex, sizeof hex, "%02x", b[i]);
+                        row += hex;
+                    }
+                } else {
+                    const auto* t = sqlite3_column_text(q, c);
+                    row += t ? reinterpret_cast<const char*>(t) : "NULL";
+                }
+                row += "|";
+            }
+            rows.push_back(row);
+        }
+    } else {
+        rows.push_back(std::string("cannot read ") + table + " of " + file + ": " + sqlite3_errmsg(db));
+    }
+    sqlite3_finalize(q);
+    sqlite3_close(db);
+    return rows;
 }
 
 /// Objects as JSON lines without the two fields that depend on when they are asked.
@@ -261,19 +300,44 @@ TEST(RecordingEndToEnd, ARecordedRunAnswersEveryVerbAsTheLiveServiceDid)
     const Answer relative = ask({"at", "--topic", "vehicleState", "--key", "3", "--time", "now", "--json"}, file);
     EXPECT_EQ(relative.code, 0) << relative.err;
     EXPECT_EQ(nlohmann::json::parse(relative.out)["commit_ns"], commits[79]);
+
+    // The same recording as MCAP: the format's reference reader reads every message as cpm
+    // decodes it, every question answers as from the SQLite file, and it comes back to SQLite
+    // byte for byte.
+    const std::string mcap = dir.file("recording.mcap");
+    Process to_mcap({built_program("cpm"), "history", "--file", file, "export", "--mcap", mcap});
+    ASSERT_EQ(to_mcap.wait(60s), 0) << to_mcap.errors();
+    EXPECT_EQ(cpm_test::mcap_differences(mcap, long(counts["recording"]["written"].get<uint64_t>())), "");
+    for (const auto& q : questions) {
+        std::string text;
+        for (const auto& a : q.args) text += a + " ";
+        const Answer from_db = ask(q.args, file), from_mcap = ask(q.args, mcap);
+        EXPECT_EQ(from_mcap.code, from_db.code) << text << from_mcap.err;
+        EXPECT_EQ(from_mcap.out, from_db.out) << text;
+    }
+    EXPECT_EQ(without_now(ask({"search", "--name", "vehicleState|labThing", "--json"}, mcap).out), without_now(recorded_search.out));
+    const std::string back = dir.file("back.db");
+    Process to_sqlite({built_program("cpm"), "history", "--file", mcap, "export", "--sqlite", back});
+    ASSERT_EQ(to_sqlite.wait(60s), 0) << to_sqlite.errors();
+    EXPECT_EQ(recorded_rows(back, "samples"), recorded_rows(file, "samples")) << "every sample, every time, every payload byte";
+    EXPECT_EQ(recorded_rows(back, "objects"), recorded_rows(file, "objects"));
+    EXPECT_EQ(recorded_rows(back, "types"), recorded_rows(file, "types"));
 }
 
 TEST(RecordingEndToEnd, ARecordingKilledMidRunStillAnswersUpToItsLastBatch)
 {
+  for (const std::string format : {"db", "mcap"}) {
+    SCOPED_TRACE("recording to " + format);
     TempDir dir;
-    const std::string file = dir.file("killed.db");
+    const std::string file = dir.file("killed." + format);
     cpm::Participant participant{udp_only()};
     cpm::HistoryClient client{participant};
     Process service({built_program("cpm_history"), "--record", file});
     Process cars = writer({"--type", "vehicle", "--vehicle", "3", "--count", "60"});
     ASSERT_EQ(cars.wait(30s), 0) << cars.errors();
     ASSERT_TRUE(wait_for_samples(client, "vehicleState", "3", 60)) << service.errors();
-    std::this_thread::sleep_for(500ms);  // past the writer thread's batch period (100 ms): the batch is on disk
+    // Past the writer thread's batch period (100 ms) and an MCAP chunk's (a second): on disk.
+    std::this_thread::sleep_for(format == "db" ? 500ms : 1500ms);
     service.kill(SIGKILL);
     service.wait(10s);
     const Answer latest = ask({"latest", "--topic", "vehicleState", "--key", "3", "--json"}, file);
@@ -281,12 +345,15 @@ TEST(RecordingEndToEnd, ARecordingKilledMidRunStillAnswersUpToItsLastBatch)
     EXPECT_EQ(nlohmann::json::parse(latest.out)["data"]["pose"]["x"], 59);
     EXPECT_NE(latest.err.find("was not closed"), std::string::npos) << latest.err;
     EXPECT_NE(latest.err.find(file), std::string::npos) << latest.err;
+  }
 }
 
 TEST(RecordingEndToEnd, AFullDiskEndsTheRecordingWithAnErrorAndTheLiveHistoryGoesOn)
 {
+  for (const std::string format : {"db", "mcap"}) {
+    SCOPED_TRACE("recording to " + format);
     TempDir dir;
-    const std::string file = dir.file("small.db");
+    const std::string file = dir.file("small." + format);
     cpm::Participant participant{udp_only()};
     cpm::HistoryClient client{participant};
     Process service({built_program("cpm_history"), "--record", file, "--record-max-bytes", "65536"});
@@ -307,6 +374,12 @@ TEST(RecordingEndToEnd, AFullDiskEndsTheRecordingWithAnErrorAndTheLiveHistoryGoe
     const Answer first = ask({"at", "--topic", "vehicleState", "--key", "3", "--by", "data", "--time", std::to_string(kBase), "--json"}, file);
     ASSERT_EQ(first.code, 0) << first.err;
     EXPECT_EQ(nlohmann::json::parse(first.out)["data"]["pose"]["x"], 0);
+    EXPECT_EQ(first.err, "") << "closed whole, up to where the limit stopped it";
+    if (format == "mcap") {
+        EXPECT_LE(fs::file_size(file), 65536u);
+        EXPECT_EQ(cpm_test::mcap_differences(file), "") << "a valid file, summary and all";
+    }
+  }
 }
 
 TEST(RecordingEndToEnd, CpmRecordWritesTheSameFileAndRefusesToOverwriteOne)
