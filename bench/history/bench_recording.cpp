@@ -1,8 +1,10 @@
 // bench_recording: recordings, in one run:
-//  1. ingest with the recording off and on: cpm_history without and with --record, the same
-//     rising rates of 100 vehicles' VehicleState; the highest rate at which every written sample
-//     was committed (and, when on, every committed sample reached the file). Target: >= 20,000/s
-//     with the recording on.
+//  1. ingest with the recording off and on: cpm_history without and with --record (SQLite, and
+//     MCAP), the same rising rates of 100 vehicles' VehicleState; the highest rate at which every
+//     written sample was committed (and, when on, every committed sample reached the file).
+//     Targets: >= 20,000/s with the recording on; MCAP >= SQLite.
+//  1b. export of a million samples SQLite -> MCAP and MCAP -> SQLite (samples/s) and each
+//     file's size per sample; loading each into a store (`at` is then the same store's).
 //  2. `at` on one object: from the live store, from the recording loaded into a store, and from
 //     SQLite on the recording file with a plain index on (oid, commit_ns); random times over the
 //     held span, p50 of blocks; the load's own time.
@@ -102,8 +104,9 @@ Ramp ramp(int domain, double seconds, const std::vector<std::string>& extra, con
 
 const char* kHelp =
     "usage: bench_recording [--domain 214] [--seconds 3]\n"
-    "Recordings: ingest with cpm_history's --record on against off, `at` from a recording against the\n"
-    "live store and SQLite, the file's size per sample, and cpm play's timing; uses domains D to D+2.\n"
+    "Recordings: ingest with cpm_history's --record on (SQLite, MCAP) against off, export both ways,\n"
+    "`at` from a recording against the live store and SQLite, the file's size per sample, and cpm\n"
+    "play's timing; uses domains D to D+3.\n"
     "  --seconds S  per rate\n";
 
 int run(int argc, char** argv)
@@ -127,6 +130,14 @@ int run(int argc, char** argv)
                 off.best > 0 ? on.best / off.best : 0.0, on.best >= 20000 ? "met" : "not met");
     bench::record({"recording", "ingest with none lost, recording on", "samples/s", on.best, "cpm_history, recording off", off.best,
                    ">= 20000/s", int(on.best >= 20000)});
+    const std::string mcap_ingest = (dir / "ingest.mcap").string();
+    const Ramp on_mcap = ramp(domain + 3, seconds, {"--record", mcap_ingest}, mcap_ingest);
+    std::printf("recording on, MCAP:\n%s", on_mcap.rows.c_str());
+    const bool mcap_met = on_mcap.best > 0 && on_mcap.best >= on.best;
+    std::printf("highest rate with none lost: MCAP %.0f/s, SQLite %.0f/s (MCAP/SQLite %.2f; target >= 1.0: %s)\n", on_mcap.best, on.best,
+                on.best > 0 ? on_mcap.best / on.best : 0.0, mcap_met ? "met" : "not met");
+    bench::record({"recording", "ingest with none lost, recording to MCAP", "samples/s", on_mcap.best, "recording to SQLite", on.best,
+                   ">= 1.0x SQLite", int(mcap_met)});
 
     // 2. at: live store, loaded recording, SQLite on the file.
     using namespace cpm::rtdb;
@@ -200,6 +211,32 @@ int run(int argc, char** argv)
     std::printf("%-44s %10.0f ns (%.1fx the loaded store)\n", "SQLite on the file, index (oid, commit_ns)", sql_ns, sql_ns / loaded_ns);
     bench::record({"recording", "at from a loaded recording (copied answer)", "ns", loaded_ns, "SQLite on the file, index (oid, commit_ns)", sql_ns});
     std::printf("(checksum %llu)\n", (unsigned long long)(sink & 0xff));
+
+    // 1b. Export both ways, each file's size, each loaded into a store.
+    {
+        const std::string mcap = (dir / "at.mcap").string(), back = (dir / "back.db").string();
+        const auto t0 = Clock::now();
+        (void)export_recording(file, mcap, {});
+        const double to_mcap_s = std::chrono::duration<double>(Clock::now() - t0).count();
+        const auto t1 = Clock::now();
+        (void)export_recording(mcap, back, {});
+        const double to_sqlite_s = std::chrono::duration<double>(Clock::now() - t1).count();
+        // A copy: the export above read the MCAP file once, and a process reads a file once.
+        const std::string fresh = (dir / "fresh.mcap").string();
+        fs::copy_file(mcap, fresh);
+        const auto t2 = Clock::now();
+        const LoadedRecording from_mcap = load_recording(fresh);
+        const double load_mcap_s = std::chrono::duration<double>(Clock::now() - t2).count();
+        const auto size_of = [&](const std::string& f) { return (double(fs::file_size(f)) - double(payload_bytes)) / double(samples); };
+        std::printf("\nexport of %llu samples: SQLite -> MCAP %.2f s (%.0f samples/s), MCAP -> SQLite %.2f s (%.0f samples/s)\n",
+                    (unsigned long long)samples, to_mcap_s, double(samples) / to_mcap_s, to_sqlite_s, double(samples) / to_sqlite_s);
+        std::printf("bytes per sample beyond its payload: MCAP %.1f, SQLite %.1f (index included)\n", size_of(mcap), size_of(file));
+        std::printf("loading into a store: MCAP %.2f s, SQLite %.2f s (%.2fx); %llu samples from MCAP\n", load_mcap_s, load_s, load_mcap_s / load_s,
+                    (unsigned long long)from_mcap.samples);
+        bench::record({"recording", "export SQLite -> MCAP", "samples/s", double(samples) / to_mcap_s, "MCAP -> SQLite", double(samples) / to_sqlite_s});
+        bench::record({"recording", "MCAP bytes per sample beyond its payload", "bytes", size_of(mcap), "SQLite's", size_of(file)});
+        bench::record({"recording", "loading an MCAP recording into a store", "s", load_mcap_s, "loading its SQLite recording", load_s});
+    }
 
     // 3. Size.
     const double per_sample = (double(fs::file_size(file)) - double(payload_bytes)) / double(samples);

@@ -11,11 +11,16 @@
 
 #include "Ingest.hpp"
 #include "Outlet.hpp"
+#include "Save.hpp"
 #include "RequestServer.hpp"
 
 #include <fastrtps/xmlparser/XMLProfileManager.h>
 
+#include <algorithm>
+#include <condition_variable>
+#include <filesystem>
 #include <map>
+#include <mutex>
 #include <thread>
 
 // The service is four parts: the ingest (discovery, raw readers, the registry of objects) feeds
@@ -54,6 +59,10 @@ struct HistoryService::Impl
     ServiceOptions options;
     std::chrono::milliseconds lease = own_lease(options);  // what the others wait for it
     bool intraprocess_set = intraprocess_off();  // before any participant of the service is made
+    // Saves in progress wait on these (declared before serving, whose stop() joins them).
+    std::mutex saves_mutex;
+    std::condition_variable saves_cv;
+    bool saves_stopping = false;
     Store store;
     Outlet outlet;
     Ingest ingest;
@@ -65,8 +74,8 @@ struct HistoryService::Impl
         RequestServer requests;
         Writer<HistoryStatus> status;
 
-        Serving(const Store& store, std::unique_ptr<Participant> p, size_t workers)
-            : own(std::move(p)), requests(store, participant(), workers),
+        Serving(const Store& store, std::unique_ptr<Participant> p, size_t workers, RequestServer::SaveHandler save)
+            : own(std::move(p)), requests(store, participant(), workers, std::move(save)),
               status(participant(), topics::history_status.name, topics::history_status.writer)
         {
         }
@@ -81,7 +90,7 @@ struct HistoryService::Impl
     explicit Impl(ServiceOptions o)
         : options(std::move(o)), store(StoreOptions{{options.window_ns, options.max_bytes_per_topic}, options.max_bytes_total}),
           outlet(store, options.sinks), ingest(options, outlet),
-          serving(std::make_unique<Serving>(store, own_participant(false), options.workers))
+          serving(std::make_unique<Serving>(store, own_participant(false), options.workers, save_handler()))
     {
         for (const auto& [topic, window] : options.topic_windows_ns) store.set_retention(topic, {window, options.max_bytes_per_topic});
         control = std::thread([this] { control_loop(); });
@@ -105,8 +114,76 @@ struct HistoryService::Impl
 
     ~Impl()
     {
+        {
+            std::lock_guard lock(saves_mutex);
+            saves_stopping = true;
+        }
+        saves_cv.notify_all();  // a save in progress closes its file with what it has
         ingest.stop();
         control.join();
+    }
+
+    // ---- the dash-cam save -------------------------------------------------------------------
+    RequestServer::SaveHandler save_handler()
+    {
+        return [this](const HistoryRequest& rq) { return save(rq); };
+    }
+
+    /// A new recording of the span [now - t0, now + t1) by data time (the topics named, or all):
+    /// the held samples at once, the live ones until the span has passed.
+    HistoryReply save(const HistoryRequest& rq)
+    {
+        HistoryReply reply;
+        reply.client_id(rq.client_id());
+        reply.request_id(rq.request_id());
+        auto refuse = [&](const std::string& why) {
+            reply.status(std::string(history::to_string(history::Status::error)));
+            reply.error("save: " + why);
+            return reply;
+        };
+        const std::string dir = options.save_dir.empty() ? std::filesystem::current_path().string() : options.save_dir;
+        const std::string& name = rq.file();
+        if (name.empty() || name.find('/') != std::string::npos || name == "." || name == "..") {
+            return refuse("file '" + name + "': give a file name; the service writes it into its save folder " + dir);
+        }
+        constexpr uint64_t kMaxAfter = 60'000'000'000ull;
+        if (rq.t1() > kMaxAfter) return refuse("the span after now is at most 60 s, not " + std::to_string(rq.t1() / 1'000'000'000.0) + " s");
+        SaveSpan span{.path = (std::filesystem::path(dir) / name).string(), .name = "save " + name};
+        const auto held = store.search({});
+        for (const auto& t : rq.objects()) {
+            if (std::none_of(held.begin(), held.end(), [&](const ObjectInfo& o) { return o.topic == t; })) {
+                return refuse("no topic '" + t + "' is held");
+            }
+            span.topics.insert(t);
+        }
+        const uint64_t now = cpm::get_time_ns();
+        span.from_ns = now - std::min(now, rq.t0());
+        span.to_ns = now + rq.t1();
+        std::shared_ptr<Save> saving;
+        try {
+            saving = std::make_shared<Save>(span);
+        } catch (const std::exception& e) {
+            return refuse(e.what());
+        }
+        ingest.locked([&] {
+            saving->start(store);
+            outlet.add_sink(saving);
+        });
+        // Until the span has passed, and a moment more for samples stamped before its end.
+        {
+            std::unique_lock lock(saves_mutex);
+            saves_cv.wait_for(lock, std::chrono::nanoseconds(span.to_ns - now) + std::chrono::milliseconds(250), [&] { return saves_stopping; });
+        }
+        ingest.locked([&] { outlet.remove_sink(saving.get()); });
+        const SaveResult r = saving->finish();
+        reply.status(std::string(history::to_string(r.error.empty() ? history::Status::ok : history::Status::error)));
+        reply.error(r.error);
+        reply.file(r.path);
+        reply.saved_samples(r.samples);
+        reply.saved_objects(r.objects);
+        reply.saved_from_ns(span.from_ns);
+        reply.saved_to_ns(span.to_ns);
+        return reply;
     }
 
     void control_loop()
@@ -142,7 +219,7 @@ struct HistoryService::Impl
                      "participants anew, so that every other participant meets them afresh",
                      std::chrono::duration<double>(turn).count(), std::chrono::duration<double>(lease).count());
         ingest.rebuild();
-        auto renewed = std::make_unique<Serving>(store, own_participant(true), options.workers);
+        auto renewed = std::make_unique<Serving>(store, own_participant(true), options.workers, save_handler());
         serving->requests.stop();  // its counts are final from here
         std::lock_guard lock(serving_mutex);
         requests_before += serving->requests.requests();

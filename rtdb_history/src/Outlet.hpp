@@ -5,6 +5,7 @@
 #include <cpm/rtdb/IngestSink.hpp>
 #include <cpm/rtdb/Store.hpp>
 
+#include <algorithm>
 #include <memory>
 #include <vector>
 
@@ -34,6 +35,13 @@ public:
     {
         store_.mark_deleted(oid, now);
         each([&](IngestSink& s) { s.object_deleted(oid, now); });
+    }
+
+    /// A sink from now on (a save), until removed; under the ingest's lock as every call here.
+    void add_sink(std::shared_ptr<IngestSink> sink) { sinks_.push_back(std::move(sink)); }
+    void remove_sink(const IngestSink* sink)
+    {
+        sinks_.erase(std::remove_if(sinks_.begin(), sinks_.end(), [&](const auto& s) { return s.get() == sink; }), sinks_.end());
     }
 
 private:

@@ -7,15 +7,21 @@
 
 namespace cpm::rtdb {
 
-RequestServer::RequestServer(const Store& store, Participant& participant, size_t workers)
+RequestServer::RequestServer(const Store& store, Participant& participant, size_t workers, SaveHandler save)
     : store_(store), participant_(participant),
-      replies_(participant, topics::history_reply.name, topics::history_reply.writer)
+      replies_(participant, topics::history_reply.name, topics::history_reply.writer), save_(std::move(save))
 {
     for (size_t i = 0; i < std::max<size_t>(1, workers); ++i) workers_.emplace_back([this] { work_loop(); });
     reader_ = std::make_unique<AsyncReader<HistoryRequest>>(
         [this](std::vector<HistoryRequest>& batch) {
             for (auto& rq : batch) {
-                if (may_wait(rq)) {
+                if (rq.kind() == "save" && save_) {  // it lasts the span after now: on a thread of its own
+                    std::lock_guard lock(work_mutex_);
+                    // A client sends a request again when a service matches while it waits: one save each.
+                    if (!stopping_ && saves_seen_.emplace(rq.client_id(), rq.request_id()).second) {
+                        saves_.emplace_back([this, rq] { send(save_(rq), rq); });
+                    }
+                } else if (may_wait(rq)) {
                     std::lock_guard lock(work_mutex_);
                     work_.push_back(std::move(rq));
                     work_cv_.notify_one();
@@ -40,11 +46,15 @@ void RequestServer::stop()
     for (auto& t : workers_) {
         if (t.joinable()) t.join();
     }
+    for (auto& t : saves_) {
+        if (t.joinable()) t.join();
+    }
 }
 
-void RequestServer::serve(const HistoryRequest& rq)
+void RequestServer::serve(const HistoryRequest& rq) { send(answer(store_, rq), rq); }
+
+void RequestServer::send(HistoryReply reply, const HistoryRequest& rq)
 {
-    HistoryReply reply = answer(store_, rq);
     cpm::stamp_message(reply, cpm::get_time_ns(), 0);
     ++requests_;
     const auto status = history::status_from(reply.status());

@@ -13,10 +13,12 @@
 #include <atomic>
 #include <condition_variable>
 #include <deque>
+#include <functional>
 #include <map>
 #include <string>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <thread>
 #include <vector>
 
@@ -25,7 +27,9 @@ namespace cpm::rtdb {
 class RequestServer
 {
 public:
-    RequestServer(const Store& store, Participant& participant, size_t workers);
+    /// Answers a `save` request (it takes as long as the span after now); none: refused.
+    using SaveHandler = std::function<HistoryReply(const HistoryRequest&)>;
+    RequestServer(const Store& store, Participant& participant, size_t workers, SaveHandler save = {});
     ~RequestServer();
     RequestServer(const RequestServer&) = delete;
     RequestServer& operator=(const RequestServer&) = delete;
@@ -38,6 +42,7 @@ public:
 
 private:
     void serve(const HistoryRequest& rq);
+    void send(HistoryReply reply, const HistoryRequest& rq);
     void work_loop();
     /// Secured: the writer of historyReply/TOPIC, made on first use.
     Writer<HistoryReply>& topic_writer(const std::string& topic);
@@ -53,6 +58,9 @@ private:
     std::deque<HistoryRequest> work_;
     bool stopping_ = false;
     std::vector<std::thread> workers_;
+    SaveHandler save_;
+    std::vector<std::thread> saves_;  // each save on a thread of its own, joined at stop()
+    std::set<std::pair<std::string, uint64_t>> saves_seen_;  // (client, request): each save once
     std::unique_ptr<AsyncReader<HistoryRequest>> reader_;
 };
 

@@ -148,6 +148,7 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
         for (const auto& i : ch.deleted) reply.objects().push_back(to_wire(i));
         return set_status(reply, Status::ok);
     }
+    case Kind::save: throw BadRequest("save: only the live history service saves (cpm history save, without --file)");
     case Kind::snapshot: {
         std::vector<Oid> oids;
         for (const auto& name : rq.objects()) {

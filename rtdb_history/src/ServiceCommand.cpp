@@ -1,5 +1,7 @@
 #include <cpm/rtdb/ServiceCommand.hpp>
 
+#include <filesystem>
+
 #include <nlohmann/json.hpp>
 
 #include <chrono>
@@ -25,6 +27,7 @@ const std::vector<cli::FlagSpec>& service_flags()
                                                   {"--record", true},
                                                   {"--record-max-bytes", true},
                                                   {"--record-format", true},
+                                                  {"--save-dir", true},
                                                   {"--record-name", true}};
     return flags;
 }
@@ -62,6 +65,12 @@ ServiceCommand read_service_flags(const cli::ParsedArgs& parsed)
     options.max_bytes_per_topic = static_cast<uint64_t>(
         cli::parse_integer("--max-bytes-per-topic", parsed.get("--max-bytes-per-topic", "134217728"), 1024, 1LL << 40));
     options.status_period_ns = cli::parse_duration("--status-period", parsed.get("--status-period", "1s"));
+    if (parsed.has("--save-dir")) {
+        c.options.save_dir = parsed.get("--save-dir");
+        if (!std::filesystem::is_directory(c.options.save_dir)) {
+            throw UsageError("cpm_history: --save-dir " + c.options.save_dir + ": no such folder");
+        }
+    }
     if (parsed.has("--record")) {
         c.record_path = parsed.get("--record");
         c.record.name = parsed.get("--record-name");

@@ -10,7 +10,7 @@ const char* kHelp =
     "usage: cpm_history [--include REGEX]... [--exclude REGEX]... [--window 10s] [--topic-window TOPIC=DURATION]...\n"
     "                   [--max-bytes-total N] [--max-bytes-per-topic N] [--status-period 1s]\n"
     "                   [--record FILE [--record-format sqlite|mcap] [--record-max-bytes N] [--record-name NAME]]\n"
-    "                   [--dds_domain N]\n"
+    "                   [--save-dir DIR] [--dds_domain N]\n"
     "\n"
     "Finds topics by DDS discovery and records every one whose name matches an --include pattern\n"
     "(all when none is given) and no --exclude pattern (full-match ECMAScript regexes), types it\n"
@@ -30,7 +30,10 @@ const char* kHelp =
     "file stops growing at N bytes. A full disk (or that limit) ends the recording with an error\n"
     "naming the file; what was written stays readable and the live history goes on serving.\n"
     "The file is closed on SIGINT/SIGTERM; after a SIGKILL it still reads up to its last batch\n"
-    "(SQLite) or its last chunk (MCAP: written at least once a second).\n";
+    "(SQLite) or its last chunk (MCAP: written at least once a second).\n"
+    "--save-dir DIR: where `cpm history save NAME` writes its recordings (the dash-cam: what the\n"
+    "history holds of the last seconds and what comes in the next ones, into a new file NAME\n"
+    "while the service goes on); default: the service's working directory.\n";
 
 int run(int argc, char** argv)
 {

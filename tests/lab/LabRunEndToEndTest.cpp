@@ -2,9 +2,11 @@
 // recording that answers, summary.json); a node killed mid-run is named with the end of its log
 // and the run fails; Ctrl-C stops everything and leaves a readable recording; a wrong scenario
 // starts nothing.
+#include <cpm/rtdb/Mcap.hpp>
 #include <cpm/rtdb/Recording.hpp>
 
 #include <cpm_test/Isolation.hpp>
+#include <cpm_test/McapCheck.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
 
@@ -196,6 +198,25 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     EXPECT_NE(beyond.errors().find("nothing of " + recording + " lies in the span asked for (--from 50s; its lab clock runs from 0 to 8.0 s)"),
               std::string::npos)
         << beyond.errors();
+
+    // The run as MCAP, for Foxglove: the format's reference reader reads every message as cpm
+    // decodes it; the scenario and summary go with it; cpm answers and plays it as the SQLite file.
+    const std::string mcap = dir.file("corridor.mcap");
+    Process to_mcap({built_program("cpm"), "history", "--file", recording, "export", "--mcap", mcap});
+    ASSERT_EQ(to_mcap.wait(60s), 0) << to_mcap.errors();
+    EXPECT_EQ(cpm_test::mcap_differences(mcap), "");
+    const auto file = cpm::rtdb::mcap::read(mcap);
+    const auto run_meta = std::find_if(file.metadata.begin(), file.metadata.end(), [](const auto& m) { return m.name == "cpm.run"; });
+    ASSERT_NE(run_meta, file.metadata.end());
+    EXPECT_EQ(run_meta->values.at("scenario"), cpm_test::file_text(out + "/scenario.yaml"));
+    EXPECT_EQ(nlohmann::json::parse(run_meta->values.at("summary"))["name"], "corridor");
+    Process at_mcap({built_program("cpm"), "history", "--file", mcap, "at", "--topic", "vehicleState", "--key", "5", "--time", "5s", "--by", "data",
+                     "--json"});
+    ASSERT_EQ(at_mcap.wait(30s), 0) << at_mcap.errors();
+    EXPECT_EQ(at_mcap.output(), at.output());
+    Process play_mcap({built_program("cpm"), "play", mcap, "--from", "2s", "--to", "4s", "--topics", "vehicleState", "--wait-for-readers", "0s"});
+    ASSERT_EQ(play_mcap.wait(60s), 0) << play_mcap.errors();
+    EXPECT_EQ(nlohmann::json::parse(play_mcap.output())["published"].get<int>(), played);
 }
 
 TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)

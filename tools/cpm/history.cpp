@@ -29,7 +29,7 @@ namespace cpm::tools {
 namespace {
 
 const char* const kHistoryHelp =
-    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot|export\n"
+    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot|save|export\n"
     "                   [flags] [--json]\n"
     "\n"
     "                   [--file recording.db]\n"
@@ -57,6 +57,10 @@ const char* const kHistoryHelp =
     "                                       every sample (of every key without --key) as CSV, in\n"
     "                                       commit order: commit_ns, data_ns, valid_after_ns, key, then\n"
     "                                       the fields by IDL path (pose.x); cpm record import reads it\n"
+    "  save NAME [--before 30s] [--after 10s] [--topics A,B]   the dash-cam: the live service writes\n"
+    "                                       what it holds of the last --before and what comes in the\n"
+    "                                       next --after (data times) into a new recording NAME in its\n"
+    "                                       save folder (cpm_history --save-dir), and goes on serving\n"
     "  export --mcap|--sqlite OUT [--topics A,B] [--from T] [--to T] [--by commit|data]   (with --file)\n"
     "                                       a new recording OUT of the topics asked for (all without\n"
     "                                       --topics), every sample byte for byte: MCAP opens in\n"
@@ -488,6 +492,54 @@ int export_recording_command(const cpm::cli::ParsedArgs& parsed, const std::stri
     return 0;
 }
 
+/// `cpm history save NAME [--before 30s] [--after 10s] [--topics A,B]`: the dash-cam. The live
+/// service writes what it holds of the last --before and what comes in the next --after into
+/// a new recording NAME in its save folder, going on meanwhile.
+int save_command(const std::vector<std::string>& args, const std::string& file)
+{
+    const std::string command = "cpm history save";
+    if (!file.empty()) throw UsageError(command + ": the live service saves; a recording (--file) is copied with export --mcap|--sqlite OUT");
+    if (args.empty() || args[0].rfind("--", 0) == 0) throw UsageError(command + ": which file? cpm history save NAME [flags] (.mcap: MCAP, else SQLite)");
+    const std::string name = args[0];
+    auto parsed = cpm::cli::parse_flags(std::vector<std::string>(args.begin() + 1, args.end()),
+                                        {{"--before", true}, {"--after", true}, {"--topics", true}, {"--json", false}}, command);
+    if (name.find('/') != std::string::npos) {
+        throw UsageError(command + ": " + name + ": a file name; the service writes it into its save folder (cpm_history --save-dir)");
+    }
+    const uint64_t before = cpm::cli::parse_duration("--before", parsed.get("--before", "30s"));
+    const uint64_t after = cpm::cli::parse_duration("--after", parsed.get("--after", "10s"));
+    if (after > 60'000'000'000ull) throw UsageError(command + ": --after is at most 60s");
+    HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::save, "", "");
+    rq.file(name);
+    rq.t0(before);
+    rq.t1(after);
+    rq.timeout_ns(after + 10'000'000'000ull);  // the reply comes once the span after now has passed
+    std::stringstream topics(parsed.get("--topics"));
+    for (std::string t; std::getline(topics, t, ',');) {
+        if (!t.empty()) rq.objects().push_back(t);
+    }
+    cpm::HistoryClient client(client_participant());
+    const HistoryReply reply = client.request(rq);
+    if (parsed.has("--json")) {
+        std::printf("%s\n", nlohmann::json{{"status", reply.status()}, {"error", reply.error()}, {"file", reply.file()},
+                                           {"samples", reply.saved_samples()}, {"objects", reply.saved_objects()},
+                                           {"from_ns", reply.saved_from_ns()}, {"to_ns", reply.saved_to_ns()}}
+                                 .dump()
+                                 .c_str());
+    }
+    if (reply.status() != "ok") {
+        std::fprintf(stderr, "%s: %s%s\n", command.c_str(), reply.error().c_str(),
+                     reply.file().empty() ? "" : ("; " + reply.file() + " holds what was written").c_str());
+        return 1;
+    }
+    if (!parsed.has("--json")) {
+        std::printf("%s: %llu samples of %llu objects, data times %s to %s\n", reply.file().c_str(), (unsigned long long)reply.saved_samples(),
+                    (unsigned long long)reply.saved_objects(), cpm::cli::format_time(reply.saved_from_ns(), 3).c_str(),
+                    cpm::cli::format_time(reply.saved_to_ns(), 3).c_str());
+    }
+    return 0;
+}
+
 int export_command(const std::vector<std::string>& args, const std::string& file)
 {
     const std::string command = "cpm history export";
@@ -589,6 +641,7 @@ int history_verb(const std::vector<std::string>& all)
     }
     if (args.empty() || args[0].rfind("--", 0) == 0) throw UsageError("cpm history: which query? (see cpm history --help)");
     if (args[0] == "export") return export_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
+    if (args[0] == "save") return save_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
     return history_command(args[0], std::vector<std::string>(args.begin() + 1, args.end()), file);
 }
 

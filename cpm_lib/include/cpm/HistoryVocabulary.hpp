@@ -30,7 +30,7 @@ enum class Status {
 };
 
 enum class Kind {
-    latest, at, older, younger, range, wait_next, successor, snapshot, info, search, list, wait_object, changes,
+    latest, at, older, younger, range, wait_next, successor, snapshot, info, search, list, wait_object, changes, save,
 };
 
 /// Which of a sample's two indexed times a query goes by.
@@ -47,7 +47,7 @@ inline constexpr std::array<std::pair<Status, std::string_view>, 9> kStatusNames
                                                                                   {Status::partial, "partial"},
                                                                                   {Status::unknown_object, "unknown_object"},
                                                                                   {Status::error, "error"}}};
-inline constexpr std::array<std::pair<Kind, std::string_view>, 13> kKindNames{{{Kind::latest, "latest"},
+inline constexpr std::array<std::pair<Kind, std::string_view>, 14> kKindNames{{{Kind::latest, "latest"},
                                                                                {Kind::at, "at"},
                                                                                {Kind::older, "older"},
                                                                                {Kind::younger, "younger"},
@@ -59,7 +59,8 @@ inline constexpr std::array<std::pair<Kind, std::string_view>, 13> kKindNames{{{
                                                                                {Kind::search, "search"},
                                                                                {Kind::list, "list"},
                                                                                {Kind::wait_object, "wait_object"},
-                                                                               {Kind::changes, "changes"}}};
+                                                                               {Kind::changes, "changes"},
+                                                                               {Kind::save, "save"}}};
 
 namespace detail {
 template <class E, size_t N>

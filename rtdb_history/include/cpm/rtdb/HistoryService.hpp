@@ -33,6 +33,9 @@ struct ServiceOptions
     std::optional<ParticipantOptions> participant;
     /// Beside the store, these get every object, sample and deletion the service records.
     std::vector<std::shared_ptr<IngestSink>> sinks;
+    /// Where `save` requests (cpm history save) write their recordings: a file name of the
+    /// request's in this folder, never a path of the requester's. "": the working directory.
+    std::string save_dir;
 };
 
 struct ServiceCounters
