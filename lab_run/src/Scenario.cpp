@@ -702,7 +702,7 @@ public:
     void services()
     {
         std::vector<std::string> history{program("cpm_history"), "--window", "60s", "--record", (fs::path(r_.run_dir) / "recording.db").string(),
-                                         "--record-name", s_.name, "--dds_domain", domain_};
+                                         "--record-name", s_.name, "--save-dir", r_.run_dir, "--dds_domain", domain_};
         for (const auto& t : s_.record.topics) {
             if (t != "*") history.insert(history.end(), {"--include", cpm::cli::glob_regex(t)});
         }

@@ -19,7 +19,10 @@
 #include <algorithm>
 #include <condition_variable>
 #include <filesystem>
+#include <ctime>
+#include <deque>
 #include <map>
+#include <set>
 #include <mutex>
 #include <thread>
 
@@ -63,6 +66,9 @@ struct HistoryService::Impl
     std::mutex saves_mutex;
     std::condition_variable saves_cv;
     bool saves_stopping = false;
+    std::deque<TriggerSink::Fired> fired;  // --save-on matches waiting for the trigger thread
+    std::set<size_t> triggers_saving;      // whose save runs: a trigger again meanwhile is in it already
+    uint64_t triggers_ignored = 0;
     Store store;
     Outlet outlet;
     Ingest ingest;
@@ -86,14 +92,70 @@ struct HistoryService::Impl
     uint64_t requests_before = 0, bad_requests_before = 0;  // counted by the servers replaced
     std::map<std::string, uint64_t> received_at_last_status;  // per topic, on the control thread
     std::thread control;
+    std::thread trigger_thread;  // --save-on's saves
 
     explicit Impl(ServiceOptions o)
         : options(std::move(o)), store(StoreOptions{{options.window_ns, options.max_bytes_per_topic}, options.max_bytes_total}),
-          outlet(store, options.sinks), ingest(options, outlet),
+          outlet(store, sinks_with_triggers()), ingest(options, outlet),
           serving(std::make_unique<Serving>(store, own_participant(false), options.workers, save_handler()))
     {
         for (const auto& [topic, window] : options.topic_windows_ns) store.set_retention(topic, {window, options.max_bytes_per_topic});
         control = std::thread([this] { control_loop(); });
+        if (!options.save_on.empty()) trigger_thread = std::thread([this] { trigger_loop(); });
+    }
+
+    /// The options' sinks, and the watch for --save-on triggers when there are any.
+    std::vector<std::shared_ptr<IngestSink>> sinks_with_triggers()
+    {
+        auto sinks = options.sinks;
+        if (options.save_on.empty()) return sinks;
+        sinks.push_back(std::make_shared<TriggerSink>(options.save_on, [this](const TriggerSink::Fired& f) {
+            std::lock_guard lock(saves_mutex);
+            if (!triggers_saving.insert(f.trigger).second) {
+                ++triggers_ignored;
+                return;
+            }
+            fired.push_back(f);
+            saves_cv.notify_all();
+        }));
+        return sinks;
+    }
+
+    /// Saves the span around each trigger's sample, one after the other.
+    void trigger_loop()
+    {
+        std::unique_lock lock(saves_mutex);
+        for (;;) {
+            saves_cv.wait(lock, [&] { return saves_stopping || !fired.empty(); });
+            if (saves_stopping) return;
+            const TriggerSink::Fired f = fired.front();
+            fired.pop_front();
+            lock.unlock();
+            const SaveTrigger& t = options.save_on[f.trigger];
+            const std::time_t secs = std::time_t(f.commit_ns / 1'000'000'000ull);
+            std::tm utc{};
+            gmtime_r(&secs, &utc);
+            char when[40];
+            std::strftime(when, sizeof when, "%Y%m%dT%H%M%S", &utc);
+            std::string name = "save_" + std::string(when) + "." + std::to_string(f.commit_ns / 1'000'000 % 1000 + 1000).substr(1) + "Z_" +
+                               t.topic + (f.key.empty() ? "" : "_" + f.key) + (options.save_format == "mcap" ? ".mcap" : ".db");
+            std::replace_if(name.begin(), name.end(), [](char c) { return c == '/' || c == ' '; }, '_');
+            const std::string dir = options.save_dir.empty() ? std::filesystem::current_path().string() : options.save_dir;
+            const SaveSpan span{.path = (std::filesystem::path(dir) / name).string(),
+                                .from_ns = f.commit_ns - std::min(f.commit_ns, options.save_before_ns),
+                                .to_ns = f.commit_ns + options.save_after_ns,
+                                .name = "save on " + t.text};
+            CPM_LOG_INFO("cpm_history: %s triggered a save (%s): %s", t.topic.c_str(), t.text.c_str(), span.path.c_str());
+            try {
+                const SaveResult r = save_span(span, cpm::get_time_ns());
+                if (r.error.empty()) CPM_LOG_INFO("cpm_history: saved %s: %llu samples", r.path.c_str(), (unsigned long long)r.samples);
+                else CPM_LOG_ERROR("cpm_history: the save %s: %s", r.path.c_str(), r.error.c_str());
+            } catch (const std::exception& e) {
+                CPM_LOG_ERROR("cpm_history: the save triggered by %s: %s", t.text.c_str(), e.what());
+            }
+            lock.lock();
+            triggers_saving.erase(f.trigger);
+        }
     }
 
     /// The options' participant; after a freeze one of the init settings when none is named.
@@ -119,11 +181,31 @@ struct HistoryService::Impl
             saves_stopping = true;
         }
         saves_cv.notify_all();  // a save in progress closes its file with what it has
+        if (trigger_thread.joinable()) trigger_thread.join();
         ingest.stop();
         control.join();
     }
 
     // ---- the dash-cam save -------------------------------------------------------------------
+    /// Writes the span: what the store holds of it at once, then (as a sink of the ingest) what
+    /// comes in until it has passed (`now` on the service's clock) and a moment more for samples
+    /// stamped before its end. Throws cpm::Error when the file cannot be made.
+    SaveResult save_span(const SaveSpan& span, uint64_t now)
+    {
+        auto saving = std::make_shared<Save>(span);
+        ingest.locked([&] {
+            saving->start(store);
+            outlet.add_sink(saving);
+        });
+        {
+            std::unique_lock lock(saves_mutex);
+            const auto left = std::chrono::nanoseconds(span.to_ns > now ? span.to_ns - now : 0) + std::chrono::milliseconds(250);
+            saves_cv.wait_for(lock, left, [&] { return saves_stopping; });
+        }
+        ingest.locked([&] { outlet.remove_sink(saving.get()); });
+        return saving->finish();
+    }
+
     RequestServer::SaveHandler save_handler()
     {
         return [this](const HistoryRequest& rq) { return save(rq); };
@@ -159,23 +241,12 @@ struct HistoryService::Impl
         const uint64_t now = cpm::get_time_ns();
         span.from_ns = now - std::min(now, rq.t0());
         span.to_ns = now + rq.t1();
-        std::shared_ptr<Save> saving;
+        SaveResult r;
         try {
-            saving = std::make_shared<Save>(span);
+            r = save_span(span, now);
         } catch (const std::exception& e) {
             return refuse(e.what());
         }
-        ingest.locked([&] {
-            saving->start(store);
-            outlet.add_sink(saving);
-        });
-        // Until the span has passed, and a moment more for samples stamped before its end.
-        {
-            std::unique_lock lock(saves_mutex);
-            saves_cv.wait_for(lock, std::chrono::nanoseconds(span.to_ns - now) + std::chrono::milliseconds(250), [&] { return saves_stopping; });
-        }
-        ingest.locked([&] { outlet.remove_sink(saving.get()); });
-        const SaveResult r = saving->finish();
         reply.status(std::string(history::to_string(r.error.empty() ? history::Status::ok : history::Status::error)));
         reply.error(r.error);
         reply.file(r.path);

@@ -1,7 +1,13 @@
 #include "Save.hpp"
 
+#include <cpm/rtdb/IdlDecoder.hpp>
+
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <limits>
+#include <optional>
+#include <sstream>
 #include <tuple>
 #include <vector>
 
@@ -65,6 +71,48 @@ SaveResult Save::finish()
     writer_->close();
     const auto c = writer_->counters();
     return {span_.path, c.written, oids_.size(), c.error.empty() && c.dropped > 0 ? std::to_string(c.dropped) + " samples dropped" : c.error};
+}
+
+TriggerSink::TriggerSink(std::vector<SaveTrigger> triggers, std::function<void(const Fired&)> fire)
+    : triggers_(std::move(triggers)), fire_(std::move(fire))
+{
+}
+
+void TriggerSink::object_added(const ObjectInfo& info)
+{
+    for (const auto& t : triggers_) {
+        if (t.topic == info.topic) objects_[info.oid] = {info.type_name, info.key};
+    }
+}
+
+void TriggerSink::sample_committed(Oid oid, const Incoming& sample, uint64_t commit_ns)
+{
+    const auto o = objects_.find(oid);
+    if (o == objects_.end()) return;
+    std::optional<nlohmann::json> decoded;  // once, for the triggers with a field
+    for (size_t i = 0; i < triggers_.size(); ++i) {
+        const SaveTrigger& t = triggers_[i];
+        if (!t.field.empty()) {
+            if (!decoded) {
+                const IdlDecoder* types = IdlDecoder::lab_types();
+                decoded = types ? types->decode(o->second.first, sample.data, sample.size) : std::nullopt;
+                if (!decoded) decoded = nlohmann::json();
+            }
+            const nlohmann::json* v = &*decoded;
+            std::stringstream path(t.field);
+            for (std::string part; v && std::getline(path, part, '.');) v = v->is_object() && v->contains(part) ? &(*v)[part] : nullptr;
+            if (!v) continue;
+            const std::string text = v->is_string() ? v->get<std::string>() : v->dump();
+            // On the edge: when the object's samples begin to match (a state entered), not on
+            // every sample of it.
+            bool& was = matching_[{i, oid}];
+            const bool now = (text == t.value) == t.equal;
+            const bool entered = now && !was;
+            was = now;
+            if (!entered) continue;
+        }
+        fire_({i, o->second.second, commit_ns});
+    }
 }
 
 }  // namespace cpm::rtdb

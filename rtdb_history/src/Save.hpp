@@ -3,14 +3,18 @@
 // KogMo-RTDB ring put on disk. It starts with the samples the store holds of the span, then
 // takes the live ingest's (it is a sink of the Outlet meanwhile) until the span's end has
 // passed, so that nothing between the two is lost or doubled, and the service never stops.
+#include <cpm/rtdb/HistoryService.hpp>
 #include <cpm/rtdb/IngestSink.hpp>
 #include <cpm/rtdb/Recording.hpp>
 #include <cpm/rtdb/Store.hpp>
 
+#include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <set>
 #include <string>
+#include <vector>
 
 namespace cpm::rtdb {
 
@@ -49,6 +53,30 @@ private:
     SaveSpan span_;
     std::unique_ptr<RecordingWriter> writer_;
     std::set<Oid> oids_;  // the objects it records
+};
+
+/// Watches the ingest for the samples of --save-on triggers and hands each on: every sample of
+/// a trigger without a filter, and for one with a filter the sample with which an object begins
+/// to match it (keep `fire` short: it runs under the ingest's lock).
+class TriggerSink final : public IngestSink
+{
+public:
+    struct Fired
+    {
+        size_t trigger = 0;  ///< its index in the options
+        std::string key;     ///< the sample's object's key
+        uint64_t commit_ns = 0;
+    };
+    TriggerSink(std::vector<SaveTrigger> triggers, std::function<void(const Fired&)> fire);
+    void object_added(const ObjectInfo& info) override;
+    void sample_committed(Oid oid, const Incoming& sample, uint64_t commit_ns) override;
+    void object_deleted(Oid, uint64_t) override {}
+
+private:
+    std::vector<SaveTrigger> triggers_;
+    std::function<void(const Fired&)> fire_;
+    std::map<Oid, std::pair<std::string, std::string>> objects_;  // of a trigger's topic: type, key
+    std::map<std::pair<size_t, Oid>, bool> matching_;              // a filter's last verdict per object
 };
 
 }  // namespace cpm::rtdb

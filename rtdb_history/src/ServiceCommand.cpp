@@ -1,5 +1,9 @@
 #include <cpm/rtdb/ServiceCommand.hpp>
 
+#include <cpm/rtdb/IdlDecoder.hpp>
+#include <cpm/topics.hpp>
+
+#include <algorithm>
 #include <filesystem>
 
 #include <nlohmann/json.hpp>
@@ -13,6 +17,38 @@
 namespace cpm::rtdb {
 
 using cli::UsageError;
+
+SaveTrigger parse_save_trigger(const std::string& text)
+{
+    SaveTrigger t{.text = text};
+    const auto eq = text.find('=');
+    t.topic = text.substr(0, eq);
+    const auto bad = [&](const std::string& why) {
+        return UsageError("cpm_history: --save-on '" + text + "': " + why + " (TOPIC, or TOPIC=FIELD==VALUE, e.g. fsmStatus=state_type==Emergency)");
+    };
+    if (t.topic.empty()) throw bad("no topic");
+    if (eq == std::string::npos) return t;
+    const std::string filter = text.substr(eq + 1);
+    size_t op = filter.find("==");
+    t.equal = op != std::string::npos;
+    if (!t.equal) op = filter.find("!=");
+    if (op == std::string::npos) throw bad("the filter '" + filter + "' has no == or !=");
+    t.field = filter.substr(0, op);
+    t.value = filter.substr(op + 2);
+    if (t.field.empty() || t.field.find_first_of(" =!") != std::string::npos) throw bad("the filter's field '" + t.field + "' is no field path");
+    // A topic of the lab's table has a known type: its field must be one of the type's.
+    if (const TopicSpec* spec = topics::find(t.topic)) {
+        if (const IdlDecoder* types = IdlDecoder::lab_types()) {
+            const auto fields = types->field_paths(spec->type_name);
+            if (!fields.empty() && std::find(fields.begin(), fields.end(), t.field) == fields.end()) {
+                std::string known;
+                for (const auto& f : fields) known += (known.empty() ? "" : ", ") + f;
+                throw bad(std::string(spec->type_name) + " has no field '" + t.field + "' (it has " + known + ")");
+            }
+        }
+    }
+    return t;
+}
 
 const std::vector<cli::FlagSpec>& service_flags()
 {
@@ -28,6 +64,10 @@ const std::vector<cli::FlagSpec>& service_flags()
                                                   {"--record-max-bytes", true},
                                                   {"--record-format", true},
                                                   {"--save-dir", true},
+                                                  {"--save-on", true, true},
+                                                  {"--save-before", true},
+                                                  {"--save-after", true},
+                                                  {"--save-format", true},
                                                   {"--record-name", true}};
     return flags;
 }
@@ -70,6 +110,18 @@ ServiceCommand read_service_flags(const cli::ParsedArgs& parsed)
         if (!std::filesystem::is_directory(c.options.save_dir)) {
             throw UsageError("cpm_history: --save-dir " + c.options.save_dir + ": no such folder");
         }
+    }
+    for (const auto& t : parsed.all("--save-on")) options.save_on.push_back(parse_save_trigger(t));
+    if (options.save_on.empty()) {
+        for (const char* f : {"--save-before", "--save-after", "--save-format"}) {
+            if (parsed.has(f)) throw UsageError(std::string("cpm_history: ") + f + " goes with --save-on");
+        }
+    }
+    options.save_before_ns = cli::parse_duration("--save-before", parsed.get("--save-before", "30s"));
+    options.save_after_ns = cli::parse_duration("--save-after", parsed.get("--save-after", "10s"));
+    options.save_format = parsed.get("--save-format", "sqlite");
+    if (options.save_format != "sqlite" && options.save_format != "mcap") {
+        throw UsageError("cpm_history: --save-format '" + options.save_format + "': expected sqlite or mcap");
     }
     if (parsed.has("--record")) {
         c.record_path = parsed.get("--record");

@@ -10,7 +10,8 @@ const char* kHelp =
     "usage: cpm_history [--include REGEX]... [--exclude REGEX]... [--window 10s] [--topic-window TOPIC=DURATION]...\n"
     "                   [--max-bytes-total N] [--max-bytes-per-topic N] [--status-period 1s]\n"
     "                   [--record FILE [--record-format sqlite|mcap] [--record-max-bytes N] [--record-name NAME]]\n"
-    "                   [--save-dir DIR] [--dds_domain N]\n"
+    "                   [--save-dir DIR] [--save-on TOPIC[=FIELD==VALUE]]... [--save-before 30s] [--save-after 10s]\n"
+    "                   [--save-format sqlite|mcap] [--dds_domain N]\n"
     "\n"
     "Finds topics by DDS discovery and records every one whose name matches an --include pattern\n"
     "(all when none is given) and no --exclude pattern (full-match ECMAScript regexes), types it\n"
@@ -33,7 +34,13 @@ const char* kHelp =
     "(SQLite) or its last chunk (MCAP: written at least once a second).\n"
     "--save-dir DIR: where `cpm history save NAME` writes its recordings (the dash-cam: what the\n"
     "history holds of the last seconds and what comes in the next ones, into a new file NAME\n"
-    "while the service goes on); default: the service's working directory.\n";
+    "while the service goes on); default: the service's working directory.\n"
+    "--save-on TOPIC[=FIELD==VALUE] (repeatable): a sample on TOPIC (with that field, by IDL path,\n"
+    "equal to VALUE; != for unequal) saves by itself, from --save-before before it to --save-after\n"
+    "after it, into save_<UTC time>_<topic>[_<key>].db (.mcap with --save-format mcap) in the save\n"
+    "folder; e.g. --save-on stopRequest, --save-on fsmStatus=state_type==Emergency. With a filter,\n"
+    "the sample with which an object begins to match fires (a state entered, not each sample in it).\n"
+    "A trigger again while its save runs is within that save.\n";
 
 int run(int argc, char** argv)
 {

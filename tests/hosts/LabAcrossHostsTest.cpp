@@ -476,7 +476,9 @@ TEST_F(LabAcrossHosts, APythonControllerOnItsOwnHostDrivesTheCarsOfAnother)
     std::printf("the controller on car_b: %s\n", c.dump().c_str());
     for (const char* car : {"1", "2"}) EXPECT_GT(summary["report"]["cars"][car]["driven_m"].get<double>(), 2.0) << "car " << car;
     for (const auto& p : summary["processes"]) {
-        if (p["name"] == "controller_platoon" || p["name"] == "hlc_platoon") EXPECT_EQ(p["host"], "car_b") << p.dump();
+        if (p["name"] == "controller_platoon" || p["name"] == "hlc_platoon") {
+            EXPECT_EQ(p["host"], "car_b") << p.dump();
+        }
     }
     for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(cpm_test::wait_until([&] { return programs_on(hosts(), h).empty(); }, 10s)) << "left on host " << h;
 }

@@ -494,3 +494,86 @@ TEST(RecordingEndToEnd, PlayNamesWhatIsWrong)
     EXPECT_EQ(none.wait(20s), 2);
     EXPECT_NE(none.errors().find("FILE"), std::string::npos) << none.errors();
 }
+
+/// `cpm vehicle sim` as car 3 on the corridor: a live writer stamping with the wall clock, as a car does.
+Process live_car()
+{
+    return Process({built_program("cpm"), "vehicle", "sim", "--id", "3", "--map", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json",
+                    "--start", "0,0,0"});
+}
+
+TEST(DashCam, ASaveHoldsExactlyTheSpanAskedAndTheLiveHistoryLosesNothing)
+{
+    TempDir dir;
+    cpm::Participant participant{udp_only()};
+    cpm::HistoryClient client{participant};
+    Process service({built_program("cpm_history"), "--save-dir", dir.path.string()});
+    Process car = live_car();
+    ASSERT_TRUE(wait_for_samples(client, "vehicleState", "3", 100)) << service.errors() << car.errors();
+    // One second back, one ahead (the reply comes once that second has passed).
+    const Answer saved = ask({"save", "dash.db", "--before", "1s", "--after", "1s", "--topics", "vehicleState,rangeSensors", "--json"});
+    ASSERT_EQ(saved.code, 0) << saved.err << saved.out;
+    const auto s = nlohmann::json::parse(saved.out);
+    EXPECT_EQ(s["file"], dir.file("dash.db"));
+    const std::string from = std::to_string(s["from_ns"].get<uint64_t>()), to = std::to_string(s["to_ns"].get<uint64_t>());
+    uint64_t saved_total = 0;
+    EXPECT_EQ(s["to_ns"].get<uint64_t>() - s["from_ns"].get<uint64_t>(), 2'000'000'000u);
+    for (const char* topic : {"vehicleState", "rangeSensors"}) {
+        SCOPED_TRACE(topic);
+        const std::vector<std::string> span{"range", "--topic", topic, "--key", "3", "--from", from, "--to", to, "--by", "data", "--json"};
+        const Answer in_file = ask(span, dir.file("dash.db"));
+        const Answer live = ask(span);  // the service still holds the span: the same samples, none more, none fewer
+        ASSERT_EQ(in_file.code, 0) << in_file.err;
+        ASSERT_EQ(live.code, 0) << live.err;
+        EXPECT_EQ(in_file.out, live.out);
+        const auto n = std::count(in_file.out.begin(), in_file.out.end(), '\n');
+        saved_total += uint64_t(n);
+        EXPECT_GE(n, 80) << "two seconds at 50 Hz";
+        EXPECT_LE(n, 102);
+        // Nothing outside the span.
+        const Answer before = ask({"older", "--topic", topic, "--key", "3", "--time", from, "--by", "data"}, dir.file("dash.db"));
+        EXPECT_EQ(before.code, 1) << before.out;
+        const Answer all = ask({"range", "--topic", topic, "--key", "3", "--from", "0", "--to", "9000000000000000000", "--json"}, dir.file("dash.db"));
+        EXPECT_EQ(all.out, in_file.out);
+    }
+    EXPECT_EQ(s["samples"].get<uint64_t>(), saved_total) << "the reply counts what the file holds";
+    const Answer others = ask({"latest", "--topic", "vehicleObservation", "--key", "3"}, dir.file("dash.db"));
+    EXPECT_EQ(others.code, 1) << "only the topics asked for\n" << others.out;
+    // The service went on meanwhile, and goes on.
+    const Answer again = ask({"save", "dash.db"});
+    EXPECT_EQ(again.code, 1);
+    EXPECT_NE(again.err.find("exists already"), std::string::npos) << again.err;
+    const Answer path = ask({"save", "../dash2.db"});
+    EXPECT_EQ(path.code, 2);
+    EXPECT_NE(path.err.find("a file name"), std::string::npos) << path.err;
+    const Answer recording = ask({"save", "x.db"}, dir.file("dash.db"));
+    EXPECT_EQ(recording.code, 2) << "a recording is copied with export";
+    EXPECT_TRUE(wait_for_samples(client, "vehicleState", "3", 400)) << "still ingesting";
+}
+
+TEST(DashCam, ATriggerSavesTheSpanAroundItByItselfAsMcap)
+{
+    TempDir dir;
+    cpm::Participant participant{udp_only()};
+    cpm::HistoryClient client{participant};
+    // Car 3's first state fires it (the filter matches from then on: once).
+    Process service({built_program("cpm_history"), "--save-dir", dir.path.string(), "--save-on", "vehicleState=vehicle_id==3", "--save-before", "1s",
+                     "--save-after", "1s", "--save-format", "mcap"});
+    Process car = live_car();
+    ASSERT_TRUE(cpm_test::wait_until([&] { return service.errors().find("cpm_history: saved ") != std::string::npos; }, 30s)) << service.errors();
+    std::vector<std::string> files;
+    for (const auto& e : fs::directory_iterator(dir.path.string())) files.push_back(e.path().filename().string());
+    ASSERT_EQ(files.size(), 1u) << "one save: the state stays matched";
+    EXPECT_EQ(files[0].rfind("save_", 0), 0u) << files[0];
+    EXPECT_NE(files[0].find("Z_vehicleState_3.mcap"), std::string::npos) << files[0];
+    EXPECT_EQ(cpm_test::mcap_differences(dir.file(files[0])), "");
+    const Answer states = ask({"range", "--topic", "vehicleState", "--key", "3", "--from", "0", "--to", "9000000000000000000", "--json"}, dir.file(files[0]));
+    ASSERT_EQ(states.code, 0) << states.err;
+    const auto n = std::count(states.out.begin(), states.out.end(), '\n');
+    EXPECT_GE(n, 40) << "the second after the first state, at 50 Hz";
+    EXPECT_LE(n, 102);
+    std::this_thread::sleep_for(2s);
+    size_t later = 0;
+    for (const auto& e : fs::directory_iterator(dir.path.string())) later += e.path().extension() == ".mcap";
+    EXPECT_EQ(later, 1u) << "no save again while the filter stays matched";
+}

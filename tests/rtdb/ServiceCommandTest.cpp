@@ -59,3 +59,27 @@ TEST(ServiceCommand, AWrongFlagIsNamedWithItsValue)
     EXPECT_EQ(error_of({"--record-name", "x"}), "cpm_history: --record-max-bytes, --record-name and --record-format go with --record FILE");
     EXPECT_NE(error_of({"--max-bytes-per-topic", "12"}).find("--max-bytes-per-topic"), std::string::npos);
 }
+
+TEST(ServiceCommand, SaveTriggersAreReadAndAWrongOneIsNamed)
+{
+    const auto c = read({"--save-on", "stopRequest", "--save-on", "fsmStatus=state_type==Emergency", "--save-on", "fsmStatus=state_id!=3",
+                         "--save-before", "5s", "--save-after", "2s", "--save-format", "mcap", "--save-dir", "/tmp"});
+    ASSERT_EQ(c.options.save_on.size(), 3u);
+    EXPECT_EQ(c.options.save_on[0].topic, "stopRequest");
+    EXPECT_EQ(c.options.save_on[0].field, "");
+    EXPECT_EQ(c.options.save_on[1].field, "state_type");
+    EXPECT_EQ(c.options.save_on[1].value, "Emergency");
+    EXPECT_TRUE(c.options.save_on[1].equal);
+    EXPECT_FALSE(c.options.save_on[2].equal);
+    EXPECT_EQ(c.options.save_before_ns, 5'000'000'000ull);
+    EXPECT_EQ(c.options.save_after_ns, 2'000'000'000ull);
+    EXPECT_EQ(c.options.save_format, "mcap");
+    EXPECT_EQ(c.options.save_dir, "/tmp");
+    EXPECT_NE(error_of({"--save-on", "fsmStatus=state_type=Emergency"}).find("has no == or !="), std::string::npos);
+    EXPECT_NE(error_of({"--save-on", "fsmStatus=state==Emergency"}).find("FsmStatus has no field 'state' (it has"), std::string::npos);
+    EXPECT_NE(error_of({"--save-on", "=x==1"}).find("no topic"), std::string::npos);
+    EXPECT_NE(error_of({"--save-on", "stopRequest", "--save-format", "csv"}).find("--save-format 'csv'"), std::string::npos);
+    EXPECT_EQ(error_of({"--save-after", "1s"}), "cpm_history: --save-after goes with --save-on");
+    EXPECT_NE(error_of({"--save-dir", "/no/such/folder"}).find("no such folder"), std::string::npos);
+    EXPECT_EQ(error_of({"--record", "/tmp/x.db", "--record-format", "csv"}), "cpm_history: --record-format 'csv': expected sqlite or mcap");
+}

@@ -14,6 +14,20 @@
 
 namespace cpm::rtdb {
 
+/// `--save-on TOPIC[=FIELD==VALUE]`: a sample on TOPIC (whose field, by IDL path, has that value;
+/// != for another value) saves the span around it by itself, as `cpm history save` does.
+struct SaveTrigger
+{
+    std::string topic;
+    std::string field;  ///< "" for any sample
+    std::string value;
+    bool equal = true;
+    std::string text;   ///< as given
+};
+
+/// Reads a --save-on value; throws cpm::cli::UsageError naming what does not parse.
+SaveTrigger parse_save_trigger(const std::string& text);
+
 struct ServiceOptions
 {
     std::vector<std::string> include;  ///< topic name regexes (full match); empty: every topic
@@ -36,6 +50,11 @@ struct ServiceOptions
     /// Where `save` requests (cpm history save) write their recordings: a file name of the
     /// request's in this folder, never a path of the requester's. "": the working directory.
     std::string save_dir;
+    /// Saves by themselves: each trigger's file is save_<UTC time>_<topic>[_<key>].db (.mcap
+    /// with save_format "mcap") in save_dir, [trigger - save_before_ns, trigger + save_after_ns).
+    std::vector<SaveTrigger> save_on;
+    uint64_t save_before_ns = 30'000'000'000ull, save_after_ns = 10'000'000'000ull;
+    std::string save_format = "sqlite";
 };
 
 struct ServiceCounters
