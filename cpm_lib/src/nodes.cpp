@@ -58,14 +58,14 @@ std::vector<NodeSpec> make_table()
          .steers_the_lab = true, .about = "keeps the last seconds of every topic, records a run"},
         {.name = "parameter_server", .publish = {t::parameter.name}, .subscribe = {t::parameter_request.name}, .steers_the_lab = true,
          .about = "cpm param serve: the lab's parameters"},
-        {.name = "monitor", .publish = {t::stop_request.name}, .subscribe = {"*"},
+        {.name = "monitor", .publish = {t::stop_request.name, t::bookmark.name}, .subscribe = {"*"},
          .about = "cpm monitor: the lab's page (writes stop requests only with --allow-stop)"},
         {.name = "lab_clock", .publish = {t::system_trigger.name}, .subscribe = {t::ready_status.name}, .steers_the_lab = true,
          .about = "cpm lab clock: starts the lab's timers once every named one is ready, and stops them"},
         {.name = "controller", .publish = commands,
          .subscribe = {t::vehicle_state.name, t::vehicle_observation.name, t::range_sensors.name, t::stop_request.name},
          .about = "a user's controller (examples/vehicle_drive): commands to its cars, their states in"},
-        {.name = "lab_run", .publish = {t::stop_request.name, t::system_trigger.name},
+        {.name = "lab_run", .publish = {t::stop_request.name, t::system_trigger.name, t::bookmark.name},
          .subscribe = {t::log.name, t::history_status.name, t::ready_status.name}, .about = "cpm lab run: starts, clocks and stops a run"},
     };
     // `cpm vehicle sim`: a simulator and a bridge in one process group, one node in a secured lab.

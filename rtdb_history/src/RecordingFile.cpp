@@ -281,6 +281,16 @@ public:
             writer_.write_private(op_sample, extra);
             writer_.write(channel, s.commit_ns, o->second.stamped ? s.data_ns : s.commit_ns, s.payload, s.size, sequence++);
         });
+        // A bookmark is also the file's metadata, which viewers list.
+        if (o->second.topic == topics::bookmark.name && decoder()) {
+            if (const auto b = decoder()->decode(o->second.type_name, s.payload, s.size)) {
+                guarded([&] {
+                    writer_.add_metadata("cpm.bookmark", {{"time_ns", std::to_string(s.data_ns)},
+                                                          {"text", b->value("text", "")},
+                                                          {"source", b->value("source", "")}});
+                });
+            }
+        }
     }
     void delete_object(Oid oid, uint64_t deleted_ns) override
     {

@@ -5,6 +5,7 @@
 // history goes on serving; cpm record writes the same file.
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/rtdb/Mcap.hpp>
 #include <cpm/rtdb/Recording.hpp>
 
 #include <cpm_test/Dds.hpp>
@@ -576,4 +577,58 @@ TEST(DashCam, ATriggerSavesTheSpanAroundItByItselfAsMcap)
     size_t later = 0;
     for (const auto& e : fs::directory_iterator(dir.path.string())) later += e.path().extension() == ".mcap";
     EXPECT_EQ(later, 1u) << "no save again while the filter stays matched";
+}
+
+TEST(Bookmarks, AMarkIsRecordedListedLiveAndFromTheFileAndIsTheMcapFilesMetadata)
+{
+    TempDir dir;
+    const std::string file = dir.file("marked.mcap");
+    cpm::Participant participant{udp_only()};
+    cpm::HistoryClient client{participant};
+    Process service({built_program("cpm_history"), "--record", file});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return !client.latest("historyStatus", "").objects().empty(); }, 30s)) << service.errors();
+    Process first({built_program("cpm"), "lab", "mark", "car 3 touched the wall"});
+    ASSERT_EQ(first.wait(30s), 0) << first.errors();
+    EXPECT_NE(first.output().find("marked "), std::string::npos) << first.output();
+    Process second({built_program("cpm"), "lab", "mark", "lap 2 begins", "--source", "planner"});
+    ASSERT_EQ(second.wait(30s), 0) << second.errors();
+    auto lines = [](const std::string& out) {
+        std::vector<nlohmann::json> v;
+        std::istringstream in(out);
+        for (std::string l; std::getline(in, l);) v.push_back(nlohmann::json::parse(l));
+        return v;
+    };
+    const Answer live = ask({"marks", "--json"});
+    ASSERT_EQ(live.code, 0) << live.err;
+    const auto marks = lines(live.out);
+    ASSERT_EQ(marks.size(), 2u) << live.out;
+    EXPECT_EQ(marks[0]["text"], "car 3 touched the wall");
+    EXPECT_EQ(marks[0]["source"], "cpm lab mark");
+    EXPECT_EQ(marks[1]["text"], "lap 2 begins");
+    EXPECT_EQ(marks[1]["source"], "planner");
+    EXPECT_LT(marks[0]["data_ns"].get<uint64_t>(), marks[1]["data_ns"].get<uint64_t>());
+    // Wrong marks are refused before anything is sent; a mark nobody records is said.
+    Process empty({built_program("cpm"), "lab", "mark", " "});
+    EXPECT_EQ(empty.wait(30s), 2);
+    EXPECT_NE(empty.errors().find("needs a text"), std::string::npos) << empty.errors();
+    Process longer({built_program("cpm"), "lab", "mark", std::string(300, 'x')});
+    EXPECT_EQ(longer.wait(30s), 2);
+    EXPECT_NE(longer.errors().find("300 bytes; at most 256"), std::string::npos) << longer.errors();
+    Process nobody({built_program("cpm"), "lab", "mark", "lost?", "--dds_domain", std::to_string(cpm_test::extra_test_domain_id())});
+    EXPECT_EQ(nobody.wait(30s), 1);
+    EXPECT_NE(nobody.errors().find("nobody records bookmarks"), std::string::npos) << nobody.errors();
+
+    service.kill(SIGINT);
+    ASSERT_EQ(service.wait(30s), 0) << service.errors();
+    const Answer recorded = ask({"marks", "--json"}, file);
+    ASSERT_EQ(recorded.code, 0) << recorded.err;
+    EXPECT_EQ(recorded.out, live.out);
+    const auto f = cpm::rtdb::mcap::read(file);
+    std::vector<std::string> texts;
+    for (const auto& m : f.metadata) {
+        if (m.name == "cpm.bookmark") texts.push_back(m.values.at("text") + " / " + m.values.at("source") + " / " + m.values.at("time_ns"));
+    }
+    EXPECT_EQ(texts, (std::vector<std::string>{"car 3 touched the wall / cpm lab mark / " + std::to_string(marks[0]["data_ns"].get<uint64_t>()),
+                                               "lap 2 begins / planner / " + std::to_string(marks[1]["data_ns"].get<uint64_t>())}));
+    EXPECT_EQ(cpm_test::mcap_differences(file), "");
 }

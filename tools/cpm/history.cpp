@@ -10,6 +10,7 @@
 #include <cpm/HistoryClient.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/read_text_file.hpp>
+#include <cpm/topics.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -29,7 +30,7 @@ namespace cpm::tools {
 namespace {
 
 const char* const kHistoryHelp =
-    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot|save|export\n"
+    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot|marks|save|export\n"
     "                   [flags] [--json]\n"
     "\n"
     "                   [--file recording.db]\n"
@@ -57,6 +58,7 @@ const char* const kHistoryHelp =
     "                                       every sample (of every key without --key) as CSV, in\n"
     "                                       commit order: commit_ns, data_ns, valid_after_ns, key, then\n"
     "                                       the fields by IDL path (pose.x); cpm record import reads it\n"
+    "  marks                                the bookmarks (cpm lab mark), oldest first: time, source, text\n"
     "  save NAME [--before 30s] [--after 10s] [--topics A,B]   the dash-cam: the live service writes\n"
     "                                       what it holds of the last --before and what comes in the\n"
     "                                       next --after (data times) into a new recording NAME in its\n"
@@ -492,6 +494,46 @@ int export_recording_command(const cpm::cli::ParsedArgs& parsed, const std::stri
     return 0;
 }
 
+/// `cpm history marks [--json]`: the bookmarks (cpm lab mark, the monitor's Mark), oldest first.
+int marks_command(const std::vector<std::string>& args, const std::string& file)
+{
+    const std::string command = "cpm history marks";
+    auto parsed = cpm::cli::parse_flags(args, {{"--json", false}}, command);
+    const Source source = open_source(file, command);
+    // Each marking process's writer is an object of its own (the topic is unkeyed): all of them.
+    HistoryRequest find = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
+    find.name_regex(std::string("^") + cpm::topics::bookmark.name + "$");
+    std::vector<HistorySample> marks;
+    const HistoryReply found = source.client->request(find);
+    for (const auto& o : found.objects()) {
+        HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::range, "", "");
+        rq.oid(o.oid());
+        rq.t0(0);
+        rq.t1(uint64_t(INT64_MAX));
+        rq.by("data");
+        rq.limit(100000);
+        const HistoryReply reply = source.client->request(rq);
+        if (reply.status() != "ok" && reply.status() != "partial" && reply.status() != "not_found") {
+            std::fprintf(stderr, "%s: %s %s\n", command.c_str(), reply.status().c_str(), reply.error().c_str());
+            return 1;
+        }
+        marks.insert(marks.end(), reply.samples().begin(), reply.samples().end());
+    }
+    std::stable_sort(marks.begin(), marks.end(), [](const HistorySample& a, const HistorySample& b) { return a.data_ns() < b.data_ns(); });
+    if (marks.empty() && !parsed.has("--json")) std::printf("no bookmarks%s\n", file.empty() ? " held" : (" in " + file).c_str());
+    const auto& types = source.decoder();
+    for (const auto& s : marks) {
+        const auto b = types.decode("Bookmark", s.payload());
+        const std::string text = b ? b->value("text", "") : "?", who = b ? b->value("source", "") : "?";
+        if (parsed.has("--json")) {
+            std::printf("%s\n", nlohmann::json{{"data_ns", s.data_ns()}, {"commit_ns", s.commit_ns()}, {"text", text}, {"source", who}}.dump().c_str());
+        } else {
+            std::printf("%s  %-16s %s\n", cpm::cli::format_time(s.data_ns(), 3).c_str(), who.c_str(), text.c_str());
+        }
+    }
+    return 0;
+}
+
 /// `cpm history save NAME [--before 30s] [--after 10s] [--topics A,B]`: the dash-cam. The live
 /// service writes what it holds of the last --before and what comes in the next --after into
 /// a new recording NAME in its save folder, going on meanwhile.
@@ -642,6 +684,7 @@ int history_verb(const std::vector<std::string>& all)
     if (args.empty() || args[0].rfind("--", 0) == 0) throw UsageError("cpm history: which query? (see cpm history --help)");
     if (args[0] == "export") return export_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
     if (args[0] == "save") return save_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
+    if (args[0] == "marks") return marks_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
     return history_command(args[0], std::vector<std::string>(args.begin() + 1, args.end()), file);
 }
 

@@ -1,7 +1,9 @@
 // cpm lab …: the lab's clock, and lab scenarios checked.
 #include "Command.hpp"
 
+#include <cpm/Bookmark.hpp>
 #include <cpm/ChildProcess.hpp>
+#include <cpm/CommandLine.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/lab/Report.hpp>
 #include <cpm/lab/Run.hpp>
@@ -226,6 +228,32 @@ int lab_report(const std::vector<std::string>& args)
     return 0;
 }
 
+const char* kMarkHelp =
+    "usage: cpm lab mark TEXT [--source NAME] [--dds_domain N]\n"
+    "\n"
+    "Marks this moment of the lab with TEXT (at most 256 bytes, one line): a Bookmark on the\n"
+    "bookmark topic, recorded by the history with everything else, listed by cpm history marks\n"
+    "(live or --file), drawn in the report's plots and exported as MCAP metadata (cpm.bookmark).\n"
+    "--source: who marks it (default: cpm lab mark). Exit code 1 when no history records it.\n";
+
+int lab_mark(const std::vector<std::string>& args)
+{
+    const std::string command = "cpm lab mark";
+    const auto parsed = parse_args(args, {{"--source", true}}, command);
+    const std::string text = only_positional(parsed, command, "text");
+    const std::string source = parsed.get("--source", "cpm lab mark");
+    if (const std::string problem = cpm::bookmark_problem(text, source); !problem.empty()) throw UsageError(command + ": " + problem);
+    cpm::Participant participant;
+    try {
+        const auto m = cpm::mark(participant, text, source);
+        std::printf("marked %s: %s\n", cpm::cli::format_time(m.stamp_ns, 3).c_str(), text.c_str());
+    } catch (const cpm::Error& e) {
+        std::fprintf(stderr, "%s: %s\n", command.c_str(), e.what());
+        return 1;
+    }
+    return 0;
+}
+
 }  // namespace
 
 std::vector<Command> lab_commands()
@@ -233,6 +261,7 @@ std::vector<Command> lab_commands()
     return {{.group = "lab", .verb = "clock", .summary = "drive the lab's timers: a synchronised real-time start and stop, or a simulated clock", .help = kClockHelp, .run = lab_clock},
             {.group = "lab", .verb = "check", .summary = "check a lab scenario file and show the processes a run of it starts", .help = kLabCheckHelp, .run = lab_check},
             {.group = "lab", .verb = "run", .summary = "run a lab scenario: every process started, supervised, recorded and stopped in order", .help = kRunHelp, .run = lab_run},
+            {.group = "lab", .verb = "mark", .summary = "mark this moment of the lab with a text (recorded, listed by cpm history marks, in the report)", .help = kMarkHelp, .run = lab_mark},
             {.group = "lab", .verb = "report", .summary = "draw a run's report (report.html with plots, summary.json) from its folder", .help = kReportHelp, .run = lab_report}};
 }
 

@@ -127,6 +127,11 @@ inline bool is_history_control(const std::string& topic)
 {
     return topic == history_request.name || topic == history_reply.name || topic.rfind(std::string(history_reply.name) + "/", 0) == 0;
 }
+// ---- the lab's record -------------------------------------------------------------------------
+/// Volatile: a bookmark is an event of its moment, recorded by the history that runs then.
+inline constexpr TopicSpec bookmark{"bookmark", "Bookmark", qos::reliable_writer(16, false), qos::reliable_reader(64, false, true),
+                                    "a moment marked in the run: its text and who marked it"};
+
 inline constexpr TopicSpec history_status{"historyStatus", "HistoryStatus", qos::reliable_writer(1, true),
                                           qos::reliable_reader(1, true), "the history service's counts, once a second"};
 
@@ -137,7 +142,7 @@ inline constexpr std::array all{&vehicle_state,          &range_sensors,        
                                 &log,
                                 &log_level,              &parameter,              &parameter_request,
                                 &ready_status,           &system_trigger,         &history_request,
-                                &history_reply,          &history_status};
+                                &history_reply,          &history_status,         &bookmark};
 
 /// The entry of a name, or nullptr.
 constexpr const TopicSpec* find(std::string_view name)
