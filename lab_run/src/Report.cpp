@@ -60,12 +60,13 @@ nlohmann::json read_json(const std::string& path)
 /// rest is dropped as the recording is read, so that a long run's samples fit in memory.
 bool read_for_figures(const std::string& topic)
 {
-    return topic == topics::vehicle_observation.name || topic == topics::vehicle_state.name || topic == topics::fsm_status.name || topic == topics::log.name;
+    return topic == topics::vehicle_observation.name || topic == topics::vehicle_state.name || topic == topics::fsm_status.name ||
+           topic == topics::log.name || topic == topics::bookmark.name;
 }
 
 nlohmann::json members_for_figures(nlohmann::json sample)
 {
-    static const std::set<std::string> members{"vehicle_id", "pose", "speed", "steering_servo", "state_type", "log_level", "stamp", "id", "content"};
+    static const std::set<std::string> members{"vehicle_id", "pose", "speed", "steering_servo", "state_type", "log_level", "stamp", "id", "content", "text", "source"};
     nlohmann::json kept = nlohmann::json::object();
     for (auto& member : sample.items()) {
         if (members.count(member.key())) kept[member.key()] = std::move(member.value());
@@ -311,6 +312,36 @@ void read_samples(const RecordedRun& recording, RunFigures& f)
     }
 }
 
+/// The run's bookmarks on the lab's time axis. A mark stamped on the real clock in a simulated
+/// run is placed at the lab time of the car states committed with it.
+std::vector<MarkFigure> marks_of(const RecordedRun& recording, uint64_t t0, bool simulated)
+{
+    std::vector<std::pair<uint64_t, uint64_t>> lab_at_commit;  // (commit, data) of the car states
+    if (simulated) {
+        for (const auto& o : recording.instances) {
+            if (o.topic != topics::vehicle_state.name) continue;
+            for (const auto& s : o.samples) lab_at_commit.emplace_back(s.commit_ns, s.data_ns);
+        }
+        std::sort(lab_at_commit.begin(), lab_at_commit.end());
+    }
+    std::vector<MarkFigure> marks;
+    for (const auto& o : recording.instances) {
+        if (o.topic != topics::bookmark.name) continue;
+        for (const auto& s : o.samples) {
+            if (s.value.is_null()) continue;
+            uint64_t t = s.data_ns;
+            if (simulated && t >= kRealClockSince) {
+                auto it = std::upper_bound(lab_at_commit.begin(), lab_at_commit.end(), std::pair{s.commit_ns, UINT64_MAX});
+                if (it == lab_at_commit.begin()) continue;  // before the lab's clock ran
+                t = std::prev(it)->second;
+            }
+            marks.push_back({.t_s = seconds_since(t0, t), .text = s.value.value("text", ""), .source = s.value.value("source", "")});
+        }
+    }
+    std::stable_sort(marks.begin(), marks.end(), [](const MarkFigure& a, const MarkFigure& b) { return a.t_s < b.t_s; });
+    return marks;
+}
+
 /// Each gate of the world judged on the car's path (the path of its reference point).
 void judge_gates(CarFigures& car, const vehicle::World& world)
 {
@@ -395,6 +426,8 @@ nlohmann::json json_of(const RunFigures& f)
     figures["missed_deadlines_by_timer"] = f.missed_ticks_by_timer;
     figures["log_errors"] = f.log_errors;
     figures["log_warnings"] = f.log_warnings;
+    figures["marks"] = nlohmann::json::array();
+    for (const auto& m : f.marks) figures["marks"].push_back({{"t_s", m.t_s}, {"text", m.text}, {"source", m.source}});
     return figures;
 }
 
@@ -427,6 +460,7 @@ public:
 
     std::string path(const std::string& file) const { return (folder_ / file).string(); }
     std::ostream& script() { return script_; }
+    std::vector<MarkFigure> marks_;
 
     /// Writes the data file `file`, a line "a b" per point; its path.
     std::string data(const std::string& file, const Line& points)
@@ -443,17 +477,30 @@ public:
         script_ << "set output " << quoted(path(file)) << "\n";
     }
 
+    /// The bookmarks every plot over lab time draws: a dashed line each, with its text.
+    void marks(const std::vector<MarkFigure>& marks) { marks_ = marks; }
+
     /// A plot over lab time of each (data file, title) of `series`; none when there are none.
     void over_time(const std::string& file, const std::string& title, const std::string& ylabel,
                    const std::vector<std::pair<std::string, std::string>>& series, const std::string& with = "lines")
     {
         if (series.empty()) return;
         image(file);
-        script_ << "set title " << quoted(title) << "\nset xlabel 'lab time (s)'\nset ylabel " << quoted(ylabel) << "\nunset size\nplot ";
+        script_ << "set title " << quoted(title) << "\nset xlabel 'lab time (s)'\nset ylabel " << quoted(ylabel) << "\nunset size\n";
+        draw_marks();
+        script_ << "plot ";
         for (size_t i = 0; i < series.size(); ++i) {
             script_ << (i ? ", " : "") << quoted(series[i].first) << " using 1:2 with " << with << " lw 2 title " << quoted(series[i].second);
         }
-        script_ << "\n";
+        script_ << "\nunset arrow\nunset label\n";
+    }
+    /// The bookmarks as dashed vertical lines labelled with their text (before a plot over lab time).
+    void draw_marks()
+    {
+        for (const auto& m : marks_) {
+            script_ << "set arrow from " << m.t_s << ", graph 0 to " << m.t_s << ", graph 1 nohead dt 2 lw 1.5 lc rgb '#b03030' front\n"
+                    << "set label " << quoted(m.text) << " at " << m.t_s << ", graph 0.97 rotate by 90 right offset -0.8,0 font ',9' tc rgb '#b03030' front\n";
+        }
     }
 
     /// Runs gnuplot on the script; the images' paths. Throws cpm::Error with gnuplot's log when it fails.
@@ -581,6 +628,7 @@ void plot_rates(PlotScript& p, const RunFigures& f)
 std::vector<std::string> draw_plots(const fs::path& plots, const RunFolder& run, const RunFigures& f)
 {
     PlotScript p(plots);
+    p.marks(f.marks);
     plot_map(p, run, f);
     plot_cars_over_time(p, f);
     plot_rates(p, f);
@@ -628,7 +676,8 @@ detail::PageValues log_row(const LogLine& l)
 void fill_lists(detail::PageValues& v, const RunFigures& f, const std::vector<std::string>& images)
 {
     auto& lists = v.lists;
-    for (const char* key : {"images", "cars", "topics", "timers", "log", "hosts", "controllers"}) lists[key];
+    for (const char* key : {"images", "cars", "topics", "timers", "log", "hosts", "controllers", "marks"}) lists[key];
+    for (const auto& m : f.marks) lists["marks"].push_back({.text = {{"t_s", fixed(m.t_s, 3)}, {"source", m.source}, {"text", m.text}}});
     for (const auto& file : images) lists["images"].push_back({.text = {{"file", file}}});
     // In the order summary.json's "report" lists the cars: by id as text (12 before 6).
     std::map<std::string, std::pair<int, const CarFigures*>> by_text;
@@ -668,6 +717,7 @@ RunFigures figures_of(const RecordedRun& recording, const nlohmann::json& summar
     f.recording_warning = recording.warning;
     f.topics = topic_figures(recording, f.simulated());
     read_samples(recording, f);
+    f.marks = marks_of(recording, lab_zero_ns(recording), f.simulated());
     for (auto& [id, car] : f.cars) complete_car(car, world);
     f.gates_in_world = world ? world->gates().size() : 0;
     f.closest_m = closest_between(f.cars);
@@ -696,7 +746,8 @@ std::string report_page(const RunFigures& f, const std::vector<std::string>& ima
                                    {"any_missed", !f.missed_ticks_by_timer.empty()},
                                    {"any_log", !f.log.empty()},
                                    {"across_hosts", !f.hosts.empty()},
-                                   {"with_controllers", !f.controllers.empty()}}};
+                                   {"with_controllers", !f.controllers.empty()},
+                                   {"any_marks", !f.marks.empty()}}};
     fill_lists(v, f, images);
     return detail::fill(detail::kReportPage, v);
 }

@@ -224,6 +224,38 @@ TEST(ReportFigures, GatesAreJudgedOnEachCarsPathAndWallsGiveItsClearance)
     EXPECT_EQ(car1.clearance_m.size(), 5u) << "one per pose";
 }
 
+TEST(ReportFigures, BookmarksArePlacedOnTheLabsTimeAxisInRealAndInSimulatedTime)
+{
+    auto mark = [](const std::string& text, const std::string& source) { return json{{"text", text}, {"source", source}}; };
+    // Real time: the mark's stamp is on the cars' clock.
+    RecordedRun real{.instances = {{.topic = "vehicleState", .samples = {at(kRealStart, state(5, 0, 0)), at(kRealStart + 4 * kSecond, state(5, 2, 0))}},
+                                   {.topic = "bookmark", .samples = {at(kRealStart + 3 * kSecond, mark("late one", "b"))}},
+                                   {.topic = "bookmark", .samples = {at(kRealStart + 1500 * kMillisecond, mark("first", "cpm lab mark"))}}},
+                     .samples = 4};
+    const auto r = figures_of(real, {{"name", "real"}, {"time", "real"}});
+    ASSERT_EQ(r.marks.size(), 2u);
+    EXPECT_EQ(r.marks[0].text, "first") << "in time order, whichever marking process wrote it";
+    EXPECT_EQ(r.marks[0].source, "cpm lab mark");
+    EXPECT_DOUBLE_EQ(r.marks[0].t_s, 1.5);
+    EXPECT_DOUBLE_EQ(r.marks[1].t_s, 3.0);
+    // Simulated: the cars stamp lab time (20 ms of it per real ms); a mark stamped on the real
+    // clock goes where the car states committed with it are.
+    const uint64_t commit0 = 1'000'000'000 * kSecond;
+    RecordedInstance states{.topic = "vehicleState"};
+    for (uint64_t k = 0; k <= 50; ++k) {
+        states.samples.push_back({.data_ns = k * 20 * kMillisecond, .commit_ns = commit0 + k * kMillisecond, .value = state(5, 0, 0.5)});
+    }
+    RecordedRun simulated{.instances = {states,
+                                        {.topic = "bookmark",
+                                         .samples = {{.data_ns = commit0 + 10 * kMillisecond + 300'000, .commit_ns = commit0 + 10 * kMillisecond + 400'000,
+                                                      .value = mark("mid", "m")},
+                                                     {.data_ns = commit0, .commit_ns = commit0 - kSecond, .value = mark("before", "m")}}}},
+                          .samples = 53};
+    const auto s = figures_of(simulated, {{"name", "sim"}, {"time", "simulated"}});
+    ASSERT_EQ(s.marks.size(), 1u) << "a mark before the lab's clock ran has no place on its axis";
+    EXPECT_NEAR(s.marks[0].t_s, 0.2, 1e-9) << "the lab time of the state committed just before it";
+}
+
 TEST(ReportPage, NamesFromTheRunAreShownAsTextNeverAsMarkup)
 {
     RunFigures figures;
@@ -233,6 +265,7 @@ TEST(ReportPage, NamesFromTheRunAreShownAsTextNeverAsMarkup)
     figures.topics["a&b"] = {.samples = 2};
     figures.missed_ticks_by_timer["<timer>"] = 3;
     figures.log.push_back({.t_s = 0.5, .error = true, .node = "<node>", .text = "</td></tr></table><script>alert(2)</script>"});
+    figures.marks.push_back({.t_s = 0.7, .text = "<script>alert(3)</script>", .source = "<i>me</i>"});
 
     const std::string page = report_page(figures, {"map.png"});
 
@@ -245,6 +278,9 @@ TEST(ReportPage, NamesFromTheRunAreShownAsTextNeverAsMarkup)
     EXPECT_NE(page.find("<td>a&amp;b</td>"), std::string::npos);
     EXPECT_NE(page.find("<td>&lt;timer&gt;</td><td>3</td>"), std::string::npos);
     EXPECT_NE(page.find("&lt;/td&gt;&lt;/tr&gt;&lt;/table&gt;&lt;script&gt;alert(2)"), std::string::npos);
+    EXPECT_NE(page.find("<td>0.700</td><td>&lt;i&gt;me&lt;/i&gt;</td><td style=\"text-align:left\">&lt;script&gt;alert(3)&lt;/script&gt;</td>"),
+              std::string::npos)
+        << "a bookmark's text and source";
 }
 
 TEST(ReportPage, ShowsTheOutcomeEachCarsGatesAndNoneForAQuietLog)

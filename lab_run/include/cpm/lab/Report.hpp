@@ -42,7 +42,7 @@ struct RecordedSample
     uint64_t data_ns = 0;    ///< its data time: the create stamp, or the writer's source time
     uint64_t commit_ns = 0;  ///< when the history committed it, on the history's real clock
     /// The sample decoded, for the topics the report reads (vehicleObservation, vehicleState,
-    /// fsmStatus, log); null for the other topics and for a sample that could not be decoded.
+    /// fsmStatus, log, bookmark); null for the other topics and for a sample that could not be decoded.
     nlohmann::json value;
 };
 
@@ -124,6 +124,13 @@ struct LogLine
     std::string node, text;
 };
 
+/// A bookmark (cpm lab mark) on the lab's time axis.
+struct MarkFigure
+{
+    double t_s = 0;
+    std::string text, source;
+};
+
 /// A host of a run across computers, as summary.json says (its clock against the run's own).
 struct HostFigures
 {
@@ -162,6 +169,7 @@ struct RunFigures
     size_t log_errors = 0, log_warnings = 0;
     std::vector<HostFigures> hosts;  ///< a run across computers: each host; empty on one host
     std::vector<ControllerFigures> controllers;  ///< users' controllers (cpm::hlc), as their middlewares counted
+    std::vector<MarkFigure> marks;   ///< the run's bookmarks, in time order
 
     bool simulated() const { return time == "simulated"; }
 };
