@@ -144,7 +144,8 @@ RecordingWriter::RecordingWriter(std::string path, RecordingOptions options) : p
     std::map<std::string, std::string> idl;
     if (const IdlDecoder* lab = IdlDecoder::lab_types()) idl = lab->sources();
     file_ = create_recording_file(path_, recording_format(path_, options_.format),
-                                  {{"name", options_.name}, {"host", host}, {"started_ns", std::to_string(started_ns_)}}, idl, options_.max_bytes);
+                                  {{"name", options_.name}, {"host", host}, {"started_ns", std::to_string(started_ns_)}}, idl, options_.max_bytes,
+                                  options_.foxglove_3d);
     thread_ = std::thread([this] { run(); });
 }
 
@@ -562,7 +563,7 @@ ExportCounts export_recording(const std::string& path, const std::string& out, c
     for (const char* k : {"name", "host", "started_ns"}) begin[k] = meta[k];
     ExportCounts counts;
     const RecordingFormat format = recording_format(out, o.format);
-    auto file = create_recording_file(out, format, begin, idl);
+    auto file = create_recording_file(out, format, begin, idl, 0, o.foxglove_3d);
     try {
         for (const auto& [info, deleted] : rows) {
             if (info.kind == ObjectKind::instance && !wanted.empty() && !wanted.count(info.topic)) continue;

@@ -10,6 +10,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <optional>
 #include <cstring>
 #include <filesystem>
 #include <regex>
@@ -235,6 +237,52 @@ ObjectInfo object_of(const nlohmann::json& j)
     return i;
 }
 
+/// Foxglove's FrameTransform (foxglove/schemas, OMG IDL), which its 3D panel places frames by.
+constexpr const char* kFrameTransformIdl = R"(module foxglove {
+struct Time { uint32 sec; uint32 nsec; };
+struct Vector3 { double x; double y; double z; };
+struct Quaternion { double x; double y; double z; double w; };
+struct FrameTransform {
+  Time timestamp;
+  string parent_frame_id;
+  string child_frame_id;
+  Vector3 translation;
+  Quaternion rotation;
+};
+};
+)";
+
+/// A FrameTransform in plain little-endian CDR (its encapsulation header first): frame `child`
+/// in "map" at (x, y) turned by yaw about z, at time `t_ns`.
+std::string frame_transform(uint64_t t_ns, const std::string& child, double x, double y, double yaw)
+{
+    std::string b{0, 1, 0, 0};  // CDR, little endian
+    auto align = [&](size_t n) {
+        while ((b.size() - 4) % n) b.push_back(0);
+    };
+    auto u32 = [&](uint32_t v) {
+        align(4);
+        for (int i = 0; i < 4; ++i) b.push_back(char((v >> (8 * i)) & 0xFF));
+    };
+    auto text = [&](const std::string& s) {
+        u32(uint32_t(s.size() + 1));
+        b += s;
+        b.push_back(0);
+    };
+    auto f64 = [&](double v) {
+        align(8);
+        uint64_t bits;
+        std::memcpy(&bits, &v, 8);
+        for (int i = 0; i < 8; ++i) b.push_back(char((bits >> (8 * i)) & 0xFF));
+    };
+    u32(uint32_t(t_ns / 1'000'000'000ull));
+    u32(uint32_t(t_ns % 1'000'000'000ull));
+    text("map");
+    text(child);
+    for (double v : {x, y, 0.0, 0.0, 0.0, std::sin(yaw / 2), std::cos(yaw / 2)}) f64(v);
+    return b;
+}
+
 /// The QoS cpm's writers offer on a topic of the lab's table, as JSON ("" for another topic).
 std::string qos_of(const std::string& topic)
 {
@@ -249,8 +297,8 @@ class McapFile final : public RecordingFile
 {
 public:
     McapFile(const std::string& path, const std::map<std::string, std::string>& meta, const std::map<std::string, std::string>& idl,
-             uint64_t max_bytes)
-        : writer_(path, std::string("cpm ") + CPM_VERSION, chunk_size(max_bytes), max_bytes), idl_(idl),
+             uint64_t max_bytes, bool foxglove_3d)
+        : writer_(path, std::string("cpm ") + CPM_VERSION, chunk_size(max_bytes), max_bytes), idl_(idl), foxglove_3d_(foxglove_3d),
           last_flush_(std::chrono::steady_clock::now())
     {
         guarded([&] {
@@ -281,6 +329,7 @@ public:
             writer_.write_private(op_sample, extra);
             writer_.write(channel, s.commit_ns, o->second.stamped ? s.data_ns : s.commit_ns, s.payload, s.size, sequence++);
         });
+        if (foxglove_3d_) frames(o->second, s);
         // A bookmark is also the file's metadata, which viewers list.
         if (o->second.topic == topics::bookmark.name && decoder()) {
             if (const auto b = decoder()->decode(o->second.type_name, s.payload, s.size)) {
@@ -322,17 +371,33 @@ public:
     uint64_t samples_in_file() const override { return writer_.messages(); }
 
 private:
+    struct Topic
+    {
+        std::string topic, type_name;
+        bool stamped = true;
+    };
+    /// A car's pose also as a FrameTransform on /tf, for Foxglove's 3D panel: car_<id> from
+    /// vehicleObservation (its true pose), car_<id>_estimate from vehicleState (its own).
+    void frames(const Topic& t, const RecordedSample& s)
+    {
+        const bool truth = t.topic == topics::vehicle_observation.name;
+        if ((!truth && t.topic != topics::vehicle_state.name) || !decoder()) return;
+        const auto j = decoder()->decode(t.type_name, s.payload, s.size);
+        if (!j || !j->contains("pose")) return;
+        const auto& pose = (*j)["pose"];
+        if (!tf_channel_) tf_channel_ = writer_.add_channel(writer_.add_schema("foxglove::FrameTransform", "omgidl", kFrameTransformIdl), "/tf", "cdr",
+                                                            {{"cpm.derived", "the cars' poses for Foxglove's 3D panel"}});
+        const std::string frame = "car_" + std::to_string(j->value("vehicle_id", 0)) + (truth ? "" : "_estimate");
+        const std::string b = frame_transform(s.data_ns, frame, pose.value("x", 0.0), pose.value("y", 0.0), pose.value("yaw", 0.0));
+        guarded([&] { writer_.write(*tf_channel_, s.commit_ns, s.data_ns, reinterpret_cast<const uint8_t*>(b.data()), b.size()); });
+    }
+
     /// 256 KiB: what a recorder killed loses at most (or a second's worth); smaller under a
     /// size limit, so that a limit ends the file after many chunks, not before the first.
     static size_t chunk_size(uint64_t max_bytes)
     {
         return max_bytes ? size_t(std::clamp<uint64_t>(max_bytes / 16, 4096, 256 * 1024)) : 256 * 1024;
     }
-    struct Topic
-    {
-        std::string topic, type_name;
-        bool stamped = true;
-    };
     template <class Write>
     void guarded(Write write)
     {
@@ -379,6 +444,8 @@ private:
     std::map<Oid, Topic> objects_;
     std::map<std::string, uint16_t> schemas_, channels_;
     std::map<uint16_t, uint32_t> sequences_;
+    bool foxglove_3d_;
+    std::optional<uint16_t> tf_channel_;
     std::chrono::steady_clock::time_point last_flush_;
 };
 
@@ -430,12 +497,12 @@ RecordingFormat recording_format(const std::string& path, const std::string& for
 
 std::unique_ptr<RecordingFile> create_recording_file(const std::string& path, RecordingFormat format,
                                                      const std::map<std::string, std::string>& meta,
-                                                     const std::map<std::string, std::string>& idl, uint64_t max_bytes)
+                                                     const std::map<std::string, std::string>& idl, uint64_t max_bytes, bool foxglove_3d)
 {
     if (sqlite::file_exists(path)) throw Error("recording " + path + ": the file exists already (a recording is never overwritten)");
     if (format == RecordingFormat::sqlite) return create_sqlite(path, meta, idl, max_bytes);
     try {
-        return std::make_unique<McapFile>(path, meta, idl, max_bytes);
+        return std::make_unique<McapFile>(path, meta, idl, max_bytes, foxglove_3d);
     } catch (const Error& e) {
         throw Error("recording " + path + ": " + e.what());
     }
@@ -496,6 +563,7 @@ void copy_mcap_into(const std::string& path, sqlite3* db)
         const mcap::Message& m = f.messages[i];
         RecordedSample s{.commit_ns = m.log_time, .data_ns = m.publish_time, .valid_after_ns = m.publish_time, .payload = m.data.data(),
                          .size = m.data.size()};
+        if (ours && !sample) continue;  // derived for viewers (Foxglove's /tf): no sample of the run
         Oid oid;
         if (ours && sample) {
             oid = get_u64(*sample, 0);

@@ -14,7 +14,9 @@
 //   0x81 cpm.sample   the next message's oid, valid_after, source time, lost_before and data
 //                     time (five little-endian uint64)
 //   0x82 cpm.deleted  an object's deletion time
-// A message's channel sequence also skips the samples lost before it.
+// A message's channel sequence also skips the samples lost before it. A message without a
+// cpm.sample record before it is derived for viewers (with foxglove_3d, the cars' poses as
+// foxglove::FrameTransform on /tf) and is no sample of the run: reading the file skips it.
 #include <cpm/Error.hpp>
 #include <cpm/rtdb/Store.hpp>
 
@@ -75,9 +77,11 @@ struct RecordingFull : Error
 /// A new recording file at `path` (it must not exist), with its meta (format, version, name,
 /// host, started_ns) and the IDL texts it carries. Throws cpm::Error naming the file.
 /// `max_bytes` (0: none) ends it as a full disk would.
+/// `foxglove_3d` (MCAP): the cars' poses also as foxglove::FrameTransform messages on /tf.
 std::unique_ptr<RecordingFile> create_recording_file(const std::string& path, RecordingFormat format,
                                                      const std::map<std::string, std::string>& meta,
-                                                     const std::map<std::string, std::string>& idl, uint64_t max_bytes = 0);
+                                                     const std::map<std::string, std::string>& idl, uint64_t max_bytes = 0,
+                                                     bool foxglove_3d = false);
 
 /// The same as an SQLite database already open (an empty one), for reading an MCAP file.
 std::unique_ptr<RecordingFile> recording_tables_in(sqlite3* db, const std::map<std::string, std::string>& meta,

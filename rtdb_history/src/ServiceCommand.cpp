@@ -63,6 +63,7 @@ const std::vector<cli::FlagSpec>& service_flags()
                                                   {"--record", true},
                                                   {"--record-max-bytes", true},
                                                   {"--record-format", true},
+                                                  {"--foxglove-3d", false},
                                                   {"--save-dir", true},
                                                   {"--save-on", true, true},
                                                   {"--save-before", true},
@@ -127,13 +128,14 @@ ServiceCommand read_service_flags(const cli::ParsedArgs& parsed)
         c.record_path = parsed.get("--record");
         c.record.name = parsed.get("--record-name");
         c.record.format = parsed.get("--record-format");
+        c.record.foxglove_3d = parsed.has("--foxglove-3d");
         if (!c.record.format.empty() && c.record.format != "sqlite" && c.record.format != "mcap") {
             throw UsageError("cpm_history: --record-format '" + c.record.format + "': expected sqlite or mcap");
         }
         if (parsed.has("--record-max-bytes"))
             c.record.max_bytes = uint64_t(cli::parse_integer("--record-max-bytes", parsed.get("--record-max-bytes"), 65536, 1LL << 50));
-    } else if (parsed.has("--record-max-bytes") || parsed.has("--record-name") || parsed.has("--record-format")) {
-        throw UsageError("cpm_history: --record-max-bytes, --record-name and --record-format go with --record FILE");
+    } else if (parsed.has("--record-max-bytes") || parsed.has("--record-name") || parsed.has("--record-format") || parsed.has("--foxglove-3d")) {
+        throw UsageError("cpm_history: --record-max-bytes, --record-name, --record-format and --foxglove-3d go with --record FILE");
     }
     return c;
 }

@@ -9,7 +9,7 @@ namespace {
 const char* kHelp =
     "usage: cpm_history [--include REGEX]... [--exclude REGEX]... [--window 10s] [--topic-window TOPIC=DURATION]...\n"
     "                   [--max-bytes-total N] [--max-bytes-per-topic N] [--status-period 1s]\n"
-    "                   [--record FILE [--record-format sqlite|mcap] [--record-max-bytes N] [--record-name NAME]]\n"
+    "                   [--record FILE [--record-format sqlite|mcap] [--foxglove-3d] [--record-max-bytes N] [--record-name NAME]]\n"
     "                   [--save-dir DIR] [--save-on TOPIC[=FIELD==VALUE]]... [--save-before 30s] [--save-after 10s]\n"
     "                   [--save-format sqlite|mcap] [--dds_domain N]\n"
     "\n"
@@ -25,7 +25,8 @@ const char* kHelp =
     "publishes historyStatus every --status-period. Ends on SIGINT/SIGTERM.\n"
     "--record FILE: also writes every sample it ingests to FILE (a new file, never overwritten):\n"
     "SQLite, or MCAP for a FILE named *.mcap (or --record-format mcap), which Foxglove and every\n"
-    "MCAP tool open. Either holds every object's info block and the IDL of cpm's types, kept whole beyond\n"
+    "MCAP tool open (--foxglove-3d: the cars' poses also as foxglove::FrameTransform on /tf, for its\n"
+    "3D panel). Either holds every object's info block and the IDL of cpm's types, kept whole beyond\n"
     "the window: cpm history --file FILE asks it the same questions, cpm play replays it. A writer\n"
     "thread batches the disk writes, so ingest never waits on the disk. --record-max-bytes N: the\n"
     "file stops growing at N bytes. A full disk (or that limit) ends the recording with an error\n"

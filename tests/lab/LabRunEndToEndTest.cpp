@@ -14,10 +14,12 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <sstream>
 
@@ -217,6 +219,39 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     Process play_mcap({built_program("cpm"), "play", mcap, "--from", "2s", "--to", "4s", "--topics", "vehicleState", "--wait-for-readers", "0s"});
     ASSERT_EQ(play_mcap.wait(60s), 0) << play_mcap.errors();
     EXPECT_EQ(nlohmann::json::parse(play_mcap.output())["published"].get<int>(), played);
+
+    // For Foxglove's 3D panel: each pose also as a FrameTransform on /tf, car_5 (the true pose)
+    // and car_5_estimate (the car's own) in map, as the reference reader decodes them; a view
+    // for viewers only, not a topic of the run.
+    const std::string three_d = dir.file("corridor_3d.mcap");
+    Process to_3d({built_program("cpm"), "history", "--file", recording, "export", "--mcap", three_d, "--foxglove-3d"});
+    ASSERT_EQ(to_3d.wait(60s), 0) << to_3d.errors();
+    EXPECT_EQ(cpm_test::mcap_differences(three_d), "");
+    std::string refused;
+    const auto read = cpm_test::mcap_reference_read(three_d, refused);
+    ASSERT_EQ(refused, "");
+    std::map<std::string, nlohmann::json> first_frame;  // by frame
+    size_t frames = 0;
+    for (const auto& m : read) {
+        if (m.value("topic", "") != "/tf") continue;
+        ++frames;
+        EXPECT_EQ(m["data"]["parent_frame_id"], "map");
+        first_frame.emplace(m["data"]["child_frame_id"].get<std::string>(), m);
+    }
+    EXPECT_EQ(frames, info->samples_total + rec.store->info(*rec.store->find("vehicleObservation", "5"))->samples_total);
+    ASSERT_TRUE(first_frame.count("car_5") && first_frame.count("car_5_estimate"));
+    Process first_pose({built_program("cpm"), "history", "--file", recording, "range", "--topic", "vehicleObservation", "--key", "5", "--from", "0",
+                        "--to", "9000000000000000000", "--limit", "1", "--json"});
+    ASSERT_EQ(first_pose.wait(30s), 0) << first_pose.errors();
+    const auto pose = nlohmann::json::parse(first_pose.output().substr(0, first_pose.output().find('\n')));
+    const auto& tf = first_frame["car_5"]["data"];
+    EXPECT_DOUBLE_EQ(tf["translation"]["x"].get<double>(), pose["data"]["pose"]["x"].get<double>());
+    EXPECT_DOUBLE_EQ(tf["translation"]["y"].get<double>(), pose["data"]["pose"]["y"].get<double>());
+    EXPECT_NEAR(2 * std::atan2(tf["rotation"]["z"].get<double>(), tf["rotation"]["w"].get<double>()), pose["data"]["pose"]["yaw"].get<double>(), 1e-12);
+    EXPECT_EQ(first_frame["car_5"]["publish_time"], std::to_string(pose["data_ns"].get<uint64_t>()));
+    Process listed({built_program("cpm"), "history", "--file", three_d, "list"});
+    ASSERT_EQ(listed.wait(30s), 0) << listed.errors();
+    EXPECT_EQ(listed.output().find("/tf"), std::string::npos) << listed.output();
 }
 
 TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)

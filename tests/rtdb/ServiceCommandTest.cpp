@@ -56,7 +56,7 @@ TEST(ServiceCommand, AWrongFlagIsNamedWithItsValue)
               "cpm_history: --topic-window 'vehicleState': expected TOPIC=DURATION (e.g. vehicleState=60s)");
     EXPECT_EQ(error_of({"--max-bytes", "4096", "--max-bytes-total", "4096"}),
               "cpm_history: --max-bytes is the older name of --max-bytes-total; give one");
-    EXPECT_EQ(error_of({"--record-name", "x"}), "cpm_history: --record-max-bytes, --record-name and --record-format go with --record FILE");
+    EXPECT_EQ(error_of({"--record-name", "x"}), "cpm_history: --record-max-bytes, --record-name, --record-format and --foxglove-3d go with --record FILE");
     EXPECT_NE(error_of({"--max-bytes-per-topic", "12"}).find("--max-bytes-per-topic"), std::string::npos);
 }
 

@@ -67,7 +67,9 @@ const char* const kHistoryHelp =
     "                                       a new recording OUT of the topics asked for (all without\n"
     "                                       --topics), every sample byte for byte: MCAP opens in\n"
     "                                       Foxglove (IDL schemas, CDR messages, indexed); a run\n"
-    "                                       folder's scenario and summary go with it as metadata\n"
+    "                                       folder's scenario and summary go with it as metadata;\n"
+    "                                       --foxglove-3d: the cars' poses also as FrameTransform on\n"
+    "                                       /tf (frames car_<id>, car_<id>_estimate in map) for its 3D panel\n"
     "--key: a vehicle id, or the key as `cpm history list` prints it. Times: nanoseconds,\n"
     "ISO-8601 UTC (2026-11-23T14:05:00.25Z) or relative to now (-2s). --by commit (default):\n"
     "when the service received it; data: the sample's create_stamp.\n"
@@ -473,6 +475,8 @@ int export_recording_command(const cpm::cli::ParsedArgs& parsed, const std::stri
     const Source source = open_source(file, command);
     cpm::rtdb::ExportOptions o{.format = mcap ? "mcap" : "sqlite"};
     o.by_data = parsed.get("--by", "commit") == "data";
+    o.foxglove_3d = parsed.has("--foxglove-3d");
+    if (o.foxglove_3d && !mcap) throw UsageError(command + ": --foxglove-3d goes with --mcap");
     if (!o.by_data && parsed.get("--by", "commit") != "commit") throw UsageError(command + ": --by '" + parsed.get("--by") + "': expected commit or data");
     if (parsed.has("--from")) o.from_ns = source.time("--from", parsed.get("--from"), o.by_data);
     if (parsed.has("--to")) o.to_ns = source.time("--to", parsed.get("--to"), o.by_data);
@@ -586,9 +590,10 @@ int export_command(const std::vector<std::string>& args, const std::string& file
 {
     const std::string command = "cpm history export";
     auto parsed = cpm::cli::parse_flags(args, {{"--topic", true}, {"--key", true}, {"--from", true}, {"--to", true}, {"--csv", false},
-                                               {"--mcap", true}, {"--sqlite", true}, {"--topics", true}, {"--by", true}}, command);
+                                               {"--mcap", true}, {"--sqlite", true}, {"--topics", true}, {"--by", true}, {"--foxglove-3d", false}},
+                                        command);
     if (parsed.has("--mcap") || parsed.has("--sqlite")) return export_recording_command(parsed, file, command);
-    for (const char* f : {"--topics", "--by"}) {
+    for (const char* f : {"--topics", "--by", "--foxglove-3d"}) {
         if (parsed.has(f)) throw UsageError(command + ": " + f + " goes with --mcap or --sqlite");
     }
     if (!parsed.has("--topic")) throw UsageError(command + ": --topic NAME is required");

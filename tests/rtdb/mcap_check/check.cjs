@@ -2,7 +2,8 @@
 // message with Foxglove's OMG IDL parser and CDR reader, as Foxglove does:
 //   node check.cjs FILE.mcap
 // Prints one JSON line per message in log time order ({topic, log_time, publish_time, sequence,
-// data}; 64-bit integers as strings), then one line of totals. Exits 1 naming what is wrong:
+// derived, data}; 64-bit integers as strings; derived: a channel cpm adds for viewers), then one
+// line of totals. Exits 1 naming what is wrong:
 // a CRC (chunks, data section, summary), a record, a schema that does not parse, a message that
 // does not decode.
 "use strict";
@@ -100,6 +101,7 @@ async function main() {
         log_time: m.logTime.toString(),
         publish_time: m.publishTime.toString(),
         sequence: m.sequence,
+        derived: channel.metadata.has("cpm.derived"),
         data,
       }) + "\n",
     );

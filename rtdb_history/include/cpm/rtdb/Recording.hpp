@@ -41,6 +41,8 @@ struct RecordingOptions
     std::string name;  ///< the run's name, kept in the file's meta table
     /// "sqlite" or "mcap"; "" (the default): MCAP for a file named *.mcap, else SQLite.
     std::string format;
+    /// MCAP: the cars' poses also as foxglove::FrameTransform on /tf (Foxglove's 3D panel).
+    bool foxglove_3d = false;
     /// The file stops growing here: the recording ends with an error, as on a full disk. 0: no
     /// limit but the disk's.
     uint64_t max_bytes = 0;
@@ -146,6 +148,7 @@ struct ExportOptions
     std::vector<std::string> topics;  ///< none: every topic
     uint64_t from_ns = 0, to_ns = UINT64_MAX;  ///< the samples of [from, to)
     bool by_data = false;             ///< from/to are data times (else commit times)
+    bool foxglove_3d = false;         ///< MCAP: the cars' poses also as foxglove::FrameTransform on /tf
     /// Metadata records for an MCAP file (name → values; cpm.run: the scenario and summary).
     std::map<std::string, std::map<std::string, std::string>> metadata;
 };
