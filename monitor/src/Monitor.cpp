@@ -3,6 +3,7 @@
 #include "WebAssets.hpp"
 
 #include <cpm/AsyncReader.hpp>
+#include <cpm/Bookmark.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/Writer.hpp>
@@ -12,6 +13,7 @@
 #include <cpm/stamp_message.hpp>
 #include <cpm/topics.hpp>
 
+#include <Bookmark.h>
 #include <StopRequest.h>
 
 #include <httplib.h>
@@ -123,6 +125,7 @@ struct Monitor::Impl
     std::atomic<size_t> watchers{0};
 
     std::unique_ptr<Writer<StopRequest>> stops;
+    std::unique_ptr<Writer<Bookmark>> marks;
     std::unique_ptr<rtdb::TopicProbe> probe;
     std::vector<std::shared_ptr<void>> readers;
     std::thread listener, snapshots, housekeeping;
@@ -239,6 +242,24 @@ struct Monitor::Impl
             [this](bool) { --watchers; });
     }
 
+    /// The request's JSON body; false (and the reply an error) when it is not one. Only a body
+    /// sent as application/json: another site's page cannot send one without the browser asking
+    /// this server first (CORS), which it never allows.
+    static bool json_body(const httplib::Request& req, httplib::Response& res, nlohmann::json& body)
+    {
+        if (req.get_header_value("Content-Type").rfind("application/json", 0) != 0) {
+            reply_error(res, 415, "send the body as Content-Type: application/json");
+            return false;
+        }
+        try {
+            body = nlohmann::json::parse(req.body);
+        } catch (const nlohmann::json::exception& e) {
+            reply_error(res, 400, std::string("the body is not JSON: ") + e.what());
+            return false;
+        }
+        return true;
+    }
+
     void stop_request(const httplib::Request& req, httplib::Response& res)
     {
         if (!options.allow_stop) {
@@ -246,12 +267,7 @@ struct Monitor::Impl
             return;
         }
         nlohmann::json body;
-        try {
-            body = nlohmann::json::parse(req.body);
-        } catch (const nlohmann::json::exception& e) {
-            reply_error(res, 400, std::string("the body is not JSON: ") + e.what());
-            return;
-        }
+        if (!json_body(req, res, body)) return;
         if (!body.is_object() || !body.contains("vehicle_id") || !body["vehicle_id"].is_number_integer()) {
             reply_error(res, 400, "the body must be {\"vehicle_id\": N} with N 1..255, or 0 for every car");
             return;
@@ -282,6 +298,37 @@ struct Monitor::Impl
         const std::string who = id == 0 ? "every car" : "car " + std::to_string(id);
         Logging::instance().write(Severity::warn, "cpm monitor: stop requested for %s from %s", who.c_str(), req.remote_addr.c_str());
         reply_json(res, 200, {{"stopped", id}, {"message", "StopRequest sent to " + who}});
+    }
+
+    /// POST /api/mark {"text": "..."}: a bookmark of this moment, its source "monitor".
+    void mark_request(const httplib::Request& req, httplib::Response& res)
+    {
+        nlohmann::json body;
+        if (!json_body(req, res, body)) return;
+        if (!body.is_object() || !body.contains("text") || !body["text"].is_string()) {
+            reply_error(res, 400, "the body must be {\"text\": \"what happened\"}");
+            return;
+        }
+        const std::string text = body["text"].get<std::string>();
+        if (const std::string problem = bookmark_problem(text, "monitor"); !problem.empty()) {
+            reply_error(res, 400, "$.text: " + problem);
+            return;
+        }
+        if (marks->matched_subscriptions() == 0) {
+            reply_error(res, 503, "nobody records bookmarks on this domain (no history service, no lab run); the mark is not made");
+            return;
+        }
+        Bookmark b;
+        b.text(text);
+        b.source("monitor");
+        const uint64_t now = get_time_ns();
+        stamp_message(b, now, 0);
+        if (!marks->write(b)) {
+            reply_error(res, 500, "the Bookmark could not be written");
+            return;
+        }
+        Logging::instance().write(Severity::info, "cpm monitor: marked '%s' from %s", text.c_str(), req.remote_addr.c_str());
+        reply_json(res, 200, {{"marked_ns", now}, {"message", "marked: " + text}});
     }
 
     void routes()
@@ -319,6 +366,7 @@ struct Monitor::Impl
             if (no_parameters(req, res)) stream(res);
         });
         server.Post("/api/stop", [this](const httplib::Request& req, httplib::Response& res) { stop_request(req, res); });
+        server.Post("/api/mark", [this](const httplib::Request& req, httplib::Response& res) { mark_request(req, res); });
         // A path that exists answers another method with 405 and what it allows, not 404.
         auto not_allowed = [](const char* allow) {
             return [allow](const httplib::Request& req, httplib::Response& res) {
@@ -327,8 +375,9 @@ struct Monitor::Impl
             };
         };
         server.Get("/api/stop", not_allowed("POST"));
-        for (const char* path : {"/api/state", "/api/world", "/api/plots", "/api/stream", "/api/stop"}) {
-            const char* allow = std::string(path) == "/api/stop" ? "POST" : "GET";
+        server.Get("/api/mark", not_allowed("POST"));
+        for (const char* path : {"/api/state", "/api/world", "/api/plots", "/api/stream", "/api/stop", "/api/mark"}) {
+            const char* allow = std::string(path) == "/api/stop" || std::string(path) == "/api/mark" ? "POST" : "GET";
             if (std::string(allow) == "GET") server.Post(path, not_allowed(allow));
             server.Put(path, not_allowed(allow));
             server.Delete(path, not_allowed(allow));
@@ -365,6 +414,7 @@ Monitor::Monitor(Participant& participant, MonitorOptions options)
         m.port = options.port;
     }
     if (options.allow_stop) m.stops = std::make_unique<Writer<StopRequest>>(participant, topics::stop_request.name, topics::stop_request.writer);
+    m.marks = std::make_unique<Writer<Bookmark>>(participant, topics::bookmark.name, topics::bookmark.writer);
     m.read<VehicleState>(topics::vehicle_state, &LiveState::on_state);
     m.read<VehicleObservation>(topics::vehicle_observation, &LiveState::on_observation);
     m.read<RangeSensors>(topics::range_sensors, &LiveState::on_ranges);

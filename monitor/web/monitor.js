@@ -157,6 +157,20 @@ async function stop(id) {
 }
 $("stop-all").addEventListener("click", () => stop(0));
 
+// A bookmark of this moment (cpm lab mark from the page).
+$("mark-form").addEventListener("submit", async (event) => {
+  event.preventDefault();
+  const text = $("mark-text").value;
+  try {
+    const res = await fetch("/api/mark", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ text }) });
+    const body = await res.json();
+    $("stop-result").textContent = res.ok ? body.message : `mark refused: ${body.error}`;
+    if (res.ok) $("mark-text").value = "";
+  } catch (e) {
+    $("stop-result").textContent = `mark failed: ${e}`;
+  }
+});
+
 // ---- topics and log ---------------------------------------------------------------------------
 // Every string here comes from the DDS domain, where any participant may write: rows are built
 // as nodes with their text set, never parsed as HTML.

@@ -11,6 +11,7 @@
 #include <cpm/stamp_message.hpp>
 #include <cpm/topics.hpp>
 
+#include <Bookmark.h>
 #include <StopRequest.h>
 
 #include <cpm_test/Isolation.hpp>
@@ -253,6 +254,40 @@ TEST_F(MonitorServer, AStopIsSentOnlyWhenAllowedAndOnlyForAValidCar)
     EXPECT_EQ(r->status, 200);
     EXPECT_NE(r->body.find("every car"), std::string::npos) << r->body;
     EXPECT_EQ(monitor->stats().stops_sent, 2u);
+}
+
+TEST_F(MonitorServer, AMarkIsABookmarkFromTheMonitorAndAWrongOneIsNamed)
+{
+    auto monitor = start();
+    httplib::Client http("127.0.0.1", monitor->port());
+    // Nobody records bookmarks yet: said, not lost quietly.
+    auto unheard = http.Post("/api/mark", R"({"text": "too early"})", "application/json");
+    ASSERT_TRUE(unheard);
+    EXPECT_EQ(unheard->status, 503) << unheard->body;
+    EXPECT_NE(unheard->body.find("nobody records bookmarks"), std::string::npos) << unheard->body;
+    cpm::Reader<Bookmark> marks(participant(), t::bookmark.name, t::bookmark.reader);
+    for (const auto& [body, what] : std::vector<std::pair<std::string, std::string>>{
+             {"lap two", "not JSON"}, {R"({"note": "x"})", "the body must be"}, {R"({"text": "  "})", "$.text: a bookmark needs a text"},
+             {R"({"text": ")" + std::string(300, 'x') + R"("})", "$.text: the text is 300 bytes; at most 256"},
+             {R"({"text": "two\nlines"})", "$.text: a control character"}}) {
+        auto r = http.Post("/api/mark", body, "application/json");
+        ASSERT_TRUE(r);
+        EXPECT_EQ(r->status, 400) << body;
+        EXPECT_NE(r->body.find(what), std::string::npos) << body << " → " << r->body;
+    }
+    // Another site's page cannot post JSON without asking first: a body not sent as JSON is refused.
+    auto plain = http.Post("/api/mark", R"({"text": "from elsewhere"})", "text/plain");
+    ASSERT_TRUE(plain);
+    EXPECT_EQ(plain->status, 415) << plain->body;
+    ASSERT_TRUE(wait_until([&] { return marks.matched_publications() > 0; }, 10s));
+    auto r = http.Post("/api/mark", R"({"text": "car 5 <b>touched</b> the wall"})", "application/json");
+    ASSERT_TRUE(r);
+    EXPECT_EQ(r->status, 200) << r->body;
+    ASSERT_TRUE(wait_until([&] { return marks.get_sample(cpm::get_time_ns()).valid; }, 5s));
+    const auto got = marks.get_sample(cpm::get_time_ns()).sample;
+    EXPECT_EQ(got.text(), "car 5 <b>touched</b> the wall");
+    EXPECT_EQ(got.source(), "monitor");
+    EXPECT_EQ(http.Get("/api/mark")->status, 405);
 }
 
 TEST_F(MonitorServer, APortInUseIsNamedAtStart)
