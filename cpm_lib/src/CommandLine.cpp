@@ -87,8 +87,8 @@ bool wants_help(const std::vector<std::string>& args)
 
 uint64_t parse_duration(const std::string& flag, const std::string& text)
 {
-    static const std::map<std::string, uint64_t> units{
-        {"ns", 1}, {"us", 1'000}, {"ms", 1'000'000}, {"s", 1'000'000'000}, {"m", 60'000'000'000}, {"h", 3'600'000'000'000}};
+    static const std::map<std::string, uint64_t> units{{"ns", 1},          {"us", 1'000},       {"ms", 1'000'000},          {"s", 1'000'000'000},
+                                                       {"m", 60'000'000'000}, {"min", 60'000'000'000}, {"h", 3'600'000'000'000}};
     size_t end = 0;
     double value = 0;
     try {
@@ -103,6 +103,39 @@ uint64_t parse_duration(const std::string& flag, const std::string& text)
                          "' is not a duration (a number of at most 2^64 ns with ns, us, ms, s, m or h, e.g. 10s)");
     }
     return static_cast<uint64_t>(value * double(unit->second));
+}
+
+uint64_t parse_bytes(const std::string& flag, const std::string& text)
+{
+    static const std::map<std::string, uint64_t> units{{"", 1},
+                                                       {"B", 1},
+                                                       {"kB", 1'000},
+                                                       {"KB", 1'000},
+                                                       {"MB", 1'000'000},
+                                                       {"GB", 1'000'000'000},
+                                                       {"TB", 1'000'000'000'000},
+                                                       {"KiB", 1ull << 10},
+                                                       {"MiB", 1ull << 20},
+                                                       {"GiB", 1ull << 30},
+                                                       {"TiB", 1ull << 40}};
+    size_t end = 0;
+    double value = 0;
+    try {
+        value = std::stod(text, &end);
+    } catch (const std::exception&) {
+        end = 0;
+    }
+    const auto unit = units.find(text.substr(end));
+    if (end == 0 || unit == units.end() || !(value >= 0) || !std::isdigit(static_cast<unsigned char>(text[0])) ||
+        !(value * double(unit->second) < 18446744073709551615.0)) {
+        throw UsageError(flag + ": '" + text + "' is not a size (a number with B, kB, MB, GB, TB, KiB, MiB, GiB or TiB, e.g. 500MB)");
+    }
+    return static_cast<uint64_t>(value * double(unit->second));
+}
+
+bool looks_like_bytes(const std::string& text)
+{
+    return !text.empty() && (text.back() == 'B' || text.find_first_not_of("0123456789.") == std::string::npos);
 }
 
 ParsedArgs parse_flags(const std::vector<std::string>& args, const std::vector<FlagSpec>& known, const std::string& command)

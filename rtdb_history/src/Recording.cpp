@@ -4,6 +4,7 @@
 #include <cpm/get_time_ns.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 #include <cpm/rtdb/Requests.hpp>
+#include <cpm/topics.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/CommandLine.hpp>
 #include <cpm/HistoryClient.hpp>
@@ -17,7 +18,9 @@
 #include <filesystem>
 #include <limits>
 #include <mutex>
+#include <regex>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 #include <sys/resource.h>
 #include <sys/stat.h>
@@ -76,18 +79,132 @@ std::string mcap_as_tables(const std::string& path)
 
 }  // namespace
 
-sqlite3* open_recording_file(const std::string& path, std::map<std::string, std::string>& meta)
+std::vector<std::string> recording_files(const std::string& path)
 {
+    namespace fs = std::filesystem;
+    std::vector<std::string> files;
+    if (path.find('\n') != std::string::npos) {  // several --file: one recording, in the order given
+        std::istringstream list(path);
+        for (std::string f; std::getline(list, f);) {
+            const auto one = recording_files(f);
+            if (one.size() != 1) throw Error("recording " + f + ": a folder in a list of files; give its files");
+            files.push_back(one[0]);
+        }
+        return files;
+    }
     if (!file_exists(path)) throw Error("recording " + path + ": no such file");
     std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) {
-        const bool run = std::filesystem::is_regular_file(std::filesystem::path(path) / "recording.db", ec);
-        throw Error("recording " + path + ": it is a directory" +
-                                 (run ? " (a run's folder? its recording is " + (std::filesystem::path(path) / "recording.db").string() + ")" : ""));
+    if (!fs::is_directory(path, ec)) return {path};
+    // A folder: its split recording (<stem>_NNN.db|.mcap, one set), or its run's recording.
+    static const std::regex part(R"((.*)_\d{3,}\.(db|mcap))");
+    std::map<std::string, std::vector<std::string>> sets;
+    for (const auto& e : fs::directory_iterator(path, ec)) {
+        std::smatch m;
+        const std::string name = e.path().filename().string();
+        if (e.is_regular_file() && std::regex_match(name, m, part)) sets[m[1].str() + "." + m[2].str()].push_back(e.path().string());
     }
+    if (sets.size() == 1) {
+        files = sets.begin()->second;
+        std::sort(files.begin(), files.end());
+        return files;
+    }
+    if (sets.size() > 1) {
+        std::string names;
+        for (const auto& [stem, parts] : sets) names += (names.empty() ? "" : ", ") + stem + " (" + std::to_string(parts.size()) + " files)";
+        throw Error("recording " + path + ": it is a directory with several split recordings (" + names + "); give one's files with --file each");
+    }
+    for (const char* run : {"recording.db", "recording.mcap"}) {
+        if (fs::is_regular_file(fs::path(path) / run, ec)) return {(fs::path(path) / run).string()};
+    }
+    throw Error("recording " + path + ": it is a directory without a recording (no recording.db, recording.mcap or split recording NAME_000.db|.mcap in it)");
+}
+
+namespace {
+
+/// Several files of one recording (a split one, or several named) as one recording's tables in
+/// an SQLite database in memory, made once per set; its URI. The objects' info blocks are the
+/// newest file's, the samples each file's in order, without those a file carries at its start
+/// from the one before (the first file's are kept: the state at its start).
+std::string set_as_tables(const std::string& key, const std::vector<std::string>& files)
+{
+    static std::mutex mutex;
+    static std::map<std::string, std::pair<std::string, sqlite3*>> made;
+    static int count = 0;
+    std::lock_guard lock(mutex);
+    if (auto it = made.find(key); it != made.end()) return it->second.first;
+    const std::string uri = "file:cpm_set_" + std::to_string(::getpid()) + "_" + std::to_string(++count) + "?mode=memory&cache=shared";
+    sqlite3* keeper = nullptr;
+    if (sqlite3_open_v2(uri.c_str(), &keeper, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_URI, nullptr) != SQLITE_OK) {
+        sqlite3_close(keeper);
+        throw Error("recording " + files.front() + ": cannot make a database in memory to read its files into");
+    }
+    try {
+        std::map<std::string, std::string> first_meta, last_meta;
+        uint64_t samples = 0, dropped = 0;
+        for (size_t i = 0; i < files.size(); ++i) {
+            std::map<std::string, std::string> meta;
+            std::unique_ptr<sqlite3, int (*)(sqlite3*)> part(open_recording_file(files[i], meta), sqlite3_close);
+            if (i == 0) {
+                first_meta = meta;
+                std::map<std::string, std::string> idl;
+                Statement t(part.get(), "SELECT file, idl FROM types");
+                while (t.step() == SQLITE_ROW) idl[t.text(0)] = t.text(1);
+                std::map<std::string, std::string> begin;
+                for (const char* k : {"name", "host", "started_ns"}) begin[k] = meta[k];
+                (void)recording_tables_in(keeper, begin, idl);
+            } else if (meta["started_ns"] != first_meta["started_ns"] || meta["name"] != first_meta["name"]) {
+                throw Error(files[i] + " is of another recording than " + files.front() + " (its start or name differs)");
+            }
+            last_meta = meta;
+            samples += std::strtoull(meta["samples"].c_str(), nullptr, 10);
+            dropped += std::strtoull(meta["dropped"].c_str(), nullptr, 10);
+            const std::string source = mcap::is_mcap(files[i]) ? mcap_as_tables(files[i]) : files[i];
+            Statement attach(keeper, "ATTACH DATABASE ? AS part");
+            if (attach.bind(1, source).run() != SQLITE_OK) throw Error("cannot read " + files[i] + ": " + sqlite3_errmsg(keeper));
+            const uint64_t carried = i == 0 ? 0 : std::strtoull(meta["carried_samples"].c_str(), nullptr, 10);
+            const std::string sql = "INSERT OR REPLACE INTO main.objects SELECT * FROM part.objects;"
+                                    "INSERT INTO main.samples SELECT * FROM part.samples WHERE rowid NOT IN"
+                                    " (SELECT rowid FROM part.samples ORDER BY rowid LIMIT " + std::to_string(carried) + ") ORDER BY rowid;";
+            const int rc = exec(keeper, sql);
+            exec(keeper, "DETACH DATABASE part");
+            if (rc != SQLITE_OK) throw Error("cannot read " + files[i] + ": " + sqlite_error(keeper, rc));
+        }
+        std::map<std::string, std::string> end{{"parts", std::to_string(files.size())}};
+        if (last_meta.count("ended_ns")) {
+            end["ended_ns"] = last_meta["ended_ns"];
+            end["samples"] = std::to_string(samples);
+            end["dropped"] = std::to_string(dropped);
+        }
+        Statement m(keeper, "INSERT OR REPLACE INTO meta VALUES(?, ?)");
+        for (const auto& [k, v] : end) (void)m.bind(1, k).bind(2, v).run();
+        exec(keeper, "CREATE INDEX IF NOT EXISTS samples_by_object ON samples(oid, commit_ns)");
+    } catch (const std::exception& e) {
+        sqlite3_close(keeper);
+        const std::string why = e.what();
+        throw Error(why.rfind("recording ", 0) == 0 ? why : "recording " + files.front() + ": " + why);
+    }
+    made[key] = {uri, keeper};
+    return uri;
+}
+
+}  // namespace
+
+sqlite3* open_recording_file(const std::string& path, std::map<std::string, std::string>& meta)
+{
+    const std::vector<std::string> files = recording_files(path);
     sqlite3* db = nullptr;
     int rc = SQLITE_OK;
-    if (mcap::is_mcap(path)) {
+    if (files.size() > 1) {
+        std::string key = path;  // a file that changed since is read again
+        for (const auto& f : files) {
+            std::error_code ec;
+            key += "|" + std::to_string(std::filesystem::file_size(f, ec)) + "@" +
+                   std::to_string(std::filesystem::last_write_time(f, ec).time_since_epoch().count());
+        }
+        rc = sqlite3_open_v2(set_as_tables(key, files).c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_URI, nullptr);
+    } else if (const std::string& file = files.front(); file != path) {
+        return open_recording_file(file, meta);  // a run's folder: its recording
+    } else if (mcap::is_mcap(path)) {
         rc = sqlite3_open_v2(mcap_as_tables(path).c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_URI, nullptr);
     } else {
         // Read-write when it may (a recording left with its WAL beside it is then read whole),
@@ -136,17 +253,107 @@ struct RecordingWriter::Event
     std::vector<uint8_t> payload;                       // sample
 };
 
-RecordingWriter::RecordingWriter(std::string path, RecordingOptions options) : path_(std::move(path)), options_(std::move(options))
+namespace {
+
+/// The meta every part of a recording begins with.
+std::map<std::string, std::string> recording_meta(const RecordingOptions& o, uint64_t started_ns)
 {
-    started_ns_ = cpm::get_time_ns();
     char host[256] = {};
     ::gethostname(host, sizeof host - 1);
-    std::map<std::string, std::string> idl;
-    if (const IdlDecoder* lab = IdlDecoder::lab_types()) idl = lab->sources();
-    file_ = create_recording_file(path_, recording_format(path_, options_.format),
-                                  {{"name", options_.name}, {"host", host}, {"started_ns", std::to_string(started_ns_)}}, idl, options_.max_bytes,
-                                  options_.foxglove_3d);
+    return {{"name", o.name}, {"host", host}, {"started_ns", std::to_string(started_ns)}};
+}
+
+std::map<std::string, std::string> lab_idl()
+{
+    const IdlDecoder* lab = IdlDecoder::lab_types();
+    return lab ? lab->sources() : std::map<std::string, std::string>{};
+}
+
+}  // namespace
+
+RecordingWriter::RecordingWriter(std::string path, RecordingOptions options) : path_(std::move(path)), options_(std::move(options))
+{
+    started_ns_ = part_started_ns_ = cpm::get_time_ns();
+    const bool split = options_.split_bytes || options_.split_ns;
+    if (!split && options_.max_total_bytes) throw Error("recording " + path_ + ": a limit on all its files goes with a split");
+    auto meta = recording_meta(options_, started_ns_);
+    if (split) meta["part"] = "0";
+    const std::string first = split ? part_path(0) : path_;
+    file_ = create_recording_file(first, recording_format(path_, options_.format), meta, lab_idl(), options_.max_bytes, options_.foxglove_3d);
+    parts_.push_back(first);
     thread_ = std::thread([this] { run(); });
+}
+
+std::string RecordingWriter::part_path(size_t part) const
+{
+    const std::filesystem::path p(path_);
+    char n[16];
+    std::snprintf(n, sizeof n, "_%03zu", part);
+    return (p.parent_path() / (p.stem().string() + n + p.extension().string())).string();
+}
+
+std::vector<std::string> RecordingWriter::files() const
+{
+    std::lock_guard lock(mutex_);
+    return parts_;
+}
+
+void RecordingWriter::split_if_due()
+{
+    if (!file_ || (!options_.split_bytes && !options_.split_ns)) return;
+    const uint64_t now = cpm::get_time_ns();
+    const bool due = (options_.split_bytes && file_->bytes() >= options_.split_bytes) || (options_.split_ns && now - part_started_ns_ >= options_.split_ns);
+    if (!due) return;
+    // The part ends here: every sample so far is in it, the next one begins with the next batch.
+    file_->commit();
+    file_->finish({{"ended_ns", std::to_string(now)}, {"samples", std::to_string(added_)}});
+    const uint64_t in_file = file_->samples_in_file() > carried_ ? file_->samples_in_file() - carried_ : 0;
+    file_.reset();
+    std::string next;
+    {
+        std::lock_guard lock(mutex_);
+        counters_.dropped += added_ > in_file ? added_ - in_file : 0;  // a last chunk the disk refused
+        written_before_ += in_file;
+        counters_.written = written_before_;
+        next = part_path(part_count_);
+    }
+    added_ = 0;
+    auto meta = recording_meta(options_, started_ns_);
+    meta["part"] = std::to_string(part_count_++);
+    meta["carried_samples"] = std::to_string(newest_kept_.size());
+    file_ = create_recording_file(next, recording_format(path_, options_.format), meta, lab_idl(), options_.max_bytes, options_.foxglove_3d);
+    part_started_ns_ = now;
+    // It stands alone: every living object, the newest state of each transient-local one.
+    for (const auto& [oid, info] : living_) file_->add_object(info);
+    for (const auto& [oid, k] : newest_kept_) {
+        file_->add_sample(oid, {.commit_ns = k.commit_ns, .data_ns = k.data_ns, .valid_after_ns = k.valid_after_ns, .source_ns = k.source_ns,
+                                .payload = k.payload.data(), .size = k.payload.size()});
+    }
+    carried_ = newest_kept_.size();
+    file_->commit();
+    {
+        std::lock_guard lock(mutex_);
+        parts_.push_back(next);
+    }
+    // The oldest parts go while all of them hold more than the limit (never the one being written).
+    if (!options_.max_total_bytes) return;
+    uint64_t total = 0;
+    std::vector<std::pair<std::string, uint64_t>> sizes;
+    for (const auto& part : files()) {
+        std::error_code ec;
+        const uint64_t size = std::filesystem::file_size(part, ec);
+        sizes.emplace_back(part, ec ? 0 : size);
+        total += ec ? 0 : size;
+    }
+    for (size_t i = 0; i + 1 < sizes.size() && total > options_.max_total_bytes; ++i) {
+        std::error_code ec;
+        std::filesystem::remove(sizes[i].first, ec);
+        total -= sizes[i].second;
+        CPM_LOG_WARN("recording %s: deleted its oldest file %s (all its files held more than %llu bytes)", path_.c_str(), sizes[i].first.c_str(),
+                     (unsigned long long)options_.max_total_bytes);
+        std::lock_guard lock(mutex_);
+        parts_.erase(std::find(parts_.begin(), parts_.end(), sizes[i].first));
+    }
 }
 
 RecordingWriter::~RecordingWriter() { close(); }
@@ -209,7 +416,14 @@ void RecordingWriter::run()
         batch.swap(queue_);
         queued_bytes_ = 0;
         lock.unlock();
-        const bool ok = batch.empty() || write(batch);
+        bool ok = true;
+        try {
+            split_if_due();
+        } catch (const std::exception& e) {
+            fail(std::string("cannot begin its next file: ") + e.what());
+            ok = false;
+        }
+        ok = ok && (batch.empty() || write(batch));
         lock.lock();
         if (!ok) {
             counters_.dropped += queue_.size();
@@ -225,7 +439,10 @@ bool RecordingWriter::write(std::deque<Event>& batch)
     try {
         for (const Event& e : batch) {
             switch (e.kind) {
-                case Event::added: file_->add_object(e.info); break;
+                case Event::added:
+                    file_->add_object(e.info);
+                    living_[e.oid] = e.info;
+                    break;
                 case Event::sample:
                     file_->add_sample(e.oid, {.commit_ns = e.t0,
                                               .data_ns = e.t1,
@@ -235,8 +452,13 @@ bool RecordingWriter::write(std::deque<Event>& batch)
                                               .payload = e.payload.data(),
                                               .size = e.payload.size()});
                     ++added_;
+                    if (options_.split_bytes || options_.split_ns) keep_if_transient_local(e);
                     break;
-                case Event::deleted: file_->delete_object(e.oid, e.t0); break;
+                case Event::deleted:
+                    file_->delete_object(e.oid, e.t0);
+                    living_.erase(e.oid);
+                    newest_kept_.erase(e.oid);
+                    break;
             }
         }
         file_->commit();
@@ -245,19 +467,28 @@ bool RecordingWriter::write(std::deque<Event>& batch)
         // chunk and keeps the chunks before it).
         uint64_t in_batch = 0;
         for (const Event& ev : batch) in_batch += ev.kind == Event::sample;
-        const uint64_t in_file = file_->samples_in_file();
+        const uint64_t in_file = file_->samples_in_file() > carried_ ? file_->samples_in_file() - carried_ : 0;
         {
             std::lock_guard lock(mutex_);
-            counters_.dropped += (in_batch - (added_ - added_before)) + (added_ - in_file);
-            counters_.written = in_file;
+            counters_.dropped += (in_batch - (added_ - added_before)) + (added_ > in_file ? added_ - in_file : 0);
+            counters_.written = written_before_ + in_file;
         }
         added_ = in_file;
         fail(dynamic_cast<const RecordingFull*>(&e) ? e.what() : std::string("cannot write to it: ") + e.what());
         return false;
     }
     std::lock_guard lock(mutex_);
-    counters_.written = file_->samples_in_file();
+    counters_.written = written_before_ + (file_->samples_in_file() > carried_ ? file_->samples_in_file() - carried_ : 0);
     return !failed_;
+}
+
+void RecordingWriter::keep_if_transient_local(const Event& e)
+{
+    const auto o = living_.find(e.oid);
+    if (o == living_.end()) return;
+    const TopicSpec* t = topics::find(o->second.topic);
+    if (!t || !t->writer.transient_local) return;
+    newest_kept_[e.oid] = {e.t0, e.t1, e.t2, e.t3, e.payload};
 }
 
 void RecordingWriter::fail(const std::string& why)
@@ -290,8 +521,9 @@ void RecordingWriter::close()
         fail(std::string("cannot close it: ") + e.what());
     }
     std::lock_guard lock(mutex_);
-    counters_.dropped += added_ - file_->samples_in_file();
-    counters_.written = file_->samples_in_file();
+    const uint64_t in_file = file_->samples_in_file() > carried_ ? file_->samples_in_file() - carried_ : 0;
+    counters_.dropped += added_ > in_file ? added_ - in_file : 0;
+    counters_.written = written_before_ + in_file;
     file_.reset();
 }
 

@@ -118,6 +118,11 @@ public:
         pending_ = 0;
     }
     uint64_t samples_in_file() const override { return committed_; }
+    uint64_t bytes() const override
+    {
+        Statement pages(db_, "SELECT page_count * page_size FROM pragma_page_count(), pragma_page_size()");
+        return pages.step() == SQLITE_ROW ? pages.u64(0) : 0;
+    }
     void finish(const std::map<std::string, std::string>& end) override
     {
         if (open_) exec(db_, "ROLLBACK");
@@ -369,6 +374,7 @@ public:
     }
 
     uint64_t samples_in_file() const override { return writer_.messages(); }
+    uint64_t bytes() const override { return writer_.bytes(); }
 
 private:
     struct Topic

@@ -63,6 +63,8 @@ public:
     virtual void commit() = 0;
     /// The samples in the file so far (an MCAP file's open chunk is not yet in it).
     virtual uint64_t samples_in_file() const = 0;
+    /// The file's size so far.
+    virtual uint64_t bytes() const = 0;
     /// Writes the end (`end`: ended_ns, samples, dropped) and closes the file; what it cannot
     /// write after a failure is left out (what was committed stays readable).
     virtual void finish(const std::map<std::string, std::string>& end) = 0;

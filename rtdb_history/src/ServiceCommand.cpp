@@ -64,6 +64,8 @@ const std::vector<cli::FlagSpec>& service_flags()
                                                   {"--record-max-bytes", true},
                                                   {"--record-format", true},
                                                   {"--foxglove-3d", false},
+                                                  {"--record-split", true},
+                                                  {"--record-max", true},
                                                   {"--save-dir", true},
                                                   {"--save-on", true, true},
                                                   {"--save-before", true},
@@ -129,13 +131,24 @@ ServiceCommand read_service_flags(const cli::ParsedArgs& parsed)
         c.record.name = parsed.get("--record-name");
         c.record.format = parsed.get("--record-format");
         c.record.foxglove_3d = parsed.has("--foxglove-3d");
+        if (parsed.has("--record-split")) {
+            const std::string split = parsed.get("--record-split");
+            if (cli::looks_like_bytes(split)) c.record.split_bytes = cli::parse_bytes("--record-split", split);
+            else c.record.split_ns = cli::parse_duration("--record-split", split);
+            if (c.record.split_bytes + c.record.split_ns == 0) throw UsageError("cpm_history: --record-split must be more than 0");
+        }
+        if (parsed.has("--record-max")) {
+            if (!parsed.has("--record-split")) throw UsageError("cpm_history: --record-max goes with --record-split (it deletes the oldest files)");
+            c.record.max_total_bytes = cli::parse_bytes("--record-max", parsed.get("--record-max"));
+        }
         if (!c.record.format.empty() && c.record.format != "sqlite" && c.record.format != "mcap") {
             throw UsageError("cpm_history: --record-format '" + c.record.format + "': expected sqlite or mcap");
         }
         if (parsed.has("--record-max-bytes"))
             c.record.max_bytes = uint64_t(cli::parse_integer("--record-max-bytes", parsed.get("--record-max-bytes"), 65536, 1LL << 50));
-    } else if (parsed.has("--record-max-bytes") || parsed.has("--record-name") || parsed.has("--record-format") || parsed.has("--foxglove-3d")) {
-        throw UsageError("cpm_history: --record-max-bytes, --record-name, --record-format and --foxglove-3d go with --record FILE");
+    } else if (parsed.has("--record-max-bytes") || parsed.has("--record-name") || parsed.has("--record-format") || parsed.has("--foxglove-3d") ||
+               parsed.has("--record-split") || parsed.has("--record-max")) {
+        throw UsageError("cpm_history: --record-max-bytes, --record-name, --record-format, --foxglove-3d, --record-split and --record-max go with --record FILE");
     }
     return c;
 }

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <map>
 #include <string>
+#include <vector>
 #include <sys/stat.h>
 
 namespace cpm::rtdb::sqlite {
@@ -81,4 +82,8 @@ namespace cpm::rtdb {
 /// Opens a recording for reading and reads its meta table; throws cpm::Error naming the
 /// file when it is none (or of a format version this cpm does not read).
 sqlite3* open_recording_file(const std::string& path, std::map<std::string, std::string>& meta);
+/// The files a recording's name stands for: the file itself; for a folder, its split recording
+/// (<stem>_NNN.db|.mcap) or its run's recording.db|.mcap; for names joined by '\n', each.
+/// Throws cpm::Error naming what is wrong (no such file, a folder without one recording).
+std::vector<std::string> recording_files(const std::string& path);
 }  // namespace cpm::rtdb

@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <thread>
 
 using namespace cpm::rtdb;
 namespace fs = std::filesystem;
@@ -309,4 +310,94 @@ TEST(Recording, ObjectsKeepTheirOidsEvenWhereTheLiveStoreReusedASlot)
         EXPECT_NE(objects[0].oid, second);
         EXPECT_EQ(objects[0].deleted_ts, 10u);
     }
+}
+
+TEST(Recording, ASplitRecordingReadAsOneEqualsItsStoreAndEachFileStandsAlone)
+{
+    for (const std::string format : {"db", "mcap"}) {
+        SCOPED_TRACE("a recording in " + format);
+        TempDir dir;
+        const std::string path = dir.file("run." + format);
+        std::vector<HistoryRequest> questions;
+        std::vector<std::string> live;
+        std::vector<std::string> files;
+        {
+            Lab lab(path, {.name = "split", .flush_period_ns = 1'000'000, .split_bytes = 160 * 1024});
+            const Oid car = lab.add({.topic = "vehicleState", .key = "5", .type_name = "VehicleState", .created_ts = 1000});
+            // Transient-local: each file begins with its newest value again.
+            const Oid param = lab.add({.topic = "parameter", .key = "speed", .type_name = "Parameter", .created_ts = 1000});
+            const Oid gone = lab.add({.topic = "log", .type_name = "Log", .created_ts = 1000});
+            std::mt19937 rng(3);
+            for (uint64_t i = 0; i < 3000; ++i) {
+                std::vector<uint8_t> payload(100 + rng() % 100);
+                for (auto& b : payload) b = uint8_t(rng());
+                const uint64_t now = 2000 + i * 10;
+                lab.commit(car, now - 2, payload, now);
+                if (i % 500 == 0) lab.commit(param, now, payload, now + 1);
+                if (i < 10) lab.commit(gone, now, payload, now + 2);
+                if (i % 100 == 99) std::this_thread::sleep_for(std::chrono::milliseconds(3));  // batches reach the writer
+            }
+            lab.remove(gone, 2500);
+            lab.writer.close();
+            files = lab.writer.files();
+            EXPECT_EQ(lab.writer.counters().written, 3000u + 6u + 10u) << "each sample once, the carried ones not counted";
+            for (const std::string kind : {"at", "older", "younger"}) {
+                for (uint64_t t : {1999ull, 2000ull, 9005ull, 17000ull, 31990ull, 40000ull}) {
+                    questions.push_back(request(kind, "vehicleState", "5", t));
+                    questions.push_back(request(kind, "parameter", "speed", t));
+                }
+            }
+            questions.push_back(request("range", "vehicleState", "5", 0, 100000));
+            questions.push_back(request("range", "parameter", "speed", 0, 100000));
+            questions.push_back(request("range", "log", "", 0, 100000));
+            questions.push_back(request("list", "", "", 0));
+            for (const auto& q : questions) live.push_back(text(answer(lab.store, q)));
+        }
+        ASSERT_GE(files.size(), 3u) << "a split every 160 KiB";
+        for (size_t i = 0; i < files.size(); ++i) {
+            char name[32];
+            std::snprintf(name, sizeof name, "run_%03zu.", i);
+            EXPECT_EQ(fs::path(files[i]).filename(), name + format);
+            // Alone: the IDL, the objects, the parameter's value at the file's start.
+            const auto one = load_recording(files[i]);
+            EXPECT_TRUE(one.complete) << one.warning;
+            ASSERT_TRUE(one.types);
+            const auto p = one.store->find("parameter", "speed");
+            ASSERT_TRUE(p) << files[i];
+            EXPECT_TRUE(one.store->latest(*p).ok()) << files[i] << ": the newest parameter value is carried";
+        }
+        // As one, through the folder: every sample once, every answer as the store gave it.
+        const auto whole = load_recording(dir.path.string());
+        EXPECT_TRUE(whole.complete) << whole.warning;
+        EXPECT_EQ(whole.samples, 3016u);
+        for (size_t i = 0; i < questions.size(); ++i) {
+            EXPECT_EQ(text(answer(*whole.store, questions[i])), live[i]) << "question " << i << ": " << questions[i].kind() << " " << questions[i].topic()
+                                                                         << " t0=" << questions[i].t0();
+        }
+    }
+}
+
+TEST(Recording, ASplitRecordingKeepsItsNewestFilesUnderItsLimit)
+{
+    TempDir dir;
+    const std::string path = dir.file("capped.db");
+    Lab lab(path, {.flush_period_ns = 1'000'000, .split_bytes = 128 * 1024, .max_total_bytes = 600 * 1024});
+    const Oid car = lab.add({.topic = "vehicleState", .key = "5", .type_name = "VehicleState", .created_ts = 1000});
+    const std::vector<uint8_t> payload(200, 9);
+    for (uint64_t i = 0; i < 8000; ++i) {
+        lab.commit(car, 1000 + i, payload, 2000 + i * 10);
+        if (i % 100 == 99) std::this_thread::sleep_for(std::chrono::milliseconds(3));
+    }
+    lab.writer.close();
+    const auto files = lab.writer.files();
+    uint64_t total = 0;
+    for (const auto& f : files) total += fs::file_size(f);
+    EXPECT_LE(total, 600u * 1024 + 200u * 1024) << "at most the limit, and the file being written when it was checked";
+    EXPECT_FALSE(fs::exists(dir.file("capped_000.db"))) << "the oldest went";
+    EXPECT_TRUE(fs::exists(files.back()));
+    const auto rest = load_recording(dir.path.string());
+    const auto newest = answer(*rest.store, request("latest", "vehicleState", "5", 0));
+    ASSERT_EQ(newest.status(), "ok");
+    EXPECT_EQ(newest.samples()[0].commit_ns(), 2000u + 7999u * 10) << "the newest files are kept";
+    EXPECT_LT(rest.samples, 8000u);
 }

@@ -56,7 +56,7 @@ TEST(ServiceCommand, AWrongFlagIsNamedWithItsValue)
               "cpm_history: --topic-window 'vehicleState': expected TOPIC=DURATION (e.g. vehicleState=60s)");
     EXPECT_EQ(error_of({"--max-bytes", "4096", "--max-bytes-total", "4096"}),
               "cpm_history: --max-bytes is the older name of --max-bytes-total; give one");
-    EXPECT_EQ(error_of({"--record-name", "x"}), "cpm_history: --record-max-bytes, --record-name, --record-format and --foxglove-3d go with --record FILE");
+    EXPECT_EQ(error_of({"--record-name", "x"}), "cpm_history: --record-max-bytes, --record-name, --record-format, --foxglove-3d, --record-split and --record-max go with --record FILE");
     EXPECT_NE(error_of({"--max-bytes-per-topic", "12"}).find("--max-bytes-per-topic"), std::string::npos);
 }
 
@@ -82,4 +82,20 @@ TEST(ServiceCommand, SaveTriggersAreReadAndAWrongOneIsNamed)
     EXPECT_EQ(error_of({"--save-after", "1s"}), "cpm_history: --save-after goes with --save-on");
     EXPECT_NE(error_of({"--save-dir", "/no/such/folder"}).find("no such folder"), std::string::npos);
     EXPECT_EQ(error_of({"--record", "/tmp/x.db", "--record-format", "csv"}), "cpm_history: --record-format 'csv': expected sqlite or mcap");
+}
+
+TEST(ServiceCommand, ASplitIsBySizeOrByTimeAndItsLimitGoesWithIt)
+{
+    const auto by_size = read({"--record", "/tmp/r.db", "--record-split", "500MB", "--record-max", "5GiB"});
+    EXPECT_EQ(by_size.record.split_bytes, 500'000'000u);
+    EXPECT_EQ(by_size.record.split_ns, 0u);
+    EXPECT_EQ(by_size.record.max_total_bytes, 5ull << 30);
+    const auto by_time = read({"--record", "/tmp/r.mcap", "--record-split", "10min", "--foxglove-3d"});
+    EXPECT_EQ(by_time.record.split_ns, 600'000'000'000u);
+    EXPECT_EQ(by_time.record.split_bytes, 0u);
+    EXPECT_TRUE(by_time.record.foxglove_3d);
+    EXPECT_NE(error_of({"--record", "/tmp/r.db", "--record-split", "5 parsecs"}).find("--record-split: '5 parsecs' is not a duration"), std::string::npos);
+    EXPECT_NE(error_of({"--record", "/tmp/r.db", "--record-split", "12XB"}).find("--record-split: '12XB' is not a size"), std::string::npos);
+    EXPECT_EQ(error_of({"--record", "/tmp/r.db", "--record-split", "0"}), "cpm_history: --record-split must be more than 0");
+    EXPECT_EQ(error_of({"--record", "/tmp/r.db", "--record-max", "1GB"}), "cpm_history: --record-max goes with --record-split (it deletes the oldest files)");
 }

@@ -29,7 +29,7 @@ constexpr uint64_t kBase = 1'700'000'000'000'000'000ull;
 namespace {
 
 const char* kHelp =
-    "usage: history_writer [--type vehicle|lab_only|tiny] [--topic T] [--vehicle K] [--count N] [--dispose] [--stay]\n"
+    "usage: history_writer [--type vehicle|lab_only|tiny] [--topic T] [--vehicle K] [--count N] [--readers N] [--dispose] [--stay]\n"
     "Waits for a reader, writes N samples (default 10) of the type on T (default vehicleState) as vehicle K\n"
     "(default 3), waits for them to be acknowledged and prints \"written N\"; --dispose then disposes the\n"
     "instance, --stay keeps the process alive until it is killed.\n";
@@ -38,7 +38,7 @@ int run(int argc, char** argv)
 {
     const auto flags = cpm::cli::parse_flags(argc, argv,
                                              {{"--type", true}, {"--topic", true}, {"--vehicle", true}, {"--count", true},
-                                              {"--dispose", false}, {"--stay", false}},
+                                              {"--dispose", false}, {"--stay", false}, {"--readers", true}},
                                              "history_writer");
     const std::string type = flags.get("--type", "vehicle"), topic = flags.get("--topic", "vehicleState");
     if (type != "vehicle" && type != "lab_only" && type != "tiny")
@@ -46,6 +46,7 @@ int run(int argc, char** argv)
     const int vehicle = int(cpm::cli::parse_integer("--vehicle", flags.get("--vehicle", "3"), 0, 255));
     const int count = int(cpm::cli::parse_integer("--count", flags.get("--count", "10"), 0, 1'000'000));
     const bool dispose = flags.has("--dispose"), stay = flags.has("--stay");
+    const int readers = int(cpm::cli::parse_integer("--readers", flags.get("--readers", "1"), 1, 100));
     cpm::init(argc, argv);
     cpm::ParticipantOptions options = cpm::ParticipantOptions::from_init();
     options.name = "history_writer_" + type;
@@ -72,7 +73,7 @@ int run(int argc, char** argv)
     auto* writer = publisher->create_datawriter(t, qos);
     if (!writer) return 2;
     fdds::PublicationMatchedStatus matched{};
-    for (int waited = 0; matched.current_count == 0; waited += 10) {
+    for (int waited = 0; matched.current_count < readers; waited += 10) {
         if (waited > 20000) {
             std::fprintf(stderr, "history_writer: no reader matched\n");
             return 3;

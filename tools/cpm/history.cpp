@@ -37,7 +37,9 @@ const char* const kHistoryHelp =
     "\n"
     "Asks the history service (cpm_history, on this domain) about the recent past, or, with\n"
     "--file, a recording of a finished run (cpm_history --record, cpm record, cpm lab run): the\n"
-    "same verbs, flags and JSON; there \"now\" (for -2s, ages and rates) is the run's end.\n"
+    "same verbs, flags and JSON; there \"now\" (for -2s, ages and rates) is the run's end. --file\n"
+    "takes an SQLite or MCAP recording, a run's folder, a folder of a split recording, or --file\n"
+    "again for each file of one recording.\n"
     "  list                                 every object held (alive and deleted-but-held)\n"
     "  search [--name REGEX] [--type T] [--parent OID] [--creator NAME|GUID] [--alive-at T]\n"
     "  wait-object [search flags] [--timeout 10s]   the first object matching, once one exists\n"
@@ -678,10 +680,11 @@ int history_verb(const std::vector<std::string>& all)
     std::string file;
     for (size_t i = 0; i < all.size(); ++i) {
         if (all[i] == "--file" || all[i].rfind("--file=", 0) == 0) {
-            if (!file.empty()) throw UsageError("cpm history: --file given twice");
+            // Given again: the files of one recording (a split one), in the order given.
             if (all[i] == "--file" && i + 1 >= all.size()) throw UsageError("cpm history: --file needs a value (a recording.db)");
-            file = all[i] == "--file" ? all[++i] : all[i].substr(7);
-            if (file.empty()) throw UsageError("cpm history: --file needs a value (a recording.db)");
+            const std::string one = all[i] == "--file" ? all[++i] : all[i].substr(7);
+            if (one.empty() || one.find('\n') != std::string::npos) throw UsageError("cpm history: --file needs a value (a recording.db)");
+            file += (file.empty() ? "" : "\n") + one;
         } else {
             args.push_back(all[i]);
         }

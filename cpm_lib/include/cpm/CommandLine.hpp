@@ -56,6 +56,11 @@ bool wants_help(const std::vector<std::string>& args);
 /// "500ms", "10s", "2m", "100ns", "20us", "1.5s" → nanoseconds; throws UsageError naming the
 /// flag and the text as given when it is not one, is negative or does not fit in 64 bits.
 uint64_t parse_duration(const std::string& flag, const std::string& text);
+/// A size in bytes: a number with B, kB, MB, GB, TB (powers of 1000) or KiB, MiB, GiB, TiB
+/// (of 1024), or none (bytes), e.g. 500MB; throws UsageError naming the flag.
+uint64_t parse_bytes(const std::string& flag, const std::string& text);
+/// Whether a value reads as a size (ends in B, or a plain number) rather than a duration.
+bool looks_like_bytes(const std::string& text);
 
 /// A point in time as nanoseconds since the Unix epoch, from
 /// - nanoseconds: `1795446323725000000` (at most 2^64 - 1);

@@ -96,6 +96,8 @@ public:
 
     /// The messages in the file's chunks so far (not those of the open chunk).
     uint64_t messages() const { return message_count_; }
+    /// The file's size so far (the open chunk not counted).
+    uint64_t bytes() const { return offset_; }
 
 private:
     void flush_chunk();

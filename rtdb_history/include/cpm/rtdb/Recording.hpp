@@ -26,6 +26,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <vector>
 #include <utility>
 #include <vector>
 
@@ -39,10 +40,6 @@ class RecordingFile;
 struct RecordingOptions
 {
     std::string name;  ///< the run's name, kept in the file's meta table
-    /// "sqlite" or "mcap"; "" (the default): MCAP for a file named *.mcap, else SQLite.
-    std::string format;
-    /// MCAP: the cars' poses also as foxglove::FrameTransform on /tf (Foxglove's 3D panel).
-    bool foxglove_3d = false;
     /// The file stops growing here: the recording ends with an error, as on a full disk. 0: no
     /// limit but the disk's.
     uint64_t max_bytes = 0;
@@ -50,6 +47,18 @@ struct RecordingOptions
     uint64_t max_queued_bytes = 256ull << 20;
     /// A batch is written at least this often.
     uint64_t flush_period_ns = 100'000'000ull;
+    /// "sqlite" or "mcap"; "" (the default): MCAP for a file named *.mcap, else SQLite.
+    std::string format;
+    /// MCAP: the cars' poses also as foxglove::FrameTransform on /tf (Foxglove's 3D panel).
+    bool foxglove_3d = false;
+    /// Split (0: never): a new file once the current one holds this many bytes or is this old.
+    /// The files are <stem>_000<ext>, <stem>_001<ext>, … beside the path given; each stands alone
+    /// (the IDL, every living object's info block and the newest sample of each transient-local
+    /// topic again at its start, marked as carried), and a folder of them reads as one recording.
+    uint64_t split_bytes = 0;
+    uint64_t split_ns = 0;
+    /// With a split: the oldest files are deleted while all of them hold more (0: none is).
+    uint64_t max_total_bytes = 0;
 };
 
 struct RecordingCounters
@@ -80,7 +89,9 @@ public:
     /// self-contained file. Idempotent.
     void close();
     RecordingCounters counters() const;
+    /// The path given; with a split, each file's name (the newest last, deleted ones left out).
     const std::string& path() const { return path_; }
+    std::vector<std::string> files() const;
 
 private:
     struct Event;
@@ -99,6 +110,23 @@ private:
     RecordingCounters counters_;
     uint64_t started_ns_ = 0;
     uint64_t added_ = 0;  // samples handed to the file (its writer thread's)
+    // Splitting (the writer thread's): the parts so far, when the current one began, and what the
+    // next one carries at its start.
+    std::string part_path(size_t part) const;
+    void split_if_due();
+    void keep_if_transient_local(const Event& e);
+    std::vector<std::string> parts_;
+    size_t part_count_ = 1;  // parts begun, deleted ones too: the next one's number
+    uint64_t part_started_ns_ = 0;
+    std::map<Oid, ObjectInfo> living_;
+    struct Kept
+    {
+        uint64_t commit_ns, data_ns, valid_after_ns, source_ns;
+        std::vector<uint8_t> payload;
+    };
+    std::map<Oid, Kept> newest_kept_;  // the newest sample of each transient-local object
+    uint64_t written_before_ = 0;      // samples in the finished parts (carried ones not counted)
+    uint64_t carried_ = 0;             // samples the current part carries at its start
     std::thread thread_;
 };
 
