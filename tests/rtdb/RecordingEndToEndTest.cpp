@@ -31,6 +31,7 @@
 #include <set>
 #include <tuple>
 #include <sstream>
+#include <unistd.h>
 
 using namespace std::chrono_literals;
 using cpm_test::built_program;
@@ -667,4 +668,41 @@ TEST(RecordingEndToEnd, ASplitRecordingReadAsOneHoldsWhatAnUnsplitOneOfTheSameRu
     EXPECT_EQ(from_parts.size(), 3000u);
     EXPECT_EQ(from_parts, from_whole);
     EXPECT_EQ(cpm_test::mcap_differences(dir.file("whole.mcap")), "");
+}
+
+TEST(RecordingEndToEnd, AnMcapRecordingOnADiskThatFillsIsClosedValidUpToItsLastChunk)
+{
+    // A real full disk: a tmpfs of 256 KiB the test mounts (root here and in CI).
+    if (::geteuid() != 0) GTEST_SKIP() << "mounting a small disk needs root";
+    TempDir dir;
+    const std::string disk = dir.file("disk");
+    fs::create_directories(disk);
+    ASSERT_EQ(std::system(("mount -t tmpfs -o size=256k tmpfs " + disk).c_str()), 0);
+    struct Unmount
+    {
+        std::string at;
+        ~Unmount() { (void)std::system(("umount " + at).c_str()); }
+    } unmount{disk};
+    const std::string file = disk + "/full.mcap";
+    cpm::Participant participant{udp_only()};
+    cpm::HistoryClient client{participant};
+    Process service({built_program("cpm_history"), "--record", file});
+    Process cars = writer({"--type", "vehicle", "--vehicle", "3", "--count", "1500"});
+    ASSERT_EQ(cars.wait(60s), 0) << cars.errors();
+    ASSERT_TRUE(wait_for_samples(client, "vehicleState", "3", 1500)) << service.errors();
+    ASSERT_TRUE(cpm_test::wait_until([&] { return service.errors().find("the recording stopped") != std::string::npos; }, 20s, 20ms))
+        << service.errors();
+    EXPECT_NE(service.errors().find("No space left on device"), std::string::npos) << service.errors();
+    EXPECT_NE(service.errors().find(file), std::string::npos) << service.errors();
+    auto newest = client.latest<VehicleState>("vehicleState", 3);
+    ASSERT_TRUE(newest.ok()) << "the live history goes on: " << newest.status;
+    EXPECT_EQ(newest.sample.pose().x(), 1499);
+    service.kill(SIGINT);
+    EXPECT_EQ(service.wait(30s), 1) << service.output() << service.errors();
+    // Closed valid: summary and all, the chunks before the full disk in it.
+    EXPECT_EQ(cpm_test::mcap_differences(file), "");
+    const Answer first = ask({"at", "--topic", "vehicleState", "--key", "3", "--by", "data", "--time", std::to_string(kBase), "--json"}, file);
+    ASSERT_EQ(first.code, 0) << first.err;
+    EXPECT_EQ(nlohmann::json::parse(first.out)["data"]["pose"]["x"], 0);
+    EXPECT_EQ(first.err, "") << "a whole file";
 }
