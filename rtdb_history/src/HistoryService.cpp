@@ -141,13 +141,14 @@ struct HistoryService::Impl
                                t.topic + (f.key.empty() ? "" : "_" + f.key) + (options.save_format == "mcap" ? ".mcap" : ".db");
             std::replace_if(name.begin(), name.end(), [](char c) { return c == '/' || c == ' '; }, '_');
             const std::string dir = options.save_dir.empty() ? std::filesystem::current_path().string() : options.save_dir;
+            // Around the trigger's data time (lab time in a simulated run, as its samples are).
             const SaveSpan span{.path = (std::filesystem::path(dir) / name).string(),
-                                .from_ns = f.commit_ns - std::min(f.commit_ns, options.save_before_ns),
-                                .to_ns = f.commit_ns + options.save_after_ns,
+                                .from_ns = f.data_ns - std::min(f.data_ns, options.save_before_ns),
+                                .to_ns = f.data_ns + options.save_after_ns,
                                 .name = "save on " + t.text};
             CPM_LOG_INFO("cpm_history: %s triggered a save (%s): %s", t.topic.c_str(), t.text.c_str(), span.path.c_str());
             try {
-                const SaveResult r = save_span(span, cpm::get_time_ns());
+                const SaveResult r = save_span(span, f.data_ns + (cpm::get_time_ns() - f.commit_ns));
                 if (r.error.empty()) CPM_LOG_INFO("cpm_history: saved %s: %llu samples", r.path.c_str(), (unsigned long long)r.samples);
                 else CPM_LOG_ERROR("cpm_history: the save %s: %s", r.path.c_str(), r.error.c_str());
             } catch (const std::exception& e) {

@@ -98,8 +98,13 @@ Writer::Writer(const std::string& path, const std::string& library, size_t chunk
 {
     fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
     if (fd_ < 0) throw cpm::Error("mcap: cannot make " + path + ": " + std::strerror(errno) + (errno == EEXIST ? " (never overwritten)" : ""));
-    put(std::string(kMagic, kMagicSize));
-    put(record(header, Out().str("").str(library).b));
+    try {
+        put(std::string(kMagic, kMagicSize) + record(header, Out().str("").str(library).b));
+    } catch (...) {
+        ::close(fd_);
+        fd_ = -1;
+        throw;
+    }
 }
 
 Writer::~Writer()
@@ -188,21 +193,35 @@ void Writer::flush_chunk()
 {
     if (chunk_.empty()) return;
     const uint64_t chunk_offset = offset_;
+    // A chunk of private records only (objects, deletions) has no message time: 0 to 0.
+    const uint64_t start = chunk_index_.empty() ? 0 : chunk_start_, end = chunk_index_.empty() ? 0 : chunk_end_;
     Out body;
-    body.u64(chunk_start_).u64(chunk_end_).u64(chunk_.size()).u32(crc_of(chunk_)).str("").u64(chunk_.size()).raw(chunk_);
+    body.u64(start).u64(end).u64(chunk_.size()).u32(crc_of(chunk_)).str("").u64(chunk_.size()).raw(chunk_);
     const std::string chunk_record = record(chunk, body.b);
+    // Its Message Indexes follow it: offsets of each channel's messages in the chunk.
+    const uint64_t indexes_offset = chunk_offset + chunk_record.size();
+    std::map<uint16_t, uint64_t> index_offsets;
+    std::string indexes;
+    for (const auto& [id, entries] : chunk_index_) {
+        Out e;
+        for (const auto& [t, at] : entries) e.u64(t).u64(at);
+        index_offsets[id] = indexes_offset + indexes.size();
+        indexes += record(message_index, Out().u16(id).u32(uint32_t(e.b.size())).raw(e.b).b);
+    }
     // Room is kept for what close() writes after it: the summary (the schemas and channels
     // again, the chunk indexes, this chunk's among them, statistics, metadata indexes, offsets),
     // the footer and a last Metadata record or two.
     uint64_t summary_room = chunk_indexes_.size() + 2048 + 64 * (channels_.size() + metadata_.size());
     for (const auto& x : schemas_) summary_room += schema_record(x).size();
     for (const auto& x : channels_) summary_room += channel_record(x).size();
-    if (max_bytes_ && offset_ + chunk_record.size() + summary_room > max_bytes_) {
+    if (max_bytes_ && offset_ + chunk_record.size() + indexes.size() + summary_room > max_bytes_) {
         drop_chunk();
         throw cpm::Error("mcap: " + path_ + " reached its size limit of " + std::to_string(max_bytes_) + " bytes");
     }
+    // The chunk and its indexes in one write: both in the file, or neither (put takes back
+    // what did not fit).
     try {
-        put(chunk_record);
+        put(chunk_record + indexes);
     } catch (const cpm::Error&) {
         drop_chunk();
         throw;
@@ -212,20 +231,12 @@ void Writer::flush_chunk()
         message_count_ += entries.size();
         channel_counts_[id] += entries.size();
     }
-    message_start_ = std::min(message_start_, chunk_start_);
-    message_end_ = std::max(message_end_, chunk_end_);
-    const uint64_t indexes_offset = offset_;
-    std::map<uint16_t, uint64_t> index_offsets;
-    std::string indexes;
-    for (const auto& [id, entries] : chunk_index_) {
-        Out e;
-        for (const auto& [t, at] : entries) e.u64(t).u64(at);
-        index_offsets[id] = indexes_offset + indexes.size();
-        indexes += record(message_index, Out().u16(id).u32(uint32_t(e.b.size())).raw(e.b).b);
+    if (!chunk_index_.empty()) {
+        message_start_ = std::min(message_start_, chunk_start_);
+        message_end_ = std::max(message_end_, chunk_end_);
     }
-    put(indexes);
     Out ci;
-    ci.u64(chunk_start_).u64(chunk_end_).u64(chunk_offset).u64(chunk_record.size()).offsets_map(index_offsets).u64(indexes.size()).str("")
+    ci.u64(start).u64(end).u64(chunk_offset).u64(chunk_record.size()).offsets_map(index_offsets).u64(indexes.size()).str("")
         .u64(chunk_.size()).u64(chunk_.size());
     chunk_indexes_ += record(chunk_index, ci.b);
     ++chunk_count_;
@@ -246,9 +257,10 @@ void Writer::add_metadata(const std::string& name, const std::map<std::string, s
 {
     flush_chunk();  // a Metadata record lies outside chunks
     const std::string r = record(metadata, Out().str(name).string_map(values).b);
+    const uint64_t at = offset_;
+    put(r);  // indexed once it is in the file
     metadata_.push_back({name, values});
-    metadata_offsets_.emplace_back(offset_, r.size());
-    put(r);
+    metadata_offsets_.emplace_back(at, r.size());
 }
 
 void Writer::close()
@@ -506,7 +518,8 @@ File read(const std::string& path, Damage damage)
                 f.summary_start = r.u64();
                 (void)r.u64();
                 const uint32_t crc = r.u32();
-                if (crc != 0 && f.summary_start != 0 && crc_of(b.substr(f.summary_start, body + 16 - f.summary_start)) != crc) {
+                if (f.summary_start > body + 16) r.fail("the footer's summary start lies past the footer");
+            if (crc != 0 && f.summary_start != 0 && crc_of(b.substr(f.summary_start, body + 16 - f.summary_start)) != crc) {
                     r.fail("the summary's CRC does not match");
                 }
             } else if (op == statistics) {

@@ -95,26 +95,28 @@ std::vector<std::string> recording_files(const std::string& path)
     if (!file_exists(path)) throw Error("recording " + path + ": no such file");
     std::error_code ec;
     if (!fs::is_directory(path, ec)) return {path};
-    // A folder: its split recording (<stem>_NNN.db|.mcap, one set), or its run's recording.
-    static const std::regex part(R"((.*)_\d{3,}\.(db|mcap))");
-    std::map<std::string, std::vector<std::string>> sets;
+    // A folder: its run's recording (a run's folder also holds its saves), else its split
+    // recording (<stem>_NNN.db|.mcap, one set).
+    for (const char* run : {"recording.db", "recording.mcap"}) {
+        if (fs::is_regular_file(fs::path(path) / run, ec)) return {(fs::path(path) / run).string()};
+    }
+    static const std::regex part(R"((.*)_(\d{3,})\.(db|mcap))");
+    std::map<std::string, std::vector<std::pair<uint64_t, std::string>>> sets;
     for (const auto& e : fs::directory_iterator(path, ec)) {
         std::smatch m;
         const std::string name = e.path().filename().string();
-        if (e.is_regular_file() && std::regex_match(name, m, part)) sets[m[1].str() + "." + m[2].str()].push_back(e.path().string());
+        if (e.is_regular_file() && std::regex_match(name, m, part)) sets[m[1].str() + "." + m[3].str()].emplace_back(std::stoull(m[2].str()), e.path().string());
     }
     if (sets.size() == 1) {
-        files = sets.begin()->second;
-        std::sort(files.begin(), files.end());
+        auto parts = sets.begin()->second;
+        std::sort(parts.begin(), parts.end());  // by number: _1000 after _999
+        for (const auto& [n, f] : parts) files.push_back(f);
         return files;
     }
     if (sets.size() > 1) {
         std::string names;
         for (const auto& [stem, parts] : sets) names += (names.empty() ? "" : ", ") + stem + " (" + std::to_string(parts.size()) + " files)";
         throw Error("recording " + path + ": it is a directory with several split recordings (" + names + "); give one's files with --file each");
-    }
-    for (const char* run : {"recording.db", "recording.mcap"}) {
-        if (fs::is_regular_file(fs::path(path) / run, ec)) return {(fs::path(path) / run).string()};
     }
     throw Error("recording " + path + ": it is a directory without a recording (no recording.db, recording.mcap or split recording NAME_000.db|.mcap in it)");
 }
@@ -422,11 +424,14 @@ void RecordingWriter::run()
         } catch (const std::exception& e) {
             fail(std::string("cannot begin its next file: ") + e.what());
             ok = false;
+            const uint64_t lost = uint64_t(std::count_if(batch.begin(), batch.end(), [](const Event& e) { return e.kind == Event::sample; }));
+            std::lock_guard dropped(mutex_);
+            counters_.dropped += lost;
         }
         ok = ok && (batch.empty() || write(batch));
         lock.lock();
         if (!ok) {
-            counters_.dropped += queue_.size();
+            counters_.dropped += uint64_t(std::count_if(queue_.begin(), queue_.end(), [](const Event& e) { return e.kind == Event::sample; }));
             queue_.clear();
         }
         if (last || failed_) return;
@@ -506,11 +511,12 @@ void RecordingWriter::close()
 {
     {
         std::lock_guard lock(mutex_);
-        if (!file_) return;
-        closing_ = true;
+        if (closed_) return;
+        closed_ = closing_ = true;
     }
     cv_.notify_one();
     if (thread_.joinable()) thread_.join();
+    if (!file_) return;  // a split that could not begin its next file: the error says so
     // What the file holds once closed (an MCAP file's last chunk is written at its close).
     const RecordingCounters c = counters();
     try {

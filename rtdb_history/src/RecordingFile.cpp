@@ -149,7 +149,7 @@ private:
     {
         if (rc == SQLITE_OK) return;
         const std::string why = sqlite_error(db_, rc);
-        if (open_) exec(db_, "ROLLBACK");
+        if (!sqlite3_get_autocommit(db_)) exec(db_, "ROLLBACK");  // a failed COMMIT may leave it open
         open_ = false;
         pending_ = 0;
         if (rc == SQLITE_FULL) throw RecordingFull("the disk is full (or the recording reached its size limit): " + why);
@@ -373,7 +373,8 @@ public:
         writer_.close();
     }
 
-    uint64_t samples_in_file() const override { return writer_.messages(); }
+    /// The run's samples: the messages but those derived for viewers (/tf).
+    uint64_t samples_in_file() const override { return writer_.messages() - (tf_channel_ ? writer_.channel_messages(*tf_channel_) : 0); }
     uint64_t bytes() const override { return writer_.bytes(); }
 
 private:
@@ -523,6 +524,9 @@ std::unique_ptr<RecordingFile> recording_tables_in(sqlite3* db, const std::map<s
 void copy_mcap_into(const std::string& path, sqlite3* db)
 {
     const mcap::File f = mcap::read(path, mcap::Damage::keep_what_reads);
+    if (!f.damage.empty() && f.messages.empty() && f.metadata.empty() && f.channels.empty()) {
+        throw Error("recording " + path + ": nothing of it reads: " + f.damage);
+    }
     std::map<std::string, std::string> meta, idl, end;
     for (const auto& m : f.metadata) {
         if (m.name == "cpm.recording") meta = m.values;

@@ -111,7 +111,7 @@ void TriggerSink::sample_committed(Oid oid, const Incoming& sample, uint64_t com
             was = now;
             if (!entered) continue;
         }
-        fire_({i, o->second.second, commit_ns});
+        fire_({i, o->second.second, commit_ns, sample.data_ns});
     }
 }
 

@@ -66,6 +66,7 @@ public:
         size_t trigger = 0;  ///< its index in the options
         std::string key;     ///< the sample's object's key
         uint64_t commit_ns = 0;
+        uint64_t data_ns = 0;  ///< the trigger sample's data time: the span is around it
     };
     TriggerSink(std::vector<SaveTrigger> triggers, std::function<void(const Fired&)> fire);
     void object_added(const ObjectInfo& info) override;

@@ -401,3 +401,28 @@ TEST(Recording, ASplitRecordingKeepsItsNewestFilesUnderItsLimit)
     EXPECT_EQ(newest.samples()[0].commit_ns(), 2000u + 7999u * 10) << "the newest files are kept";
     EXPECT_LT(rest.samples, 8000u);
 }
+
+TEST(Recording, AFolderReadsItsRunsRecordingBeforeAnySaveAndItsPartsInNumberOrder)
+{
+    TempDir dir;
+    auto one = [&](const std::string& file, uint64_t t) {
+        Lab lab(file);
+        const Oid o = lab.add({.topic = "t", .type_name = "Blob", .created_ts = 1});
+        lab.commit(o, t, {1, 2, 3}, t);
+    };
+    one(dir.file("recording.db"), 1000);
+    one(dir.file("save_20261204T101010.000Z_fsmStatus_123.db"), 2000);  // a save in the run's folder
+    const auto run = load_recording(dir.path.string());
+    EXPECT_EQ(answer(*run.store, request("latest", "t", "", 0)).samples().at(0).commit_ns(), 1000u);
+    // Parts numbered past 999 come after 999.
+    TempDir parts;
+    fs::copy_file(dir.file("recording.db"), parts.file("run_999.db"));
+    fs::copy_file(dir.file("save_20261204T101010.000Z_fsmStatus_123.db"), parts.file("run_1000.db"));
+    // Both are single recordings of their own (each a start of its own): refused as one set.
+    try {
+        (void)load_recording(parts.path.string());
+        FAIL() << "two recordings read as one";
+    } catch (const cpm::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("run_1000.db is of another recording than"), std::string::npos) << e.what();
+    }
+}

@@ -488,7 +488,7 @@ int export_recording_command(const cpm::cli::ParsedArgs& parsed, const std::stri
         if (!t.empty()) o.topics.push_back(t);
     }
     // A run folder's scenario and summary travel with its recording.
-    const std::filesystem::path dir = std::filesystem::path(file).parent_path();
+    const std::filesystem::path dir = std::filesystem::is_directory(file) ? std::filesystem::path(file) : std::filesystem::path(file).parent_path();
     std::map<std::string, std::string> run;
     for (const char* f : {"scenario.yaml", "summary.json"}) {
         if (std::filesystem::is_regular_file(dir / f)) run[std::filesystem::path(f).stem().string()] = cpm::read_text_file((dir / f).string(), "run file");
@@ -702,7 +702,7 @@ std::vector<Command> history_commands()
 {
     return {{.group = "history", .verb = "",
              .summary = "ask the history service about the recent past: list, search, latest, at, older, younger, range, "
-                        "wait, successor, snapshot, changes, wait-object",
+                        "wait, successor, snapshot, changes, wait-object, marks; save (the dash-cam), export (CSV, MCAP, SQLite)",
              .help = kHistoryHelp, .run = history_verb},
             {.group = "dump", .verb = "", .summary = "one table of every object the history service holds", .help = kDumpHelp, .run = dump_command}};
 }

@@ -98,6 +98,12 @@ public:
     uint64_t messages() const { return message_count_; }
     /// The file's size so far (the open chunk not counted).
     uint64_t bytes() const { return offset_; }
+    /// The messages of one channel in the file's chunks so far.
+    uint64_t channel_messages(uint16_t id) const
+    {
+        const auto it = channel_counts_.find(id);
+        return it == channel_counts_.end() ? 0 : it->second;
+    }
 
 private:
     void flush_chunk();

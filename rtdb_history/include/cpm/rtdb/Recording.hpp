@@ -106,7 +106,7 @@ private:
     std::condition_variable cv_;
     std::deque<Event> queue_;
     uint64_t queued_bytes_ = 0;
-    bool closing_ = false, failed_ = false;
+    bool closing_ = false, failed_ = false, closed_ = false;
     RecordingCounters counters_;
     uint64_t started_ns_ = 0;
     uint64_t added_ = 0;  // samples handed to the file (its writer thread's)
