@@ -207,6 +207,20 @@ struct HistoryService::Impl
         return saving->finish();
     }
 
+    /// "Now" on the clock the samples' data times are on: the wall clock, or in a simulated run
+    /// (stamps on a lab clock from 0, far below the wall clock) the newest stamp held.
+    uint64_t data_clock_now(const std::set<std::string>& topics) const
+    {
+        constexpr uint64_t kLabClockBelow = 1'000'000'000'000'000'000ull;  // 2001: no wall clock of a run
+        uint64_t newest = 0;
+        for (const auto& o : store.search({})) {
+            if (o.kind != ObjectKind::instance || o.data_time != "create_stamp" || (!topics.empty() && !topics.count(o.topic))) continue;
+            const auto last = store.latest(o.oid);
+            if (last.ok()) newest = std::max(newest, last.sample.data_ns);
+        }
+        return newest > 0 && newest < kLabClockBelow ? newest : cpm::get_time_ns();
+    }
+
     RequestServer::SaveHandler save_handler()
     {
         return [this](const HistoryRequest& rq) { return save(rq); };
@@ -239,7 +253,7 @@ struct HistoryService::Impl
             }
             span.topics.insert(t);
         }
-        const uint64_t now = cpm::get_time_ns();
+        const uint64_t now = data_clock_now(span.topics);
         span.from_ns = now - std::min(now, rq.t0());
         span.to_ns = now + rq.t1();
         SaveResult r;

@@ -18,8 +18,22 @@ RequestServer::RequestServer(const Store& store, Participant& participant, size_
                 if (rq.kind() == "save" && save_) {  // it lasts the span after now: on a thread of its own
                     std::lock_guard lock(work_mutex_);
                     // A client sends a request again when a service matches while it waits: one save each.
+                    for (auto it = saves_.begin(); it != saves_.end();) {  // the finished ones
+                        if (!*it->done) {
+                            ++it;
+                            continue;
+                        }
+                        it->thread.join();
+                        it = saves_.erase(it);
+                    }
+                    if (saves_seen_.size() > 4096) saves_seen_.clear();  // a client resends within seconds, not hours
                     if (!stopping_ && saves_seen_.emplace(rq.client_id(), rq.request_id()).second) {
-                        saves_.emplace_back([this, rq] { send(save_(rq), rq); });
+                        auto done = std::make_shared<std::atomic<bool>>(false);
+                        saves_.push_back({std::thread([this, rq, done] {
+                                              send(save_(rq), rq);
+                                              *done = true;
+                                          }),
+                                          done});
                     }
                 } else if (may_wait(rq)) {
                     std::lock_guard lock(work_mutex_);
@@ -47,7 +61,7 @@ void RequestServer::stop()
         if (t.joinable()) t.join();
     }
     for (auto& t : saves_) {
-        if (t.joinable()) t.join();
+        if (t.thread.joinable()) t.thread.join();
     }
 }
 

@@ -14,6 +14,7 @@
 #include <condition_variable>
 #include <deque>
 #include <functional>
+#include <list>
 #include <map>
 #include <string>
 #include <memory>
@@ -59,8 +60,13 @@ private:
     bool stopping_ = false;
     std::vector<std::thread> workers_;
     SaveHandler save_;
-    std::vector<std::thread> saves_;  // each save on a thread of its own, joined at stop()
-    std::set<std::pair<std::string, uint64_t>> saves_seen_;  // (client, request): each save once
+    struct Saving
+    {
+        std::thread thread;
+        std::shared_ptr<std::atomic<bool>> done;
+    };
+    std::list<Saving> saves_;  // each save on a thread of its own: finished ones joined at the next, all at stop()
+    std::set<std::pair<std::string, uint64_t>> saves_seen_;  // (client, request): each save once (the recent ones)
     std::unique_ptr<AsyncReader<HistoryRequest>> reader_;
 };
 

@@ -422,6 +422,33 @@ TEST(LabRun, CtrlCInSimulatedTimeSaysHowMuchLabTimeRanAndWhyTheRunEndedEarly)
     EXPECT_NE(html.find("did not end well: it was stopped (Ctrl-C or SIGTERM) before its end"), std::string::npos) << html.substr(0, 3000);
 }
 
+TEST(LabRun, ADashCamSaveInSimulatedTimeHoldsTheLabTimeSpanInTheRunFolder)
+{
+    TempDir dir;
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", kCorridor, "--duration", "1000s", "--out", out, "--monitor", "off"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("processes on domain") != std::string::npos; }, 30s)) << run.errors();
+    std::this_thread::sleep_for(3s);  // some seconds of lab time
+    // The cars stamp lab time from 0: the span is on that clock, not on the wall clock.
+    Process save({built_program("cpm"), "history", "save", "dash.db", "--before", "2s", "--after", "0s", "--topics", "vehicleState", "--json"});
+    ASSERT_EQ(save.wait(60s), 0) << save.errors() << save.output();
+    run.kill(SIGINT);
+    EXPECT_EQ(run.wait(60s), 1) << run.errors();
+    const auto saved = nlohmann::json::parse(save.output());
+    EXPECT_EQ(saved["file"], out + "/dash.db") << "in the run's folder";
+    EXPECT_LT(saved["to_ns"].get<uint64_t>(), 1000'000'000'000ull) << "lab time: " << saved.dump();
+    EXPECT_EQ(saved["to_ns"].get<uint64_t>() - saved["from_ns"].get<uint64_t>(), 2'000'000'000u);
+    Process states({built_program("cpm"), "history", "--file", out + "/dash.db", "range", "--topic", "vehicleState", "--key", "5", "--from", "0",
+                    "--to", "9000000000000000000", "--by", "data", "--json"});
+    ASSERT_EQ(states.wait(30s), 0) << states.errors();
+    const std::string lines = states.output();
+    EXPECT_NEAR(double(std::count(lines.begin(), lines.end(), '\n')), 100, 3) << "two seconds of lab time at 50 Hz";
+    // The run's folder still reads as the run.
+    Process whole({built_program("cpm"), "history", "--file", out, "latest", "--topic", "vehicleState", "--key", "5", "--json"});
+    ASSERT_EQ(whole.wait(30s), 0) << whole.errors();
+    EXPECT_GE(nlohmann::json::parse(whole.output())["data_ns"].get<uint64_t>(), saved["to_ns"].get<uint64_t>() - 100'000'000);
+}
+
 TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
 {
     // A state machine frozen (SIGSTOP) before it joins the simulated clock: the clock waits for
