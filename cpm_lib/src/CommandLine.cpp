@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <cstdlib>
 #include <ctime>
+#include <map>
+#include <optional>
 #include <csignal>
 #include <cstdio>
 #include <cstring>
@@ -85,10 +87,12 @@ bool wants_help(const std::vector<std::string>& args)
     return false;
 }
 
-uint64_t parse_duration(const std::string& flag, const std::string& text)
+namespace {
+
+/// A non-negative number followed by one of `units` (name → multiplier), below 2^64 once
+/// multiplied; none when the text is not one.
+std::optional<uint64_t> number_with_unit(const std::string& text, const std::map<std::string, uint64_t>& units)
 {
-    static const std::map<std::string, uint64_t> units{{"ns", 1},          {"us", 1'000},       {"ms", 1'000'000},          {"s", 1'000'000'000},
-                                                       {"m", 60'000'000'000}, {"min", 60'000'000'000}, {"h", 3'600'000'000'000}};
     size_t end = 0;
     double value = 0;
     try {
@@ -99,10 +103,20 @@ uint64_t parse_duration(const std::string& flag, const std::string& text)
     const auto unit = units.find(text.substr(end));
     if (end == 0 || unit == units.end() || !(value >= 0) || !std::isdigit(static_cast<unsigned char>(text[0])) ||
         !(value * double(unit->second) < 18446744073709551615.0)) {
-        throw UsageError(flag + ": '" + text +
-                         "' is not a duration (a number of at most 2^64 ns with ns, us, ms, s, m or h, e.g. 10s)");
+        return std::nullopt;
     }
     return static_cast<uint64_t>(value * double(unit->second));
+}
+
+}  // namespace
+
+uint64_t parse_duration(const std::string& flag, const std::string& text)
+{
+    static const std::map<std::string, uint64_t> units{{"ns", 1},          {"us", 1'000},       {"ms", 1'000'000},          {"s", 1'000'000'000},
+                                                       {"m", 60'000'000'000}, {"min", 60'000'000'000}, {"h", 3'600'000'000'000}};
+    const auto v = number_with_unit(text, units);
+    if (!v) throw UsageError(flag + ": '" + text + "' is not a duration (a number of at most 2^64 ns with ns, us, ms, s, m or h, e.g. 10s)");
+    return *v;
 }
 
 uint64_t parse_bytes(const std::string& flag, const std::string& text)
@@ -118,19 +132,9 @@ uint64_t parse_bytes(const std::string& flag, const std::string& text)
                                                        {"MiB", 1ull << 20},
                                                        {"GiB", 1ull << 30},
                                                        {"TiB", 1ull << 40}};
-    size_t end = 0;
-    double value = 0;
-    try {
-        value = std::stod(text, &end);
-    } catch (const std::exception&) {
-        end = 0;
-    }
-    const auto unit = units.find(text.substr(end));
-    if (end == 0 || unit == units.end() || !(value >= 0) || !std::isdigit(static_cast<unsigned char>(text[0])) ||
-        !(value * double(unit->second) < 18446744073709551615.0)) {
-        throw UsageError(flag + ": '" + text + "' is not a size (a number with B, kB, MB, GB, TB, KiB, MiB, GiB or TiB, e.g. 500MB)");
-    }
-    return static_cast<uint64_t>(value * double(unit->second));
+    const auto v = number_with_unit(text, units);
+    if (!v) throw UsageError(flag + ": '" + text + "' is not a size (a number with B, kB, MB, GB, TB, KiB, MiB, GiB or TiB, e.g. 500MB)");
+    return *v;
 }
 
 bool looks_like_bytes(const std::string& text)

@@ -588,6 +588,19 @@ int save_command(const std::vector<std::string>& args, const std::string& file)
     return 0;
 }
 
+/// The keys of every instance of `topic` the source holds.
+std::vector<std::string> keys_of(const Source& source, const std::string& topic)
+{
+    HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
+    rq.name_regex("^" + std::regex_replace(topic, std::regex(R"([.^$|()\[\]{}*+?\\])"), R"(\$&)") + "(/|$)");
+    const HistoryReply found = source.client->request(rq);
+    std::vector<std::string> keys;
+    for (const auto& o : found.objects()) {
+        if (!o.is_process() && o.topic() == topic) keys.push_back(o.key());
+    }
+    return keys;
+}
+
 int export_command(const std::vector<std::string>& args, const std::string& file)
 {
     const std::string command = "cpm history export";
@@ -605,21 +618,10 @@ int export_command(const std::vector<std::string>& args, const std::string& file
     const uint64_t to = parsed.has("--to") ? source.time("--to", parsed.get("--to")) : uint64_t(INT64_MAX);
     if (to < from) throw UsageError(command + ": --to is before --from");
     const std::string topic = parsed.get("--topic");
-    // The objects: the one named, or every instance of the topic.
-    std::vector<std::string> keys;
-    if (parsed.has("--key")) {
-        keys.push_back(parsed.get("--key"));
-    } else {
-        HistoryRequest rq = cpm::HistoryClient::make(cpm::history::Kind::search, "", "");
-        rq.name_regex("^" + std::regex_replace(topic, std::regex(R"([.^$|()\[\]{}*+?\\])"), R"(\$&)") + "(/|$)");
-        const HistoryReply found = source.client->request(rq);
-        for (const auto& o : found.objects()) {
-            if (!o.is_process() && o.topic() == topic) keys.push_back(o.key());
-        }
-        if (keys.empty()) {
-            std::fprintf(stderr, "%s: no object of topic '%s'%s\n", command.c_str(), topic.c_str(), file.empty() ? "" : (" in " + file).c_str());
-            return 1;
-        }
+    const std::vector<std::string> keys = parsed.has("--key") ? std::vector<std::string>{parsed.get("--key")} : keys_of(source, topic);
+    if (keys.empty()) {
+        std::fprintf(stderr, "%s: no object of topic '%s'%s\n", command.c_str(), topic.c_str(), file.empty() ? "" : (" in " + file).c_str());
+        return 1;
     }
     struct Row
     {
