@@ -153,6 +153,33 @@ const char* const kPlayHelp =
     "Waits up to --wait-for-readers for each topic to have a reader, then plays; prints what it\n"
     "sent and how late samples left (p50, p99) as one JSON line.\n";
 
+/// cpm play's options from its flags; `clock` is the recording's when a span is asked for.
+cpm::rtdb::PlayOptions play_options(const cpm::cli::ParsedArgs& parsed, const std::string& file, const std::string& command,
+                                    cpm::rtdb::RunClock& clock)
+{
+    cpm::rtdb::PlayOptions options;
+    options.rate = cpm::cli::parse_number("--rate", parsed.get("--rate", "1"), 1e-6, 1e6);
+    if (parsed.has("--topics")) {
+        for (const auto& t : split_list("--topics", parsed.get("--topics"))) options.include.push_back(cpm::cli::glob_regex(t));
+    }
+    if (parsed.has("--exclude")) {
+        for (const auto& t : split_list("--exclude", parsed.get("--exclude"))) options.exclude.push_back(cpm::cli::glob_regex(t));
+    }
+    if (parsed.has("--wait-for-readers")) options.wait_for_readers_ns = parse_duration("--wait-for-readers", parsed.get("--wait-for-readers"));
+    // The span, as commit times (what play goes by): needs the run's clocks, from the file.
+    if (parsed.has("--from") || parsed.has("--to")) {
+        try {
+            clock = cpm::rtdb::recording_clock(file);
+        } catch (const std::runtime_error& e) {
+            throw cpm::Error(command + ": " + e.what());
+        }
+    }
+    if (parsed.has("--from")) options.from_ns = cpm::rtdb::recording_time(file, clock, "--from", parsed.get("--from"), false);
+    if (parsed.has("--to")) options.to_ns = cpm::rtdb::recording_time(file, clock, "--to", parsed.get("--to"), false);
+    if (options.to_ns < options.from_ns) throw UsageError(command + ": --to is before --from");
+    return options;
+}
+
 int play_command(const std::vector<std::string>& args)
 {
     const std::string command = "cpm play";
@@ -165,28 +192,9 @@ int play_command(const std::vector<std::string>& args)
                                {"--wait-for-readers", true}},
                               command);
     const std::string file = only_positional(parsed, command, "FILE (a recording)");
-    cpm::rtdb::PlayOptions options;
-    options.rate = cpm::cli::parse_number("--rate", parsed.get("--rate", "1"), 1e-6, 1e6);
-    if (parsed.has("--topics")) {
-        for (const auto& t : split_list("--topics", parsed.get("--topics"))) options.include.push_back(cpm::cli::glob_regex(t));
-    }
-    if (parsed.has("--exclude")) {
-        for (const auto& t : split_list("--exclude", parsed.get("--exclude"))) options.exclude.push_back(cpm::cli::glob_regex(t));
-    }
-    if (parsed.has("--wait-for-readers")) options.wait_for_readers_ns = parse_duration("--wait-for-readers", parsed.get("--wait-for-readers"));
-    // The span, as commit times (what play goes by): needs the run's clocks, from the file.
     cpm::rtdb::RunClock clock;
     const bool span = parsed.has("--from") || parsed.has("--to");
-    if (span) {
-        try {
-            clock = cpm::rtdb::recording_clock(file);
-        } catch (const std::runtime_error& e) {
-            throw cpm::Error(command + ": " + e.what());
-        }
-    }
-    if (parsed.has("--from")) options.from_ns = cpm::rtdb::recording_time(file, clock, "--from", parsed.get("--from"), false);
-    if (parsed.has("--to")) options.to_ns = cpm::rtdb::recording_time(file, clock, "--to", parsed.get("--to"), false);
-    if (options.to_ns < options.from_ns) throw UsageError(command + ": --to is before --from");
+    const cpm::rtdb::PlayOptions options = play_options(parsed, file, command, clock);
 
     cpm::cli::stop_on_signals();
     std::unique_ptr<cpm::Participant> participant;
