@@ -1,6 +1,7 @@
 #include <cpm/detail/AsyncWorker.hpp>
 
 #include "log_internal.hpp"
+#include "realtime_internal.hpp"
 
 #include <cpm/detail/ReaderCore.hpp>
 
@@ -28,6 +29,7 @@ void AsyncWorker::stop()
 
 void AsyncWorker::run(State& state, ReaderCore& core)
 {
+    run_at_normal_priority();  // a reader made on a real-time loop calls back at normal priority
     while (!state.stopping) {
         if (!core.wait_for_data(std::chrono::seconds(1))) continue;
         if (state.stopping) break;

@@ -41,7 +41,17 @@ std::shared_ptr<Timer> Timer::create(Participant& participant, const std::string
                                      uint64_t offset_ns, TimerOptions options)
 {
     const bool simulated = init_settings().simulated_time && options.simulated_time_allowed;
-    return std::make_shared<detail::LabTimer>(participant, node_id, period_ns, offset_ns, options.wait_for_start, simulated);
+    if (options.realtime_priority < 1 || options.realtime_priority > 99) {
+        throw Error("Timer '" + node_id + "': realtime_priority " + std::to_string(options.realtime_priority) +
+                    " is outside SCHED_FIFO's 1..99");
+    }
+    const Realtime realtime = options.realtime.value_or(init_settings().realtime);
+    if (realtime == Realtime::required) {
+        if (const std::string missing = realtime_missing(options.realtime_priority); !missing.empty())
+            throw Error("Timer '" + node_id + "': real time is required and not permitted: " + missing);
+    }
+    return std::make_shared<detail::LabTimer>(participant, node_id, period_ns, offset_ns, options.wait_for_start, simulated,
+                                              realtime, options.realtime_priority);
 }
 
 std::optional<std::pair<std::string, uint64_t>> timer_missed_ticks(const std::string& message)
@@ -91,12 +101,14 @@ void Timer::run_until(const std::function<bool()>& stop_requested, Callback call
 namespace detail {
 
 LabTimer::LabTimer(Participant& participant, std::string node_id, uint64_t period_ns, uint64_t offset_ns,
-                   bool wait_for_start, bool simulated)
+                   bool wait_for_start, bool simulated, Realtime realtime, int realtime_priority)
     : node_id_(std::move(node_id)),
       period_ns_(period_ns),
       offset_ns_(offset_ns),
       wait_for_start_(wait_for_start || simulated),
-      simulated_(simulated)
+      simulated_(simulated),
+      realtime_(realtime),
+      realtime_priority_(realtime_priority)
 {
     if (node_id_.empty()) throw Error("Timer: node_id is empty");
     if (period_ns_ == 0) throw Error("Timer '" + node_id_ + "': period_ns must be > 0");
@@ -220,6 +232,7 @@ void LabTimer::start(Callback callback, std::function<void()> on_stop)
 
 void LabTimer::run(const Callback& callback, const std::function<void()>& on_stop)
 {
+    const RealtimeThread realtime(realtime_, realtime_priority_, "timer '" + node_id_ + "'");
     if (simulated_) {
         run_simulated(callback);
     } else {

@@ -23,7 +23,8 @@ class LabTimer : public Timer
 {
 public:
     LabTimer(Participant& participant, std::string node_id, uint64_t period_ns, uint64_t offset_ns,
-             bool wait_for_start, bool simulated);
+             bool wait_for_start, bool simulated, Realtime realtime = Realtime::off,
+             int realtime_priority = realtime_priority::timer);
     ~LabTimer() override;
 
     void start(Callback callback, std::function<void()> on_stop) override;
@@ -52,6 +53,8 @@ private:
     const uint64_t offset_ns_;
     const bool wait_for_start_;
     const bool simulated_;
+    const Realtime realtime_;
+    const int realtime_priority_;
     int timer_fd_ = -1;
     int stop_fd_ = -1;
     std::atomic<bool> started_{false};

@@ -219,6 +219,13 @@ dds::DomainParticipantQos participant_qos(const ParticipantOptions& options)
     builtin.discovery_config.initial_announcements.count = 5;
     builtin.discovery_config.initial_announcements.period = {0, 100'000'000};
     qos.wire_protocol().participant_id = -1;
+    if (options.realtime != Realtime::off) {
+        auto& allocation = qos.allocation();
+        allocation.participants = eprosima::fastrtps::ResourceLimitedContainerConfig(16);
+        allocation.readers = eprosima::fastrtps::ResourceLimitedContainerConfig(32);
+        allocation.writers = eprosima::fastrtps::ResourceLimitedContainerConfig(32);
+        allocation.send_buffers.preallocated_number = 4;
+    }
 
     if (!options.discovery_server.empty()) {
         // A super client: it hears of every endpoint, not only of those matching its own (a
@@ -379,6 +386,7 @@ ParticipantOptions ParticipantOptions::from_init()
     options.security = settings.security;
     options.shared_memory = settings.shared_memory;
     options.lease = settings.lease;
+    options.realtime = settings.realtime;
     return options;
 }
 

@@ -5,6 +5,7 @@
 #include <cpm/Security.hpp>
 
 #include "lab_clock.hpp"
+#include "realtime_internal.hpp"
 
 #include <openssl/crypto.h>
 
@@ -76,7 +77,8 @@ bool is_init_flag(const std::string& flag, bool& takes_value)
     static const std::pair<const char*, bool> kFlags[] = {
         {"--dds_domain", true},       {"--node_id", true},           {"--dds_interface", true},
         {"--dds_initial_peer", true}, {"--dds_discovery_server", true}, {"--simulated_time", false},
-        {"--security", true},         {"--dds_shared_memory", true},  {"--dds_lease", true}};
+        {"--security", true},         {"--dds_shared_memory", true},  {"--dds_lease", true},
+        {"--realtime", false}};
     for (const auto& [name, value] : kFlags) {
         if (flag == name) {
             takes_value = value;
@@ -126,8 +128,15 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
     if (const char* lease = std::getenv("CPM_DDS_LEASE"); lease != nullptr && *lease != '\0') {
         settings.lease = parse_lease(lease, "CPM_DDS_LEASE");
     }
+    if (const char* realtime = std::getenv("CPM_REALTIME"); realtime != nullptr && *realtime != '\0') {
+        settings.realtime = parse_realtime(realtime, "CPM_REALTIME");
+    }
     for (int i = 1; i < argc; ++i) {
-        if (std::strcmp(argv[i], "--simulated_time") == 0) {
+        if (std::strcmp(argv[i], "--realtime") == 0) {
+            settings.realtime = Realtime::on;
+        } else if (std::strncmp(argv[i], "--realtime=", 11) == 0) {
+            settings.realtime = parse_realtime(argv[i] + 11, "--realtime");
+        } else if (std::strcmp(argv[i], "--simulated_time") == 0) {
             settings.simulated_time = true;
         } else if (auto v = flag_value(argc, argv, i, "simulated_time")) {
             settings.simulated_time = parse_bool(*v, "--simulated_time");
@@ -195,6 +204,7 @@ void init(int argc, char* argv[])
             // threads (see ParticipantCore).
             OPENSSL_init_crypto(OPENSSL_INIT_NO_ATEXIT, nullptr);
         }
+        detail::start_realtime(settings.realtime, settings.node_id);
     } catch (const cli::UsageError&) {
         throw;
     } catch (const Error& e) {

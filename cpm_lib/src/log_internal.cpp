@@ -1,4 +1,5 @@
 #include "log_internal.hpp"
+#include "realtime_internal.hpp"
 
 #include <cpm/Logging.hpp>
 #include <cpm/get_time_ns.hpp>
@@ -45,6 +46,7 @@ void log_warning_later(std::string message)
     if (q.started) return;
     q.started = true;
     std::thread([&q] {
+        run_at_normal_priority();
         for (;;) {
             std::string m;
             {

@@ -199,7 +199,17 @@ void read_history(Checker& c, const YAML::Node& root, Scenario& s)
     if (h["host"]) s.history_host = host_name(c, s, h["host"], "history.host");
 }
 
-/// The cars: each one's id (once), start, camera, state machine, restart and host.
+/// `realtime:` true, false or required.
+Realtime read_realtime(Checker& c, const YAML::Node& n, const std::string& path)
+{
+    if (n.IsScalar() && n.Scalar() == "required") return Realtime::required;
+    bool on = false;
+    if (n.IsScalar() && YAML::convert<bool>::decode(n, on)) return on ? Realtime::on : Realtime::off;
+    c.error(n, path, "expected true, false or required");
+    return Realtime::off;
+}
+
+/// The cars: each one's id (once), start, camera, state machine, restart, host and realtime.
 void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicles, Scenario& s)
 {
     if (!vehicles) c.error(root, "vehicles", "missing (a list of cars, each with an id)");
@@ -210,10 +220,10 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
             const YAML::Node v = vehicles[i];
             const std::string p = "vehicles[" + std::to_string(i) + "]";
             if (!v.IsMap()) {
-                c.error(v, p, "expected a map (id, start, camera, fsm, restart, host)");
+                c.error(v, p, "expected a map (id, start, camera, fsm, restart, host, realtime)");
                 continue;
             }
-            c.keys(v, p, {"id", "start", "camera", "fsm", "restart", "host"});
+            c.keys(v, p, {"id", "start", "camera", "fsm", "restart", "host", "realtime"});
             VehicleSpec spec;
             if (!v["id"]) c.error(v, p + ".id", "missing");
             else if (auto id = c.integer(v["id"], p + ".id", 1, 255)) {
@@ -233,6 +243,7 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
             if (v["fsm"]) spec.fsm = c.file(v["fsm"], p + ".fsm", s.dir, "state machine");
             if (v["restart"]) spec.restart = c.boolean(v["restart"], p + ".restart").value_or(false);
             if (v["host"]) spec.host = host_name(c, s, v["host"], p + ".host");
+            if (v["realtime"]) spec.realtime = read_realtime(c, v["realtime"], p + ".realtime");
             if (v["camera"] && !root["world"]) c.error(v["camera"], p + ".camera", "a camera needs the world's markers: give world");
             if (!spec.fsm.empty() && spec.camera.empty()) {
                 // A machine that looks for gates waits for a camera's markers: without one the car
@@ -251,9 +262,10 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
 void read_routing(Checker& c, const YAML::Node& root, Scenario& s)
 {
     if (const YAML::Node r = root["routing"]) {
-        if (!r.IsMap()) c.error(r, "routing", "expected a map (enabled, seed, period, restart, host)");
+        if (!r.IsMap()) c.error(r, "routing", "expected a map (enabled, seed, period, restart, host, realtime)");
         else {
-            c.keys(r, "routing", {"enabled", "seed", "period", "restart", "host"});
+            c.keys(r, "routing", {"enabled", "seed", "period", "restart", "host", "realtime"});
+            if (r["realtime"]) s.routing.realtime = read_realtime(c, r["realtime"], "routing.realtime");
             if (r["host"]) s.routing.host = host_name(c, s, r["host"], "routing.host");
             if (r["enabled"]) s.routing.enabled = c.boolean(r["enabled"], "routing.enabled").value_or(false);
             if (r["seed"]) s.routing.seed = uint64_t(c.integer(r["seed"], "routing.seed", 0, 1ll << 53).value_or(1));
@@ -372,11 +384,12 @@ void read_controllers(Checker& c, const YAML::Node& root, Scenario& s)
         const std::string p = "controllers[" + std::to_string(i) + "]";
         const YAML::Node n = list[i];
         if (!n.IsMap()) {
-            c.error(n, p, "expected a map (program, name, args, vehicles, period, domain)");
+            c.error(n, p, "expected a map (program, name, args, vehicles, period, domain, host, realtime)");
             continue;
         }
-        c.keys(n, p, {"program", "name", "args", "vehicles", "period", "domain", "host"});
+        c.keys(n, p, {"program", "name", "args", "vehicles", "period", "domain", "host", "realtime"});
         ControllerSpec spec;
+        if (n["realtime"]) spec.realtime = read_realtime(c, n["realtime"], p + ".realtime");
         read_controller_program(c, n, p, s, spec, names);
         if (const YAML::Node a = n["args"]) read_controller_args(c, a, p, s, spec);
         read_controller_vehicles(c, n, p, s, spec, driven_by);
@@ -739,10 +752,11 @@ public:
         if (s_.cars_on_lanes()) {
             int first = 255;
             bool restart = false;
-            for (const auto& v : s_.vehicles) first = std::min(first, v.id), restart = restart || v.restart;
+            Realtime realtime = Realtime::off;  // one simulator and bridge for all: the strictest car's
+            for (const auto& v : s_.vehicles) first = std::min(first, v.id), restart = restart || v.restart, realtime = std::max(realtime, v.realtime);
             add("cars", "vehicle_sim",
                 common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count", std::to_string(s_.vehicles.size()), "--lanes",
-                        s_.lanes, "--seed", std::to_string(s_.routing.seed)}),
+                        s_.lanes, "--seed", std::to_string(s_.routing.seed)}, realtime),
                 restart, 5, first, s_.vehicles.front().host);
             plan_.back().timer = timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first);
             return;
@@ -751,14 +765,14 @@ public:
             const std::string id = std::to_string(v.id);
             const std::string start = number(v.x) + "," + number(v.y) + "," + number(v.yaw);
             const std::string link = (fs::path(r_.run_dir) / ("car_" + id + ".tty")).string();
-            add("sim_" + id, "firmware_sim", common({program("firmware_sim"), "--vehicle_id", id, "--map", s_.world, "--start", start, "--link", link}),
+            add("sim_" + id, "firmware_sim", common({program("firmware_sim"), "--vehicle_id", id, "--map", s_.world, "--start", start, "--link", link}, v.realtime),
                 v.restart, 6, v.id, v.host);
-            add("bridge_" + id, "vehicle_bridge", common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}),
+            add("bridge_" + id, "vehicle_bridge", common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}, v.realtime),
                 v.restart, 5, v.id, v.host);
             // In real time the camera starts at once; on the simulated clock it ticks with the car.
             if (!v.camera.empty()) {
                 add("camera_" + id, "camera_sim",
-                    common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s_.world, "--rate", "30"}), v.restart, 4,
+                    common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s_.world, "--rate", "30"}, v.realtime), v.restart, 4,
                     v.id, v.host, simulated());
             }
         }
@@ -770,7 +784,7 @@ public:
         for (const auto& v : s_.vehicles) {
             if (v.camera.empty()) continue;
             const std::string id = std::to_string(v.id);
-            add("aruco_" + id, "aruco_node", common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s_.world}),
+            add("aruco_" + id, "aruco_node", common({program("aruco_node"), "--vehicle_id", id, "--camera", v.camera, "--world", s_.world}, v.realtime),
                 v.restart, 3, v.id, v.host, simulated());
         }
         if (s_.routing.enabled) {
@@ -778,14 +792,15 @@ public:
             for (const auto& v : s_.vehicles) ids += (ids.empty() ? "" : ",") + std::to_string(v.id);
             add("central_routing", "central_routing",
                 common({program("central_routing"), "--vehicle_ids", ids, "--lanes", s_.lanes, "--seed", std::to_string(s_.routing.seed), "--period",
-                        std::to_string(s_.routing.period_ns / 1'000'000) + "ms"}),
+                        std::to_string(s_.routing.period_ns / 1'000'000) + "ms"},
+                       s_.routing.realtime),
                 s_.routing.restart, 1, 0, s_.routing.host);
         }
         controllers();
         for (const auto& v : s_.vehicles) {
             if (v.fsm.empty()) continue;
             const std::string id = std::to_string(v.id);
-            add("fsm_" + id, "fsm_node", common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}), v.restart, 1, v.id, v.host);
+            add("fsm_" + id, "fsm_node", common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}, v.realtime), v.restart, 1, v.id, v.host);
         }
     }
 
@@ -800,7 +815,8 @@ public:
             for (int v : c.vehicles) ids += (ids.empty() ? "" : ",") + std::to_string(v);
             add("hlc_" + c.name, "hlc_middleware",
                 common({program("hlc_middleware"), "--vehicle_ids", ids, "--controller_domain", std::to_string(domain), "--name", c.name,
-                        "--period", std::to_string(c.period_ns / 1'000'000) + "ms"}),
+                        "--period", std::to_string(c.period_ns / 1'000'000) + "ms"},
+                       c.realtime),
                 false, 2, c.vehicles.front(), c.host, false);
             plan_.back().timer = timer_ids::hlc_middleware(c.name);
             std::vector<std::string> argv;
@@ -816,6 +832,7 @@ public:
             argv.insert(argv.end(), c.args.begin(), c.args.end());
             argv.insert(argv.end(), {"--vehicle_ids", ids, "--dds_domain", std::to_string(domain)});
             if (simulated()) argv.push_back("--simulated_time");
+            if (c.realtime != Realtime::off) argv.push_back(realtime_flag(c.realtime));
             add("controller_" + c.name, "hlc_controller", argv, false, 1, c.vehicles.front(), c.host, false);
         }
     }
@@ -856,13 +873,16 @@ private:
         if (::access(p.c_str(), X_OK) != 0 && std::find(missing_.begin(), missing_.end(), p) == missing_.end()) missing_.push_back(p);
         return p;
     }
-    /// The flags every node of the run takes: its domain, and the simulated clock.
-    std::vector<std::string> common(std::vector<std::string> argv) const
+    /// The flags every node of the run takes: its domain, the simulated clock, and --realtime
+    /// where the scenario marks it.
+    std::vector<std::string> common(std::vector<std::string> argv, Realtime realtime = Realtime::off) const
     {
         argv.insert(argv.end(), {"--dds_domain", domain_});
         if (simulated()) argv.push_back("--simulated_time");
+        if (realtime != Realtime::off) argv.push_back(realtime_flag(realtime));
         return argv;
     }
+    static std::string realtime_flag(Realtime realtime) { return realtime == Realtime::required ? "--realtime=required" : "--realtime"; }
     static std::string number(double v)
     {
         char b[32];

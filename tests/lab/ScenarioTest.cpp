@@ -10,6 +10,7 @@
 #include <sys/stat.h>
 
 #include <filesystem>
+#include <map>
 #include <fstream>
 
 namespace fs = std::filesystem;
@@ -583,4 +584,42 @@ TEST(Scenario, AControllerOnAnotherHostRunsThereWithItsScriptCopiedAndFindsCpmTh
                                                   "controllers: [{program: ctl, vehicles: [1], host: car_a}]\n");
     EXPECT_EQ(errors_of(other), std::vector<std::string>{other + ":8: controllers[0].program: on another host a controller is one of cpm's programs "
                                                                  "or a Python script (copied there)"});
+}
+
+TEST(Scenario, ACarMarkedRealtimeRunsEachOfItsProcessesWithTheFlagAndAWrongValueIsNamed)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    dir.write("cam.yaml", "");
+    dir.write("m.json", "{}");
+    const std::string bin = fake_bin(dir, {"cpm_history", "cpm", "firmware_sim", "vehicle_bridge", "camera_sim", "aruco_node", "fsm_node"});
+    const Scenario s = load_scenario(dir.write("r.yaml", "name: r\nduration: 5s\nworld: map.json\n"
+                                                         "vehicles:\n  - {id: 2, realtime: true, camera: cam.yaml}\n"
+                                                         "  - {id: 3, realtime: required, start: [1, 0, 0]}\n  - {id: 4, start: [2, 0, 0]}\n"));
+    EXPECT_EQ(s.vehicles[0].realtime, cpm::Realtime::on);
+    EXPECT_EQ(s.vehicles[1].realtime, cpm::Realtime::required);
+    EXPECT_EQ(s.vehicles[2].realtime, cpm::Realtime::off);
+    std::map<std::string, std::string> flag_of;  // process -> its --realtime flag, "" without
+    for (const auto& p : plan_run(s, {.bin_dir = bin, .run_dir = "/runs/r", .domain = 3})) {
+        for (const auto& a : p.argv) {
+            if (a.rfind("--realtime", 0) == 0) flag_of[p.name] += a;
+        }
+        flag_of.try_emplace(p.name, "");
+    }
+    EXPECT_EQ(flag_of, (std::map<std::string, std::string>{{"cpm_history", ""},
+                                                           {"sim_2", "--realtime"},
+                                                           {"bridge_2", "--realtime"},
+                                                           {"camera_2", "--realtime"},
+                                                           {"aruco_2", "--realtime"},
+                                                           {"sim_3", "--realtime=required"},
+                                                           {"bridge_3", "--realtime=required"},
+                                                           {"sim_4", ""},
+                                                           {"bridge_4", ""}}));
+    const std::string bad = dir.write("b.yaml", "name: b\nduration: 5s\nworld: map.json\nvehicles:\n  - {id: 2, realtime: always}\n"
+                                                "routing: {realtime: 2}\n");
+    const auto errors = errors_of(bad);
+    EXPECT_NE(testing::PrintToString(errors).find(bad + ":5: vehicles[0].realtime: expected true, false or required"), std::string::npos)
+        << testing::PrintToString(errors);
+    EXPECT_NE(testing::PrintToString(errors).find(bad + ":6: routing.realtime: expected true, false or required"), std::string::npos)
+        << testing::PrintToString(errors);
 }

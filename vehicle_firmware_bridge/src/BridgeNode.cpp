@@ -233,6 +233,8 @@ void BridgeCar::cycle(const StatePacket& packet, uint64_t t_received)
 
 void BridgeCar::run(const std::function<bool()>& stop_requested)
 {
+    const RealtimeThread realtime(init_settings().realtime, realtime_priority::serial_loop,
+                                  "vehicle " + std::to_string(options.vehicle_id) + "'s serial loop");
     while (!stop_requested()) {
         if (!port && !open_line()) {
             std::this_thread::sleep_for(std::chrono::milliseconds(200));

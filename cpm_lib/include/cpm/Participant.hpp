@@ -1,6 +1,7 @@
 #pragma once
 #include <cpm/Discovery.hpp>
 #include <cpm/Error.hpp>
+#include <cpm/Realtime.hpp>
 
 #include <chrono>
 #include <memory>
@@ -41,6 +42,10 @@ struct ParticipantOptions
     /// called until the participant is deleted, which is when its last reader or writer goes:
     /// what it refers to must live that long.
     DiscoveryCallback on_discovery;
+    /// --realtime: Fast DDS allocates its tables of remote participants, readers and writers
+    /// for a lab up front (16 participants with 32 readers and 32 writers each; beyond, they grow), and
+    /// its send buffers, so discovery during a run allocates less.
+    Realtime realtime = Realtime::off;
 
     /// The options given by cpm::init (or the environment).
     static ParticipantOptions from_init();

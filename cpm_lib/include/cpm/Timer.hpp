@@ -8,6 +8,7 @@
 #include <vector>
 
 #include <cpm/Participant.hpp>
+#include <cpm/Realtime.hpp>
 
 namespace cpm {
 
@@ -19,6 +20,10 @@ struct TimerOptions
     bool wait_for_start = true;
     /// Under --simulated_time, follow the lab's simulated clock; else always the real clock.
     bool simulated_time_allowed = true;
+    /// Run the timer's thread (the callbacks) SCHED_FIFO at realtime_priority; unset: cpm::init's
+    /// --realtime. With Realtime::required and no privilege, Timer::create throws cpm::Error.
+    std::optional<Realtime> realtime;
+    int realtime_priority = cpm::realtime_priority::timer;  ///< 1..99
 };
 
 /// Calls back at absolute lab times k * period + offset (cpm_lab's Timer).

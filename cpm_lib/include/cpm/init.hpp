@@ -3,6 +3,8 @@
 #include <string>
 #include <vector>
 
+#include <cpm/Realtime.hpp>
+
 namespace cpm {
 
 /// The settings every cpm program shares, read by cpm::init from its command line.
@@ -19,10 +21,14 @@ struct InitSettings
     /// --dds_lease (or CPM_DDS_LEASE), 1s..1h: how long the others wait for this process's
     /// participants once they fall silent (a crash) before dropping them and what they wrote.
     std::chrono::milliseconds lease{10'000};
+    /// --realtime (on), --realtime=required|on|off (or CPM_REALTIME): lock memory, run the timer and
+    /// serial-loop threads SCHED_FIFO (see cpm/Realtime.hpp). cpm::init locks the memory and
+    /// checks the privileges: with `required`, a UsageError naming what is missing.
+    Realtime realtime = Realtime::off;
 };
 
 /// Reads cpm's flags (`--flag=value` or `--flag value`) from the command line and
-/// CPM_DOMAIN_ID (CPM_SECURITY, CPM_SHARED_MEMORY, CPM_DDS_LEASE) from the environment; other flags are left to
+/// CPM_DOMAIN_ID (CPM_SECURITY, CPM_SHARED_MEMORY, CPM_DDS_LEASE, CPM_REALTIME) from the environment; other flags are left to
 /// the program.
 /// Throws cpm::cli::UsageError (a cpm::Error; cpm's programs exit 2 on it) naming the flag and
 /// value when a value is malformed or out of range, or an interface is not on this host.
@@ -36,7 +42,8 @@ InitSettings init_settings();
 InitSettings parse_init_settings(int argc, const char* const argv[], const char* env_domain);
 
 /// Whether `flag` (e.g. "--dds_domain", without "=value") is one of cpm::init's flags; then
-/// `takes_value` says whether a separate value follows it (--simulated_time stands alone).
+/// `takes_value` says whether a separate value follows it (--simulated_time and --realtime stand
+/// alone; their value, if any, is given as --realtime=required).
 /// Lets programs with flags of their own pass cpm's through.
 bool is_init_flag(const std::string& flag, bool& takes_value);
 

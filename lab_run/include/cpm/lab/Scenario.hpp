@@ -14,7 +14,8 @@
 //       camera: ../cameras/sim_640x480.yaml   # synthetic camera + aruco_node
 //       fsm: ../fsm/corridor.json             # fsm_node for this car
 //       restart: false              # restart its processes when they die (default: the run stops)
-//   routing: {enabled: false, seed: 1, period: 400ms, restart: false}
+//       realtime: true              # its processes run with --realtime (or `required`: refuse without)
+//   routing: {enabled: false, seed: 1, period: 400ms, restart: false, realtime: false}
 //   qos: {vehicleState: {reliable: false, history_depth: 1}}
 //   record: {topics: ["*"], exclude: ["cameraFrame"]}
 //   parameters: ../params/lab.yaml  # served to every node (cpm param serve)
@@ -29,6 +30,7 @@
 //       period: 100ms
 //       domain: 40                  # the domain it shares with its middleware; default: chosen
 //       host: car5                  # where it and its middleware run (default: the run's host)
+//       realtime: true              # it and its middleware run with --realtime
 //   monitor: 8080                   # cpm monitor on this port while the run lasts, or
 //                                   # {port: 8080, allow_stop: true} for its stop buttons; off: none
 //
@@ -36,6 +38,7 @@
 // ("corridor.yaml:12: vehicles[1].id: 5 is given twice (also vehicles[0])").
 #include <cpm/Diagnostics.hpp>
 #include <cpm/QosOverrides.hpp>
+#include <cpm/Realtime.hpp>
 
 #include <cstdint>
 #include <functional>
@@ -57,6 +60,7 @@ struct VehicleSpec
     std::string fsm;     ///< absolute path, or empty
     bool restart = false;
     std::string host;    ///< where its processes run (a name of `hosts:`); "" the run's own
+    Realtime realtime = Realtime::off;  ///< --realtime for its processes (simulator, bridge, camera, aruco, fsm)
 };
 
 /// A computer of the lab (`hosts:`): the address its participants use and how the run reaches it.
@@ -75,6 +79,7 @@ struct RoutingSpec
     uint64_t period_ns = 400'000'000ull;
     bool restart = false;
     std::string host;  ///< where central_routing runs; "" the run's own
+    Realtime realtime = Realtime::off;
 };
 
 /// A user's high-level controller and what it drives (`controllers:`).
@@ -87,6 +92,7 @@ struct ControllerSpec
     uint64_t period_ns = 100'000'000;
     std::optional<int> domain;      ///< the controller's own domain; unset: the run chooses one
     std::string host;               ///< where it and its middleware run (a name of hosts:); "" the run's own
+    Realtime realtime = Realtime::off;  ///< --realtime for it and its middleware
     bool python() const;
 };
 
