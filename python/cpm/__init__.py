@@ -83,10 +83,12 @@ def MultiVehicleReader(msg_type, topic, vehicle_ids, participant=None, **options
     return _typed("MultiVehicleReader", msg_type, "cpm.MultiVehicleReader")(topic, ids, _options("ReaderOptions", options, "cpm.MultiVehicleReader"), participant)
 
 
-def Timer(node_id, period_ns, offset_ns=0, wait_for_start=True, simulated_time_allowed=True):
+def Timer(node_id, period_ns, offset_ns=0, wait_for_start=True, simulated_time_allowed=True, realtime=None):
     """cpm_lab's Timer: start(callback) calls callback(t_nominal_ns) every period on the lab's
-    clock (real, or simulated with --simulated_time) until stop(), the lab's stop or Ctrl-C."""
-    return _cpm.Timer(node_id, period_ns, offset_ns, wait_for_start, simulated_time_allowed)
+    clock (real, or simulated with --simulated_time) until stop(), the lab's stop or Ctrl-C.
+    realtime: the callbacks' thread SCHED_FIFO (True, "on", "required"; None: cpm.init's
+    --realtime)."""
+    return _cpm.Timer(node_id, period_ns, offset_ns, wait_for_start, simulated_time_allowed, realtime)
 
 
 def stamp_message(message, t_now_ns, expected_delay_ns):

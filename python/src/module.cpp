@@ -155,12 +155,17 @@ void bind_history(py::module_& m)
 void bind_timer(py::module_& m)
 {
     py::class_<cpm::Timer, std::shared_ptr<cpm::Timer>>(m, "Timer")
-        .def(py::init([](const std::string& node_id, uint64_t period_ns, uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed) {
+        .def(py::init([](const std::string& node_id, uint64_t period_ns, uint64_t offset_ns, bool wait_for_start, bool simulated_time_allowed,
+                         const py::object& realtime) {
+                 cpm::TimerOptions options{wait_for_start, simulated_time_allowed};
+                 // None: cpm.init's --realtime; True/False; or "on", "off", "required".
+                 if (py::isinstance<py::bool_>(realtime)) options.realtime = realtime.cast<bool>() ? cpm::Realtime::on : cpm::Realtime::off;
+                 else if (!realtime.is_none()) options.realtime = cpm::parse_realtime(py::str(realtime).cast<std::string>(), "Timer realtime");
                  py::gil_scoped_release release;
-                 return cpm::Timer::create(node_id, period_ns, offset_ns, cpm::TimerOptions{wait_for_start, simulated_time_allowed});
+                 return cpm::Timer::create(node_id, period_ns, offset_ns, options);
              }),
              py::arg("node_id"), py::arg("period_ns"), py::arg("offset_ns") = 0, py::arg("wait_for_start") = true,
-             py::arg("simulated_time_allowed") = true)
+             py::arg("simulated_time_allowed") = true, py::arg("realtime") = py::none())
         .def("start", [](cpm::Timer& t, py::function callback) {
             auto cb = from_python<uint64_t>(std::move(callback), "the timer's callback");
             SignalWatch watch;
