@@ -109,8 +109,8 @@ protected:
                                               hosts_yaml + "ssh_config: " + hosts().ssh_config() + "\n" + extra +
                                               "history: {host: central}\n"
                                               "vehicles:\n"
-                                              "  - {id: 5, host: car_a, start: [0.0, 0.0, 0.3]" + car_a_fsm + car_a_extra + "}\n"
-                                              "  - {id: 6, host: car_b, start: [0.0, 0.6, 0.3]" + car_b_extra + "}\n");
+                                              "  - {id: 5, host: car_a, realtime: true, start: [0.0, 0.0, 0.3]" + car_a_fsm + car_a_extra + "}\n"
+                                              "  - {id: 6, host: car_b, realtime: true, start: [0.0, 0.6, 0.3]" + car_b_extra + "}\n");
     }
     cpm_test::TempDir dir;
 

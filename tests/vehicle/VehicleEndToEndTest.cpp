@@ -71,7 +71,8 @@ struct Car
     }
     void start_sim(std::vector<std::string> flags)
     {
-        std::vector<std::string> argv{built_program("firmware_sim"), "--vehicle_id", std::to_string(id)};
+        // As a real car's: the microcontroller's loop and the bridge's serial loop in real time.
+        std::vector<std::string> argv{built_program("firmware_sim"), "--vehicle_id", std::to_string(id), "--realtime"};
         argv.insert(argv.end(), flags.begin(), flags.end());
         sim = std::make_unique<Process>(argv);
         EXPECT_TRUE(cpm_test::wait_until([&] { return sim->output().find('\n') != std::string::npos; }))
@@ -84,7 +85,7 @@ struct Car
     {
         bridge = std::make_unique<Process>(std::vector<std::string>{built_program("vehicle_bridge"), "--vehicle_id",
                                                                     std::to_string(bridge_id < 0 ? id : bridge_id),
-                                                                    "--device", path.empty() ? device : path});
+                                                                    "--device", path.empty() ? device : path, "--realtime"});
     }
     /// The sim's `pwm T MODE PWM` trace lines after time t (ns): (time, mode) pairs.
     std::vector<std::pair<uint64_t, int>> pwm_trace_after(uint64_t t) const
@@ -603,7 +604,7 @@ TEST_F(VehicleEndToEnd, OneSimulatorAndOneBridgeProcessCarryTwentyCarsEachOnItsO
     // car 25 is commanded. Every car must report at 50 Hz, car 25 drive, the others stay put.
     cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});
     cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
-    Process sut({built_program("cpm"), "vehicle", "sim", "--id", "11", "--count", "20", "--spacing", "1.0"});
+    Process sut({built_program("cpm"), "vehicle", "sim", "--id", "11", "--count", "20", "--spacing", "1.0", "--realtime"});
     std::set<std::string> sim_pids, bridge_pids;
     ASSERT_TRUE(cpm_test::wait_until([&] { return count_of(sut.output(), "vehicle_bridge pid ") == 20; }, 20s))
         << sut.output() << sut.errors();
@@ -814,7 +815,7 @@ TEST_F(VehicleEndToEnd, CraftedFramesOnAPtyAreCheckedRebasedAndLoggedOnceASecond
 {
     Watcher watch(participant);
     CraftedController controller;
-    Process bridge({built_program("vehicle_bridge"), "--vehicle_id", std::to_string(kId), "--device", controller.device()});
+    Process bridge({built_program("vehicle_bridge"), "--vehicle_id", std::to_string(kId), "--device", controller.device(), "--realtime"});
     cpm::vehicle::StatePacket p;
     p.vehicle_id = kId;
     p.tick = 100'000;
