@@ -55,7 +55,11 @@ struct Player::Impl
     {
         auto* dp = participant.native();
         for (auto& [name, w] : writers) {
-            if (w.writer) publisher->delete_datawriter(w.writer);
+            if (w.writer) {
+                size_t removed = 0;  // an empty history first: see cpm::detail::WriterCore::close
+                (void)w.writer->clear_history(&removed);
+                publisher->delete_datawriter(w.writer);
+            }
             if (w.topic_entity) dp->delete_topic(w.topic_entity);
         }
         if (publisher) dp->delete_publisher(publisher);

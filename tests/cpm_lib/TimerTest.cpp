@@ -85,7 +85,9 @@ protected:
 
 TEST_F(TimerTest, SynchronisedStartTicksAtAbsoluteMultiplesWithNominalTimes)
 {
-    auto sut = cpm::Timer::create(node, "planner", 20 * kMs, 5 * kMs, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = false});
+    // Every tick in a row: in real time, as a car's loop would run (a busy machine skips one otherwise).
+    auto sut = cpm::Timer::create(node, "planner", 20 * kMs, 5 * kMs,
+                                  cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = false, .realtime = cpm::Realtime::on});
     sut->start_async(recorder());
     ASSERT_TRUE(saw_ready_from("planner")) << "no ReadyStatus from the waiting timer";
     EXPECT_EQ(calls(), 0u) << "ticked before the trigger";

@@ -116,3 +116,19 @@ TEST(Writer, KeepAllWriteFailsVisiblyWhenAReaderStopsAcknowledgingAndRecovers)
     EXPECT_TRUE(sut.wait_for_acknowledgments(5000ms));
     EXPECT_TRUE(sut.write(cpm_test::vehicle_state(1, 9, 9))) << "writing resumes once acknowledged";
 }
+
+TEST(Writer, AKeepAllWriterWithSamplesAFrozenReaderNeverAcknowledgedIsDestroyedPromptly)
+{
+    // Fast DDS 2.9 hung for good destroying such a writer when its heartbeat came during the
+    // teardown (bench_recording: 8 minutes at 100 % CPU): each round here gave it the chance.
+    const std::string topic = cpm_test::unique_topic("vehicleState");
+    cpm_test::Process reader({cpm_test::built_program("reliable_reader"), topic, "--dds_lease", "1h"});
+    cpm_test::Process writer({cpm_test::built_program("keep_all_writer"), topic, "--rounds", "12", "--cars", "20", "--pause", "1s"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return writer.output().find("matched") != std::string::npos; }, 20000ms))
+        << writer.output() << writer.errors();
+    reader.kill(SIGSTOP);  // from now on it acknowledges nothing
+    const int status = writer.wait(45000ms);  // about 20 s with the fix; without, it hangs in the first rounds
+    reader.kill(SIGCONT);
+    EXPECT_EQ(status, 0) << "a writer's destruction hung:\n" << writer.output() << writer.errors();
+    EXPECT_NE(writer.output().find("round 11 destroyed in "), std::string::npos) << writer.output();
+}

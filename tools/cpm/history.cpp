@@ -2,6 +2,7 @@
 #include "Command.hpp"
 
 #include <cpm/rtdb/Csv.hpp>
+#include <cpm/rtdb/Diff.hpp>
 #include <cpm/rtdb/HistoryJson.hpp>
 #include <cpm/rtdb/IdlDecoder.hpp>
 #include <cpm/rtdb/Recording.hpp>
@@ -30,7 +31,7 @@ namespace cpm::tools {
 namespace {
 
 const char* const kHistoryHelp =
-    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot|marks|save|export\n"
+    "usage: cpm history list|search|wait-object|changes|latest|at|older|younger|range|wait|successor|snapshot|marks|save|export|diff\n"
     "                   [flags] [--json]\n"
     "\n"
     "                   [--file recording.db]\n"
@@ -72,6 +73,11 @@ const char* const kHistoryHelp =
     "                                       folder's scenario and summary go with it as metadata;\n"
     "                                       --foxglove-3d: the cars' poses also as FrameTransform on\n"
     "                                       /tf (frames car_<id>, car_<id>_estimate in map) for its 3D panel\n"
+    "  diff OTHER [--topics A,B] [--all]    (with --file) compares two recordings (two runs of a\n"
+    "                                       scenario, of a controller) sample for sample by data time\n"
+    "                                       and payload; prints the first difference of each topic and\n"
+    "                                       key, naming the field; exit 0 when identical, 1 when not.\n"
+    "                                       Leaves out the lab clock's traffic and the log unless --all\n"
     "--key: a vehicle id, or the key as `cpm history list` prints it. Times: nanoseconds,\n"
     "ISO-8601 UTC (2026-11-23T14:05:00.25Z) or relative to now (-2s). --by commit (default):\n"
     "when the service received it; data: the sample's create_stamp.\n"
@@ -501,6 +507,39 @@ int export_recording_command(const cpm::cli::ParsedArgs& parsed, const std::stri
 }
 
 /// `cpm history marks [--json]`: the bookmarks (cpm lab mark, the monitor's Mark), oldest first.
+/// `cpm history --file A diff B [--topics A,B] [--all] [--json]`: the first difference of each topic and key.
+int diff_command(const std::vector<std::string>& args, const std::string& file)
+{
+    const std::string command = "cpm history diff";
+    const auto parsed = cpm::cli::parse_args(args, {{"--topics", true}, {"--all", false}, {"--json", false}}, command);
+    if (file.empty()) throw UsageError(command + ": which recordings? cpm history --file A diff B");
+    if (parsed.positional.size() != 1)
+        throw UsageError(command + ": give the other recording once (cpm history --file A diff B); got " + std::to_string(parsed.positional.size()));
+    cpm::rtdb::DiffOptions o;
+    if (parsed.has("--all")) o.exclude.clear();
+    std::stringstream topics(parsed.get("--topics"));
+    for (std::string t; std::getline(topics, t, ',');) {
+        if (!t.empty()) o.topics.push_back(t);
+    }
+    const auto a = cpm::rtdb::load_recording(file);
+    const auto b = cpm::rtdb::load_recording(parsed.positional[0]);
+    const auto result = cpm::rtdb::diff_recordings(a, b, o);
+    for (const auto& d : result.differences) {
+        const std::string name = d.key.empty() ? d.topic : d.topic + "/" + d.key;
+        if (parsed.has("--json")) {
+            std::printf("%s\n", nlohmann::json{{"topic", d.topic}, {"key", d.key}, {"index", d.index}, {"data_ns_a", d.data_ns_a},
+                                               {"data_ns_b", d.data_ns_b}, {"what", d.what}}.dump().c_str());
+        } else {
+            std::printf("%s: sample %llu: %s\n", name.c_str(), (unsigned long long)d.index, d.what.c_str());
+        }
+    }
+    if (!parsed.has("--json")) {
+        std::printf("%llu topic/key(s) compared, %llu samples equal: %s\n", (unsigned long long)result.objects, (unsigned long long)result.samples,
+                    result.identical() ? "identical" : (std::to_string(result.differences.size()) + " differ").c_str());
+    }
+    return result.identical() ? 0 : 1;
+}
+
 int marks_command(const std::vector<std::string>& args, const std::string& file)
 {
     const std::string command = "cpm history marks";
@@ -695,6 +734,7 @@ int history_verb(const std::vector<std::string>& all)
     if (args[0] == "export") return export_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
     if (args[0] == "save") return save_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
     if (args[0] == "marks") return marks_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
+    if (args[0] == "diff") return diff_command(std::vector<std::string>(args.begin() + 1, args.end()), file);
     return history_command(args[0], std::vector<std::string>(args.begin() + 1, args.end()), file);
 }
 
@@ -704,7 +744,7 @@ std::vector<Command> history_commands()
 {
     return {{.group = "history", .verb = "",
              .summary = "ask the history service about the recent past: list, search, latest, at, older, younger, range, "
-                        "wait, successor, snapshot, changes, wait-object, marks; save (the dash-cam), export (CSV, MCAP, SQLite)",
+                        "wait, successor, snapshot, changes, wait-object, marks; save (the dash-cam), export (CSV, MCAP, SQLite), diff (two runs)",
              .help = kHistoryHelp, .run = history_verb},
             {.group = "dump", .verb = "", .summary = "one table of every object the history service holds", .help = kDumpHelp, .run = dump_command}};
 }
