@@ -128,12 +128,16 @@ LabTimer::LabTimer(Participant& participant, std::string node_id, uint64_t perio
     if (wait_for_start_) {
         ready_writer_ = std::make_unique<Writer<ReadyStatus>>(participant, topics::ready_status.name, topics::ready_status.writer);
     }
+    // on_trigger is short (a lock, a notify): it runs on the DDS thread that delivers the
+    // trigger, one thread hop less per step of a simulated clock.
+    ReaderOptions trigger_options = topics::system_trigger.reader;
+    trigger_options.dds_thread_callback = true;
     trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
-        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name,
-        topics::system_trigger.reader);
+        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name, trigger_options);
+    ReaderOptions live_options = live_reader_options(topics::system_trigger);
+    live_options.dds_thread_callback = true;
     live_trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
-        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name,
-        live_reader_options(topics::system_trigger));
+        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name, live_options);
 }
 
 LabTimer::~LabTimer()
@@ -251,10 +255,16 @@ void LabTimer::run_simulated(const Callback& callback)
     start_time_ = next;
     std::unique_lock<std::mutex> lock(trigger_mutex_);
     uint64_t seen = 0;
+    uint64_t announced = UINT64_MAX;  // the tick last announced
     while (!stopping_) {
-        lock.unlock();
-        announce(next);
-        lock.lock();
+        // Once per tick: another node's step leaves our announced tick as it was, and the
+        // master still has it (and a master that appears late, in the transient-local history).
+        if (announced != next) {
+            lock.unlock();
+            announce(next);
+            lock.lock();
+            announced = next;
+        }
         // Wait for the master to move the clock (stop() notifies too). A master that appears
         // late still finds the announcement in the transient-local history.
         trigger_changed_.wait(lock, [&] { return stopping_ || trigger_count_ != seen; });

@@ -76,7 +76,7 @@ TimeMaster::TimeMaster(Participant& participant) : impl_(std::make_unique<Impl>(
 TimeMaster::~TimeMaster() = default;
 
 uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uint64_t end_ns,
-                                   std::chrono::milliseconds step_timeout)
+                                   std::chrono::milliseconds step_timeout, const std::function<void()>& before_start)
 {
     if (node_ids.empty()) throw Error("TimeMaster: no node ids to drive");
     bool started = false;
@@ -97,6 +97,7 @@ uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uin
             }
         }
         if (waiting_for.empty()) {
+            if (!started && before_start) before_start();
             if (next >= end_ns) {
                 stop_all();
                 return steps;

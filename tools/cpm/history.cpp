@@ -533,7 +533,9 @@ int diff_command(const std::vector<std::string>& args, const std::string& file)
             std::printf("%s: sample %llu: %s\n", name.c_str(), (unsigned long long)d.index, d.what.c_str());
         }
     }
-    if (!parsed.has("--json")) {
+    if (parsed.has("--json")) {
+        std::printf("%s\n", nlohmann::json{{"compared", result.objects}, {"equal_samples", result.samples}, {"identical", result.identical()}}.dump().c_str());
+    } else {
         std::printf("%llu topic/key(s) compared, %llu samples equal: %s\n", (unsigned long long)result.objects, (unsigned long long)result.samples,
                     result.identical() ? "identical" : (std::to_string(result.differences.size()) + " differ").c_str());
     }

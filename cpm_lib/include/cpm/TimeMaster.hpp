@@ -1,5 +1,6 @@
 #pragma once
 #include <chrono>
+#include <functional>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -27,9 +28,12 @@ public:
 
     /// Drives simulated time for the named nodes from 0 until `end_ns`, then stops all timers.
     /// Throws cpm::Error naming the silent nodes when a step waits longer than `step_timeout`.
-    /// Returns the number of steps (distinct tick times) it triggered.
+    /// Returns the number of steps (distinct tick times) it triggered. `before_start` (if given)
+    /// runs once every node has announced, before the first trigger: what must be ready before
+    /// lab time moves (cpm lab run: the recorder reading every writer).
     uint64_t run_simulated(const std::vector<std::string>& node_ids, uint64_t end_ns,
-                           std::chrono::milliseconds step_timeout = std::chrono::seconds(10));
+                           std::chrono::milliseconds step_timeout = std::chrono::seconds(10),
+                           const std::function<void()>& before_start = {});
 
     /// The simulated time run_simulated last triggered (0 before); safe from any thread.
     uint64_t simulated_now() const;

@@ -15,8 +15,8 @@ struct DiffOptions
     std::vector<std::string> topics;  ///< none: every topic either holds
     /// Topics left out: by default the lab clock's own traffic (its ready announcements and
     /// triggers, which carry each process's wall clock) and the log (its texts name processes'
-    /// ids and wall-clock times).
-    std::vector<std::string> exclude{"readyStatus", "systemTrigger", "log"};
+    /// ids and wall-clock times) and the history service's status (its own wall clock).
+    std::vector<std::string> exclude{"readyStatus", "systemTrigger", "log", "historyStatus"};
 };
 
 /// The first difference of one topic and key.
