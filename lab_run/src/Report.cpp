@@ -179,6 +179,7 @@ RunFigures outline_of(const nlohmann::json& summary)
     f.time = summary.value("time", std::string("?"));
     f.lab_time_s = summary.value("lab_time_s", 0.0);
     f.real_s = summary.value("real_s", 0.0);
+    f.clock_real_s = summary.value("clock_real_s", 0.0);
     f.ok = summary.value("ok", false);
     if (!f.ok) f.why_not_ok = why_not_ok(summary);
     for (const auto& h : summary.value("hosts", nlohmann::json::array())) {
@@ -733,6 +734,8 @@ std::string report_page(const RunFigures& f, const std::vector<std::string>& ima
                                   {"time", f.time},
                                   {"lab_time_s", fixed(f.lab_time_s, 1)},
                                   {"real_s", fixed(f.real_s, 1)},
+                                  {"clock_real_s", fixed(f.clock_real_s, 1)},
+                                  {"speedup", fixed(f.clock_real_s > 0 ? f.lab_time_s / f.clock_real_s : 0, 1)},
                                   {"why_not_ok", f.why_not_ok},
                                   {"recorded_samples", std::to_string(f.recorded_samples)},
                                   {"recording_warning", f.recording_warning},
@@ -743,6 +746,7 @@ std::string report_page(const RunFigures& f, const std::vector<std::string>& ima
                                    {"recording_warned", !f.recording_warning.empty()},
                                    {"with_gates", f.gates_in_world > 0},
                                    {"simulated", f.simulated()},
+                                   {"clock_timed", f.clock_real_s > 0},
                                    {"any_missed", !f.missed_ticks_by_timer.empty()},
                                    {"any_log", !f.log.empty()},
                                    {"across_hosts", !f.hosts.empty()},

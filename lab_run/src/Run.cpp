@@ -506,8 +506,12 @@ public:
         if (simulated()) {
             thread_ = std::thread([this, timers] {
                 try {
-                    master_.run_simulated(timers, settings_.duration_ns, std::chrono::seconds(10), before_start_);
+                    master_.run_simulated(timers, settings_.duration_ns, std::chrono::seconds(10), [this] {
+                        if (before_start_) before_start_();
+                        stepping_since_ = std::chrono::steady_clock::now();
+                    });
                     until_ = settings_.duration_ns;
+                    stepped_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - stepping_since_).count();
                 } catch (const std::exception& e) {
                     error_ = e.what();
                 }
@@ -523,6 +527,8 @@ public:
         return "";
     }
     bool simulated() const { return settings_.time == TimeMode::simulated; }
+    /// A simulated clock that ran to its end: the real seconds from its first step to its last.
+    double stepped_seconds() const { return done_ ? stepped_.load() : 0; }
     /// Lab time now: the simulated clock's last step, or real time since the start.
     uint64_t now() const
     {
@@ -558,6 +564,8 @@ private:
     std::atomic<bool> done_{false};
     std::atomic<uint64_t> until_{0};
     std::string error_;  // written by the thread before done_
+    std::chrono::steady_clock::time_point stepping_since_;  // the thread's
+    std::atomic<double> stepped_{0};
     uint64_t real_start_ = 0;
     bool stopped_ = false;
 };
@@ -779,6 +787,7 @@ void write_summary(const Scenario& s, const RunSettings& settings, const std::st
                            {"duration_s", double(settings.duration_ns) / 1e9},  // not * 1e-9: 15.000000000000002
                            {"lab_time_s", double(result.lab_time_ns) / 1e9},
                            {"real_s", result.real_seconds},
+                           {"clock_real_s", result.clock_seconds},
                            {"ok", result.ok},
                            {"interrupted", result.interrupted},
                            {"error", result.error},
@@ -905,6 +914,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
         return std::string(line);
     }, o, dir, plan);
     result.lab_time_ns = clock.now();
+    result.clock_seconds = clock.stepped_seconds();
     stop_in_order(stops, clock, group, s, settings);
     result.real_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
 

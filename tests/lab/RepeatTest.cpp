@@ -31,7 +31,11 @@ void expect_two_runs_alike(const std::string& name, std::vector<std::string> ext
         std::ifstream summary(dir.file(run) + "/summary.json");
         const auto s = nlohmann::json::parse(summary);
         ASSERT_EQ(s["ok"], true) << s.dump(2);
-        std::printf("%s run %s: %.1f s of lab time in %.1f s\n", name.c_str(), run, s["lab_time_s"].get<double>(), s["real_s"].get<double>());
+        const double clock_s = s["clock_real_s"].get<double>();
+        EXPECT_GT(clock_s, 0) << "a simulated run says how long its clock stepped";
+        EXPECT_LT(clock_s, s["real_s"].get<double>());
+        std::printf("%s run %s: %.1f s of lab time in %.1f s, the clock stepping %.1f s (%.1fx real time)\n", name.c_str(), run,
+                    s["lab_time_s"].get<double>(), s["real_s"].get<double>(), clock_s, s["lab_time_s"].get<double>() / clock_s);
     }
     Process diff({built_program("cpm"), "history", "--file", dir.file("a"), "diff", dir.file("b")});
     EXPECT_EQ(diff.wait(60s), 0) << diff.output() << diff.errors();

@@ -214,7 +214,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
         file + ":8: vehicles[0].fsm: state machine 'missing.json' does not exist (looked for " + (dir.path / "missing.json").string() + ")",
         file + ":9: vehicles[1].id: 5 is given twice (also vehicles[0])",
         file + ":10: vehicles[1].start[1]: 'nan' is not a finite number",
-        file + ":12: vehicles[2].camra: unknown key (did you mean 'camera'?); known: id, start, camera, fsm, restart, host",
+        file + ":12: vehicles[2].camra: unknown key (did you mean 'camera'?); known: id, start, camera, fsm, restart, host, realtime",
         file + ":11: vehicles[2].id: 300 is out of range (1 to 255)",
         file + ":13: routing.period: must be a multiple of 50ms",
         file + ":13: routing.enabled: central routing needs a lane graph: give lanes",

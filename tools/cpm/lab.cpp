@@ -200,8 +200,13 @@ int lab_run(const std::vector<std::string>& args)
                                    p.restarts ? (" (restarted " + std::to_string(p.restarts) + " times)").c_str() : "", p.last_lines.c_str());
     }
     if (!r.error.empty()) std::fprintf(stderr, "%s: the run ended early: %s\n", command.c_str(), r.error.c_str());
-    std::printf("%s %s: %.1f s of lab time in %.1f s; %s (summary.json, recording.db, a .log per process)\n", s.name.c_str(),
-                r.ok ? "ran" : r.interrupted ? "was stopped" : "FAILED", double(r.lab_time_ns) * 1e-9, r.real_seconds, r.dir.c_str());
+    char speed[96] = "";
+    if (r.clock_seconds > 0) {
+        std::snprintf(speed, sizeof speed, " (the simulated clock: %.1f s, %.1fx real time)", r.clock_seconds,
+                      double(r.lab_time_ns) * 1e-9 / r.clock_seconds);
+    }
+    std::printf("%s %s: %.1f s of lab time in %.1f s%s; %s (summary.json, recording.db, a .log per process)\n", s.name.c_str(),
+                r.ok ? "ran" : r.interrupted ? "was stopped" : "FAILED", double(r.lab_time_ns) * 1e-9, r.real_seconds, speed, r.dir.c_str());
     if (!report.empty()) std::printf("report: %s\n", report.c_str());
     return status;
 }

@@ -189,6 +189,12 @@ void FirmwareSimNode::Impl::publish(Car& car, uint64_t t_model)
     o.pose().x(pose.x);
     o.pose().y(pose.y);
     o.pose().yaw(pose.yaw);
+    if (simulated) {
+        // On the lab's simulated clock the tick waits for its poses anyway: written here, one
+        // thread hop less per step (the publisher thread is for real time, where a write may stall).
+        (void)observations.write(o);
+        return;
+    }
     std::lock_guard<std::mutex> lock(publish_mutex);
     to_publish[car.options.vehicle_id] = o;
     publish_ready.notify_one();

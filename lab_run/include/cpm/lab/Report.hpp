@@ -154,6 +154,7 @@ struct RunFigures
     std::string name;        ///< summary's "name"
     std::string time = "?";  ///< summary's "time": "real", "simulated", or "?" when it has none
     double lab_time_s = 0, real_s = 0;
+    double clock_real_s = 0;  ///< a simulated run: the real seconds its clock stepped (0: not known)
     bool ok = false;         ///< every process ran its time
     std::string why_not_ok;  ///< why the run did not end well: its error, a stop, a failed process; "" when ok
     uint64_t recorded_samples = 0;

@@ -42,7 +42,10 @@ struct RunResult
     bool ok = false;
     bool interrupted = false;           ///< stopped by RunOptions::stop
     uint64_t lab_time_ns = 0;           ///< how far the lab clock got
-    double real_seconds = 0;
+    double real_seconds = 0;            ///< the whole run: processes started, clock, stopped
+    /// A simulated run: the real seconds its clock stepped (first step to the last), the lab
+    /// time it covered per real second being lab_time_ns / 1e9 / clock_seconds; 0 in real time.
+    double clock_seconds = 0;
     std::vector<ProcessEnd> processes;
     std::string error;                  ///< why the run ended early ("" when it ran its time)
     /// Across hosts: each host's clock against the run's own (offset and round trip, ns), and
