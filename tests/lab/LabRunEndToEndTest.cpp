@@ -553,3 +553,30 @@ TEST(LabRun, ASecuredLabRunsEachProcessAsItsOwnNodeAndAStrangerSeesNothing)
         EXPECT_EQ(*(flag + 1), lab + "/nodes/run-" + p["name"].get<std::string>()) << p.dump();
     }
 }
+
+TEST(LabRun, ANodeThatStallsMidRunIsNamedWhenTheSimulatedClockGivesUpOnIt)
+{
+    // The car's simulator frozen (SIGSTOP) while the simulated clock steps (the state machine is
+    // done after 20 s of lab time, about a second here): the clock waits its step timeout for the
+    // node's next tick, then the run ends naming it. Never a silent hang.
+    TempDir dir;
+    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string file = dir.write("stall.yaml", "name: stall\ntime: simulated\nduration: 3600s\nworld: " + source +
+                                                         "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0], fsm: " + source +
+                                                         "fsm/corridor.json}\n");
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
+    int pid = 0;
+    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with("/bin/firmware_sim ", run_tag(out))) != 0; }, 30s, 1ms)) << run.errors();
+    // Lab time moves: the run says so about once a second.
+    ASSERT_TRUE(cpm_test::wait_until([&] { return (run.output() + run.errors()).find("(simulated, ") != std::string::npos; }, 30s))
+        << run.output() << run.errors();
+    ASSERT_EQ(::kill(pid, SIGSTOP), 0);
+    EXPECT_EQ(run.wait(90s), 1) << run.output() << run.errors();
+    const std::string said = run.output() + run.errors();
+    EXPECT_NE(said.find("simulated time stuck at "), std::string::npos) << said;
+    EXPECT_EQ(said.find("simulated time stuck at 0 ns"), std::string::npos) << "it stalled mid-run, not at the start:\n" << said;
+    EXPECT_NE(said.find("no announcement from 'firmware_sim_5'"), std::string::npos) << said;
+    EXPECT_NE(said.find("sim_5's log (" + out + "/sim_5.log) ends:"), std::string::npos) << said;
+    EXPECT_EQ(pid_with("/bin/firmware_sim ", run_tag(out)), 0) << "the frozen node is stopped with the run";
+}
