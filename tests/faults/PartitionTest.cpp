@@ -7,6 +7,7 @@
 // secured lab across two machines, on the same two namespaces.
 #include <cpm/get_time_ns.hpp>
 
+#include <cpm_test/Hosts.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
@@ -49,7 +50,8 @@ class TwoHosts
 public:
     TwoHosts()
     {
-        const std::string tag = std::to_string(::getpid() % 100000);
+        cpm_test::remove_stale_namespaces();
+        const std::string tag = std::to_string(::getpid());
         subnet_ = "10.199." + std::to_string(::getpid() % 250 + 1);
         ns_ = {"cpmA" + tag, "cpmB" + tag};
         link_ = {"cpmva" + tag, "cpmvb" + tag};

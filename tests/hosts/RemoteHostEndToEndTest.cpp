@@ -11,6 +11,8 @@
 #include <gtest/gtest.h>
 
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <csignal>
 #include <filesystem>
@@ -151,4 +153,22 @@ TEST_F(RemoteHostEndToEnd, AHostsClockIsMeasuredAndAHostWithoutSshIsNamed)
     } catch (const cpm::Error& e) {
         EXPECT_NE(std::string(e.what()).find("host car_a (car_a)"), std::string::npos) << e.what();
     }
+}
+
+TEST(NamespaceHostsLeftovers, TheHostsOfAKilledTestGoBeforeTheNextTestMakesItsOwnAndARunningTestsStay)
+{
+    if (::geteuid() != 0) GTEST_SKIP() << "making network namespaces needs root; not run";
+    const auto exists = [](const std::string& ns) { return std::system(("ip netns pids " + ns + " >/dev/null 2>&1").c_str()) == 0; };
+    // As a killed test leaves them: named after a process that is gone (a child, reaped).
+    const pid_t gone = ::fork();
+    if (gone == 0) ::_exit(0);
+    ::waitpid(gone, nullptr, 0);
+    const std::string dead = "cpmh" + std::to_string(gone) + "_0", dead_switch = "cpmsw" + std::to_string(gone);
+    const std::string mine = "cpmh" + std::to_string(::getpid()) + "_9";  // a running test's
+    for (const auto& ns : {dead, dead_switch, mine}) ASSERT_EQ(std::system(("ip netns add " + ns).c_str()), 0) << ns;
+    cpm_test::remove_stale_namespaces();
+    EXPECT_FALSE(exists(dead));
+    EXPECT_FALSE(exists(dead_switch));
+    EXPECT_TRUE(exists(mine)) << "a running test's hosts stay";
+    (void)std::system(("ip netns del " + mine).c_str());
 }

@@ -25,9 +25,12 @@ int shell(const std::string& command) { return std::system((command + " >/dev/nu
 
 }  // namespace
 
+void remove_stale_namespaces() { shell(CPM_NETNS_CLEAN_SCRIPT); }
+
 NamespaceHosts::NamespaceHosts(std::vector<std::string> names) : names_(std::move(names))
 {
-    const std::string tag = std::to_string(::getpid() % 100000);
+    remove_stale_namespaces();
+    const std::string tag = std::to_string(::getpid());
     subnet_ = "10.231." + std::to_string(::getpid() % 250 + 1);
     switch_ns_ = "cpmsw" + tag;
     for (size_t i = 0; i < names_.size(); ++i) {
@@ -56,7 +59,7 @@ bool NamespaceHosts::make()
     if (shell(sw + "ip link add br0 type bridge") != 0 || shell(sw + "ip link set br0 up") != 0) return fail("no bridge in the switch namespace");
     for (size_t i = 0; i < names_.size(); ++i) {
         const std::string in = "ip netns exec " + namespaces_[i] + " ";
-        const std::string peer = "cpms" + std::to_string(::getpid() % 100000) + "_" + std::to_string(i);
+        const std::string peer = "cpms" + std::to_string(::getpid()) + "_" + std::to_string(i);
         const bool ok = shell("ip netns add " + namespaces_[i]) == 0 &&
                         shell("ip link add " + links_[i] + " netns " + namespaces_[i] + " type veth peer name " + peer + " netns " + switch_ns_) == 0 &&
                         shell(sw + "ip link set " + peer + " master br0") == 0 && shell(sw + "ip link set " + peer + " up") == 0 &&

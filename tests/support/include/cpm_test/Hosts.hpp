@@ -12,6 +12,11 @@
 
 namespace cpm_test {
 
+/// Removes the network namespaces of test processes that are gone (killed before their
+/// destructor ran: a ctest timeout, a CI job cut off); scripts/netns_clean.sh, which ./lab test
+/// also runs at its end. Those of running processes are kept.
+void remove_stale_namespaces();
+
 class NamespaceHosts
 {
 public:
