@@ -7,6 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -88,6 +89,27 @@ int wait_child(cpm::ChildProcess& child, double timeout_s)
     auto end = child.wait(std::chrono::milliseconds(int64_t(timeout_s * 1000)));
     if (!end) end = child.stop(std::chrono::milliseconds(0));
     return end->signal == 0 ? end->code : -1;
+}
+
+BusyLoops::BusyLoops(unsigned count)
+{
+    for (unsigned c = 0; c < count; ++c) spinners_.push_back(spawn_self({"--role", "busy"}));
+}
+
+BusyLoops::~BusyLoops()
+{
+    for (auto& spinner : spinners_) {
+        spinner.signal(SIGKILL);
+        wait_child(spinner, 5);
+    }
+}
+
+unsigned BusyLoops::every_core() { return std::max(1u, std::thread::hardware_concurrency()); }
+
+void spin_if_asked(const std::string& role)
+{
+    if (role != "busy") return;
+    for (;;) asm volatile("" ::: "memory");  // spin: keep a core busy
 }
 
 std::string cyclone_loopback_env() { return "CYCLONEDDS_URI=file://" CPM_CYCLONE_LOOPBACK_XML; }

@@ -38,6 +38,24 @@ cpm::ChildProcess spawn(const std::vector<std::string>& argv, const std::vector<
 /// Waits for a child's end; returns its exit code (-1 if a signal ended it). Stops it after timeout_s.
 int wait_child(cpm::ChildProcess& child, double timeout_s);
 
+/// While it lives, `count` processes (this program again with `--role busy`, see
+/// spin_if_asked) spin at normal priority: a busy loop on each core (0: none).
+class BusyLoops
+{
+public:
+    explicit BusyLoops(unsigned count);
+    ~BusyLoops();
+    BusyLoops(const BusyLoops&) = delete;
+    BusyLoops& operator=(const BusyLoops&) = delete;
+    /// One per core of this machine.
+    static unsigned every_core();
+
+private:
+    std::vector<cpm::ChildProcess> spinners_;
+};
+/// Spins for ever when `role` is "busy" (the process BusyLoops starts); returns otherwise.
+void spin_if_asked(const std::string& role);
+
 /// CYCLONEDDS_URI=... for loopback only, unicast discovery, no multicast.
 std::string cyclone_loopback_env();
 

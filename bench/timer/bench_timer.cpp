@@ -93,9 +93,7 @@ int run(int argc, char** argv)
 {
     const auto flags = cpm::cli::parse_flags(argc, argv, {{"--seconds", true}, {"--domain", true}, {"--role", true}}, "bench_timer");
     const std::string role = flags.get("--role", "main");
-    if (role == "busy") {
-        for (;;) asm volatile("" ::: "memory");  // spin: keep a core busy
-    }
+    bench::spin_if_asked(role);
     if (role != "main") throw cpm::cli::UsageError("bench_timer: --role '" + role + "' is neither main nor busy");
     const int seconds = int(cpm::cli::parse_integer("--seconds", flags.get("--seconds", "10"), 1, 86400));
     cpm::ParticipantOptions options;
@@ -111,10 +109,8 @@ int run(int argc, char** argv)
     if (!missing.empty()) std::printf("real-time cases left out: %s\n", missing.c_str());
     std::vector<cpm::Realtime> modes{cpm::Realtime::off};
     if (missing.empty()) modes.push_back(cpm::Realtime::required);
-    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
     for (const bool busy : {false, true}) {
-        std::vector<cpm::ChildProcess> spinners;
-        for (unsigned c = 0; busy && c < cores; ++c) spinners.push_back(bench::spawn_self({"--role", "busy"}));
+        const bench::BusyLoops spinners(busy ? bench::BusyLoops::every_core() : 0);
         for (const uint64_t period : {20'000'000ull, 1'000'000ull}) {
             const std::string rate = period == 20'000'000ull ? "50 Hz" : "1 kHz";
             std::map<cpm::Realtime, bench::Stats> cpm_by_mode;
@@ -166,10 +162,6 @@ int run(int argc, char** argv)
                 bench::record({"timer", rate + " " + (busy ? "busy" : "idle") + " p99, realtime against normal", "µs", rt.p99,
                                "the same timer in normal mode", normal.p99});
             }
-        }
-        for (auto& spinner : spinners) {
-            spinner.signal(SIGKILL);
-            bench::wait_child(spinner, 5);
         }
     }
     // Last: --simulated_time switches this process's clock to the lab's simulated one.

@@ -322,9 +322,7 @@ int run(int argc, char** argv)
     const auto flags = cpm::cli::parse_flags(
         argc, argv, {{"--seconds", true}, {"--domain", true}, {"--cars", true}, {"--cars-per-car", true}, {"--loaded-cars", true}, {"--role", true}},
         "bench_vehicle");
-    if (flags.get("--role", "main") == "busy") {
-        for (;;) asm volatile("" ::: "memory");  // spin: keep a core busy
-    }
+    bench::spin_if_asked(flags.get("--role", "main"));
     const int loaded_cars = int(cpm::cli::parse_integer("--loaded-cars", flags.get("--loaded-cars", "8"), 0, 255));
     const int seconds = int(cpm::cli::parse_integer("--seconds", flags.get("--seconds", "10"), 1, 86400));
     const int domain = int(cpm::cli::parse_integer("--domain", flags.get("--domain", "210"), 0, 232));
@@ -390,13 +388,10 @@ int run(int argc, char** argv)
         std::printf("%10s %9s %9s %7s %6s %9s\n", "mode", "expected", "received", "absent", "late", "missed %");
         std::map<bool, double> missed;
         for (const bool realtime : {false, true}) {
-            std::vector<cpm::ChildProcess> spinners;
-            for (unsigned c = 0; c < std::max(1u, std::thread::hardware_concurrency()); ++c) spinners.push_back(bench::spawn_self({"--role", "busy"}));
-            const auto r = capacity(participant, env, loaded_cars, seconds, false, realtime);
-            for (auto& spinner : spinners) {
-                spinner.signal(SIGKILL);
-                bench::wait_child(spinner, 5);
-            }
+            const auto r = [&] {
+                const bench::BusyLoops spinners(bench::BusyLoops::every_core());
+                return capacity(participant, env, loaded_cars, seconds, false, realtime);
+            }();
             std::printf("%10s %9llu %9llu %7llu %6llu %8.3f%%\n", realtime ? "realtime" : "normal", (unsigned long long)r.expected,
                         (unsigned long long)r.received, (unsigned long long)r.absent, (unsigned long long)r.late, r.missed_fraction * 100);
             std::fflush(stdout);

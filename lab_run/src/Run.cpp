@@ -23,6 +23,7 @@
 #include <StopRequest.h>
 #include <cpm_topic_types.hpp>
 
+#include <cpm/rtdb/HistoryService.hpp>
 #include <cpm/rtdb/TopicProbe.hpp>
 
 #include <nlohmann/json.hpp>
@@ -190,7 +191,7 @@ private:
     {
         std::set<std::string> read, missing;
         for (const auto& [prefix, topic] : readers_) {
-            if (auto n = names_.find(prefix); n != names_.end() && n->second == "cpm_history_recorder") read.insert(topic);
+            if (auto n = names_.find(prefix); n != names_.end() && n->second == rtdb::recorder_name("cpm_history")) read.insert(topic);
         }
         for (const auto& [prefix, topic] : writers_) {
             const auto n = names_.find(prefix);

@@ -116,7 +116,7 @@ struct Ingest::Impl
         : self(i), out(o), registry(o), include(compile(options.include, "--include")), exclude(compile(options.exclude, "--exclude"))
     {
         recorder_options = options.participant.value_or(ParticipantOptions::from_init());
-        recorder_options.name = (recorder_options.name.empty() ? std::string("cpm_history") : recorder_options.name) + "_recorder";
+        recorder_options.name = recorder_name(recorder_options.name);
         recorder_options.on_discovery = [this](const DiscoveryEvent& e) { on_discovery(e); };
         open();
     }

@@ -106,7 +106,6 @@ struct FirmwareSimNode::Impl
     void see_each_other();
     void report_collisions(Car& car);
     void publish_loop();
-    void await_published();
 
     FirmwareSimNodeOptions options;
     std::vector<std::unique_ptr<Car>> cars;
@@ -119,12 +118,12 @@ struct FirmwareSimNode::Impl
     bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
     uint64_t last_tick_ns = 0, steps = 0, skipped_steps = 0;
-    // The true poses go out from a thread of their own: a DDS write can stall (a reader's
-    // process killed while holding its shared-memory port), and the microcontrollers' clock,
-    // commands and watchdogs must not wait for it. Only the newest observation per car is kept.
+    // In real time the true poses go out from a thread of their own: a DDS write can stall (a
+    // reader's process killed while holding its shared-memory port), and the microcontrollers'
+    // clock, commands and watchdogs must not wait for it. Only the newest observation per car is
+    // kept. On the simulated clock the tick writes them itself (publish).
     std::mutex publish_mutex;
-    std::condition_variable publish_ready, published;
-    bool writing = false;  ///< the publisher is writing a batch
+    std::condition_variable publish_ready;
     std::map<uint8_t, VehicleObservation> to_publish;
     bool publishing = true;
     std::thread publisher;  // started once the lines are open (the constructor may throw before)
@@ -139,22 +138,9 @@ void FirmwareSimNode::Impl::publish_loop()
             publish_ready.wait(lock, [&] { return !to_publish.empty() || !publishing; });
             if (to_publish.empty()) return;
             batch.swap(to_publish);
-            writing = true;
         }
         for (const auto& [id, o] : batch) (void)observations.write(o);
-        std::lock_guard<std::mutex> lock(publish_mutex);
-        writing = false;
-        published.notify_all();
     }
-}
-
-void FirmwareSimNode::Impl::await_published()
-{
-    // Simulated time runs faster than real time: without this wait a loaded machine would let
-    // the next tick's poses replace ones not yet written. Bounded, as a stalled write must not
-    // hold the lab's clock for ever.
-    std::unique_lock<std::mutex> lock(publish_mutex);
-    published.wait_for(lock, std::chrono::milliseconds(100), [&] { return to_publish.empty() && !writing; });
 }
 
 void FirmwareSimNode::Impl::trace(Car& car, uint64_t now)
@@ -290,7 +276,6 @@ void FirmwareSimNode::Impl::tick(uint64_t t_nominal)
             publish(*car, t_nominal);
         }
         see_each_other();
-        if (simulated) await_published();
     }
     for (auto& car : cars) trace(*car, get_time_ns());
 }

@@ -2,6 +2,7 @@
 // Two recordings compared sample for sample: what `cpm history --file A diff B` reports, and
 // what a test of a simulated run's repeatability asserts.
 #include <cpm/rtdb/Recording.hpp>
+#include <cpm/topics.hpp>
 
 #include <cstdint>
 #include <string>
@@ -16,7 +17,8 @@ struct DiffOptions
     /// Topics left out: by default the lab clock's own traffic (its ready announcements and
     /// triggers, which carry each process's wall clock) and the log (its texts name processes'
     /// ids and wall-clock times) and the history service's status (its own wall clock).
-    std::vector<std::string> exclude{"readyStatus", "systemTrigger", "log", "historyStatus"};
+    std::vector<std::string> exclude{topics::ready_status.name, topics::system_trigger.name, topics::log.name,
+                                     topics::history_status.name};
 };
 
 /// The first difference of one topic and key.

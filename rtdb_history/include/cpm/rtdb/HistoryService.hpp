@@ -28,6 +28,13 @@ struct SaveTrigger
 /// Reads a --save-on value; throws cpm::cli::UsageError naming what does not parse.
 SaveTrigger parse_save_trigger(const std::string& text);
 
+/// The participant a history service of that name (its node id; "" for cpm_history's) records
+/// through: "<service>_recorder". Others find its readers by it (cpm lab run's clock waits for them).
+inline std::string recorder_name(const std::string& service)
+{
+    return (service.empty() ? std::string("cpm_history") : service) + "_recorder";
+}
+
 struct ServiceOptions
 {
     std::vector<std::string> include;  ///< topic name regexes (full match); empty: every topic
