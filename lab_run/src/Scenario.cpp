@@ -202,9 +202,10 @@ void read_history(Checker& c, const YAML::Node& root, Scenario& s)
 /// `realtime:` true, false or required.
 Realtime read_realtime(Checker& c, const YAML::Node& n, const std::string& path)
 {
-    if (n.IsScalar() && n.Scalar() == "required") return Realtime::required;
-    bool on = false;
-    if (n.IsScalar() && YAML::convert<bool>::decode(n, on)) return on ? Realtime::on : Realtime::off;
+    try {
+        if (n.IsScalar()) return parse_realtime(n.Scalar(), path);  // the words --realtime= takes
+    } catch (const Error&) {
+    }
     c.error(n, path, "expected true, false or required");
     return Realtime::off;
 }
