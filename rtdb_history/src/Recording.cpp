@@ -411,12 +411,27 @@ void RecordingWriter::run()
     // up the slack (bounded by max_queued_bytes) and the file catches up when it can.
     ::setpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)), 10);
     std::unique_lock lock(mutex_);
+    bool more = false;  // a batch was cut short: the rest is due at once
     for (;;) {
-        cv_.wait_for(lock, std::chrono::nanoseconds(options_.flush_period_ns), [&] { return closing_ || queue_.size() >= 4096; });
-        const bool last = closing_;
+        cv_.wait_for(lock, std::chrono::nanoseconds(options_.flush_period_ns), [&] { return closing_ || more || queue_.size() >= 4096; });
         std::deque<Event> batch;
-        batch.swap(queue_);
-        queued_bytes_ = 0;
+        if (!options_.split_bytes) {
+            batch.swap(queue_);
+            queued_bytes_ = 0;
+        } else {
+            // A part is checked for its size between batches: a batch of at most a quarter of a
+            // part keeps each part within 1.25 times --record-split however far the disk fell
+            // behind (one batch of 1 MB made a 128 kB part eight times too large).
+            uint64_t bytes = 0;
+            while (!queue_.empty() && (batch.empty() || bytes < options_.split_bytes / 4)) {
+                bytes += queue_.front().payload.size();
+                batch.push_back(std::move(queue_.front()));
+                queue_.pop_front();
+            }
+            queued_bytes_ -= std::min(queued_bytes_, bytes);
+        }
+        more = !queue_.empty();
+        const bool last = closing_ && !more;
         lock.unlock();
         bool ok = true;
         try {
