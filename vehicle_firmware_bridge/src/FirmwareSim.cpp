@@ -51,6 +51,13 @@ void FirmwareSim::on_command(const CommandPacket& command)
     model_.command(model_.time(), command.motor_mode, command.motor_pwm, command.servo_us);
 }
 
+void FirmwareSim::drive(MotorMode mode, uint16_t pwm, uint16_t servo_us)
+{
+    driven_ = true;
+    motor_command_ = {mode, pwm};
+    model_.command(model_.time(), mode, pwm, servo_us);
+}
+
 void FirmwareSim::step()
 {
     double dt = 1.0 / p_.physics_rate;
@@ -69,7 +76,7 @@ void FirmwareSim::step()
         last_contact_t_ = model_.time();
     }
     imu_yaw_ = wrap_angle(imu_yaw_ + (model_.yaw_rate() + noise(p_.imu_yaw_rate_noise)) * dt);
-    if (!watchdog_active_ && model_.time() - last_command_t_ > p_.watchdog_timeout) {
+    if (!driven_ && !watchdog_active_ && model_.time() - last_command_t_ > p_.watchdog_timeout) {
         watchdog_active_ = true;
         ++stats_.watchdog_stops;
         motor_command_ = {MotorMode::brake, 0};

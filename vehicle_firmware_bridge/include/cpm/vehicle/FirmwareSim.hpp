@@ -40,6 +40,10 @@ public:
 
     /// Bytes from the host (any chunking); commands act on the model from now.
     void receive(const uint8_t* data, size_t size);
+    /// The motor and servo as a real microcontroller's pins show them (firmware_hil runs the
+    /// car's firmware and drives the model through this, not through receive()). From the
+    /// first call on, this class's own watchdog is off: the chip's is the one that brakes.
+    void drive(MotorMode mode, uint16_t pwm, uint16_t servo_us);
     /// One physics step of 1 / physics_rate seconds; runs the watchdog. A step that would
     /// take the body into a wall is undone: the car stops against it (a Collision).
     void step();
@@ -91,6 +95,7 @@ private:
     bool bad_crc_ = false;
     bool wrong_vehicle_ = false;
     bool answered_ = true;
+    bool driven_ = false;  ///< by drive(): no watchdog here
     uint32_t command_tick_ = 0;
     std::pair<MotorMode, uint16_t> motor_command_{MotorMode::brake, 0};
     double imu_yaw_ = 0;

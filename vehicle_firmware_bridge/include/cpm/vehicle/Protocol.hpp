@@ -1,4 +1,6 @@
 #pragma once
+#include <cpm/vehicle/cpm_serial.h>
+
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -8,7 +10,8 @@
 /// The serial protocol between vehicle_bridge and the car's microcontroller (README.md in
 /// this folder has the byte layout). Every packet is [version, kind, fields...] with
 /// little-endian fields of fixed width, then a CRC-16/CCITT-FALSE, COBS-encoded between two
-/// zero bytes.
+/// zero bytes. The bytes are made and checked by the C code the car's firmware runs too
+/// (cpm/vehicle/cpm_serial.h, from firmware/protocol/); these are its C++ faces.
 namespace cpm::vehicle {
 
 constexpr uint8_t kProtocolVersion = 1;
@@ -18,6 +21,7 @@ enum StatusFlags : uint8_t {
     kStatusBadCrc = 1u << 0,         ///< the last command frame had a bad CRC (or did not decode)
     kStatusWatchdogStop = 1u << 1,   ///< no valid command for the watchdog period: motor braked
     kStatusWrongVehicle = 1u << 2,   ///< the last command named another vehicle id (ignored)
+    kStatusBadCommand = 1u << 3,     ///< the last command's values were out of range (the AVR firmware ignores it)
 };
 
 enum class MotorMode : uint8_t { brake = 0, forward = 1, reverse = 2 };
@@ -98,6 +102,7 @@ public:
             if (auto packet = push(data[i])) on_packet(*packet);
         }
     }
+    FrameDecoder();
     /// Feeds one byte; a packet when this byte completed a good frame.
     std::optional<Packet> push(uint8_t byte);
 
@@ -106,13 +111,10 @@ public:
     bool last_frame_bad() const { return last_frame_bad_; }
 
     /// Longest encoded frame body accepted (the largest packet plus CRC, COBS overhead).
-    static constexpr size_t kMaxFrame = 64;
+    static constexpr size_t kMaxFrame = CPM_SERIAL_MAX_FRAME;
 
 private:
-    std::optional<Packet> finish_frame();
-
-    std::vector<uint8_t> frame_;
-    bool discarding_ = false;
+    cpm_decoder decoder_;
     bool last_frame_bad_ = false;
     DecoderErrors errors_;
 };
