@@ -445,3 +445,62 @@ TEST(BridgeCore, ABatteryReadingOfZeroVoltsIsNotPublished)
     EXPECT_NE(cycle.notices[0].message.find("battery reads 0.000 V, outside [3, 20] V"), std::string::npos)
         << cycle.notices[0].message;
 }
+
+TEST(BridgeCore, TheSpeedLoopDoesNotWindUpWhileTheControllerHoldsItsWatchdogBrake)
+{
+    // A line that carries no command for a while (a flood, a loose cable): the controller brakes
+    // and says so in every state packet. Two seconds of that must not leave a wound-up integral
+    // that sends the car off faster than commanded when the commands get through again.
+    auto first_throttle_after_standing = [](uint8_t status) {
+        BridgeCore sut(kId, Calibration{});
+        uint64_t now = 50 * kSecond;
+        CommandInputs inputs;
+        uint32_t tick = 1000;
+        for (int i = 0; i < 100; ++i, tick += 20, now += 20'000'000) {
+            inputs.speed_curvature = fresh(speed_curvature(0.5, 0), now - 10'000'000, now);
+            auto p = moving(tick, 0);
+            p.status = status;
+            (void)sut.on_state_packet(p, now, inputs);
+        }
+        inputs.speed_curvature = fresh(speed_curvature(0.5, 0), now - 10'000'000, now);
+        return sut.on_state_packet(moving(tick, 0), now, inputs).command.motor_pwm;
+    };
+    const auto braked_by_watchdog = first_throttle_after_standing(kStatusWatchdogStop);
+    const auto stuck_without_a_word = first_throttle_after_standing(0);  // a car that does not move: the integral may act
+    Calibration c;
+    // Feed-forward and proportional term, plus what two 20 ms cycles integrate (the last braked
+    // one and the first free one).
+    const double fresh_start = 0.5 * c.throttle_per_speed + c.speed_kp * 0.5 + 2 * c.speed_ki * 0.5 * 0.02;
+    EXPECT_NEAR(braked_by_watchdog, fresh_start * 1000, 2);
+    EXPECT_GT(stuck_without_a_word, braked_by_watchdog + 100);
+}
+
+TEST(BridgeCore, ALineThatLagsItsCommandsPausesTheSpeedFeedbackAndSaysSo)
+{
+    // The controller applies commands long after they were sent (a backed-up line: its echo of
+    // the last applied command's tick falls behind). Feedback through a second of delay would
+    // overshoot and oscillate; the bridge drives feed-forward only until the line catches up.
+    BridgeCore sut(kId, Calibration{});
+    Calibration c;
+    uint64_t now = 50 * kSecond;
+    CommandInputs inputs;
+    uint32_t tick = 1000;
+    uint32_t sent = 0;
+    auto cycle_with_echo = [&](uint32_t echoed, double speed) {
+        inputs.speed_curvature = fresh(speed_curvature(0.5, 0), now - 10'000'000, now);
+        auto p = moving(tick, speed);
+        p.command_tick = echoed;
+        auto out = sut.on_state_packet(p, now, inputs);
+        tick += 20, now += 20'000'000;
+        sent = out.command.tick;
+        return out;
+    };
+    for (int i = 0; i < 10; ++i) cycle_with_echo(sent, 0.5);  // in step: the last command applied
+    BridgeCycle out;
+    for (int i = 0; i < 60; ++i) out = cycle_with_echo(sent > 50 ? sent - 50 : 1, 0.1);  // a second behind, car slow
+    EXPECT_NEAR(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000, 1) << "feed-forward only";
+    EXPECT_EQ(sut.anomalies(Anomaly::line_lag), 1u) << "once per lagging spell";
+    // In step again: feedback resumes (the car is slow: more than feed-forward).
+    out = cycle_with_echo(sent, 0.1);
+    EXPECT_GT(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000 + 50);
+}

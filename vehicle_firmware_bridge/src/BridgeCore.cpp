@@ -87,6 +87,7 @@ const char* to_string(Anomaly anomaly)
     case Anomaly::controller_restart: return "controller_restarts";
     case Anomaly::odometer_jump: return "odometer_jumps";
     case Anomaly::battery_out_of_range: return "battery_out_of_range";
+    case Anomaly::line_lag: return "line_lags";
     }
     return "?";
 }
@@ -207,6 +208,11 @@ BridgeCore::Actuation BridgeCore::drive(const MotionRequest& request, double spe
         speed_controller_.reset();
         return a;  // brake: nothing to drive to
     }
+    if (line_lagging_) {
+        // Feedback through a backed-up line would act on the past: feed-forward only.
+        speed_controller_.reset();
+        speed = request.speed;
+    }
     a.throttle = speed_controller_.update(request.speed, speed, dt);
     a.brake = false;
     return a;
@@ -279,6 +285,22 @@ double BridgeCore::plausible_battery(uint16_t battery_mv, std::vector<Notice>& n
     return battery_v_;
 }
 
+void BridgeCore::watch_line_lag(const StatePacket& packet, std::vector<Notice>& notices)
+{
+    // The controller echoes the tick of the last command it applied; at 50 Hz it is one or two
+    // behind the newest sent. Ten (200 ms) behind, the line holds a backlog. A controller that
+    // has applied none yet (0) says nothing about the line.
+    constexpr uint32_t kLagLimit = 10;
+    const uint32_t behind = command_tick_ - packet.command_tick;
+    const bool lagging = packet.command_tick != 0 && behind > kLagLimit && behind < 0x80000000u;
+    if (lagging && !line_lagging_) {
+        notice(notices, Anomaly::line_lag,
+               "the controller applies commands " + std::to_string(behind) +
+                   " behind the newest sent (a backed-up line): speed feedback paused until it catches up");
+    }
+    line_lagging_ = lagging;
+}
+
 CommandPacket BridgeCore::to_packet(const Actuation& a)
 {
     CommandPacket packet;
@@ -313,6 +335,11 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     last_tick_ = packet.tick;
     dead_reckon(packet, t_ns, tick_dt, out.notices);
     double speed = packet.speed_mm_s * 1e-3;
+    // While the controller says its watchdog holds the brake, our commands do not reach the
+    // motor (a flooded or broken line): integrating the speed error then would send the car off
+    // too fast once they do.
+    if (packet.status & kStatusWatchdogStop) speed_controller_.reset();
+    watch_line_lag(packet, out.notices);
 
     Actuation a = choose(commands, t_ns, speed, dt, out.active, out.notices);
     if (out.active != last_active_) speed_controller_.reset();

@@ -79,16 +79,18 @@ std::string elf_chip(const std::string& path)
         const auto sh = section(i);
         if (names.sh_offset + sh.sh_name >= bytes.size() || sh.sh_offset + sh.sh_size > bytes.size()) continue;
         if (std::strcmp(bytes.data() + names.sh_offset + sh.sh_name, ".note.gnu.avr.deviceinfo") != 0) continue;
-        // Elf32_Nhdr, "AVR\0", then 7 words (flash, sram, eeprom start/size, offset table
-        // length), the offset table, and the string table with the device's name first.
+        // Elf32_Nhdr, "AVR\0", then six words (flash, sram, eeprom: start and size), the
+        // offset table's length in bytes (its own word included) and its offsets, the first of
+        // them the device name's in the string table that follows.
         const char* note = bytes.data() + sh.sh_offset;
         Elf32_Nhdr nh{};
+        if (sh.sh_size < sizeof nh + 4 + 8 * 4) return {};
         std::memcpy(&nh, note, sizeof nh);
         const char* desc = note + sizeof nh + ((nh.n_namesz + 3) & ~3u);
         uint32_t table_len = 0, name_offset = 0;
         std::memcpy(&table_len, desc + 6 * 4, 4);
         std::memcpy(&name_offset, desc + 7 * 4, 4);
-        const char* strings = desc + 7 * 4 + table_len * 4;
+        const char* strings = desc + 6 * 4 + table_len;
         if (strings + name_offset >= note + sh.sh_size) return {};
         return std::string(strings + name_offset, strnlen(strings + name_offset, size_t(note + sh.sh_size - strings)));
     }
@@ -132,6 +134,13 @@ private:
 };
 
 }  // namespace
+
+void check_firmware_elf(const std::string& path)
+{
+    const std::string chip = elf_chip(path);
+    if (!chip.empty() && chip != kChip)
+        throw Error("firmware_hil: " + path + " is built for " + chip + "; firmware_hil runs an " + kChip);
+}
 
 std::string default_firmware_elf() { return executable_dir() + "/../share/cpm/firmware/cpm_car.elf"; }
 
@@ -201,9 +210,7 @@ FirmwareHil::Impl::Impl(FirmwareHilOptions o)
       sim(options.parameters, options.world, options.car.start, options.car.vehicle_id, options.car.seed),
       rng(options.car.seed + 7919u)
 {
-    const std::string chip = elf_chip(options.elf);
-    if (!chip.empty() && chip != kChip)
-        throw Error("firmware_hil: " + options.elf + " is built for " + chip + "; firmware_hil runs an " + kChip);
+    check_firmware_elf(options.elf);
     {
         QuietStdout quiet;  // simavr tells what it loaded on stdout
         elf_firmware_t firmware{};
@@ -397,7 +404,10 @@ void FirmwareHil::Impl::step_physics()
 {
     const auto& p = options.parameters;
     sim.step();
-    if (!sim.take_collisions().empty()) ++stats.wall_collisions;
+    for (const auto& c : sim.take_collisions()) {
+        ++stats.wall_collisions;
+        CPM_LOG_WARN("%s", describe_collision(options.car.vehicle_id, c).c_str());
+    }
     const double distance = sim.model().distance();
     travelled += std::abs(distance - last_distance);
     last_distance = distance;

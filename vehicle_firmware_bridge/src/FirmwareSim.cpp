@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace cpm::vehicle {
 namespace {
@@ -14,6 +15,14 @@ T saturate(double value)
 }
 
 }  // namespace
+
+std::string describe_collision(uint8_t vehicle_id, const Collision& c)
+{
+    char text[200];
+    std::snprintf(text, sizeof text, "vehicle %u: hit the wall [%.3f, %.3f, %.3f, %.3f] at x %.3f y %.3f yaw %.3f; stopped against it",
+                  unsigned(vehicle_id), c.wall.x1, c.wall.y1, c.wall.x2, c.wall.y2, c.pose.x, c.pose.y, c.pose.yaw);
+    return text;
+}
 
 FirmwareSim::FirmwareSim(const VehicleParameters& parameters, World world, Pose start, uint8_t vehicle_id,
                          uint32_t seed)

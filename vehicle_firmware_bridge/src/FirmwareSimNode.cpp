@@ -155,11 +155,7 @@ void FirmwareSimNode::Impl::trace(Car& car, uint64_t now)
 
 void FirmwareSimNode::Impl::report_collisions(Car& car)
 {
-    for (const auto& c : car.sim.take_collisions()) {
-        CPM_LOG_WARN("vehicle %u: hit the wall [%.3f, %.3f, %.3f, %.3f] at x %.3f y %.3f yaw %.3f; stopped against it",
-                     unsigned(car.options.vehicle_id), c.wall.x1, c.wall.y1, c.wall.x2, c.wall.y2, c.pose.x, c.pose.y,
-                     c.pose.yaw);
-    }
+    for (const auto& c : car.sim.take_collisions()) CPM_LOG_WARN("%s", describe_collision(car.options.vehicle_id, c).c_str());
 }
 
 void FirmwareSimNode::Impl::publish(Car& car, uint64_t t_model)

@@ -1,6 +1,7 @@
 // firmware_hil: runs the car's real firmware (an ATmega2560 ELF) in simavr behind a pty, a
 // model car on its pins (see README.md).
 #include <cpm/CommandLine.hpp>
+#include <cpm/Error.hpp>
 #include <cpm/init.hpp>
 #include <cpm/vehicle/FirmwareHil.hpp>
 
@@ -49,6 +50,11 @@ int run(int argc, char** argv)
     if (ids.size() != 1) throw cpm::cli::UsageError("firmware_hil: one chip is one car; --vehicle_id lists " + std::to_string(ids.size()));
     cpm::vehicle::FirmwareHilOptions o;
     o.elf = parsed.positional.empty() ? cpm::vehicle::default_firmware_elf() : parsed.positional[0];
+    try {
+        cpm::vehicle::check_firmware_elf(o.elf);  // a wrong file is a wrong argument: exit 2
+    } catch (const cpm::Error& e) {
+        throw cpm::cli::UsageError(e.what());
+    }
     if (parsed.has("--params")) o.parameters = cpm::vehicle::VehicleParameters::load(parsed.get("--params"));
     if (parsed.has("--map")) o.world = cpm::vehicle::World::load(parsed.get("--map"));
     o.car.vehicle_id = ids[0];

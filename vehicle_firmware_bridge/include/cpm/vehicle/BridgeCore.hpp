@@ -51,8 +51,9 @@ enum class Anomaly {
     controller_restart,  ///< the controller's tick went backwards: odometer and heading rebased
     odometer_jump,       ///< an odometer step no car can drive in that time: ignored, rebased
     battery_out_of_range,  ///< a battery reading outside the calibration's range: not published
+    line_lag,            ///< the controller applies commands long after they were sent: speed feedback paused
 };
-constexpr size_t kAnomalyKinds = 4;
+constexpr size_t kAnomalyKinds = 5;
 const char* to_string(Anomaly anomaly);
 
 /// One anomaly of one cycle, with a message that names the value seen.
@@ -111,6 +112,8 @@ private:
         bool brake = true;
     };
 
+    /// Notes whether the controller's echo of the last applied command falls far behind.
+    void watch_line_lag(const StatePacket& packet, std::vector<Notice>& notices);
     void dead_reckon(const StatePacket& packet, uint64_t t_ns, double tick_dt, std::vector<Notice>& notices);
     uint64_t measured_time(uint32_t tick, uint64_t received_ns);
     double plausible_battery(uint16_t battery_mv, std::vector<Notice>& notices);
@@ -132,6 +135,7 @@ private:
     std::optional<uint32_t> last_tick_;
     double distance_ = 0;
     uint32_t command_tick_ = 0;
+    bool line_lagging_ = false;  ///< the controller applies commands far behind the newest sent
     ActiveCommand last_active_ = ActiveCommand::none;
     std::deque<Estimate> history_;
     uint64_t tick_epoch_ms_ = 0;  // controller ticks are 32-bit ms; they wrap after 49 days

@@ -100,6 +100,10 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
+/// Throws cpm::Error naming the file when it is missing, not an ELF for the AVR, or built for
+/// another chip than the ATmega2560 (avr-gcc's device note).
+void check_firmware_elf(const std::string& path);
+
 /// The default firmware: share/cpm/firmware/cpm_car.elf beside this program's bin/.
 std::string default_firmware_elf();
 

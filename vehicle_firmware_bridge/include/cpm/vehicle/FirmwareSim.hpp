@@ -30,6 +30,10 @@ struct Collision
     Segment wall;
 };
 
+/// "vehicle N: hit the wall [x1, y1, x2, y2] at x … y … yaw …; stopped against it", as the
+/// simulators log it.
+std::string describe_collision(uint8_t vehicle_id, const Collision& c);
+
 /// The car's microcontroller without its serial port or clock: the vehicle model, its
 /// sensors against the world, the command decoder and the watchdog. firmware_sim drives it
 /// in real time behind a pty; tests drive it step by step. Not thread-safe.
