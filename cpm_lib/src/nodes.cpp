@@ -39,6 +39,10 @@ std::vector<NodeSpec> make_table()
         {.name = "firmware_sim", .publish = {t::vehicle_observation.name},
          .subscribe = {t::vehicle_observation.name},  // the other cars, for its rangers
          .timer = timer_ids::firmware_sim, .about = "a simulated car's firmware: its ground truth"},
+        {.name = "firmware_hil", .publish = {t::vehicle_observation.name},
+         .subscribe = {t::vehicle_observation.name},  // the other cars, for its rangers
+         .timer = timer_ids::firmware_sim,  // the car's microcontroller slot on the lab clock, as firmware_sim's
+         .about = "a car's real AVR firmware in simavr, a model car on its pins: its ground truth"},
         {.name = "vehicle_bridge", .publish = {t::vehicle_state.name, t::range_sensors.name},
          .subscribe = with(commands, {t::stop_request.name, t::vehicle_observation.name}), .timer = timer_ids::vehicle_bridge,
          .about = "a car's serial link to DDS: its state and ranges out, commands in"},

@@ -224,7 +224,7 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
                 c.error(v, p, "expected a map (id, start, camera, fsm, restart, host, realtime)");
                 continue;
             }
-            c.keys(v, p, {"id", "start", "camera", "fsm", "restart", "host", "realtime"});
+            c.keys(v, p, {"id", "start", "camera", "fsm", "restart", "host", "realtime", "firmware"});
             VehicleSpec spec;
             if (!v["id"]) c.error(v, p + ".id", "missing");
             else if (auto id = c.integer(v["id"], p + ".id", 1, 255)) {
@@ -245,6 +245,10 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
             if (v["restart"]) spec.restart = c.boolean(v["restart"], p + ".restart").value_or(false);
             if (v["host"]) spec.host = host_name(c, s, v["host"], p + ".host");
             if (v["realtime"]) spec.realtime = read_realtime(c, v["realtime"], p + ".realtime");
+            if (const YAML::Node f = v["firmware"]) {
+                if (f.IsScalar() && (f.Scalar() == "sim" || f.Scalar() == "avr")) spec.avr = f.Scalar() == "avr";
+                else c.error(f, p + ".firmware", "expected sim (firmware_sim) or avr (the car's AVR firmware under firmware_hil)");
+            }
             if (v["camera"] && !root["world"]) c.error(v["camera"], p + ".camera", "a camera needs the world's markers: give world");
             if (!spec.fsm.empty() && spec.camera.empty()) {
                 // A machine that looks for gates waits for a camera's markers: without one the car
@@ -254,6 +258,15 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
                     c.error(v["fsm"], p + ".fsm", "its machine works on ArUco markers, but the car has no camera: give it one (camera: FILE)");
             }
             s.vehicles.push_back(spec);
+        }
+    }
+    // Cars on lanes run in one `cpm vehicle sim`: one kind of microcontroller for all of them.
+    if (s.cars_on_lanes() && vehicles.IsSequence()) {
+        for (size_t i = 1; i < s.vehicles.size() && i < vehicles.size(); ++i) {
+            if (s.vehicles[i].avr != s.vehicles[0].avr)
+                c.error(vehicles[i], "vehicles[" + std::to_string(i) + "].firmware",
+                        std::string("cars on lanes share one simulation: give every car the same firmware (vehicles[0] has ") +
+                            (s.vehicles[0].avr ? "avr" : "sim") + ")");
         }
     }
 
@@ -757,7 +770,7 @@ public:
             for (const auto& v : s_.vehicles) first = std::min(first, v.id), restart = restart || v.restart, realtime = std::max(realtime, v.realtime);
             add("cars", "vehicle_sim",
                 common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count", std::to_string(s_.vehicles.size()), "--lanes",
-                        s_.lanes, "--seed", std::to_string(s_.routing.seed)}, realtime),
+                        s_.lanes, "--seed", std::to_string(s_.routing.seed), "--firmware", s_.vehicles.front().avr ? "avr" : "sim"}, realtime),
                 restart, 5, first, s_.vehicles.front().host);
             plan_.back().timer = timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first);
             return;
@@ -766,7 +779,9 @@ public:
             const std::string id = std::to_string(v.id);
             const std::string start = number(v.x) + "," + number(v.y) + "," + number(v.yaw);
             const std::string link = (fs::path(r_.run_dir) / ("car_" + id + ".tty")).string();
-            add("sim_" + id, "firmware_sim", common({program("firmware_sim"), "--vehicle_id", id, "--map", s_.world, "--start", start, "--link", link}, v.realtime),
+            const char* microcontroller = v.avr ? "firmware_hil" : "firmware_sim";
+            add("sim_" + id, microcontroller,
+                common({program(microcontroller), "--vehicle_id", id, "--map", s_.world, "--start", start, "--link", link}, v.realtime),
                 v.restart, 6, v.id, v.host);
             add("bridge_" + id, "vehicle_bridge", common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}, v.realtime),
                 v.restart, 5, v.id, v.host);

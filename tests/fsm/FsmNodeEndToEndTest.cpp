@@ -60,8 +60,12 @@ struct Drive
     }
 };
 
-Drive drive(const std::string& machine, const std::string& tick = "timer")
+/// `tick`: fsm_node's --tick (timer, on-sample), or "avr": on the timer, the car's
+/// microcontroller the real AVR firmware under firmware_hil instead of firmware_sim.
+Drive drive(const std::string& machine, std::string tick = "timer")
 {
+    const bool avr = tick == "avr";
+    if (avr) tick = "timer";
     cpm::Participant participant(cpm_test::isolated_options());
     cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
     cpm::ReaderAbstract<VehicleCommandDirect> commands(participant, "vehicleCommandDirect", {.keep_all = true});
@@ -69,7 +73,7 @@ Drive drive(const std::string& machine, const std::string& tick = "timer")
     cpm::ReaderAbstract<FsmStatus> status(participant, "fsmStatus", {.reliable = true, .keep_all = true, .transient_local = true});
     const std::string root = CPM_SOURCE_DIR;
     Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", root + "/scenarios/maps/corridor.json",
-                 "--start", "0,-0.01,0"});
+                 "--start", "0,-0.01,0", "--firmware", avr ? "avr" : "sim"});
     Process sut({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", root + "/scenarios/fsm/" + machine, "--report", "--tick", tick});
     Drive run;
     auto collect = [&] {
@@ -100,8 +104,9 @@ class FsmNodeTicking : public ::testing::TestWithParam<std::string>
 {
 };
 
-INSTANTIATE_TEST_SUITE_P(FsmNodeEndToEnd, FsmNodeTicking, ::testing::Values("timer", "on-sample"),
-                         [](const auto& info) { return info.param == "timer" ? std::string("OnTheTimer") : std::string("OnEachSample"); });
+INSTANTIATE_TEST_SUITE_P(FsmNodeEndToEnd, FsmNodeTicking, ::testing::Values("timer", "on-sample", "avr"), [](const auto& info) {
+    return info.param == "timer" ? std::string("OnTheTimer") : info.param == "avr" ? std::string("OnTheTimerWithTheAvrFirmware") : std::string("OnEachSample");
+});
 
 TEST_P(FsmNodeTicking, FollowsTheRightWallAtHalfAMetrePassesTheNicheTakesTheCornerAndStops)
 {

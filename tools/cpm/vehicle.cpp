@@ -25,7 +25,7 @@ namespace {
 
 const char* const kVehicleSimHelp =
     "usage: cpm vehicle sim --id N [--count K] [--map FILE] [--start X,Y,YAW] [--spacing M]\n"
-    "                       [--lanes FILE [--seed S]] [--process-per-car]\n"
+    "                       [--lanes FILE [--seed S]] [--process-per-car] [--firmware sim|avr]\n"
     "                       [--params FILE] [--calibration FILE] [--camera FILE [--camera-rate HZ]]\n"
     "                       [--dds_domain N]\n"
     "\n"
@@ -41,7 +41,9 @@ const char* const kVehicleSimHelp =
     "--camera-rate Hz (default 30) from its true pose; run aruco_node to turn the frames into\n"
     "arucoMarkers. All cars run in one firmware_sim and one vehicle_bridge process (each car still\n"
     "behind its own pty, line and loop); --process-per-car starts a pair of processes per car\n"
-    "instead (more isolation, fewer cars per machine). With --simulated_time the cars and their\n"
+    "instead (more isolation, fewer cars per machine). --firmware avr runs each car's real\n"
+    "firmware (the ATmega2560 ELF a car is flashed with) in firmware_hil instead of firmware_sim,\n"
+    "one chip per car; the bridge is the same. With --simulated_time the cars and their\n"
     "cameras follow the lab's simulated clock (give aruco_node --simulated_time and the camera's\n"
     "rate as --rate too): it prints the timers to name to `cpm lab clock --simulated --nodes`, and\n"
     "ends when that clock stops them. Runs until Ctrl-C, then prints each car's statistics (JSON\n"
@@ -60,8 +62,13 @@ int vehicle_sim(const std::vector<std::string>& args)
                                        {{"--id", true}, {"--count", true}, {"--map", true}, {"--start", true},
                                         {"--spacing", true}, {"--params", true}, {"--calibration", true},
                                         {"--camera", true}, {"--camera-rate", true}, {"--lanes", true}, {"--seed", true},
-                                        {"--process-per-car", false}},
+                                        {"--process-per-car", false}, {"--firmware", true}},
                                        "cpm vehicle sim");
+    const std::string firmware = parsed.get("--firmware", "sim");
+    if (firmware != "sim" && firmware != "avr")
+        throw cpm::cli::UsageError("cpm vehicle sim: --firmware is sim (firmware_sim) or avr (the AVR firmware in firmware_hil), not '" +
+                                   firmware + "'");
+    const bool avr = firmware == "avr";
     if (!parsed.has("--id")) throw cpm::cli::UsageError("cpm vehicle sim: --id is required (the vehicle id, 1..255)");
     long long first = cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255);
     long long count = cpm::cli::parse_integer("--count", parsed.get("--count", "1"), 1, 256 - first);
@@ -121,12 +128,14 @@ int vehicle_sim(const std::vector<std::string>& args)
         ~StopInOrder() { (void)all.stop_all(); }
     } stop_in_order{children};
 
-    const std::string firmware_sim = cpm::sibling_executable("firmware_sim");
+    // The car's microcontroller: firmware_sim, or the real firmware in firmware_hil (one chip each).
+    const std::string microcontroller = avr ? "firmware_hil" : "firmware_sim";
+    const std::string firmware_sim = cpm::sibling_executable(microcontroller);
     const std::string vehicle_bridge = cpm::sibling_executable("vehicle_bridge");
     const std::string camera_sim = parsed.has("--camera") ? cpm::sibling_executable("camera_sim") : "";
     // Every car in one simulator and one bridge process (a machine carries many more cars so),
     // or with --process-per-car a simulator and a bridge for each (one car's crash is its own).
-    const bool per_car = parsed.has("--process-per-car");
+    const bool per_car = parsed.has("--process-per-car") || avr;
     std::string timers;  // the simulated-time node ids, for cpm lab clock
     auto join = [](const std::vector<std::string>& items, const char* separator) {
         std::string text;
@@ -145,7 +154,7 @@ int vehicle_sim(const std::vector<std::string>& args)
         for (const char* flag : {"--map", "--params"}) {
             if (parsed.has(flag)) sim_argv.insert(sim_argv.end(), {flag, parsed.get(flag)});
         }
-        cpm::ChildProcess& sim = launch("firmware_sim " + name, sim_argv, true);
+        cpm::ChildProcess& sim = launch(microcontroller + " " + name, sim_argv, true);
         timers += (timers.empty() ? "" : ",") + cpm::vehicle::FirmwareSimNode::timer_name(uint8_t(std::stoi(ids[0]))) + "," +
                   cpm::vehicle::BridgeNode::timer_name(uint8_t(std::stoi(ids[0])));
         std::vector<std::string> devices;
@@ -155,11 +164,11 @@ int vehicle_sim(const std::vector<std::string>& args)
             const std::string prefix = ids.size() == 1 ? "device: " : "device " + id + ": ";
             if (!line) {
                 const auto end = sim.wait(std::chrono::seconds(2));
-                throw cpm::Error("firmware_sim " + name + " did not start: it " + (end ? end->describe() : "closed its output") +
+                throw cpm::Error(microcontroller + " " + name + " did not start: it " + (end ? end->describe() : "closed its output") +
                                  " before naming its device (its errors, if any, are above)");
             }
             if (line->rfind(prefix, 0) != 0) {
-                throw cpm::Error("firmware_sim " + name + " did not start: it printed '" + *line + "' where '" + prefix +
+                throw cpm::Error(microcontroller + " " + name + " did not start: it printed '" + *line + "' where '" + prefix +
                                  "PATH' was expected");
             }
             devices.push_back(line->substr(prefix.size()));
@@ -171,8 +180,8 @@ int vehicle_sim(const std::vector<std::string>& args)
         cpm::ChildProcess& bridge = launch("vehicle_bridge " + name, bridge_argv, false);
         for (size_t k = 0; k < ids.size(); ++k) {
             const std::string& id = ids[k];
-            std::printf("vehicle %s: firmware_sim pid %d on %s, vehicle_bridge pid %d, start %s\n", id.c_str(), sim_pid,
-                        devices[k].c_str(), bridge.pid(), starts[k].c_str());
+            std::printf("vehicle %s: %s pid %d on %s, vehicle_bridge pid %d, start %s\n", id.c_str(), microcontroller.c_str(),
+                        sim_pid, devices[k].c_str(), bridge.pid(), starts[k].c_str());
             if (!camera_sim.empty()) {
                 cpm::ChildProcess& camera = launch("camera_sim " + id, {camera_sim, "--vehicle_id", id, "--camera", parsed.get("--camera"),
                                                                         "--map", parsed.get("--map"), "--rate", camera_rate},

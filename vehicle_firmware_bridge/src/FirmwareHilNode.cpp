@@ -3,6 +3,7 @@
 #include <cpm/Error.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/Participant.hpp>
+#include <cpm/ReaderAbstract.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
@@ -17,6 +18,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <map>
 #include <cstdio>
 #include <thread>
 
@@ -26,7 +28,8 @@ struct FirmwareHilNode::Impl
 {
     explicit Impl(FirmwareHilOptions o)
         : vehicle_id(o.car.vehicle_id), hil(std::move(o)), participant(Participant::default_participant()),
-          observations(participant, topics::vehicle_observation.name, topics::vehicle_observation.writer)
+          observations(participant, topics::vehicle_observation.name, topics::vehicle_observation.writer),
+          others(participant, topics::vehicle_observation.name, topics::vehicle_observation.reader)
     {
         hil.on_state_period([this](uint64_t chip_ns) { publish(chip_ns); });
     }
@@ -34,6 +37,7 @@ struct FirmwareHilNode::Impl
     void publish(uint64_t chip_ns)
     {
         auto& car = hil.car();
+        see_others(t0 + chip_ns);
         if (car.drop_observation()) return;
         VehicleObservation o;
         stamp_message(o, t0 + chip_ns, 0);
@@ -43,6 +47,25 @@ struct FirmwareHilNode::Impl
         o.pose().y(pose.y);
         o.pose().yaw(pose.yaw);
         (void)observations.write(o);
+    }
+
+    /// The other cars' bodies, for the rangers: those seen within the last second.
+    void see_others(uint64_t now)
+    {
+        for (auto& o : others.take()) {
+            if (o.vehicle_id() == vehicle_id) continue;
+            other_cars[o.vehicle_id()] = {o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()}};
+        }
+        std::vector<Pose> poses;
+        for (auto it = other_cars.begin(); it != other_cars.end();) {
+            if (it->second.first + 1'000'000'000ull < now) {
+                it = other_cars.erase(it);
+            } else {
+                poses.push_back(it->second.second);
+                ++it;
+            }
+        }
+        hil.car().set_other_cars(poses);
     }
 
     /// Simulated time: the bridge answered the last state packet before the lab clock moved on,
@@ -70,6 +93,8 @@ struct FirmwareHilNode::Impl
     FirmwareHil hil;
     Participant& participant;
     Writer<VehicleObservation> observations;
+    ReaderAbstract<VehicleObservation> others;
+    std::map<uint8_t, std::pair<uint64_t, Pose>> other_cars;  ///< (seen at, pose)
     std::shared_ptr<Timer> timer;
     uint64_t t0 = 0;  ///< lab time of the chip's reset
     bool host_silent = false;

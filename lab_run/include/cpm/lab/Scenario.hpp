@@ -61,6 +61,7 @@ struct VehicleSpec
     bool restart = false;
     std::string host;    ///< where its processes run (a name of `hosts:`); "" the run's own
     Realtime realtime = Realtime::off;  ///< --realtime for its processes (simulator, bridge, camera, aruco, fsm)
+    bool avr = false;    ///< firmware: avr - the car's real firmware under firmware_hil instead of firmware_sim
 };
 
 /// A computer of the lab (`hosts:`): the address its participants use and how the run reaches it.
