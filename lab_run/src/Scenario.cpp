@@ -260,15 +260,6 @@ void read_vehicles(Checker& c, const YAML::Node& root, const YAML::Node& vehicle
             s.vehicles.push_back(spec);
         }
     }
-    // Cars on lanes run in one `cpm vehicle sim`: one kind of microcontroller for all of them.
-    if (s.cars_on_lanes() && vehicles.IsSequence()) {
-        for (size_t i = 1; i < s.vehicles.size() && i < vehicles.size(); ++i) {
-            if (s.vehicles[i].avr != s.vehicles[0].avr)
-                c.error(vehicles[i], "vehicles[" + std::to_string(i) + "].firmware",
-                        std::string("cars on lanes share one simulation: give every car the same firmware (vehicles[0] has ") +
-                            (s.vehicles[0].avr ? "avr" : "sim") + ")");
-        }
-    }
 
 }
 
@@ -427,6 +418,11 @@ void check_cars_on_lanes(Checker& c, const YAML::Node& root, const YAML::Node& v
         if (!vehicles[i].IsMap()) continue;  // said above
         if (vehicles[i]["fsm"]) c.error(vehicles[i]["fsm"], p + ".fsm", "a car either follows its fsm or " + driver + ", not both");
         if (vehicles[i]["start"]) c.error(vehicles[i]["start"], p + ".start", "with " + who + " the cars are spread over the lanes; leave start out");
+        // They run in one `cpm vehicle sim`: one kind of microcontroller for all of them.
+        if (i > 0 && i < s.vehicles.size() && s.vehicles[i].avr != s.vehicles[0].avr)
+            c.error(vehicles[i], p + ".firmware",
+                    std::string("cars on lanes share one simulation: give every car the same firmware (vehicles[0] has ") +
+                        (s.vehicles[0].avr ? "avr" : "sim") + ")");
     }
     std::vector<int> ids;
     for (const auto& v : s.vehicles) ids.push_back(v.id);

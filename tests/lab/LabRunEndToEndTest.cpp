@@ -580,3 +580,35 @@ TEST(LabRun, ANodeThatStallsMidRunIsNamedWhenTheSimulatedClockGivesUpOnIt)
     EXPECT_NE(said.find("sim_5's log (" + out + "/sim_5.log) ends:"), std::string::npos) << said;
     EXPECT_EQ(pid_with("/bin/firmware_sim ", run_tag(out)), 0) << "the frozen node is stopped with the run";
 }
+
+TEST(LabRun, TheCorridorOnTheCarsAvrFirmwareInSimulatedTimeEndsInItsStopState)
+{
+    // firmware: avr - the ELF a car is flashed with, in simavr on the lab's simulated clock, the
+    // same bridge and state machine as with firmware_sim: the whole corridor to its Stop state.
+    TempDir dir;
+    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string scenario =
+        dir.write("corridor_avr.yaml", "name: corridor_avr\ntime: simulated\nduration: 40s\nworld: " + source +
+                                           "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0], firmware: avr, fsm: " +
+                                           source + "fsm/corridor.json}\n");
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", scenario, "--out", out, "--monitor", "off"});
+    ASSERT_EQ(run.wait(120s), 0) << run.output() << run.errors();
+    const auto summary = summary_of(out);
+    EXPECT_EQ(summary["ok"], true) << summary.dump(2);
+    std::ifstream fsm_log(out + "/fsm_5.log");
+    const std::string fsm_text((std::istreambuf_iterator<char>(fsm_log)), std::istreambuf_iterator<char>());
+    EXPECT_NE(fsm_text.find("ended in state 3 (Stop)"), std::string::npos) << fsm_text;
+    std::ifstream sim_log(out + "/sim_5.log");
+    std::string stats;
+    for (std::string line; std::getline(sim_log, line);) {
+        if (!line.empty() && line[0] == '{') stats = line;
+    }
+    ASSERT_FALSE(stats.empty()) << "firmware_hil's statistics at its end";
+    const auto j = nlohmann::json::parse(stats);
+    // One state packet per 20 ms of the chip's 40 s, every one answered in time.
+    EXPECT_GE(j["state_packets"].get<int>(), 1990) << stats;
+    EXPECT_EQ(j["watchdog_stops"], 0) << stats;
+    EXPECT_EQ(j["wall_collisions"], 0) << stats;
+    EXPECT_GT(summary["report"]["cars"]["5"]["driven_m"].get<double>(), 10.0) << summary.dump(2);
+}

@@ -214,7 +214,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
         file + ":8: vehicles[0].fsm: state machine 'missing.json' does not exist (looked for " + (dir.path / "missing.json").string() + ")",
         file + ":9: vehicles[1].id: 5 is given twice (also vehicles[0])",
         file + ":10: vehicles[1].start[1]: 'nan' is not a finite number",
-        file + ":12: vehicles[2].camra: unknown key (did you mean 'camera'?); known: id, start, camera, fsm, restart, host, realtime",
+        file + ":12: vehicles[2].camra: unknown key (did you mean 'camera'?); known: id, start, camera, fsm, restart, host, realtime, firmware",
         file + ":11: vehicles[2].id: 300 is out of range (1 to 255)",
         file + ":13: routing.period: must be a multiple of 50ms",
         file + ":13: routing.enabled: central routing needs a lane graph: give lanes",
@@ -622,4 +622,36 @@ TEST(Scenario, ACarMarkedRealtimeRunsEachOfItsProcessesWithTheFlagAndAWrongValue
         << testing::PrintToString(errors);
     EXPECT_NE(testing::PrintToString(errors).find(bad + ":6: routing.realtime: expected true, false or required"), std::string::npos)
         << testing::PrintToString(errors);
+}
+
+TEST(Scenario, ACarOnItsAvrFirmwareRunsFirmwareHilAndAWrongValueOrAMixOnLanesIsNamed)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    const std::string bin = fake_bin(dir, {"cpm_history", "cpm", "firmware_sim", "firmware_hil", "vehicle_bridge"});
+    const Scenario s = load_scenario(dir.write("f.yaml", "name: f\nduration: 5s\nworld: map.json\n"
+                                                         "vehicles:\n  - {id: 2, firmware: avr}\n  - {id: 3, firmware: sim, start: [1, 0, 0]}\n"
+                                                         "  - {id: 4, start: [2, 0, 0]}\n"));
+    EXPECT_TRUE(s.vehicles[0].avr);
+    EXPECT_FALSE(s.vehicles[1].avr);
+    EXPECT_FALSE(s.vehicles[2].avr);
+    std::map<std::string, std::string> program_of;
+    for (const auto& p : plan_run(s, {.bin_dir = bin, .run_dir = "/runs/f", .domain = 3})) {
+        program_of[p.name] = fs::path(p.argv.at(0)).filename().string();
+    }
+    EXPECT_EQ(program_of["sim_2"], "firmware_hil");
+    EXPECT_EQ(program_of["sim_3"], "firmware_sim");
+    EXPECT_EQ(program_of["sim_4"], "firmware_sim");
+    EXPECT_EQ(program_of["bridge_2"], "vehicle_bridge") << "the bridge is the same for either";
+
+    const std::string bad = dir.write("b.yaml", "name: b\nduration: 5s\nworld: map.json\nvehicles:\n  - {id: 2, firmware: arm}\n");
+    EXPECT_EQ(errors_of(bad),
+              std::vector<std::string>{bad + ":5: vehicles[0].firmware: expected sim (firmware_sim) or avr (the car's AVR firmware under firmware_hil)"});
+    dir.write("lanes.json", "{}");
+    const std::string mixed = dir.write("m.yaml", "name: m\nduration: 5s\nworld: map.json\nlanes: lanes.json\nrouting: {enabled: true}\n"
+                                                  "vehicles:\n  - {id: 2, firmware: avr}\n  - {id: 3}\n");
+    EXPECT_NE(testing::PrintToString(errors_of(mixed))
+                  .find(mixed + ":8: vehicles[1].firmware: cars on lanes share one simulation: give every car the same firmware (vehicles[0] has avr)"),
+              std::string::npos)
+        << testing::PrintToString(errors_of(mixed));
 }
