@@ -41,6 +41,7 @@ else
 fi
 bench "bench_timer (tick jitter, cpm::Timer vs clock_nanosleep, normal and real time, idle and every core busy)" "$bin/bench_timer"
 bench "bench_vehicle (simulated cars: bridge cycle cost, command latency, fleet capacity)" "$bin/bench_vehicle"
+bench "bench_firmware (the car's AVR firmware in simavr: simulated MHz, real-time factor, chips per two cores, command latency vs firmware_sim, flash/RAM)" "$bin/bench_firmware"
 bench "bench_fsm (state-machine tick cost; fsm_node command latency vs a plain DDS relay)" "$bin/bench_fsm"
 bench "bench_history_store (the history store vs SQLite in memory, indexed, prepared statements)" "$bin/bench_history_store"
 bench "bench_history_service (cpm_history: ingest without loss, query round trip vs plain ping-pong, memory)" "$bin/bench_history_service"

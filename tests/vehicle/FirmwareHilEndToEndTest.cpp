@@ -152,7 +152,7 @@ TEST_F(FirmwareHilEndToEnd, KillingTheBridgeLetsTheFirmwaresWatchdogBrakeWithin2
     ASSERT_TRUE(cpm_test::wait_until([&] { return !car.pwm_trace_after(killed, 0).empty(); }, 3s)) << car.sim->output();
     const double after = double(car.pwm_trace_after(killed, 0).front().first - killed) * 1e-9;
     // 250 ms after the last command, which came up to one state period (20 ms) before the kill;
-    // the outputs are sampled every millisecond of chip time.
+    // the outputs are sampled every 250 us of chip time.
     EXPECT_GT(after, 0.2);
     EXPECT_LT(after, 0.3);
     // The count is of the state packets that newly report the brake: the next one goes out

@@ -51,6 +51,7 @@ constexpr double kBatteryDivider = 2.0, kCurrentMvPerA = 500.0, kSoundMPerS = 34
 constexpr double kAccelLsbPerG = 8192.0, kGyroLsbPerDps = 65.5, kGravity = 9.81;
 constexpr uint8_t kImuAddress = 0x68;
 constexpr double kEchoDelayS = 200e-6;  // an HC-SR04 sends its burst before the echo line rises
+constexpr double kSampleS = 250e-6;  // how often the motor and servo outputs are read
 
 /// The chip an AVR ELF was built for, from avr-gcc's .note.gnu.avr.deviceinfo; empty when the
 /// note is missing. Throws naming the file when it is not an ELF for the AVR.
@@ -242,7 +243,7 @@ FirmwareHil::Impl::Impl(FirmwareHilOptions o)
     steps_per_state = std::max<uint64_t>(1, std::llround(p.physics_rate / p.state_rate));
     update_imu();
     avr_cycle_timer_register(avr, physics_cycles, physics_timer, this);
-    avr_cycle_timer_register(avr, cycles_for(1e-3), sample_timer, this);
+    avr_cycle_timer_register(avr, cycles_for(kSampleS), sample_timer, this);
 }
 
 FirmwareHil::Impl::~Impl()
@@ -484,7 +485,7 @@ avr_cycle_count_t FirmwareHil::Impl::sample_timer(avr_t*, avr_cycle_count_t when
 {
     auto& d = *static_cast<Impl*>(self);
     d.sample_outputs();
-    return when + d.cycles_for(1e-3);
+    return when + d.cycles_for(kSampleS);
 }
 
 FirmwareHil::FirmwareHil(FirmwareHilOptions options) : impl_(std::make_unique<Impl>(std::move(options))) {}

@@ -79,7 +79,7 @@ private:
 
 /// firmware_hil's loop: one FirmwareHil stepped by one cpm::Timer, publishing the car's true
 /// pose as VehicleObservation, like firmware_sim. Real time: the chip runs paced to the wall
-/// clock (every 2 ms it catches up, its lag remembered). Under --simulated_time its timer (node
+/// clock (every 1 ms it catches up, its lag remembered). Under --simulated_time its timer (node
 /// `firmware_sim_<id>`, the car's microcontroller slot) ticks once per state packet: it waits
 /// up to 100 ms of real time for the bridge's answer to reach the pty, then runs the chip 20 ms.
 /// Prints `device: PATH` first, and one JSON line of statistics at the end.
