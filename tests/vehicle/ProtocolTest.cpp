@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <map>
 #include <random>
 
@@ -199,4 +201,38 @@ TEST(Protocol, SeededRandomCorruptionNeverYieldsABadPacketAndLosesNoIntactOne)
                 n, intact, (unsigned long long)accepted, (unsigned long long)sut.errors().oversize,
                 (unsigned long long)sut.errors().bad_cobs, (unsigned long long)sut.errors().too_short,
                 (unsigned long long)sut.errors().bad_crc, (unsigned long long)sut.errors().bad_packet);
+}
+
+TEST(Protocol, TheFirmwaresCSourceLaysOutACommandByteForByteAndDecodesItsOwnFrame)
+{
+    // The C code the AVR firmware runs (firmware/protocol/cpm_serial.c), called directly: the
+    // bytes written by hand from the protocol's table (README), little-endian after version 1
+    // and kind 2.
+    const cpm_command_packet c{0x01020304u, 7, CPM_MOTOR_FORWARD, 500, 1600};
+    uint8_t payload[CPM_SERIAL_COMMAND_SIZE];
+    ASSERT_EQ(cpm_command_pack(&c, payload), size_t(CPM_SERIAL_COMMAND_SIZE));
+    const std::vector<uint8_t> by_hand{0x01, 0x02, 0x04, 0x03, 0x02, 0x01, 0x07, 0x01, 0xF4, 0x01, 0x40, 0x06};
+    EXPECT_EQ(std::vector<uint8_t>(payload, payload + sizeof payload), by_hand);
+
+    uint8_t frame[CPM_SERIAL_MAX_WIRE + 4];
+    const size_t n = cpm_frame_encode(payload, sizeof payload, frame);
+    EXPECT_EQ(frame[0], 0);
+    EXPECT_EQ(frame[n - 1], 0);
+    EXPECT_EQ(std::count(frame + 1, frame + n - 1, 0), 0) << "COBS leaves no zero inside a frame";
+    // The same bytes as the host's C++ face makes, and the C decoder hands back the payload.
+    EXPECT_EQ(std::vector<uint8_t>(frame, frame + n),
+              cpm::vehicle::encode_frame(cpm::vehicle::CommandPacket{0x01020304u, 7, cpm::vehicle::MotorMode::forward, 500, 1600}));
+    cpm_decoder d;
+    cpm_decoder_init(&d);
+    int last = CPM_DECODE_NONE;
+    for (size_t i = 0; i < n; ++i) last = cpm_decoder_push(&d, frame[i]);
+    ASSERT_EQ(last, CPM_DECODE_PAYLOAD);
+    cpm_command_packet back{};
+    ASSERT_EQ(cpm_command_unpack(d.payload, d.payload_size, &back), 0);
+    EXPECT_EQ(back.tick, c.tick);
+    EXPECT_EQ(back.servo_us, 1600);
+    // One bit off in the body: the C decoder names the bad CRC, the C++ face counts it.
+    frame[5] ^= 0x01;
+    for (size_t i = 0; i < n; ++i) last = cpm_decoder_push(&d, frame[i]);
+    EXPECT_EQ(last, CPM_DECODE_BAD_CRC);
 }
