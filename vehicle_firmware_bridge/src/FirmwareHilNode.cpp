@@ -119,7 +119,7 @@ void FirmwareHilNode::run(const std::function<bool()>& stop_requested)
     // so the packet it starts at each multiple of 20 ms is on the line (4 ms at 115200 baud)
     // before the tick ends. Real time: the chip catches up with the wall clock every 1 ms.
     const uint64_t state_period = uint64_t(1e9 / p.state_rate);
-    const uint64_t period = simulated ? state_period : 1'000'000ull;
+    const uint64_t period = simulated ? state_period : 2'000'000ull;
     const uint64_t lead = simulated ? state_period / 2 : 0;
     d.timer = Timer::create(d.participant, timer_ids::firmware_sim(d.vehicle_id), period, 0,
                             cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});

@@ -200,9 +200,9 @@ ISR(PCINT0_vect)
         if (pins & bit) {
             echo_rise_[i] = now;
         } else {
-            /* the pulse is the round trip: mm = us * 343 / 1000 / 2 */
-            uint32_t us = (now - echo_rise_[i]) / 2u;
-            uint32_t mm = us * SOUND_MM_PER_MS / 2000u;
+            /* the pulse (in 0.5 us steps) is the round trip: mm = us * 343 / 1000 / 2, rounded */
+            uint32_t half_us = now - echo_rise_[i];
+            uint32_t mm = (half_us * SOUND_MM_PER_MS + 2000u) / 4000u;
             echo_mm_[i] = (uint16_t)(mm > RANGER_MAX_MM ? RANGER_MAX_MM : (mm < RANGER_MIN_MM ? RANGER_MIN_MM : mm));
             echo_done_ |= bit;
         }
@@ -288,24 +288,96 @@ int8_t hw_imu_init(void)
                : -1;
 }
 
-int8_t hw_imu_read(int16_t accel[3], int16_t gyro[3])
+/* The periodic read runs in the TWI interrupt, so the loop sleeps while the bus works: register
+ * pointer 0x3B written, a repeated start, 14 bytes read (accelerometer, temperature, gyro). */
+enum imu_step { IMU_IDLE, IMU_START, IMU_ADDRESS_W, IMU_POINTER, IMU_RESTART, IMU_ADDRESS_R, IMU_DATA, IMU_DONE, IMU_FAILED };
+static volatile uint8_t imu_step_ = IMU_IDLE;
+static volatile uint8_t imu_bytes_[14];
+static volatile uint8_t imu_count_;
+
+static void twi_go(uint8_t extra) { TWCR = (uint8_t)((1u << TWINT) | (1u << TWEN) | (1u << TWIE) | extra); }
+
+static void imu_fail(void)
 {
-    uint8_t b[14];
-    int8_t ok = twi_start((uint8_t)(IMU_ADDRESS << 1), 0) == 0 && twi_write(0x3Bu) == 0 &&
-                twi_start((uint8_t)((IMU_ADDRESS << 1) | 1u), 1) == 0;
-    for (uint8_t i = 0; ok && i < sizeof b; ++i) {
-        uint8_t last = i + 1u == sizeof b;
-        ok = twi_command((uint8_t)((1u << TWINT) | (1u << TWEN) | (last ? 0 : (1u << TWEA))), last ? 0x58u : 0x50u) == 0;
-        b[i] = TWDR;
-    }
-    twi_stop();
-    if (!ok) return -1;
-    for (uint8_t i = 0; i < 3; ++i) {
-        accel[i] = (int16_t)(((uint16_t)b[2 * i] << 8) | b[2 * i + 1]);
-        gyro[i] = (int16_t)(((uint16_t)b[8 + 2 * i] << 8) | b[9 + 2 * i]);
-    }
-    return 0;
+    TWCR = (uint8_t)((1u << TWINT) | (1u << TWEN) | (1u << TWSTO));
+    imu_step_ = IMU_FAILED;
 }
+
+ISR(TWI_vect)
+{
+    const uint8_t status = TWSR & 0xF8u;
+    switch (imu_step_) {
+    case IMU_START:
+        if (status != 0x08u) { imu_fail(); return; }
+        TWDR = (uint8_t)(IMU_ADDRESS << 1);
+        imu_step_ = IMU_ADDRESS_W;
+        twi_go(0);
+        break;
+    case IMU_ADDRESS_W:
+        if (status != 0x18u) { imu_fail(); return; }
+        TWDR = 0x3Bu;
+        imu_step_ = IMU_POINTER;
+        twi_go(0);
+        break;
+    case IMU_POINTER:
+        if (status != 0x28u) { imu_fail(); return; }
+        imu_step_ = IMU_RESTART;
+        twi_go(1u << TWSTA);
+        break;
+    case IMU_RESTART:
+        if (status != 0x10u) { imu_fail(); return; }
+        TWDR = (uint8_t)((IMU_ADDRESS << 1) | 1u);
+        imu_step_ = IMU_ADDRESS_R;
+        twi_go(0);
+        break;
+    case IMU_ADDRESS_R:
+        if (status != 0x40u) { imu_fail(); return; }
+        imu_count_ = 0;
+        imu_step_ = IMU_DATA;
+        twi_go(1u << TWEA);
+        break;
+    case IMU_DATA:
+        if (status != 0x50u && status != 0x58u) { imu_fail(); return; }
+        imu_bytes_[imu_count_++] = TWDR;
+        if (imu_count_ == sizeof imu_bytes_) {
+            TWCR = (uint8_t)((1u << TWINT) | (1u << TWEN) | (1u << TWSTO));
+            imu_step_ = IMU_DONE;
+        } else {
+            twi_go(imu_count_ + 1u == sizeof imu_bytes_ ? 0 : (1u << TWEA));  /* NACK the last byte */
+        }
+        break;
+    default:
+        TWCR = (uint8_t)((1u << TWINT) | (1u << TWEN));
+        break;
+    }
+}
+
+void hw_imu_start(void)
+{
+    if (imu_step_ != IMU_IDLE && imu_step_ != IMU_DONE && imu_step_ != IMU_FAILED) {
+        /* the last read never finished (a device that stopped answering): give the bus back */
+        TWCR = (uint8_t)((1u << TWINT) | (1u << TWEN) | (1u << TWSTO));
+    }
+    imu_step_ = IMU_START;
+    twi_go(1u << TWSTA);
+}
+
+int8_t hw_imu_take(int16_t accel[3], int16_t gyro[3])
+{
+    if (imu_step_ == IMU_FAILED) {
+        imu_step_ = IMU_IDLE;
+        return -1;
+    }
+    if (imu_step_ != IMU_DONE) return 0;
+    for (uint8_t i = 0; i < 3; ++i) {
+        accel[i] = (int16_t)(((uint16_t)imu_bytes_[2 * i] << 8) | imu_bytes_[2 * i + 1]);
+        gyro[i] = (int16_t)(((uint16_t)imu_bytes_[8 + 2 * i] << 8) | imu_bytes_[9 + 2 * i]);
+    }
+    imu_step_ = IMU_IDLE;
+    return 1;
+}
+
+uint8_t hw_imu_ready(void) { return imu_step_ == IMU_DONE || imu_step_ == IMU_FAILED; }
 
 /* --- the rest ------------------------------------------------------------------------------ */
 uint8_t hw_vehicle_id(void) { return eeprom_read_byte(&ee_vehicle_id); }

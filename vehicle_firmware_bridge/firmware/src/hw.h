@@ -35,10 +35,14 @@ void hw_rangers_read(uint16_t mm[3]);
 /* ADC in millivolts at the pin: channel 0 battery, 1 motor current. */
 uint16_t hw_adc_mv(uint8_t channel);
 
-/* IMU: raw accelerometer (x, y, z) and gyro (x, y, z) words; 0 on success, -1 when the device
- * did not answer (the values are left alone). */
+/* IMU: configured once at start (blocking; 0 when it answered). A read is started and runs in
+ * the TWI interrupt; hw_imu_take then gives 1 with the raw accelerometer (x, y, z) and gyro
+ * (x, y, z) words once it finished, -1 when the device did not answer, 0 while it is under way
+ * (or none was started). hw_imu_ready: a result waits. */
 int8_t hw_imu_init(void);
-int8_t hw_imu_read(int16_t accel[3], int16_t gyro[3]);
+void hw_imu_start(void);
+int8_t hw_imu_take(int16_t accel[3], int16_t gyro[3]);
+uint8_t hw_imu_ready(void);
 
 /* The vehicle id from EEPROM. */
 uint8_t hw_vehicle_id(void);

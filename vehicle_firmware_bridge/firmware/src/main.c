@@ -32,7 +32,7 @@ static int16_t accel[3], gyro[3];
 static uint32_t last_imu_half_us;
 static uint32_t served_ms;
 
-static uint8_t busy(void) { return hw_millis() != served_ms || hw_serial_available(); }
+static uint8_t busy(void) { return hw_millis() != served_ms || hw_serial_available() || hw_imu_ready(); }
 
 static void on_command(const cpm_command_packet* c)
 {
@@ -79,13 +79,15 @@ static void watch_commands(uint32_t now)
     }
 }
 
-static void read_imu(void)
+static void take_imu(void)
 {
-    uint32_t now = hw_halfmicros();
-    if (hw_imu_read(accel, gyro) < 0) {
+    const int8_t got = hw_imu_take(accel, gyro);
+    if (got == 0) return;
+    if (got < 0) {
         imu_ok = 0;
         return;
     }
+    const uint32_t now = hw_halfmicros();
     if (imu_ok) {
         const float rad_per_lsb = 3.14159265f / 180.0f / IMU_GYRO_LSB_PER_DPS;
         yaw_rad += (float)gyro[2] * rad_per_lsb * (float)(now - last_imu_half_us) * 0.5e-6f;
@@ -137,11 +139,12 @@ int main(void)
     for (;;) {
         wdt_reset();
         read_line();
+        take_imu();
         uint32_t now = hw_millis();
         while (served_ms != now) {
             ++served_ms;
             watch_commands(served_ms);
-            if (served_ms % IMU_PERIOD_MS == 0) read_imu();
+            if (served_ms % IMU_PERIOD_MS == 0) hw_imu_start();
             if (served_ms % RANGER_PERIOD_MS == RANGER_PERIOD_MS / 2) hw_rangers_fire();
             if (served_ms % STATE_PERIOD_MS == 0) send_state(served_ms);
             read_line();
