@@ -5,7 +5,11 @@
 
 #include <cpm/vehicle/Protocol.hpp>
 #include <cpm/vehicle/SerialPort.hpp>
+#include <cpm/vehicle/VehicleModel.hpp>
 
+#include <cpm/AsyncReader.hpp>
+
+#include <RangeSensors.h>
 #include <VehicleCommandDirect.h>
 
 #include <fcntl.h>
@@ -302,6 +306,12 @@ TEST_F(FirmwareHilEndToEnd, ACarDrivenIntoAWallStopsAgainstIt)
     }
     Car car = avr_car({"--map", map});
     ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
+    std::vector<double> front_ranges;
+    auto ranges = std::make_unique<cpm::AsyncReader<RangeSensors>>(
+        [&](std::vector<RangeSensors>& samples) {
+            for (const auto& r : samples) front_ranges.push_back(r.front());
+        },
+        participant, "rangeSensors");
     {
         Repeater<VehicleCommandSpeedCurvature> command(participant, "vehicleCommandSpeedCurvature", speed_curvature(1.0, 0));
         ASSERT_TRUE(cpm_test::wait_until([&] { return car.sim->errors().find("hit the wall") != std::string::npos; }, 10s))
@@ -318,9 +328,13 @@ TEST_F(FirmwareHilEndToEnd, ACarDrivenIntoAWallStopsAgainstIt)
     EXPECT_LE(furthest + front, 1.0 + 1e-6);
     EXPECT_GT(furthest + front, 0.95);
     EXPECT_EQ(last_json_line(car.sim->output()).at("wall_collisions"), 1) << car.sim->output();
-    // The front ranger saw the wall come: the firmware's echo timing, in the bridge's samples.
-    auto states = watch.states();
-    ASSERT_FALSE(states.empty());
+    // The front ranger saw the wall: the firmware timed the echo pulse firmware_hil gave it for
+    // the distance from the ranger to the wall, and the bridge published it.
+    ranges.reset();
+    ASSERT_FALSE(front_ranges.empty());
+    const double ranger_x = cpm::vehicle::VehicleParameters{}.ultrasonic[0].x;
+    EXPECT_NEAR(front_ranges.back(), 1.0 - (furthest + ranger_x), 0.02);
+    EXPECT_GT(*std::max_element(front_ranges.begin(), front_ranges.end()), 0.7) << "it came closer";
 }
 
 TEST_F(FirmwareHilEndToEnd, AWrongFirmwareFileIsNamedAndExitsTwo)
@@ -334,4 +348,9 @@ TEST_F(FirmwareHilEndToEnd, AWrongFirmwareFileIsNamedAndExitsTwo)
     fails("/bin/true", "/bin/true is not a program for an AVR microcontroller");
     fails(CPM_FIRMWARE_HEX, "is not an ELF file (give the .elf avr-gcc made, not the .hex)");
     fails(CPM_OTHER_CHIP_ELF, "is built for atmega328p; firmware_hil runs an atmega2560");
+    cpm_test::Process sim({cpm_test::built_program("cpm"), "vehicle", "sim", "--id", "1", "--firmware", "arm"});
+    EXPECT_EQ(sim.wait(10s), 2);
+    EXPECT_NE(sim.errors().find("cpm vehicle sim: --firmware is sim (firmware_sim) or avr (the AVR firmware in firmware_hil), not 'arm'"),
+              std::string::npos)
+        << sim.errors();
 }
