@@ -73,6 +73,6 @@ TEST(Nodes, ARowHasItsTimerAndAnUnknownNameListsTheKnown)
         (void)nodes::find("fsm_nod");
         FAIL() << "no error";
     } catch (const cpm::Error& e) {
-        EXPECT_NE(std::string(e.what()).find("no node kind 'fsm_nod' (known: firmware_sim, vehicle_bridge"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("no node kind 'fsm_nod' (known: firmware_sim, firmware_hil, vehicle_bridge"), std::string::npos) << e.what();
     }
 }

@@ -86,6 +86,7 @@ each rtdb cpm/rtdb/Recording.hpp 'return int(cpm::rtdb::load_recording("x").samp
 each lab cpm/lab/Scenario.hpp 'return int(cpm::lab::load_scenario("x").vehicles.size())'
 each monitor cpm/monitor/Monitor.hpp 'return int(cpm::monitor::listen_problem("127.0.0.1", 1).size())'
 each vehicle cpm/vehicle/World.hpp 'return int(cpm::vehicle::World::load("x").walls().size())'
+each vehicle_hil cpm/vehicle/FirmwareHil.hpp 'return int(cpm::vehicle::default_firmware_elf().size() + cpm::vehicle::crc16(nullptr, 0))'
 each aruco cpm/aruco/Camera.hpp 'return int(cpm::aruco::Camera::load("x").width)'
 each aruco_node cpm/aruco/ArucoNode.hpp 'std::string why; return int(cpm::aruco::frame_image(CameraFrame{}, cpm::aruco::Camera{}, why).cols)'
 each fsm cpm/fsm/Loader.hpp 'return int(cpm::fsm::load_file("x").errors.size())'
