@@ -1,6 +1,7 @@
 #include <cpm/vehicle/FirmwareHil.hpp>
 
 #include <cpm/Error.hpp>
+#include <cpm/LogThrottle.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/Participant.hpp>
 #include <cpm/ReaderAbstract.hpp>
@@ -97,6 +98,7 @@ struct FirmwareHilNode::Impl
     std::map<uint8_t, std::pair<uint64_t, Pose>> other_cars;  ///< (seen at, pose)
     std::shared_ptr<Timer> timer;
     uint64_t t0 = 0;  ///< lab time of the chip's reset
+    LogThrottle lag_log;
     bool host_silent = false;
 };
 
@@ -130,8 +132,16 @@ void FirmwareHilNode::run(const std::function<bool()>& stop_requested)
         if (simulated) {
             d.await_output();
         } else {
-            const double lag_ms = double(int64_t(get_time_ns() - d.t0) - int64_t(d.hil.chip_ns())) * 1e-6;
+            const uint64_t now = get_time_ns();
+            const double lag_ms = double(int64_t(now - d.t0) - int64_t(d.hil.chip_ns())) * 1e-6;
             d.hil.note_lag(lag_ms);
+            // A chip a state period behind the wall clock sends its packets late: say so, once a second.
+            uint64_t held_back = 0;
+            if (lag_ms > 20.0 && d.lag_log.allow(now, held_back)) {
+                CPM_LOG_WARN("vehicle %u: the simulated chip is %.1f ms behind the wall clock (this machine is too busy to run it in "
+                             "real time; %llu more such ticks since the last report)",
+                             unsigned(d.vehicle_id), lag_ms, static_cast<unsigned long long>(held_back));
+            }
         }
     });
 }
