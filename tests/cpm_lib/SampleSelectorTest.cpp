@@ -139,3 +139,41 @@ TEST(SampleSelector, ConcurrentAddAndSelectStayConsistent)
     EXPECT_TRUE(monotone) << "a later read returned an older sample";
     EXPECT_EQ(tag_of(sut.select(UINT64_MAX)), 20000);
 }
+
+TEST(SampleSelector, TheRingGrowsToItsCapacityOrHoldsItFromTheStartInRealTime)
+{
+    SampleSelector growing(100, false);
+    EXPECT_EQ(growing.slots(), 8u) << "a small ring first";
+    for (int i = 0; i < 30; ++i) add(growing, i, 100 + i, 100 + i);
+    EXPECT_EQ(growing.slots(), 32u) << "doubled as the samples came";
+    EXPECT_EQ(growing.size(), 30u);
+    EXPECT_EQ(tag_of(growing.select(129)), 29);
+    for (int i = 0; i < 300; ++i) add(growing, i, 1000 + i, 1000 + i);
+    EXPECT_EQ(growing.slots(), 100u) << "never beyond the capacity";
+    EXPECT_EQ(growing.size(), 100u);
+
+    SampleSelector preallocated(2000, true);
+    EXPECT_EQ(preallocated.slots(), 2000u) << "--realtime: every slot before the first sample";
+    for (int i = 0; i < 5000; ++i) add(preallocated, i, 100 + i, 100 + i);
+    EXPECT_EQ(preallocated.slots(), 2000u);
+    EXPECT_EQ(preallocated.overflow_count(), 3000u);
+}
+
+TEST(SampleSelector, AReadAcrossTheRingsWrapKeepsWhatMayStillWinInArrivalOrder)
+{
+    // Capacity 4, six arrivals: the ring has wrapped (head in the middle). Created out of order.
+    SampleSelector sut(4, true);
+    const int creates[] = {10, 11, 50, 20, 40, 30};
+    for (int i = 0; i < 6; ++i) add(sut, i, creates[i], creates[i]);
+    // Held: tags 2 (50), 3 (20), 4 (40), 5 (30). At t = 45 valid are 20, 40, 30: 40 wins; 50 may
+    // still win later and stays, as does the pick; 20 and 30 can never win again.
+    EXPECT_EQ(tag_of(sut.select(45)), 4);
+    EXPECT_EQ(sut.size(), 2u);
+    EXPECT_EQ(tag_of(sut.select(45)), 4) << "the pick is kept";
+    EXPECT_EQ(tag_of(sut.select(60)), 2);
+    EXPECT_EQ(sut.size(), 1u);
+    // And the compacted ring takes new arrivals behind what it kept.
+    for (int i = 6; i < 9; ++i) add(sut, i, 60 + i, 60 + i);
+    EXPECT_EQ(sut.size(), 4u);
+    EXPECT_EQ(tag_of(sut.select(100)), 8);
+}
