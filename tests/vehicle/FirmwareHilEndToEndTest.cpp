@@ -348,6 +348,18 @@ TEST_F(FirmwareHilEndToEnd, AWrongFirmwareFileIsNamedAndExitsTwo)
     fails("/bin/true", "/bin/true is not a program for an AVR microcontroller");
     fails(CPM_FIRMWARE_HEX, "is not an ELF file (give the .elf avr-gcc made, not the .hex)");
     fails(CPM_OTHER_CHIP_ELF, "is built for atmega328p; firmware_hil runs an atmega2560");
+    // A model car other than the one the firmware is built for: its odometer would lie.
+    const std::string params = "/tmp/cpm_hil_params_" + std::to_string(::getpid()) + ".json";
+    {
+        std::ofstream out(params);
+        out << R"({"ticks_per_metre": 500})";
+    }
+    cpm_test::Process other_car({cpm_test::built_program("firmware_hil"), "--vehicle_id", "1", "--params", params});
+    EXPECT_EQ(other_car.wait(10s), 2);
+    EXPECT_NE(other_car.errors().find("--params " + params + ": vehicle parameter ticks_per_metre is 500, but the firmware is built for 600"),
+              std::string::npos)
+        << other_car.errors();
+    ::unlink(params.c_str());
     cpm_test::Process sim({cpm_test::built_program("cpm"), "vehicle", "sim", "--id", "1", "--firmware", "arm"});
     EXPECT_EQ(sim.wait(10s), 2);
     EXPECT_NE(sim.errors().find("cpm vehicle sim: --firmware is sim (firmware_sim) or avr (the AVR firmware in firmware_hil), not 'arm'"),

@@ -206,8 +206,33 @@ struct FirmwareHil::Impl
     uint16_t pwm = 0, servo_us = 1500;
 };
 
+void check_firmware_parameters(const VehicleParameters& p)
+{
+    struct Fixed
+    {
+        const char* name;
+        double given, firmware;
+        const char* where;
+    };
+    const Fixed fixed[] = {{"ticks_per_metre", p.ticks_per_metre, 600, "ODOMETER_TICKS_PER_METRE"},
+                           {"ultrasonic_max_range", p.ultrasonic_max_range, 3.0, "RANGER_MAX_MM"},
+                           {"ultrasonic_min_range", p.ultrasonic_min_range, 0.02, "RANGER_MIN_MM"},
+                           {"state_rate", p.state_rate, 50, "STATE_PERIOD_MS"},
+                           {"watchdog_timeout", p.watchdog_timeout, 0.25, "COMMAND_WATCHDOG_MS"}};
+    for (const auto& f : fixed) {
+        if (std::abs(f.given - f.firmware) > 1e-9 * std::max(1.0, std::abs(f.firmware))) {
+            char text[320];
+            std::snprintf(text, sizeof text,
+                          "firmware_hil: vehicle parameter %s is %g, but the firmware is built for %g (%s in firmware/src/board.h): "
+                          "give the car the firmware's value, or build the firmware for yours",
+                          f.name, f.given, f.firmware, f.where);
+            throw Error(text);
+        }
+    }
+}
+
 FirmwareHil::Impl::Impl(FirmwareHilOptions o)
-    : options(std::move(o)),
+    : options((check_firmware_parameters(o.parameters), std::move(o))),
       sim(options.parameters, options.world, options.car.start, options.car.vehicle_id, options.car.seed),
       rng(options.car.seed + 7919u)
 {

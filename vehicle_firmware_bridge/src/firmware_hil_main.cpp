@@ -55,7 +55,15 @@ int run(int argc, char** argv)
     } catch (const cpm::Error& e) {
         throw cpm::cli::UsageError(e.what());
     }
-    if (parsed.has("--params")) o.parameters = cpm::vehicle::VehicleParameters::load(parsed.get("--params"));
+    if (parsed.has("--params")) {
+        o.parameters = cpm::vehicle::VehicleParameters::load(parsed.get("--params"));
+        try {
+            cpm::vehicle::check_firmware_parameters(o.parameters);
+        } catch (const cpm::Error& e) {
+            throw cpm::cli::UsageError("firmware_hil: --params " + parsed.get("--params") + ": " +
+                                       std::string(e.what()).substr(std::string("firmware_hil: ").size()));
+        }
+    }
     if (parsed.has("--map")) o.world = cpm::vehicle::World::load(parsed.get("--map"));
     o.car.vehicle_id = ids[0];
     if (parsed.has("--start")) o.car.start = cpm::vehicle::parse_poses("--start", parsed.get("--start"), 1)[0];

@@ -104,6 +104,11 @@ private:
 /// another chip than the ATmega2560 (avr-gcc's device note).
 void check_firmware_elf(const std::string& path);
 
+/// Throws cpm::Error naming the parameter when the model car differs from the car the firmware
+/// is built for (firmware/src/board.h: odometer ticks per metre, the rangers' range, the state
+/// rate, the watchdog): the chip would measure another car than the one simulated.
+void check_firmware_parameters(const VehicleParameters& parameters);
+
 /// The default firmware: share/cpm/firmware/cpm_car.elf beside this program's bin/.
 std::string default_firmware_elf();
 
