@@ -67,7 +67,8 @@ public:
         }
         return out;
     }
-    /// Sends `c` every 20 ms for `ms` and returns the state packets meanwhile.
+    /// Sends `c` every 20 ms for `ms` and returns the state packets meanwhile and in the 60 ms
+    /// after the last (so the last packet reports what the chip made of the last command).
     std::vector<cpm::vehicle::StatePacket> command_for(cpm::vehicle::CommandPacket c, int ms)
     {
         std::vector<cpm::vehicle::StatePacket> out;
@@ -77,6 +78,8 @@ public:
             auto s = states_for(20);
             out.insert(out.end(), s.begin(), s.end());
         }
+        auto s = states_for(60);
+        out.insert(out.end(), s.begin(), s.end());
         return out;
     }
 
