@@ -56,34 +56,31 @@ std::string pose_text(double x, double y, double yaw)
     return text;
 }
 
-int vehicle_sim(const std::vector<std::string>& args)
+/// What `cpm vehicle sim` was told, checked before anything starts.
+struct SimRequest
 {
-    auto parsed = cpm::cli::parse_flags(args,
-                                       {{"--id", true}, {"--count", true}, {"--map", true}, {"--start", true},
-                                        {"--spacing", true}, {"--params", true}, {"--calibration", true},
-                                        {"--camera", true}, {"--camera-rate", true}, {"--lanes", true}, {"--seed", true},
-                                        {"--process-per-car", false}, {"--firmware", true}},
-                                       "cpm vehicle sim");
-    const std::string firmware = parsed.get("--firmware", "sim");
-    if (firmware != "sim" && firmware != "avr")
-        throw cpm::cli::UsageError("cpm vehicle sim: --firmware is sim (firmware_sim) or avr (the AVR firmware in firmware_hil), not '" +
-                                   firmware + "'");
-    const bool avr = firmware == "avr";
-    if (!parsed.has("--id")) throw cpm::cli::UsageError("cpm vehicle sim: --id is required (the vehicle id, 1..255)");
-    long long first = cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255);
-    long long count = cpm::cli::parse_integer("--count", parsed.get("--count", "1"), 1, 256 - first);
-    double spacing = cpm::cli::parse_number("--spacing", parsed.get("--spacing", "0.6"), 0, 100);
-    if (parsed.has("--camera") && !parsed.has("--map")) {
-        throw cpm::cli::UsageError("cpm vehicle sim: --camera needs --map (the world whose markers the camera sees)");
-    }
-    if (parsed.has("--camera")) cpm::aruco::Camera::load(parsed.get("--camera"));  // a wrong file fails here, not in a child
-    const bool simulated = std::find(parsed.init_args.begin(), parsed.init_args.end(), "--simulated_time") != parsed.init_args.end();
-    const std::string camera_rate = parsed.get("--camera-rate", "30");
-    cpm::cli::parse_number("--camera-rate", camera_rate, 0.1, 1000);
-    auto start = cpm::vehicle::parse_pose("--start", parsed.get("--start", "0,0,0"));
-    double x0 = start.x, y0 = start.y, yaw = start.yaw;
-    // Start poses: a row behind --start, or spread over a lane graph as central_routing's
-    // simulation spreads them (outside conflict zones, by the seed).
+    cpm::cli::ParsedArgs parsed;
+    long long first = 1, count = 1;
+    bool avr = false;        ///< --firmware avr: the real firmware under firmware_hil
+    bool per_car = false;    ///< a simulator and a bridge process per car
+    bool simulated = false;  ///< --simulated_time
+    std::string camera_rate;
+    std::vector<std::string> poses;  ///< each car's start, "x,y,yaw"
+};
+
+std::string joined(const std::vector<std::string>& items, const char* separator)
+{
+    std::string text;
+    for (const auto& item : items) text += (text.empty() ? "" : separator) + item;
+    return text;
+}
+
+/// Start poses: a row behind --start, --spacing apart, or spread over a lane graph as
+/// central_routing's simulation spreads them (outside conflict zones, by the seed).
+std::vector<std::string> start_poses(const cpm::cli::ParsedArgs& parsed, long long count)
+{
+    const double spacing = cpm::cli::parse_number("--spacing", parsed.get("--spacing", "0.6"), 0, 100);
+    const auto start = cpm::vehicle::parse_pose("--start", parsed.get("--start", "0,0,0"));
     std::vector<std::string> poses;
     if (parsed.has("--lanes")) {
         if (parsed.has("--start")) throw cpm::cli::UsageError("cpm vehicle sim: give --start or --lanes, not both");
@@ -93,119 +90,167 @@ int vehicle_sim(const std::vector<std::string>& args)
         const cpm::routing::ConflictTable table(graph, spread);
         const auto seed = uint64_t(cpm::cli::parse_integer("--seed", parsed.get("--seed", "1"), 0, 1ll << 53));
         for (const auto& p : cpm::routing::spread_cars(table, size_t(count), seed, 0.3)) poses.push_back(pose_text(p.x, p.y, p.yaw));
-    } else {
-        if (parsed.has("--seed")) throw cpm::cli::UsageError("cpm vehicle sim: --seed places cars on --lanes; give --lanes too");
-        for (long long k = 0; k < count; ++k) {
-            poses.push_back(pose_text(x0 - double(k) * spacing * std::cos(yaw), y0 - double(k) * spacing * std::sin(yaw), yaw));
-        }
+        return poses;
     }
+    if (parsed.has("--seed")) throw cpm::cli::UsageError("cpm vehicle sim: --seed places cars on --lanes; give --lanes too");
+    for (long long k = 0; k < count; ++k) {
+        poses.push_back(pose_text(start.x - double(k) * spacing * std::cos(start.yaw), start.y - double(k) * spacing * std::sin(start.yaw),
+                                  start.yaw));
+    }
+    return poses;
+}
 
-    // One name a child: "firmware_sim 3", "vehicle_bridge 3". Bridges are stopped first, so that
-    // none of them reports its simulator's end as a lost link.
-    cpm::ProcessGroup children;
-    auto launch = [&](const std::string& name, std::vector<std::string> argv, bool capture) -> cpm::ChildProcess& {
-        argv.insert(argv.end(), parsed.init_args.begin(), parsed.init_args.end());
-        const bool bridge = name.rfind("vehicle_bridge", 0) == 0;
-        // In this command's process group: whoever stops or freezes it (Ctrl-C, Ctrl-Z, a lab
-        // run, SIGSTOP) reaches its cars too.
-        return children.start(
-            {.name = name, .argv = std::move(argv), .capture_stdout = capture, .stop_order = bridge ? 0 : 1, .own_process_group = false});
-    };
-    cpm::cli::stop_on_signals();
-    std::vector<std::thread> copiers;
-    struct JoinCopiers  // the copiers end when their simulator does (its pipe closes)
-    {
-        std::vector<std::thread>& threads;
-        ~JoinCopiers()
-        {
-            for (auto& t : threads) t.join();
-        }
-    } join_copiers{copiers};
-    // Children are stopped on every way out, before their output copiers are joined.
-    struct StopInOrder
-    {
-        cpm::ProcessGroup& all;
-        ~StopInOrder() { (void)all.stop_all(); }
-    } stop_in_order{children};
-
-    // The car's microcontroller: firmware_sim, or the real firmware in firmware_hil (one chip each).
-    const std::string microcontroller = avr ? "firmware_hil" : "firmware_sim";
-    const std::string firmware_sim = cpm::sibling_executable(microcontroller);
-    const std::string vehicle_bridge = cpm::sibling_executable("vehicle_bridge");
-    const std::string camera_sim = parsed.has("--camera") ? cpm::sibling_executable("camera_sim") : "";
+SimRequest read_request(const std::vector<std::string>& args)
+{
+    SimRequest r;
+    r.parsed = cpm::cli::parse_flags(args,
+                                     {{"--id", true}, {"--count", true}, {"--map", true}, {"--start", true},
+                                      {"--spacing", true}, {"--params", true}, {"--calibration", true},
+                                      {"--camera", true}, {"--camera-rate", true}, {"--lanes", true}, {"--seed", true},
+                                      {"--process-per-car", false}, {"--firmware", true}},
+                                     "cpm vehicle sim");
+    const auto& parsed = r.parsed;
+    const std::string firmware = parsed.get("--firmware", "sim");
+    if (firmware != "sim" && firmware != "avr")
+        throw cpm::cli::UsageError("cpm vehicle sim: --firmware is sim (firmware_sim) or avr (the AVR firmware in firmware_hil), not '" +
+                                   firmware + "'");
+    r.avr = firmware == "avr";
     // Every car in one simulator and one bridge process (a machine carries many more cars so),
-    // or with --process-per-car a simulator and a bridge for each (one car's crash is its own).
-    const bool per_car = parsed.has("--process-per-car") || avr;
-    std::string timers;  // the simulated-time node ids, for cpm lab clock
-    auto join = [](const std::vector<std::string>& items, const char* separator) {
-        std::string text;
-        for (const auto& item : items) text += (text.empty() ? "" : separator) + item;
-        return text;
-    };
-    for (long long group = 0; group < (per_car ? count : 1); ++group) {
-        const long long begin = per_car ? group : 0, end = per_car ? group + 1 : count;
-        std::vector<std::string> ids, starts;
-        for (long long k = begin; k < end; ++k) {
-            ids.push_back(std::to_string(first + k));
-            starts.push_back(poses[size_t(k)]);
-        }
-        const std::string name = join(ids, ",");
-        std::vector<std::string> sim_argv{firmware_sim, "--vehicle_id", name, "--start", join(starts, ";")};
-        for (const char* flag : {"--map", "--params"}) {
-            if (parsed.has(flag)) sim_argv.insert(sim_argv.end(), {flag, parsed.get(flag)});
-        }
-        cpm::ChildProcess& sim = launch(microcontroller + " " + name, sim_argv, true);
-        timers += (timers.empty() ? "" : ",") + cpm::vehicle::FirmwareSimNode::timer_name(uint8_t(std::stoi(ids[0]))) + "," +
-                  cpm::vehicle::BridgeNode::timer_name(uint8_t(std::stoi(ids[0])));
-        std::vector<std::string> devices;
-        for (const auto& id : ids) {
-            // "device: PATH" for one car, "device ID: PATH" for each of several
-            const auto line = sim.read_line();
-            const std::string prefix = ids.size() == 1 ? "device: " : "device " + id + ": ";
-            if (!line) {
-                const auto end = sim.wait(std::chrono::seconds(2));
-                throw cpm::Error(microcontroller + " " + name + " did not start: it " + (end ? end->describe() : "closed its output") +
-                                 " before naming its device (its errors, if any, are above)");
-            }
-            if (line->rfind(prefix, 0) != 0) {
-                throw cpm::Error(microcontroller + " " + name + " did not start: it printed '" + *line + "' where '" + prefix +
-                                 "PATH' was expected");
-            }
-            devices.push_back(line->substr(prefix.size()));
-        }
-        std::vector<std::string> bridge_argv{vehicle_bridge, "--vehicle_id", name, "--device", join(devices, ","),
-                                             "--start", join(starts, ";")};
-        if (parsed.has("--calibration")) bridge_argv.insert(bridge_argv.end(), {"--calibration", parsed.get("--calibration")});
-        const int sim_pid = sim.pid();
-        cpm::ChildProcess& bridge = launch("vehicle_bridge " + name, bridge_argv, false);
-        for (size_t k = 0; k < ids.size(); ++k) {
-            const std::string& id = ids[k];
-            std::printf("vehicle %s: %s pid %d on %s, vehicle_bridge pid %d, start %s\n", id.c_str(), microcontroller.c_str(),
-                        sim_pid, devices[k].c_str(), bridge.pid(), starts[k].c_str());
-            if (!camera_sim.empty()) {
-                cpm::ChildProcess& camera = launch("camera_sim " + id, {camera_sim, "--vehicle_id", id, "--camera", parsed.get("--camera"),
-                                                                        "--map", parsed.get("--map"), "--rate", camera_rate},
-                                                   false);
-                std::printf("vehicle %s: camera_sim pid %d, %s Hz\n", id.c_str(), camera.pid(), camera_rate.c_str());
-                timers += "," + cpm::timer_ids::camera_sim(std::stoi(id));
-            }
-        }
-        std::fflush(stdout);
-        copiers.emplace_back([&sim] {
-            while (auto l = sim.read_line()) {
-                std::printf("%s\n", l->c_str());
-                std::fflush(stdout);
-            }
-        });
+    // or a simulator and a bridge for each (one car's crash is its own; an AVR chip is one car).
+    r.per_car = parsed.has("--process-per-car") || r.avr;
+    if (!parsed.has("--id")) throw cpm::cli::UsageError("cpm vehicle sim: --id is required (the vehicle id, 1..255)");
+    r.first = cpm::cli::parse_integer("--id", parsed.get("--id"), 1, 255);
+    r.count = cpm::cli::parse_integer("--count", parsed.get("--count", "1"), 1, 256 - r.first);
+    if (parsed.has("--camera") && !parsed.has("--map")) {
+        throw cpm::cli::UsageError("cpm vehicle sim: --camera needs --map (the world whose markers the camera sees)");
     }
+    if (parsed.has("--camera")) cpm::aruco::Camera::load(parsed.get("--camera"));  // a wrong file fails here, not in a child
+    r.simulated = std::find(parsed.init_args.begin(), parsed.init_args.end(), "--simulated_time") != parsed.init_args.end();
+    r.camera_rate = parsed.get("--camera-rate", "30");
+    cpm::cli::parse_number("--camera-rate", r.camera_rate, 0.1, 1000);
+    r.poses = start_poses(parsed, r.count);
+    return r;
+}
 
-    if (simulated) {
-        std::printf("simulated time: drive the cars with cpm lab clock --simulated --nodes %s[,your nodes]\n", timers.c_str());
-        std::fflush(stdout);
+/// The started cars: each group's microcontroller (firmware_sim or firmware_hil), bridge and
+/// cameras in one process group, stopped in order (bridges first, so that none reports its
+/// simulator's end as a lost link) on every way out, before the output copiers are joined.
+class Fleet
+{
+public:
+    explicit Fleet(const SimRequest& r)
+        : r_(r), microcontroller_(r.avr ? "firmware_hil" : "firmware_sim"),
+          microcontroller_path_(cpm::sibling_executable(microcontroller_)), bridge_path_(cpm::sibling_executable("vehicle_bridge")),
+          camera_path_(r.parsed.has("--camera") ? cpm::sibling_executable("camera_sim") : "")
+    {
     }
+    ~Fleet()
+    {
+        (void)children_.stop_all();
+        for (auto& t : copiers_) t.join();  // they end when their simulator does (its pipe closes)
+    }
+    Fleet(const Fleet&) = delete;
+    Fleet& operator=(const Fleet&) = delete;
+
+    /// Cars [begin, end) of the request in one simulator and one bridge process.
+    void start_group(long long begin, long long end);
+    /// The simulated-time node ids, for cpm lab clock.
+    const std::string& timers() const { return timers_; }
+    /// Until Ctrl-C or a child's end: 0, or 1 when a child failed.
+    int supervise();
+
+private:
+    cpm::ChildProcess& launch(const std::string& name, std::vector<std::string> argv, bool capture);
+    std::vector<std::string> read_devices(cpm::ChildProcess& sim, const std::string& name, const std::vector<std::string>& ids);
+    void start_camera(const std::string& id);
+
+    const SimRequest& r_;
+    const std::string microcontroller_, microcontroller_path_, bridge_path_, camera_path_;
+    cpm::ProcessGroup children_;
+    std::vector<std::thread> copiers_;
+    std::string timers_;
+};
+
+cpm::ChildProcess& Fleet::launch(const std::string& name, std::vector<std::string> argv, bool capture)
+{
+    argv.insert(argv.end(), r_.parsed.init_args.begin(), r_.parsed.init_args.end());
+    const bool bridge = name.rfind("vehicle_bridge", 0) == 0;
+    // In this command's process group: whoever stops or freezes it (Ctrl-C, Ctrl-Z, a lab run,
+    // SIGSTOP) reaches its cars too.
+    return children_.start(
+        {.name = name, .argv = std::move(argv), .capture_stdout = capture, .stop_order = bridge ? 0 : 1, .own_process_group = false});
+}
+
+std::vector<std::string> Fleet::read_devices(cpm::ChildProcess& sim, const std::string& name, const std::vector<std::string>& ids)
+{
+    std::vector<std::string> devices;
+    for (const auto& id : ids) {
+        // "device: PATH" for one car, "device ID: PATH" for each of several
+        const auto line = sim.read_line();
+        const std::string prefix = ids.size() == 1 ? "device: " : "device " + id + ": ";
+        if (!line) {
+            const auto end = sim.wait(std::chrono::seconds(2));
+            throw cpm::Error(microcontroller_ + " " + name + " did not start: it " + (end ? end->describe() : "closed its output") +
+                             " before naming its device (its errors, if any, are above)");
+        }
+        if (line->rfind(prefix, 0) != 0) {
+            throw cpm::Error(microcontroller_ + " " + name + " did not start: it printed '" + *line + "' where '" + prefix +
+                             "PATH' was expected");
+        }
+        devices.push_back(line->substr(prefix.size()));
+    }
+    return devices;
+}
+
+void Fleet::start_camera(const std::string& id)
+{
+    cpm::ChildProcess& camera = launch("camera_sim " + id,
+                                       {camera_path_, "--vehicle_id", id, "--camera", r_.parsed.get("--camera"), "--map",
+                                        r_.parsed.get("--map"), "--rate", r_.camera_rate},
+                                       false);
+    std::printf("vehicle %s: camera_sim pid %d, %s Hz\n", id.c_str(), camera.pid(), r_.camera_rate.c_str());
+    timers_ += "," + cpm::timer_ids::camera_sim(std::stoi(id));
+}
+
+void Fleet::start_group(long long begin, long long end)
+{
+    const auto& parsed = r_.parsed;
+    std::vector<std::string> ids, starts;
+    for (long long k = begin; k < end; ++k) {
+        ids.push_back(std::to_string(r_.first + k));
+        starts.push_back(r_.poses[size_t(k)]);
+    }
+    const std::string name = joined(ids, ",");
+    std::vector<std::string> sim_argv{microcontroller_path_, "--vehicle_id", name, "--start", joined(starts, ";")};
+    for (const char* flag : {"--map", "--params"}) {
+        if (parsed.has(flag)) sim_argv.insert(sim_argv.end(), {flag, parsed.get(flag)});
+    }
+    cpm::ChildProcess& sim = launch(microcontroller_ + " " + name, sim_argv, true);
+    timers_ += (timers_.empty() ? "" : ",") + cpm::vehicle::FirmwareSimNode::timer_name(uint8_t(std::stoi(ids[0]))) + "," +
+               cpm::vehicle::BridgeNode::timer_name(uint8_t(std::stoi(ids[0])));
+    const auto devices = read_devices(sim, name, ids);
+    std::vector<std::string> bridge_argv{bridge_path_, "--vehicle_id", name, "--device", joined(devices, ","), "--start", joined(starts, ";")};
+    if (parsed.has("--calibration")) bridge_argv.insert(bridge_argv.end(), {"--calibration", parsed.get("--calibration")});
+    cpm::ChildProcess& bridge = launch("vehicle_bridge " + name, bridge_argv, false);
+    for (size_t k = 0; k < ids.size(); ++k) {
+        std::printf("vehicle %s: %s pid %d on %s, vehicle_bridge pid %d, start %s\n", ids[k].c_str(), microcontroller_.c_str(), sim.pid(),
+                    devices[k].c_str(), bridge.pid(), starts[k].c_str());
+        if (!camera_path_.empty()) start_camera(ids[k]);
+    }
+    std::fflush(stdout);
+    copiers_.emplace_back([&sim] {
+        while (auto l = sim.read_line()) {
+            std::printf("%s\n", l->c_str());
+            std::fflush(stdout);
+        }
+    });
+}
+
+int Fleet::supervise()
+{
     int exit_code = 0;
     for (bool ended = false; !cpm::cli::stop_requested() && !ended;) {
-        for (const auto& e : children.poll()) {
+        for (const auto& e : children_.poll()) {
             // Exit 0 unasked: the lab's clock stopped the timers (cpm lab clock), a normal end.
             std::fprintf(stderr, "cpm vehicle sim: %s %s%s; stopping the others\n", e.name.c_str(), e.end.describe().c_str(),
                          e.end.ok() ? " (the lab's clock stopped it)" : "");
@@ -215,6 +260,21 @@ int vehicle_sim(const std::vector<std::string>& args)
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     return exit_code;
+}
+
+int vehicle_sim(const std::vector<std::string>& args)
+{
+    const SimRequest request = read_request(args);
+    cpm::cli::stop_on_signals();
+    Fleet fleet(request);
+    for (long long group = 0; group < (request.per_car ? request.count : 1); ++group) {
+        fleet.start_group(request.per_car ? group : 0, request.per_car ? group + 1 : request.count);
+    }
+    if (request.simulated) {
+        std::printf("simulated time: drive the cars with cpm lab clock --simulated --nodes %s[,your nodes]\n", fleet.timers().c_str());
+        std::fflush(stdout);
+    }
+    return fleet.supervise();
 }
 
 }  // namespace
