@@ -22,6 +22,10 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
+#include <fcntl.h>
+#include <random>
+#include <unistd.h>
 #include <cmath>
 #include <memory>
 #include <mutex>
@@ -264,6 +268,37 @@ inline double mean_speed(const std::vector<VehicleObservation>& points)
     double dt = double(points.back().header().create_stamp().nanoseconds() -
                        points.front().header().create_stamp().nanoseconds()) * 1e-9;
     return length / dt;
+}
+
+/// Forty bursts of 37 random bytes (one zero among them) into the line towards the car's
+/// microcontroller, 50 ms apart: between the bridge's commands.
+inline void write_garbage_bursts(const std::string& device)
+{
+    int line = ::open(device.c_str(), O_WRONLY | O_NOCTTY);
+    ASSERT_GE(line, 0);
+    std::mt19937 rng(7);
+    for (int burst = 0; burst < 40; ++burst) {
+        uint8_t junk[37];
+        for (auto& b : junk) b = uint8_t(rng());
+        junk[10] = 0;
+        ASSERT_EQ(::write(line, junk, sizeof junk), ssize_t(sizeof junk));
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ::close(line);
+}
+
+/// With one state frame in five corrupted on its way to the bridge: still publishing at the
+/// rate the corruption leaves (80 of the 100 states of two seconds, binomial sd 4; at least 60,
+/// counted by their stamps once they have arrived - a broken link gives none), and still driving
+/// at the commanded 0.5 m/s.
+inline void expect_driving_through_corruption(const Watcher& watch)
+{
+    const uint64_t t0 = cpm::get_time_ns();
+    auto states_in_two_seconds = [&] { return watch.states_created_after(t0) - watch.states_created_after(t0 + 2 * kSecond); };
+    EXPECT_TRUE(cpm_test::wait_until([&] { return states_in_two_seconds() >= 60; }, std::chrono::seconds(6))) << states_in_two_seconds();
+    auto recent = watch.observations_between(t0, t0 + kSecond / 2);
+    ASSERT_GT(recent.size(), 10u);
+    EXPECT_NEAR(mean_speed(recent), 0.5, 0.1);
 }
 
 }  // namespace car_harness

@@ -256,27 +256,8 @@ TEST_F(VehicleEndToEnd, CorruptBytesOnTheLineAreSurvivedBothWays)
     Car car({"--corrupt-rate", "0.2"});  // one state frame in five corrupted on its way to the bridge
     ASSERT_TRUE(watch.wait_for_states(5)) << car.bridge->errors();
     Repeater<VehicleCommandSpeedCurvature> command(participant, "vehicleCommandSpeedCurvature", speed_curvature(0.5, 0));
-    // Garbage into the line towards the simulator, between the bridge's commands.
-    int line = ::open(car.device.c_str(), O_WRONLY | O_NOCTTY);
-    ASSERT_GE(line, 0);
-    std::mt19937 rng(7);
-    for (int burst = 0; burst < 40; ++burst) {
-        uint8_t junk[37];
-        for (auto& b : junk) b = uint8_t(rng());
-        junk[10] = 0;
-        ASSERT_EQ(::write(line, junk, sizeof junk), ssize_t(sizeof junk));
-        std::this_thread::sleep_for(50ms);
-    }
-    ::close(line);
-    // Still publishing at the rate the corruption leaves: one state frame in five is thrown
-    // away, so 80 of the 100 states of two seconds get through (binomial, sd 4). At least 60,
-    // counted by their stamps once they have arrived (a broken link gives none).
-    const uint64_t t0 = cpm::get_time_ns();
-    auto states_in_two_seconds = [&] { return watch.states_created_after(t0) - watch.states_created_after(t0 + 2 * kSecond); };
-    EXPECT_TRUE(cpm_test::wait_until([&] { return states_in_two_seconds() >= 60; }, 6s)) << states_in_two_seconds();
-    auto recent = watch.observations_between(t0, t0 + kSecond / 2);
-    ASSERT_GT(recent.size(), 10u);
-    EXPECT_NEAR(mean_speed(recent), 0.5, 0.1);  // and still driving
+    write_garbage_bursts(car.device);  // towards the microcontroller, between the bridge's commands
+    expect_driving_through_corruption(watch);
 
     car.bridge->kill(SIGTERM);
     car.sim->kill(SIGTERM);

@@ -527,18 +527,12 @@ void FirmwareHil::run_to(uint64_t t)
     while (d.avr->cycle < target) {
         const int state = avr_run(d.avr);
         if (state == cpu_Done || state == cpu_Crashed) {
-            throw Error("firmware_hil: the chip " + std::string(state == cpu_Crashed ? "crashed" : "stopped") + " at " +
-                        std::to_string(double(d.avr->cycle) * kNsPerCycle * 1e-9) + " s (pc 0x" +
-                        [&] {
-                            char pc[16];
-                            std::snprintf(pc, sizeof pc, "%x", unsigned(d.avr->pc));
-                            return std::string(pc);
-                        }() +
-                        ")");
+            char where[64];
+            std::snprintf(where, sizeof where, " at %.6f s (pc 0x%x)", double(d.avr->cycle) * kNsPerCycle * 1e-9, unsigned(d.avr->pc));
+            throw Error(std::string("firmware_hil: the chip ") + (state == cpu_Crashed ? "crashed" : "stopped") + where);
         }
     }
     d.stats.wall_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-    d.stats.cycles = d.avr->cycle;
 }
 
 bool FirmwareHil::frame_waiting() const

@@ -19,7 +19,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <map>
 #include <cstdio>
 #include <thread>
 
@@ -55,18 +54,9 @@ struct FirmwareHilNode::Impl
     {
         for (auto& o : others.take()) {
             if (o.vehicle_id() == vehicle_id) continue;
-            other_cars[o.vehicle_id()] = {o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()}};
+            other_cars.seen(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
         }
-        std::vector<Pose> poses;
-        for (auto it = other_cars.begin(); it != other_cars.end();) {
-            if (it->second.first + 1'000'000'000ull < now) {
-                it = other_cars.erase(it);
-            } else {
-                poses.push_back(it->second.second);
-                ++it;
-            }
-        }
-        hil.car().set_other_cars(poses);
+        hil.car().set_other_cars(other_cars.current(now));
     }
 
     /// Simulated time: the bridge answered the last state packet before the lab clock moved on,
@@ -95,7 +85,7 @@ struct FirmwareHilNode::Impl
     Participant& participant;
     Writer<VehicleObservation> observations;
     ReaderAbstract<VehicleObservation> others;
-    std::map<uint8_t, std::pair<uint64_t, Pose>> other_cars;  ///< (seen at, pose)
+    OtherCars other_cars;
     std::shared_ptr<Timer> timer;
     uint64_t t0 = 0;  ///< lab time of the chip's reset
     LogThrottle lag_log;

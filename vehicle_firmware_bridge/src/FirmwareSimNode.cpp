@@ -113,7 +113,7 @@ struct FirmwareSimNode::Impl
     Participant& participant;
     Writer<VehicleObservation> observations;
     ReaderAbstract<VehicleObservation> others;
-    std::map<uint8_t, std::pair<uint64_t, Pose>> other_cars;  ///< cars of other processes: (seen at, pose)
+    OtherCars other_cars;  ///< cars of other processes
     std::shared_ptr<Timer> timer;
     bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
@@ -187,18 +187,9 @@ void FirmwareSimNode::Impl::see_each_other()
     const uint64_t now = get_time_ns();
     for (auto& o : others.take()) {
         if (own_ids.count(o.vehicle_id())) continue;
-        other_cars[o.vehicle_id()] = {o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()}};
+        other_cars.seen(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
     }
-    std::vector<Pose> everyone;  // other processes' cars first, then this process's in order
-    for (auto it = other_cars.begin(); it != other_cars.end();) {
-        // A car not seen for a second has left the world.
-        if (it->second.first + 1'000'000'000ull < now) {
-            it = other_cars.erase(it);
-        } else {
-            everyone.push_back(it->second.second);
-            ++it;
-        }
-    }
+    std::vector<Pose> everyone = other_cars.current(now);  // other processes' cars first, then this process's in order
     const size_t foreign = everyone.size();
     for (const auto& car : cars) everyone.push_back(car->sim.model().pose());
     std::vector<Pose> poses;

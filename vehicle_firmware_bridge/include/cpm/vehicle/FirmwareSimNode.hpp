@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <utility>
@@ -17,6 +18,32 @@ struct SimulatedCar
     Pose start;
     uint32_t seed = 0;     ///< noise seed
     std::string link;      ///< also make this path a symlink to the car's new pty (empty: none)
+};
+
+/// The cars of other processes as their vehicleObservation shows them, for a simulator's rangers:
+/// each one's newest pose, forgotten a second after it was last seen (it has left the world).
+class OtherCars
+{
+public:
+    /// Takes a car's observation (stamp: its create_stamp).
+    void seen(uint8_t vehicle_id, uint64_t stamp_ns, const Pose& pose) { cars_[vehicle_id] = {stamp_ns, pose}; }
+    /// The poses seen within the second before `now_ns`, by vehicle id; older ones are dropped.
+    std::vector<Pose> current(uint64_t now_ns)
+    {
+        std::vector<Pose> poses;
+        for (auto it = cars_.begin(); it != cars_.end();) {
+            if (it->second.first + 1'000'000'000ull < now_ns) {
+                it = cars_.erase(it);
+            } else {
+                poses.push_back(it->second.second);
+                ++it;
+            }
+        }
+        return poses;
+    }
+
+private:
+    std::map<uint8_t, std::pair<uint64_t, Pose>> cars_;
 };
 
 /// What firmware_sim is told on its command line.
