@@ -108,3 +108,25 @@ def test_readers_and_writers_name_a_wrong_type_or_option():
         cpm.MultiVehicleReader(T.Log, "log", [1])
     with pytest.raises(ValueError, match="vehicle id 0 is not 1..255"):
         cpm.MultiVehicleReader(T.VehicleState, "vehicleState", [0])
+
+
+def test_the_stubs_name_every_public_name_of_the_package_and_its_compiled_module():
+    """Editors complete from the stubs: every name the package exports and every public name of
+    the compiled module is in them, with a signature where it is a function."""
+    import ast
+    import os
+    folder = os.path.dirname(cpm.__file__)
+    with open(os.path.join(folder, "_cpm.pyi"), encoding="utf-8") as f:
+        tree = ast.parse(f.read())
+    stubbed = {n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    stubbed |= {t.target.id for t in tree.body if isinstance(t, ast.AnnAssign)}
+    with open(os.path.join(folder, "types.pyi"), encoding="utf-8") as f:
+        typed = {n.name for n in ast.parse(f.read()).body if isinstance(n, ast.ClassDef)}
+    missing = [n for n in dir(cpm._cpm) if not n.startswith("_") and n not in stubbed and n not in typed]
+    assert missing == [], f"not in _cpm.pyi: {missing}"
+    # The Timer's methods with their parameters, as pybind11 gives them.
+    timer = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Timer")
+    methods = {f.name: [a.arg for a in f.args.args] for f in timer.body if isinstance(f, ast.FunctionDef)}
+    assert "start" in methods and "stop" in methods, methods
+    functions = {f.name: f for f in tree.body if isinstance(f, ast.FunctionDef)}
+    assert ast.unparse(functions["get_time_ns"].returns) == "int"
