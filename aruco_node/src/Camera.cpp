@@ -79,9 +79,36 @@ YAML::Node parse(Checker& c, std::string text)
     return {};
 }
 
+/// world_x, world_y, world_z and world_rotation (a rotation matrix), all or none; nullopt when
+/// none is there (and the placement does not ask for them).
+std::optional<OverheadPose> overhead_pose(Checker& check, const YAML::Node& root, CameraPlacement placement)
+{
+    const bool any = root["world_x"] || root["world_y"] || root["world_z"] || root["world_rotation"];
+    if (!any) {
+        if (placement == CameraPlacement::overhead) {
+            check.error("", "no overhead pose (world_x, world_y, world_z, world_rotation): this camera has not been located in "
+                            "the map; run cpm camera locate --camera FILE --world FILE --image IMAGE");
+        }
+        return std::nullopt;
+    }
+    OverheadPose pose;
+    pose.position = {number(check, root, "world_x"), number(check, root, "world_y"), number(check, root, "world_z")};
+    const auto r = matrix(check, root, "world_rotation", 3, 3);
+    if (r.empty()) return std::nullopt;
+    pose.rotation = cv::Matx33d(r.data());
+    const double off = cv::norm(cv::Mat(pose.rotation.t() * pose.rotation - cv::Matx33d::eye()), cv::NORM_INF);
+    if (off > 1e-3 || cv::determinant(pose.rotation) < 0) {
+        check.error(root["world_rotation"], "world_rotation", "not a rotation matrix (R^T R differs from I by " + std::to_string(off) +
+                                                                   ", det " + std::to_string(cv::determinant(pose.rotation)) + ")");
+        return std::nullopt;
+    }
+    if (root["world_residual_px"]) pose.residual_px = number(check, root, "world_residual_px");
+    return pose;
+}
+
 }  // namespace
 
-Camera Camera::load(const std::string& path)
+Camera Camera::load(const std::string& path, CameraPlacement placement)
 {
     Checker check(path);
     const YAML::Node root = parse(check, read_text_file(path, "camera file"));  // names a directory or a missing file
@@ -99,12 +126,15 @@ Camera Camera::load(const std::string& path)
     }
     const auto d = matrix(check, root, "distortion_coefficients", 1, 5);
     for (size_t i = 0; i < d.size(); ++i) c.distortion[int(i)] = d[i];
-    c.mount.x = number(check, root, "mount_x");
-    c.mount.y = number(check, root, "mount_y");
-    c.mount.z = number(check, root, "mount_z");
-    c.mount.yaw = number(check, root, "mount_yaw");
-    c.mount.pitch = number(check, root, "mount_pitch");
-    if (std::abs(c.mount.pitch) >= M_PI / 2) check.error(root["mount_pitch"], "mount_pitch", "must be within ±90°");
+    if (placement == CameraPlacement::on_car || root["mount_x"]) {
+        c.mount.x = number(check, root, "mount_x");
+        c.mount.y = number(check, root, "mount_y");
+        c.mount.z = number(check, root, "mount_z");
+        c.mount.yaw = number(check, root, "mount_yaw");
+        c.mount.pitch = number(check, root, "mount_pitch");
+        if (std::abs(c.mount.pitch) >= M_PI / 2) check.error(root["mount_pitch"], "mount_pitch", "must be within ±90°");
+    }
+    c.overhead = overhead_pose(check, root, placement);
     check.throw_if_errors();
     return c;
 }
@@ -116,6 +146,12 @@ void Camera::save(const std::string& path) const
     fs << "image_width" << width << "image_height" << height;
     fs << "camera_matrix" << cv::Mat(camera_matrix);
     fs << "distortion_coefficients" << cv::Mat(distortion).reshape(1, 1);
+    if (overhead) {
+        fs << "world_x" << overhead->position[0] << "world_y" << overhead->position[1] << "world_z" << overhead->position[2];
+        fs << "world_rotation" << cv::Mat(overhead->rotation);
+        if (overhead->residual_px >= 0) fs << "world_residual_px" << overhead->residual_px;
+        return;
+    }
     fs << "mount_x" << mount.x << "mount_y" << mount.y << "mount_z" << mount.z << "mount_yaw" << mount.yaw << "mount_pitch"
        << mount.pitch;
 }

@@ -129,7 +129,7 @@ TEST(World, MapErrorsNameTheFileAndJsonPath)
     EXPECT_EQ(message(R"({"walls": [[0,0,1,0], [1,2,3]]})"), "map.json: $.walls[1]: expected [x1, y1, x2, y2], got [1,2,3]");
     EXPECT_EQ(message(R"({"walls": [[0,0,"a",0]]})"), "map.json: $.walls[0][2]: expected a finite number, got \"a\"");
     EXPECT_EQ(message(R"({"markers": [{"id": 1, "x": 0, "y": 0}]})"), "map.json: $.markers[0]: missing \"yaw\"");
-    EXPECT_EQ(message(R"({"wall": []})"), "map.json: $.wall: unknown key (did you mean 'walls'?); known: walls, markers, gates");
+    EXPECT_EQ(message(R"({"wall": []})"), "map.json: $.wall: unknown key (did you mean 'walls'?); known: walls, markers, gates, roof_markers, floor_markers");
     EXPECT_NE(message("{").find("map.json: not valid JSON"), std::string::npos);
     // Every error of the file at once, in the order of the file.
     EXPECT_EQ(message(R"({"walls": [[0,0,0,0]], "markers": [{"id": 1, "x": 0, "y": 0, "yaw": 0, "size": -1},

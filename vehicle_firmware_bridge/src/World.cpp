@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cmath>
 #include <limits>
 #include <initializer_list>
@@ -126,7 +127,97 @@ std::vector<Gate> read_gates(Checker& c, const json& gates, const std::vector<Ma
     return out;
 }
 
+/// A side (size) in metres, > 0, if the member is given; `fallback` otherwise.
+double side_member(Checker& c, const json& m, const std::string& at, double fallback)
+{
+    if (!m.contains("size")) return fallback;
+    const auto v = c.number(m["size"], Checker::member(at, "size"));
+    if (v && *v <= 0) c.error(Checker::member(at, "size"), "must be > 0");
+    return v.value_or(fallback);
+}
+
+/// `"roof_markers": {"<vehicle id>": {"id": N, "size": 0.08, "z": 0.1}}`: one marker per car, no
+/// marker id on two roofs.
+std::vector<RoofMarker> read_roof_markers(Checker& c, const json& roofs)
+{
+    std::vector<RoofMarker> out;
+    if (!c.object(roofs, "$.roof_markers", "an object {\"<vehicle id>\": {\"id\", \"size\", \"z\"}}")) return out;
+    for (auto it = roofs.begin(); it != roofs.end(); ++it) {
+        const std::string at = "$.roof_markers[\"" + it.key() + "\"]";
+        RoofMarker r;
+        char* end = nullptr;
+        const long vehicle = std::strtol(it.key().c_str(), &end, 10);
+        if (it.key().empty() || *end != '\0' || vehicle < 1 || vehicle > 255) {
+            c.error(at, "the key must be a vehicle id 1..255, got \"" + it.key() + "\"");
+            continue;
+        }
+        r.vehicle_id = int(vehicle);
+        if (!c.object(*it, at, "an object {\"id\", \"size\", \"z\"}")) continue;
+        c.keys(*it, at, {"id", "size", "z"});
+        const size_t before = c.errors().size();
+        if (!it->contains("id")) c.error(at, "missing \"id\" (the marker's id)");
+        else if (auto id = c.integer((*it)["id"], Checker::member(at, "id"), 0)) r.id = int(*id);
+        r.size = side_member(c, *it, at, r.size);
+        if (it->contains("z")) r.z = c.number((*it)["z"], Checker::member(at, "z"), 0, 10).value_or(r.z);
+        if (c.errors().size() != before) continue;
+        for (const auto& o : out) {
+            if (o.id == r.id) {
+                c.error(Checker::member(at, "id"), "marker " + std::to_string(r.id) + " is on the roofs of cars " +
+                                                       std::to_string(o.vehicle_id) + " and " + std::to_string(r.vehicle_id) +
+                                                       " (the overhead camera could not tell them apart)");
+            }
+        }
+        out.push_back(r);
+    }
+    std::sort(out.begin(), out.end(), [](const RoofMarker& a, const RoofMarker& b) { return a.vehicle_id < b.vehicle_id; });
+    return out;
+}
+
+/// `"floor_markers": [{"id", "x", "y", "yaw", "size"}]`: ids unique and on no roof.
+std::vector<FloorMarker> read_floor_markers(Checker& c, const json& floors, const std::vector<RoofMarker>& roofs)
+{
+    std::vector<FloorMarker> out;
+    if (!c.array(floors, "$.floor_markers", "an array of {\"id\", \"x\", \"y\", \"yaw\", \"size\"}")) return out;
+    for (size_t i = 0; i < floors.size(); ++i) {
+        const std::string at = Checker::item("$.floor_markers", i);
+        const json& m = floors[i];
+        if (!c.object(m, at, "an object {\"id\", \"x\", \"y\", \"yaw\", \"size\"}")) continue;
+        c.keys(m, at, {"id", "x", "y", "yaw", "size"});
+        FloorMarker f;
+        const size_t before = c.errors().size();
+        if (!m.contains("id")) c.error(at, "missing \"id\"");
+        else if (auto id = c.integer(m["id"], Checker::member(at, "id"), 0)) f.id = int(*id);
+        for (auto [name, field] : {std::pair{"x", &f.x}, {"y", &f.y}, {"yaw", &f.yaw}}) *field = c.number_member(m, at, name).value_or(0);
+        f.size = side_member(c, m, at, f.size);
+        if (c.errors().size() != before) continue;
+        const std::string id_at = Checker::member(at, "id");
+        if (std::any_of(out.begin(), out.end(), [&](const FloorMarker& o) { return o.id == f.id; })) {
+            c.error(id_at, "id " + std::to_string(f.id) + " is used twice");
+            continue;
+        }
+        for (const auto& r : roofs) {
+            if (r.id == f.id) c.error(id_at, "id " + std::to_string(f.id) + " is also the roof marker of car " + std::to_string(r.vehicle_id));
+        }
+        out.push_back(f);
+    }
+    return out;
+}
+
 }  // namespace
+
+void World::set_overhead_markers(std::vector<RoofMarker> roof, std::vector<FloorMarker> floor)
+{
+    roof_markers_ = std::move(roof);
+    floor_markers_ = std::move(floor);
+}
+
+const RoofMarker* World::roof_marker(int marker_id) const
+{
+    for (const auto& r : roof_markers_) {
+        if (r.id == marker_id) return &r;
+    }
+    return nullptr;
+}
 
 World::World(std::vector<Segment> walls, std::vector<Marker> markers, std::vector<Gate> gates)
     : walls_(std::move(walls)), markers_(std::move(markers)), gates_(std::move(gates))
@@ -142,6 +233,16 @@ std::string World::to_json() const
     for (const auto& m : markers_) j["markers"].push_back({{"id", m.id}, {"x", m.x}, {"y", m.y}, {"yaw", m.yaw}, {"size", m.size}, {"z", m.z}});
     j["gates"] = json::array();
     for (const auto& g : gates_) j["gates"].push_back({{"left", g.left}, {"right", g.right}});
+    if (!roof_markers_.empty()) {
+        j["roof_markers"] = json::object();
+        for (const auto& r : roof_markers_) j["roof_markers"][std::to_string(r.vehicle_id)] = {{"id", r.id}, {"size", r.size}, {"z", r.z}};
+    }
+    if (!floor_markers_.empty()) {
+        j["floor_markers"] = json::array();
+        for (const auto& f : floor_markers_) {
+            j["floor_markers"].push_back({{"id", f.id}, {"x", f.x}, {"y", f.y}, {"yaw", f.yaw}, {"size", f.size}});
+        }
+    }
     return j.dump(2) + "\n";
 }
 
@@ -164,13 +265,17 @@ World World::parse(const std::string& json_text, const std::string& source)
     const auto j = c.parse(json_text);
     c.throw_if_errors();
     if (!c.object(*j, "$", "an object with \"walls\", \"markers\" and \"gates\"")) c.throw_if_errors();
-    c.keys(*j, "$", {"walls", "markers", "gates"});
+    c.keys(*j, "$", {"walls", "markers", "gates", "roof_markers", "floor_markers"});
     const json none = json::array();
     std::vector<Segment> walls = read_walls(c, j->value("walls", none));
     std::vector<Marker> markers = read_markers(c, j->value("markers", none));
     std::vector<Gate> gates = read_gates(c, j->value("gates", none), markers);
+    std::vector<RoofMarker> roofs = read_roof_markers(c, j->value("roof_markers", json::object()));
+    std::vector<FloorMarker> floors = read_floor_markers(c, j->value("floor_markers", none), roofs);
     c.throw_if_errors();
-    return World(std::move(walls), std::move(markers), std::move(gates));
+    World world(std::move(walls), std::move(markers), std::move(gates));
+    world.set_overhead_markers(std::move(roofs), std::move(floors));
+    return world;
 }
 
 double ray_segment_distance(double x, double y, double dx, double dy, const Segment& s)

@@ -25,6 +25,25 @@ struct Gate
     int left = 0, right = 0;
 };
 
+/// The marker lying flat on a car's roof, for the overhead camera (IPS): centred over the point
+/// whose pose vehicleObservation reports, its x axis along the car's heading; `size` is the side
+/// of its black square, `z` the roof's height above the floor, metres.
+struct RoofMarker
+{
+    int vehicle_id = 0;
+    int id = 0;
+    double size = 0.08, z = 0.1;
+};
+
+/// A marker lying flat on the floor at a known place, for locating the overhead camera: its
+/// centre (x, y), the direction of its x axis in the map (yaw, radians), the side of its black
+/// square (size, metres).
+struct FloorMarker
+{
+    int id = 0;
+    double x = 0, y = 0, yaw = 0, size = 0.15;
+};
+
 /// The 2-D world the simulated cars drive in: walls, markers and gates (format: scenarios/README.md).
 class World
 {
@@ -32,7 +51,11 @@ public:
     World() = default;
     World(std::vector<Segment> walls, std::vector<Marker> markers, std::vector<Gate> gates = {});
 
-    /// Reads a map file `{"walls": [[x1, y1, x2, y2], ...], "markers": [...], "gates": [...]}`.
+    /// Roof and floor markers (the overhead camera's) are set on their own.
+    void set_overhead_markers(std::vector<RoofMarker> roof, std::vector<FloorMarker> floor);
+
+    /// Reads a map file `{"walls": [[x1, y1, x2, y2], ...], "markers": [...], "gates": [...],
+    /// "roof_markers": {"<vehicle id>": {"id", "size", "z"}}, "floor_markers": [...]}`.
     /// Throws cpm::Error naming the file and the JSON path of the first wrong entry.
     static World load(const std::string& path);
     /// The same from JSON text; `source` names it in error messages.
@@ -46,6 +69,11 @@ public:
     const std::vector<Gate>& gates() const { return gates_; }
     /// The marker with this id, or nullptr.
     const Marker* marker(int id) const;
+    /// The cars' roof markers, by vehicle id order.
+    const std::vector<RoofMarker>& roof_markers() const { return roof_markers_; }
+    const std::vector<FloorMarker>& floor_markers() const { return floor_markers_; }
+    /// The roof marker with this marker id, or nullptr.
+    const RoofMarker* roof_marker(int marker_id) const;
 
     /// Distance (m) from (x, y) along direction `angle` (rad) to the nearest wall or extra
     /// segment, or max_range when nothing is closer. O(walls + extra).
@@ -61,6 +89,8 @@ private:
     std::vector<Segment> walls_;
     std::vector<Marker> markers_;
     std::vector<Gate> gates_;
+    std::vector<RoofMarker> roof_markers_;
+    std::vector<FloorMarker> floor_markers_;
 };
 
 /// Distance along the ray from (x, y) in direction (dx, dy) (unit vector) to the segment,
