@@ -1,6 +1,9 @@
 #include <cpm/aruco/CameraSimNode.hpp>
 
+#include <cpm/Error.hpp>
 #include <cpm/LogThrottle.hpp>
+#include <cpm/MultiVehicleReader.hpp>
+#include <cpm/aruco/Overhead.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/Reader.hpp>
 #include <cpm/Timer.hpp>
@@ -18,16 +21,69 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <map>
 #include <mutex>
 #include <vector>
 
 namespace cpm::aruco {
+namespace {
+
+/// A car's true pose moved on to the frame's moment by its motion between its last two
+/// observations (they come at 50 Hz; up to 100 ms ahead).
+class PoseAhead
+{
+public:
+    /// `stamp`: the newest observation's create_stamp. Returns the pose at `now` and sets
+    /// `exposure` to the moment it is for.
+    vehicle::Pose at(const vehicle::Pose& newest_pose, uint64_t stamp, uint64_t now, uint64_t& exposure)
+    {
+        if (stamp != newest_stamp_) {
+            previous_ = newest_;
+            previous_stamp_ = newest_stamp_;
+            newest_ = newest_pose;
+            newest_stamp_ = stamp;
+        }
+        vehicle::Pose p = newest_;
+        exposure = newest_stamp_;
+        if (previous_stamp_ && newest_stamp_ > previous_stamp_ && now > newest_stamp_ && now - newest_stamp_ <= 100'000'000) {
+            const double k = double(now - newest_stamp_) / double(newest_stamp_ - previous_stamp_);
+            p.x += k * (newest_.x - previous_.x);
+            p.y += k * (newest_.y - previous_.y);
+            p.yaw += k * std::remainder(newest_.yaw - previous_.yaw, 2 * M_PI);
+            exposure = now;
+        }
+        return p;
+    }
+
+private:
+    vehicle::Pose newest_, previous_;
+    uint64_t newest_stamp_ = 0, previous_stamp_ = 0;
+};
+
+/// The frame's bytes and stamps from a mono8 image.
+void fill_frame(CameraFrame& message, const cv::Mat& image, uint64_t exposure)
+{
+    message.header().create_stamp().nanoseconds(exposure);
+    message.header().valid_after_stamp().nanoseconds(exposure);
+    auto& data = message.data();
+    data.resize(image.total());
+    std::memcpy(data.data(), image.data, image.total());
+}
+
+/// Render times, bounded.
+void keep_time(std::vector<uint64_t>& times, std::chrono::steady_clock::time_point started)
+{
+    times.push_back(uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - started).count()));
+    if (times.size() > 100000) times.erase(times.begin(), times.begin() + 50000);
+}
+
+}  // namespace
 
 struct CameraSimNode::Impl
 {
     explicit Impl(CameraSimOptions o)
         : options(std::move(o)), renderer(options.world, options.camera, options.render),
-          poses(topics::vehicle_observation.name, topics::vehicle_observation.reader_for(options.vehicle_id)),
+          poses(options.truth_topic, topics::vehicle_observation.reader_for(options.vehicle_id)),
           frames(topics::camera_frame.name, topics::camera_frame.writer)
     {
         message.vehicle_id(options.vehicle_id);
@@ -46,40 +102,20 @@ struct CameraSimNode::Impl
             ++without_pose;
             uint64_t held = 0;
             if (no_pose_log.allow(now, held)) {
-                CPM_LOG_WARN("camera_sim %u: no VehicleObservation of the car yet; no frame", unsigned(options.vehicle_id));
+                CPM_LOG_WARN("camera_sim %u: no VehicleObservation of the car on %s yet; no frame", unsigned(options.vehicle_id),
+                             options.truth_topic.c_str());
             }
             return;
         }
-        // The exposure is now: the newest pose moved on by the motion between the last two
-        // (observations come at 50 Hz; up to 100 ms ahead).
-        const uint64_t stamp = pose.sample.header().create_stamp().nanoseconds();
+        uint64_t exposure = 0;
         const auto& p = pose.sample.pose();
-        if (stamp != newest_stamp) {
-            previous = newest;
-            previous_stamp = newest_stamp;
-            newest = {p.x(), p.y(), p.yaw()};
-            newest_stamp = stamp;
-        }
-        vehicle::Pose at = newest;
-        uint64_t exposure = newest_stamp;
-        if (previous_stamp && newest_stamp > previous_stamp && now > newest_stamp && now - newest_stamp <= 100'000'000) {
-            const double k = double(now - newest_stamp) / double(newest_stamp - previous_stamp);
-            at.x += k * (newest.x - previous.x);
-            at.y += k * (newest.y - previous.y);
-            at.yaw += k * std::remainder(newest.yaw - previous.yaw, 2 * M_PI);
-            exposure = now;
-        }
+        const vehicle::Pose at = ahead.at({p.x(), p.y(), p.yaw()}, pose.sample.header().create_stamp().nanoseconds(), now, exposure);
         renderer.render(at, image);
-        message.header().create_stamp().nanoseconds(exposure);
-        message.header().valid_after_stamp().nanoseconds(exposure);
-        auto& data = message.data();
-        data.resize(image.total());
-        std::memcpy(data.data(), image.data, image.total());
+        fill_frame(message, image, exposure);
         (void)frames.write(message);
         std::lock_guard<std::mutex> lock(mutex);
         ++count;
-        render_ns.push_back(uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - started).count()));
-        if (render_ns.size() > 100000) render_ns.erase(render_ns.begin(), render_ns.begin() + 50000);
+        keep_time(render_ns, started);
     }
 
     CameraSimOptions options;
@@ -88,8 +124,7 @@ struct CameraSimNode::Impl
     Writer<CameraFrame> frames;
     CameraFrame message;
     cv::Mat image;
-    vehicle::Pose newest, previous;
-    uint64_t newest_stamp = 0, previous_stamp = 0;
+    PoseAhead ahead;
     mutable std::mutex mutex;
     uint64_t count = 0, without_pose = 0;
     std::vector<uint64_t> render_ns;
@@ -106,7 +141,7 @@ void CameraSimNode::run(const std::function<bool()>& stop_requested)
     const std::string node_id = timer_ids::camera_sim(impl_->options.vehicle_id);
     // On the simulated clock: the car's true pose must reach the first frame.
     if (init_settings().simulated_time &&
-        !wait_for_inputs(node_id, {{topics::vehicle_observation.name, [&] { return impl_->poses.matched_publications(); }}},
+        !wait_for_inputs(node_id, {{impl_->options.truth_topic, [&] { return impl_->poses.matched_publications(); }}},
                          stop_requested)) {
         return;
     }
@@ -122,6 +157,87 @@ std::string CameraSimNode::stats_json() const
     std::snprintf(line, sizeof line, "{\"vehicle_id\": %u, \"frames\": %llu, \"without_pose\": %llu, \"render_ms_p50\": %.3f}",
                   unsigned(impl_->options.vehicle_id), (unsigned long long)impl_->count, (unsigned long long)impl_->without_pose,
                   percentile(impl_->render_ns, 0.5) * 1e-6);
+    return line;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+struct OverheadCameraSimNode::Impl
+{
+    static std::vector<uint8_t> cars_of(const vehicle::World& world)
+    {
+        std::vector<uint8_t> ids;
+        for (const auto& r : world.roof_markers()) ids.push_back(uint8_t(r.vehicle_id));
+        if (ids.empty()) throw Error("camera_sim --overhead: the world has no roof_markers (which marker is on which car)");
+        return ids;
+    }
+
+    explicit Impl(CameraSimOptions o)
+        : options(std::move(o)), renderer(options.world, options.camera, options.render),
+          poses(options.truth_topic, cars_of(options.world), topics::vehicle_observation.reader),
+          frames(topics::ips_camera_frame.name, topics::ips_camera_frame.writer)
+    {
+        message.vehicle_id(0);
+        message.width(uint32_t(options.camera.width));
+        message.height(uint32_t(options.camera.height));
+        message.encoding("mono8");
+    }
+
+    void tick()
+    {
+        const uint64_t now = get_time_ns();
+        const auto started = std::chrono::steady_clock::now();
+        cars.clear();
+        for (auto& [id, result] : poses.get_samples(now)) {
+            if (!result.valid) continue;
+            uint64_t exposure = 0;
+            const auto& p = result.sample.pose();
+            cars.push_back({id, ahead[id].at({p.x(), p.y(), p.yaw()}, result.sample.header().create_stamp().nanoseconds(), now, exposure)});
+        }
+        renderer.render(cars, image);
+        fill_frame(message, image, now);
+        (void)frames.write(message);
+        std::lock_guard<std::mutex> lock(mutex);
+        ++count;
+        drawn += cars.size();
+        keep_time(render_ns, started);
+    }
+
+    CameraSimOptions options;
+    OverheadRenderer renderer;
+    MultiVehicleReader<VehicleObservation> poses;
+    Writer<CameraFrame> frames;
+    CameraFrame message;
+    cv::Mat image;
+    std::vector<OverheadCar> cars;
+    std::map<int, PoseAhead> ahead;
+    mutable std::mutex mutex;
+    uint64_t count = 0, drawn = 0;
+    std::vector<uint64_t> render_ns;
+};
+
+OverheadCameraSimNode::OverheadCameraSimNode(CameraSimOptions options) : impl_(std::make_unique<Impl>(std::move(options))) {}
+
+OverheadCameraSimNode::~OverheadCameraSimNode() = default;
+
+void OverheadCameraSimNode::run(const std::function<bool()>& stop_requested)
+{
+    const auto period_ns = static_cast<uint64_t>(1e9 / impl_->options.rate_hz);
+    if (init_settings().simulated_time &&
+        !wait_for_inputs(timer_ids::ips_camera, {{impl_->options.truth_topic, [&] { return impl_->poses.matched_publications(); }}},
+                         stop_requested)) {
+        return;
+    }
+    auto timer = Timer::create(timer_ids::ips_camera, period_ns, 0, TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
+    timer->run_until(stop_requested, [&](uint64_t) { impl_->tick(); });
+}
+
+std::string OverheadCameraSimNode::stats_json() const
+{
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    char line[256];
+    std::snprintf(line, sizeof line, "{\"frames\": %llu, \"cars_drawn\": %llu, \"render_ms_p50\": %.3f}", (unsigned long long)impl_->count,
+                  (unsigned long long)impl_->drawn, percentile(impl_->render_ns, 0.5) * 1e-6);
     return line;
 }
 

@@ -1,6 +1,6 @@
 #include <cpm/aruco/Renderer.hpp>
 
-#include "ArucoCompat.hpp"
+#include "MarkerPainter.hpp"
 
 #include <cpm/Error.hpp>
 
@@ -14,38 +14,14 @@ namespace cpm::aruco {
 
 struct Renderer::Impl
 {
-    std::shared_ptr<const compat::Dictionary> dictionary;
-    int cells = 6;  // black border + bits, per side
-    std::map<std::pair<int, int>, cv::Mat> textures;  // (id, px per cell) → marker with its quiet zone
-    cv::RNG rng;
-
-    const cv::Mat& texture(int id, int px_per_cell)
-    {
-        auto key = std::make_pair(id, px_per_cell);
-        auto it = textures.find(key);
-        if (it != textures.end()) return it->second;
-        if (textures.size() > 512) textures.clear();  // bounded: many ids × many scales
-        cv::Mat marker = compat::draw_marker(*dictionary, id, cells * px_per_cell);
-        cv::Mat padded;
-        cv::copyMakeBorder(marker, padded, px_per_cell, px_per_cell, px_per_cell, px_per_cell, cv::BORDER_CONSTANT, 255);
-        return textures.emplace(key, padded).first->second;
-    }
+    explicit Impl(const RenderOptions& options) : painter(options) {}
+    MarkerPainter painter;
 };
 
 Renderer::Renderer(vehicle::World world, Camera camera, RenderOptions options)
-    : world_(std::move(world)), camera_(std::move(camera)), options_(std::move(options)), impl_(std::make_unique<Impl>())
+    : world_(std::move(world)), camera_(std::move(camera)), options_(std::move(options)), impl_(std::make_unique<Impl>(options_))
 {
-    impl_->dictionary = compat::dictionary(options_.dictionary);
-    impl_->cells = compat::marker_bits(*impl_->dictionary) + 2;
-    impl_->rng = cv::RNG(options_.seed);
-    for (const auto& m : world_.markers()) {
-        // drawMarker asserts on ids outside the dictionary; say which marker instead.
-        const int size = compat::dictionary_size(*impl_->dictionary);
-        if (m.id < 0 || m.id >= size) {
-            throw Error("marker id " + std::to_string(m.id) + " is not in " + options_.dictionary + " (ids 0.." +
-                        std::to_string(size - 1) + ")");
-        }
-    }
+    for (const auto& m : world_.markers()) impl_->painter.check_id(m.id, "the map");
 }
 
 Renderer::~Renderer() = default;
@@ -105,7 +81,6 @@ void Renderer::render(const vehicle::Pose& car, cv::Mat& frame, std::vector<Rend
 
     for (const auto& v : visible) {
         const auto& m = *v.marker;
-        const double cells = impl_->cells;
         const cv::Vec3d right(-std::sin(v.normal_yaw), std::cos(v.normal_yaw), 0), up(0, 0, 1);
         // The black square's corners and the quiet zone's (one cell wider on each side).
         auto corners_at = [&](double half) {
@@ -115,7 +90,7 @@ void Renderer::render(const vehicle::Pose& car, cv::Mat& frame, std::vector<Rend
                                             camera_.to_camera(v.centre_car - half * right - half * up)};
         };
         const auto black = corners_at(m.size / 2);
-        const auto outer = corners_at(m.size / 2 * (cells + 2) / cells);
+        const auto outer = corners_at(m.size / 2 * impl_->painter.quiet_zone_scale());
         bool in_front = true;
         for (const auto& p : outer) in_front = in_front && p[2] > 0.05;
         if (!in_front) continue;  // projectPoints would mirror points behind the camera
@@ -124,34 +99,15 @@ void Renderer::render(const vehicle::Pose& car, cv::Mat& frame, std::vector<Rend
         object.insert(object.end(), outer.begin(), outer.end());
         std::vector<cv::Point2d> image;
         cv::projectPoints(object, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), camera_.camera_matrix, camera_.distortion, image);
+        if (!impl_->painter.paint(frame, m.id, {image[0], image[1], image[2], image[3]}, {image[4], image[5], image[6], image[7]})) {
+            continue;
+        }
         double side = 0, shortest = 1e9;
         for (int i = 0; i < 4; ++i) {
             const double edge = cv::norm(image[i] - image[(i + 1) % 4]);
             side += edge / 4;
             shortest = std::min(shortest, edge);
         }
-        if (side < 4) continue;
-
-        // A texture no finer than the marker's most foreshortened edge: warping then only
-        // magnifies, and a bilinear edge crosses mid-grey where the true edge is (minifying
-        // would alias and move edges by a good part of a pixel).
-        const int ppc = std::clamp(int(std::floor(shortest / cells)), 1, 64);
-        const cv::Mat& tex = impl_->texture(m.id, ppc);
-        const double a = ppc - 0.5, b = ppc + cells * ppc - 0.5;  // the black square's edges in the texture
-        const cv::Point2f src[4] = {{float(a), float(a)}, {float(b), float(a)}, {float(b), float(b)}, {float(a), float(b)}};
-        const cv::Point2f dst[4] = {image[0], image[1], image[2], image[3]};
-        cv::Matx33d hom = cv::getPerspectiveTransform(src, dst);
-
-        cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>{image[4], image[5], image[6], image[7]});
-        box.x -= 1;
-        box.y -= 1;
-        box.width += 3;
-        box.height += 3;
-        box &= cv::Rect(0, 0, w, h);
-        if (box.empty()) continue;
-        const cv::Matx33d shift(1, 0, -box.x, 0, 1, -box.y, 0, 0, 1);
-        cv::Mat roi = frame(box);
-        cv::warpPerspective(tex, roi, shift * hom, roi.size(), cv::INTER_LINEAR, cv::BORDER_TRANSPARENT);
 
         if (truth) {
             RenderedMarker t;
@@ -173,15 +129,7 @@ void Renderer::render(const vehicle::Pose& car, cv::Mat& frame, std::vector<Rend
         }
     }
 
-    if (options_.blur > 1) cv::blur(frame, frame, cv::Size(options_.blur, options_.blur));
-    if (options_.noise_sigma > 0) {
-        cv::Mat noise(h, w, CV_16S);
-        impl_->rng.fill(noise, cv::RNG::NORMAL, 0, options_.noise_sigma);
-        cv::Mat sum;
-        frame.convertTo(sum, CV_16S);
-        sum += noise;
-        sum.convertTo(frame, CV_8U);
-    }
+    impl_->painter.sensor(frame);
 }
 
 }  // namespace cpm::aruco

@@ -240,5 +240,5 @@ TEST(ArucoDetect, UnknownSizeMeansNoPoseAndUnknownDictionaryIsNamed)
     EXPECT_EQ(error_of([&] { MarkerDetector(camera, DetectorOptions{.dictionary = "DICT_9X9_1"}); }).substr(0, 47),
               "unknown dictionary 'DICT_9X9_1' (known: DICT_4X");
     EXPECT_EQ(error_of([&] { Renderer(one_marker(1, 0, M_PI, 0.1, 0.12, 77), camera); }),
-              "marker id 77 is not in DICT_4X4_50 (ids 0..49)");
+              "the map: marker id 77 is not in DICT_4X4_50 (ids 0..49)");
 }

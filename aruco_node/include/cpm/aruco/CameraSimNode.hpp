@@ -17,6 +17,9 @@ struct CameraSimOptions
     vehicle::World world;
     RenderOptions render;
     double rate_hz = 30;
+    /// Where the cars' true poses come from: vehicleObservation, or vehicleObservationTruth when
+    /// the lab's positioning system writes vehicleObservation.
+    std::string truth_topic = "vehicleObservation";
 };
 
 /// camera_sim's work: at rate_hz, renders what the car's camera sees from its true pose
@@ -35,6 +38,29 @@ public:
 
     void run(const std::function<bool()>& stop_requested);
     /// {"vehicle_id": …, "frames": …, "without_pose": …, "render_ms_p50": …}
+    std::string stats_json() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+/// camera_sim --overhead: the lab's positioning camera under the ceiling. At rate_hz it draws
+/// every car of the world's roof_markers at its true pose (moved on to the frame's moment, as
+/// the car's camera does) and publishes a mono8 CameraFrame (vehicle_id 0) on ipsCameraFrame.
+/// Under --simulated_time it ticks on the lab clock (timer ips_camera).
+class OverheadCameraSimNode
+{
+public:
+    /// `options.camera` must have its overhead pose; `vehicle_id` is unused. Throws cpm::Error
+    /// naming what is missing.
+    explicit OverheadCameraSimNode(CameraSimOptions options);
+    ~OverheadCameraSimNode();
+    OverheadCameraSimNode(const OverheadCameraSimNode&) = delete;
+    OverheadCameraSimNode& operator=(const OverheadCameraSimNode&) = delete;
+
+    void run(const std::function<bool()>& stop_requested);
+    /// {"frames": …, "cars_drawn": …, "render_ms_p50": …}
     std::string stats_json() const;
 
 private:

@@ -1,0 +1,395 @@
+#include <cpm/aruco/Overhead.hpp>
+
+#include "MarkerPainter.hpp"
+
+#include <cpm/Error.hpp>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+namespace cpm::aruco {
+namespace {
+
+/// The camera's pose as OpenCV's projection takes it: map → camera (rvec, tvec).
+struct Extrinsics
+{
+    cv::Vec3d rvec, tvec;
+};
+
+Extrinsics extrinsics(const OverheadPose& pose)
+{
+    const cv::Matx33d map_to_camera = pose.rotation.t();
+    Extrinsics e;
+    cv::Rodrigues(map_to_camera, e.rvec);
+    e.tvec = -(map_to_camera * pose.position);
+    return e;
+}
+
+const OverheadPose& overhead_pose_of(const Camera& camera, const char* who)
+{
+    if (!camera.overhead) {
+        throw Error(std::string(who) + ": the camera file has no overhead pose (world_x, world_y, world_z, world_rotation); "
+                                       "locate the camera first: cpm camera locate --camera FILE --world FILE --image IMAGE");
+    }
+    return *camera.overhead;
+}
+
+bool has_distortion(const Camera& camera)
+{
+    for (int i = 0; i < 5; ++i) {
+        if (camera.distortion[i] != 0) return true;
+    }
+    return false;
+}
+
+std::vector<cv::Point2d> project_points(const std::vector<cv::Point3d>& points, const Extrinsics& e, const cv::Matx33d& k,
+                                        const cv::Vec<double, 5>& distortion)
+{
+    std::vector<cv::Point2d> image;
+    cv::projectPoints(points, e.rvec, e.tvec, k, distortion, image);
+    return image;
+}
+
+}  // namespace
+
+std::array<cv::Vec3d, 4> flat_marker_corners(double x, double y, double z, double yaw, double size)
+{
+    // The marker lies face up: its x axis along yaw, its y axis (to the printed top) 90° left of
+    // it, z up. The detector's order: top-left, top-right, bottom-right, bottom-left.
+    const double h = size / 2;
+    const cv::Vec3d c(x, y, z), u(std::cos(yaw), std::sin(yaw), 0), v(-std::sin(yaw), std::cos(yaw), 0);
+    return {c - h * u + h * v, c + h * u + h * v, c + h * u - h * v, c - h * u - h * v};
+}
+
+double rotation_angle(const cv::Matx33d& a, const cv::Matx33d& b)
+{
+    const cv::Matx33d d = a.t() * b;
+    return std::acos(std::clamp((cv::trace(d) - 1) / 2, -1.0, 1.0));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The synthetic overhead camera
+
+struct OverheadRenderer::Impl
+{
+    Impl(const Camera& camera, const RenderOptions& o, const vehicle::VehicleParameters& b)
+        : painter(o), options(o), body(b), pose(extrinsics(overhead_pose_of(camera, "the overhead camera")))
+    {
+        canvas_k = camera.camera_matrix;
+        if (!has_distortion(camera)) return;
+        // Where each pixel of the distorted frame looks, on an ideal pinhole canvas large enough
+        // to hold all of them: the frame is then the canvas remapped.
+        std::vector<cv::Point2f> pixels, ideal;
+        pixels.reserve(size_t(camera.width) * camera.height);
+        for (int v = 0; v < camera.height; ++v) {
+            for (int u = 0; u < camera.width; ++u) pixels.emplace_back(float(u), float(v));
+        }
+        cv::undistortPoints(pixels, ideal, camera.camera_matrix, camera.distortion, cv::noArray(), camera.camera_matrix);
+        float min_x = 0, min_y = 0, max_x = float(camera.width), max_y = float(camera.height);
+        for (const auto& p : ideal) {
+            min_x = std::min(min_x, p.x);
+            min_y = std::min(min_y, p.y);
+            max_x = std::max(max_x, p.x);
+            max_y = std::max(max_y, p.y);
+        }
+        const float ox = std::ceil(-min_x) + 2, oy = std::ceil(-min_y) + 2;
+        canvas_k(0, 2) += ox;
+        canvas_k(1, 2) += oy;
+        canvas.create(int(std::ceil(max_y + oy)) + 3, int(std::ceil(max_x + ox)) + 3, CV_8UC1);
+        cv::Mat map_x(camera.height, camera.width, CV_32F), map_y(camera.height, camera.width, CV_32F);
+        for (int v = 0, i = 0; v < camera.height; ++v) {
+            for (int u = 0; u < camera.width; ++u, ++i) {
+                map_x.at<float>(v, u) = ideal[size_t(i)].x + ox;
+                map_y.at<float>(v, u) = ideal[size_t(i)].y + oy;
+            }
+        }
+        cv::convertMaps(map_x, map_y, map1, map2, CV_16SC2);
+        distorted = true;
+    }
+
+    MarkerPainter painter;
+    RenderOptions options;
+    vehicle::VehicleParameters body;
+    Extrinsics pose;
+    cv::Matx33d canvas_k;
+    bool distorted = false;
+    cv::Mat canvas, map1, map2;          ///< with distortion: the pinhole canvas and its remap
+    std::vector<cv::Rect> dirty;         ///< frame regions drawn this frame (remapped from the canvas)
+};
+
+OverheadRenderer::OverheadRenderer(vehicle::World world, Camera camera, RenderOptions options, vehicle::VehicleParameters body)
+    : world_(std::move(world)), camera_(std::move(camera)), impl_(std::make_unique<Impl>(camera_, options, body))
+{
+    for (const auto& r : world_.roof_markers()) impl_->painter.check_id(r.id, "the roof marker of car " + std::to_string(r.vehicle_id));
+    for (const auto& f : world_.floor_markers()) impl_->painter.check_id(f.id, "a floor marker");
+}
+
+OverheadRenderer::~OverheadRenderer() = default;
+
+cv::Point2d OverheadRenderer::project(const cv::Vec3d& p) const
+{
+    return project_points({cv::Point3d(p)}, impl_->pose, camera_.camera_matrix, camera_.distortion)[0];
+}
+
+void OverheadRenderer::render(const std::vector<OverheadCar>& cars, cv::Mat& frame, std::vector<OverheadTruth>* truth)
+{
+    Impl& d = *impl_;
+    const int w = camera_.width, h = camera_.height;
+    frame.create(h, w, CV_8UC1);
+    frame.setTo(d.options.floor_grey);
+    cv::Mat& target = d.distorted ? d.canvas : frame;
+    if (d.distorted) target.setTo(d.options.floor_grey);
+    d.dirty.clear();
+    if (truth) truth->clear();
+    const cv::Vec<double, 5> none(0, 0, 0, 0, 0);
+
+    // The outline's points (5 along each side), for the frame region a shape covers once the
+    // lens has bent its straight edges.
+    auto mark_dirty = [&](const std::array<cv::Vec3d, 4>& outline) {
+        if (!d.distorted) return;
+        std::vector<cv::Point3d> points;
+        for (int i = 0; i < 4; ++i) {
+            for (int k = 0; k < 5; ++k) points.emplace_back(outline[size_t(i)] + (outline[size_t((i + 1) % 4)] - outline[size_t(i)]) * (k / 5.0));
+        }
+        const auto image = project_points(points, d.pose, camera_.camera_matrix, camera_.distortion);
+        std::vector<cv::Point2f> fp(image.begin(), image.end());
+        cv::Rect box = cv::boundingRect(fp);
+        box.x -= 3;
+        box.y -= 3;
+        box.width += 7;
+        box.height += 7;
+        box &= cv::Rect(0, 0, w, h);
+        if (!box.empty()) d.dirty.push_back(box);
+    };
+    // A flat marker at (x, y, z): painted on the canvas, its truth in the frame.
+    auto flat_marker = [&](int id, int vehicle_id, double x, double y, double z, double yaw, double size) {
+        const auto black = flat_marker_corners(x, y, z, yaw, size);
+        const auto outer = flat_marker_corners(x, y, z, yaw, size * d.painter.quiet_zone_scale());
+        std::vector<cv::Point3d> object(black.begin(), black.end());
+        object.insert(object.end(), outer.begin(), outer.end());
+        const auto ideal = project_points(object, d.pose, d.canvas_k, none);
+        if (!d.painter.paint(target, id, {ideal[0], ideal[1], ideal[2], ideal[3]}, {ideal[4], ideal[5], ideal[6], ideal[7]})) return;
+        mark_dirty(outer);
+        if (!truth) return;
+        const auto seen = project_points({object.begin(), object.begin() + 4}, d.pose, camera_.camera_matrix, camera_.distortion);
+        OverheadTruth t;
+        t.id = id;
+        t.vehicle_id = vehicle_id;
+        t.whole_in_view = true;
+        for (int i = 0; i < 4; ++i) {
+            t.corners[size_t(i)] = seen[size_t(i)];
+            t.side_px += cv::norm(seen[size_t(i)] - seen[size_t((i + 1) % 4)]) / 4;
+            t.whole_in_view = t.whole_in_view && seen[size_t(i)].x >= 3 && seen[size_t(i)].y >= 3 && seen[size_t(i)].x <= w - 4 &&
+                              seen[size_t(i)].y <= h - 4;
+        }
+        truth->push_back(t);
+    };
+
+    for (const auto& f : world_.floor_markers()) flat_marker(f.id, 0, f.x, f.y, 0, f.yaw, f.size);
+    for (const auto& car : cars) {
+        const vehicle::RoofMarker* roof = nullptr;
+        for (const auto& r : world_.roof_markers()) {
+            if (r.vehicle_id == car.vehicle_id) roof = &r;
+        }
+        const double z = roof ? roof->z : 0.1;
+        // The body: a dark box from the rear overhang to the front, its top at the roof's height.
+        const double c = std::cos(car.pose.yaw), s = std::sin(car.pose.yaw);
+        const double back = -d.body.rear_overhang, front = d.body.length - d.body.rear_overhang, half = d.body.width / 2;
+        std::array<cv::Vec3d, 4> outline;
+        const double xs[4] = {back, front, front, back}, ys[4] = {half, half, -half, -half};
+        for (int i = 0; i < 4; ++i) {
+            outline[size_t(i)] = {car.pose.x + c * xs[i] - s * ys[i], car.pose.y + s * xs[i] + c * ys[i], z};
+        }
+        const auto ideal = project_points({outline.begin(), outline.end()}, d.pose, d.canvas_k, none);
+        std::vector<cv::Point> poly;
+        for (const auto& p : ideal) poly.emplace_back(int(std::lround(p.x * 16)), int(std::lround(p.y * 16)));
+        cv::fillConvexPoly(target, poly, cv::Scalar(40), cv::LINE_AA, 4);
+        mark_dirty(outline);
+        if (roof) flat_marker(roof->id, car.vehicle_id, car.pose.x, car.pose.y, z, car.pose.yaw, roof->size);
+    }
+    if (d.distorted) {
+        for (const auto& box : d.dirty) {
+            cv::Mat out = frame(box);
+            cv::remap(d.canvas, out, d.map1(box), d.map2(box), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(d.options.floor_grey));
+        }
+    }
+    d.painter.sensor(frame);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Locating the cars
+
+struct OverheadLocator::Impl
+{
+    MarkerDetector detector;
+    OverheadPose pose;
+    Extrinsics extrinsics;
+    mutable std::vector<MarkerObservation> seen;
+    std::map<int, const vehicle::FloorMarker*> floor;
+};
+
+OverheadLocator::OverheadLocator(vehicle::World world, Camera camera, DetectorOptions options)
+    : world_(std::move(world)), camera_(std::move(camera)),
+      impl_(std::make_unique<Impl>(Impl{MarkerDetector(camera_, options), overhead_pose_of(camera_, "the IPS"), {}, {}, {}}))
+{
+    impl_->extrinsics = extrinsics(impl_->pose);
+    for (const auto& f : world_.floor_markers()) impl_->floor[f.id] = &f;
+    if (world_.roof_markers().empty()) throw Error("the IPS: the world has no roof_markers (which marker is on which car)");
+}
+
+OverheadLocator::~OverheadLocator() = default;
+OverheadLocator::OverheadLocator(OverheadLocator&&) noexcept = default;
+OverheadLocator& OverheadLocator::operator=(OverheadLocator&&) noexcept = default;
+
+cv::Vec3d OverheadLocator::on_plane(const cv::Point2f& px, double z) const
+{
+    std::vector<cv::Point2f> in{px}, out;
+    cv::undistortPoints(in, out, camera_.camera_matrix, camera_.distortion);
+    const cv::Vec3d ray = impl_->pose.rotation * cv::Vec3d(out[0].x, out[0].y, 1);
+    const cv::Vec3d& c = impl_->pose.position;
+    if (std::abs(ray[2]) < 1e-12 || (z - c[2]) / ray[2] <= 0) {
+        const double nan = std::numeric_limits<double>::quiet_NaN();
+        return {nan, nan, nan};
+    }
+    return c + ray * ((z - c[2]) / ray[2]);
+}
+
+OverheadView OverheadLocator::locate(const cv::Mat& gray) const
+{
+    const Impl& d = *impl_;
+    OverheadView view;
+    d.detector.detect(gray, d.seen);
+    std::map<int, int> count;
+    for (const auto& m : d.seen) ++count[m.id];
+    double floor_sq = 0;
+    int floor_points = 0;
+    for (const auto& m : d.seen) {
+        if (auto f = d.floor.find(m.id); f != d.floor.end()) {
+            if (count[m.id] > 1) continue;
+            const auto corners = flat_marker_corners(f->second->x, f->second->y, 0, f->second->yaw, f->second->size);
+            const auto expected = project_points({corners.begin(), corners.end()}, d.extrinsics, camera_.camera_matrix, camera_.distortion);
+            for (int i = 0; i < 4; ++i) {
+                const cv::Point2d diff = expected[size_t(i)] - cv::Point2d(m.corners[size_t(i)]);
+                floor_sq += diff.dot(diff);
+                ++floor_points;
+            }
+            ++view.floor_markers;
+            continue;
+        }
+        const vehicle::RoofMarker* roof = world_.roof_marker(m.id);
+        if (!roof) {
+            if (std::find(view.unknown_ids.begin(), view.unknown_ids.end(), m.id) == view.unknown_ids.end()) view.unknown_ids.push_back(m.id);
+            continue;
+        }
+        if (count[m.id] > 1) {
+            if (std::find(view.seen_twice.begin(), view.seen_twice.end(), m.id) == view.seen_twice.end()) view.seen_twice.push_back(m.id);
+            continue;
+        }
+        std::array<cv::Vec3d, 4> p;
+        bool finite = true;
+        for (int i = 0; i < 4; ++i) {
+            p[size_t(i)] = on_plane(m.corners[size_t(i)], roof->z);
+            finite = finite && std::isfinite(p[size_t(i)][0]);
+        }
+        bool fits = finite;
+        for (int i = 0; i < 4 && fits; ++i) {
+            const double side = cv::norm(p[size_t((i + 1) % 4)] - p[size_t(i)]);
+            fits = std::abs(side - roof->size) <= 0.25 * roof->size;
+        }
+        if (!fits) {
+            view.misfits.push_back(m.id);
+            continue;
+        }
+        const cv::Vec3d centre = (p[0] + p[1] + p[2] + p[3]) * 0.25;
+        const cv::Vec3d x_axis = (p[1] - p[0]) + (p[2] - p[3]);
+        LocatedCar car;
+        car.vehicle_id = roof->vehicle_id;
+        car.marker_id = m.id;
+        car.x = centre[0];
+        car.y = centre[1];
+        car.yaw = std::atan2(x_axis[1], x_axis[0]);
+        car.corners = m.corners;
+        view.cars.push_back(car);
+    }
+    std::sort(view.cars.begin(), view.cars.end(), [](const LocatedCar& a, const LocatedCar& b) { return a.vehicle_id < b.vehicle_id; });
+    if (floor_points > 0) view.floor_residual_px = std::sqrt(floor_sq / floor_points);
+    return view;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Locating the camera
+
+CameraLocation locate_camera(const Camera& lens, const vehicle::World& world, const cv::Mat& gray, DetectorOptions options)
+{
+    if (world.floor_markers().size() < 2) {
+        throw Error("the world has " + std::to_string(world.floor_markers().size()) +
+                    " floor_markers; locating the camera needs at least 2 seen in the image");
+    }
+    MarkerDetector detector(lens, options);
+    std::vector<MarkerObservation> seen;
+    detector.detect(gray, seen);
+    CameraLocation out;
+    std::vector<cv::Point3d> object;
+    std::vector<cv::Point2d> image;
+    std::map<int, int> count;
+    for (const auto& m : seen) ++count[m.id];
+    for (const auto& m : seen) {
+        const vehicle::FloorMarker* f = nullptr;
+        for (const auto& candidate : world.floor_markers()) {
+            if (candidate.id == m.id) f = &candidate;
+        }
+        if (!f) {
+            out.unknown.push_back(m.id);
+            continue;
+        }
+        if (count[m.id] > 1) throw Error("floor marker " + std::to_string(m.id) + " is seen " + std::to_string(count[m.id]) + " times in the image");
+        const auto corners = flat_marker_corners(f->x, f->y, 0, f->yaw, f->size);
+        for (int i = 0; i < 4; ++i) {
+            object.emplace_back(corners[size_t(i)]);
+            image.emplace_back(m.corners[size_t(i)]);
+        }
+        out.markers.push_back(m.id);
+    }
+    std::sort(out.markers.begin(), out.markers.end());
+    std::sort(out.unknown.begin(), out.unknown.end());
+    if (out.markers.size() < 2) {
+        std::string ids;
+        for (int id : out.markers) ids += " " + std::to_string(id);
+        throw Error("the image shows " + std::to_string(out.markers.size()) + " of the world's floor markers" +
+                    (ids.empty() ? "" : " (" + ids.substr(1) + ")") + "; locating the camera needs at least 2");
+    }
+    // All floor corners lie in one plane: IPPE's two solutions, the one with the camera above
+    // the floor and the smaller error, refined over every corner.
+    std::vector<cv::Mat> rvecs, tvecs;
+    std::vector<double> errors;
+    cv::solvePnPGeneric(object, image, lens.camera_matrix, lens.distortion, rvecs, tvecs, false, cv::SOLVEPNP_IPPE, cv::noArray(),
+                        cv::noArray(), errors);
+    int best = -1;
+    for (size_t i = 0; i < rvecs.size(); ++i) {
+        cv::Matx33d r;
+        cv::Rodrigues(rvecs[i], r);
+        const cv::Vec3d centre = -(r.t() * cv::Vec3d(tvecs[i].ptr<double>()));
+        if (centre[2] <= 0) continue;
+        if (best < 0 || errors[i] < errors[size_t(best)]) best = int(i);
+    }
+    if (best < 0) throw Error("no camera pose above the floor fits the floor markers seen");
+    cv::Mat rvec = rvecs[size_t(best)], tvec = tvecs[size_t(best)];
+    cv::solvePnPRefineLM(object, image, lens.camera_matrix, lens.distortion, rvec, tvec);
+    cv::Matx33d map_to_camera;
+    cv::Rodrigues(rvec, map_to_camera);
+    out.pose.rotation = map_to_camera.t();
+    out.pose.position = -(map_to_camera.t() * cv::Vec3d(tvec.ptr<double>()));
+    std::vector<cv::Point2d> back;
+    cv::projectPoints(object, rvec, tvec, lens.camera_matrix, lens.distortion, back);
+    double sq = 0;
+    for (size_t i = 0; i < back.size(); ++i) sq += (back[i] - image[i]).dot(back[i] - image[i]);
+    out.pose.residual_px = std::sqrt(sq / double(back.size()));
+    return out;
+}
+
+}  // namespace cpm::aruco
