@@ -36,18 +36,22 @@ std::vector<NodeSpec> make_table()
         {.name = "history_client", .publish = {t::history_request.name}, .subscribe = {pattern(t::history_reply, "*")}, .steers_the_lab = true,
          .about = "asks the history for the past"},
         // ---- the programs ----------------------------------------------------------------------
-        {.name = "firmware_sim", .publish = {t::vehicle_observation.name},
-         .subscribe = {t::vehicle_observation.name},  // the other cars, for its rangers
+        {.name = "firmware_sim", .publish = {t::vehicle_observation.name, t::vehicle_observation_truth.name},
+         .subscribe = {t::vehicle_observation.name, t::vehicle_observation_truth.name},  // the other cars, for its rangers
          .timer = timer_ids::firmware_sim, .about = "a simulated car's firmware: its ground truth"},
-        {.name = "firmware_hil", .publish = {t::vehicle_observation.name},
-         .subscribe = {t::vehicle_observation.name},  // the other cars, for its rangers
+        {.name = "firmware_hil", .publish = {t::vehicle_observation.name, t::vehicle_observation_truth.name},
+         .subscribe = {t::vehicle_observation.name, t::vehicle_observation_truth.name},  // the other cars, for its rangers
          .timer = timer_ids::firmware_sim,  // the car's microcontroller slot on the lab clock, as firmware_sim's
          .about = "a car's real AVR firmware in simavr, a model car on its pins: its ground truth"},
         {.name = "vehicle_bridge", .publish = {t::vehicle_state.name, t::range_sensors.name},
          .subscribe = with(commands, {t::stop_request.name, t::vehicle_observation.name}), .timer = timer_ids::vehicle_bridge,
          .about = "a car's serial link to DDS: its state and ranges out, commands in"},
-        {.name = "camera_sim", .publish = {t::camera_frame.name}, .subscribe = {t::vehicle_observation.name}, .timer = timer_ids::camera_sim,
-         .about = "a car's simulated camera"},
+        {.name = "camera_sim", .publish = {t::camera_frame.name, t::ips_camera_frame.name},
+         .subscribe = {t::vehicle_observation.name, t::vehicle_observation_truth.name}, .timer = timer_ids::camera_sim,
+         .about = "a car's simulated camera, or the overhead positioning camera (--overhead)"},
+        {.name = "ips_node", .publish = {t::vehicle_observation.name}, .subscribe = {t::ips_camera_frame.name},
+         .timer = [](int) { return std::string(timer_ids::ips_node); },
+         .about = "the lab's positioning system: every car's pose from the overhead camera's frames"},
         {.name = "aruco_node", .publish = {t::aruco_markers.name}, .subscribe = {t::camera_frame.name}, .timer = timer_ids::aruco_node,
          .about = "finds ArUco markers in a car's camera frames"},
         {.name = "fsm_node", .publish = {t::vehicle_command_direct.name, t::fsm_status.name, t::stop_request.name},

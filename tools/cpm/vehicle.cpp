@@ -27,7 +27,7 @@ const char* const kVehicleSimHelp =
     "usage: cpm vehicle sim --id N [--count K] [--map FILE] [--start X,Y,YAW] [--spacing M]\n"
     "                       [--lanes FILE [--seed S]] [--process-per-car] [--firmware sim|avr]\n"
     "                       [--params FILE] [--calibration FILE] [--camera FILE [--camera-rate HZ]]\n"
-    "                       [--dds_domain N]\n"
+    "                       [--truth_topic T] [--dds_domain N]\n"
     "\n"
     "Starts simulated car N: firmware_sim (vehicle model, sensors, watchdog) and vehicle_bridge,\n"
     "joined by a pseudo-terminal exactly as a real car's computer and microcontroller are by a\n"
@@ -47,7 +47,8 @@ const char* const kVehicleSimHelp =
     "cameras follow the lab's simulated clock (give aruco_node --simulated_time and the camera's\n"
     "rate as --rate too): it prints the timers to name to `cpm lab clock --simulated --nodes`, and\n"
     "ends when that clock stops them. Runs until Ctrl-C, then prints each car's statistics (JSON\n"
-    "lines).\n";
+    "lines). --truth_topic vehicleObservationTruth: the cars' true poses go there instead of to\n"
+    "vehicleObservation, for a lab whose positioning system (ips_node) writes vehicleObservation.\n";
 
 std::string pose_text(double x, double y, double yaw)
 {
@@ -107,7 +108,7 @@ SimRequest read_request(const std::vector<std::string>& args)
                                      {{"--id", true}, {"--count", true}, {"--map", true}, {"--start", true},
                                       {"--spacing", true}, {"--params", true}, {"--calibration", true},
                                       {"--camera", true}, {"--camera-rate", true}, {"--lanes", true}, {"--seed", true},
-                                      {"--process-per-car", false}, {"--firmware", true}},
+                                      {"--process-per-car", false}, {"--firmware", true}, {"--truth_topic", true}},
                                      "cpm vehicle sim");
     const auto& parsed = r.parsed;
     const std::string firmware = parsed.get("--firmware", "sim");
@@ -206,7 +207,8 @@ void Fleet::start_camera(const std::string& id)
 {
     cpm::ChildProcess& camera = launch("camera_sim " + id,
                                        {camera_path_, "--vehicle_id", id, "--camera", r_.parsed.get("--camera"), "--map",
-                                        r_.parsed.get("--map"), "--rate", r_.camera_rate},
+                                        r_.parsed.get("--map"), "--rate", r_.camera_rate, "--truth_topic",
+                                        r_.parsed.get("--truth_topic", "vehicleObservation")},
                                        false);
     std::printf("vehicle %s: camera_sim pid %d, %s Hz\n", id.c_str(), camera.pid(), r_.camera_rate.c_str());
     timers_ += "," + cpm::timer_ids::camera_sim(std::stoi(id));
@@ -222,7 +224,7 @@ void Fleet::start_group(long long begin, long long end)
     }
     const std::string name = joined(ids, ",");
     std::vector<std::string> sim_argv{microcontroller_path_, "--vehicle_id", name, "--start", joined(starts, ";")};
-    for (const char* flag : {"--map", "--params"}) {
+    for (const char* flag : {"--map", "--params", "--truth_topic"}) {
         if (parsed.has(flag)) sim_argv.insert(sim_argv.end(), {flag, parsed.get(flag)});
     }
     cpm::ChildProcess& sim = launch(microcontroller_ + " " + name, sim_argv, true);

@@ -27,9 +27,9 @@ namespace cpm::vehicle {
 struct FirmwareHilNode::Impl
 {
     explicit Impl(FirmwareHilOptions o)
-        : vehicle_id(o.car.vehicle_id), hil(std::move(o)), participant(Participant::default_participant()),
-          observations(participant, topics::vehicle_observation.name, topics::vehicle_observation.writer),
-          others(participant, topics::vehicle_observation.name, topics::vehicle_observation.reader)
+        : vehicle_id(o.car.vehicle_id), truth_topic(o.truth_topic), hil(std::move(o)), participant(Participant::default_participant()),
+          observations(participant, truth_topic, topics::vehicle_observation.writer),
+          others(participant, truth_topic, topics::vehicle_observation.reader)
     {
         hil.on_state_period([this](uint64_t chip_ns) { publish(chip_ns); });
     }
@@ -81,6 +81,7 @@ struct FirmwareHilNode::Impl
     }
 
     uint8_t vehicle_id;
+    std::string truth_topic;
     FirmwareHil hil;
     Participant& participant;
     Writer<VehicleObservation> observations;

@@ -87,8 +87,8 @@ struct FirmwareSimNode::Impl
 {
     explicit Impl(FirmwareSimNodeOptions o)
         : options(std::move(o)), participant(Participant::default_participant()),
-          observations(participant, topics::vehicle_observation.name, topics::vehicle_observation.writer),
-          others(participant, topics::vehicle_observation.name, topics::vehicle_observation.reader)
+          observations(participant, options.truth_topic, topics::vehicle_observation.writer),
+          others(participant, options.truth_topic, topics::vehicle_observation.reader)
     {
         checked(options);
         for (const auto& c : options.cars) {

@@ -12,7 +12,7 @@ namespace {
 
 const char* kHelp =
     "usage: firmware_hil [ELF] --vehicle_id N [--map FILE] [--params FILE] [--start X,Y,YAW] [--link PATH]\n"
-    "                    [--seed N] [--trace-pwm] [--corrupt-rate P] [--dds_domain N] [--simulated_time]\n"
+    "                    [--seed N] [--trace-pwm] [--corrupt-rate P] [--truth_topic T] [--dds_domain N] [--simulated_time]\n"
     "\n"
     "Runs the car's firmware - the very ELF that would be flashed onto the car's ATmega2560 -\n"
     "in the simavr simulator at 16 MHz. Its serial port is a pseudo-terminal, printed first as\n"
@@ -32,6 +32,9 @@ const char* kHelp =
     "  --seed N        noise seed (default: the vehicle id)\n"
     "  --trace-pwm     print `pwm T_NS MODE PWM` whenever the chip's motor outputs change\n"
     "  --corrupt-rate P  flip one byte of a state frame on its way to the bridge with probability P\n"
+    "  --truth_topic T   where the true poses go and the other cars' come from (default\n"
+    "                  vehicleObservation; vehicleObservationTruth in a lab whose positioning\n"
+    "                  system, ips_node, writes vehicleObservation)\n"
     "On SIGINT/SIGTERM it prints one JSON line of statistics (simulated MHz, real-time factor,\n"
     "lag, state packets, watchdog stops) and exits 0. A missing ELF, or one for another chip:\n"
     "exit 2 naming it.\n";
@@ -41,7 +44,7 @@ int run(int argc, char** argv)
     auto parsed = cpm::cli::parse_args(std::vector<std::string>(argv + 1, argv + argc),
                                        {{"--vehicle_id", true}, {"--map", true}, {"--params", true}, {"--start", true},
                                         {"--link", true}, {"--seed", true}, {"--trace-pwm", false},
-                                        {"--corrupt-rate", true}},
+                                        {"--corrupt-rate", true}, {"--truth_topic", true}},
                                        "firmware_hil");
     if (parsed.positional.size() > 1)
         throw cpm::cli::UsageError("firmware_hil: one ELF file; '" + parsed.positional[1] + "' is a second");
@@ -71,6 +74,7 @@ int run(int argc, char** argv)
     o.car.link = parsed.get("--link");
     o.trace_pwm = parsed.has("--trace-pwm");
     o.corrupt_rate = cpm::cli::parse_number("--corrupt-rate", parsed.get("--corrupt-rate", "0"), 0, 1);
+    o.truth_topic = parsed.get("--truth_topic", o.truth_topic);
     cpm::init(argc, argv);
 
     cpm::vehicle::FirmwareHilNode node(std::move(o));

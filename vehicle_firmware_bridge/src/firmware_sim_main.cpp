@@ -11,7 +11,7 @@ namespace {
 const char* kHelp =
     "usage: firmware_sim --vehicle_id N[,M,…] [--map FILE] [--params FILE] [--start X,Y,YAW[;X,Y,YAW…]]\n"
     "                    [--link PATH | --device TTY [--baud B]] [--seed N] [--trace-pwm]\n"
-    "                    [--corrupt-rate P] [--dds_domain N]\n"
+    "                    [--corrupt-rate P] [--truth_topic T] [--dds_domain N]\n"
     "\n"
     "Plays vehicle N's microcontroller: opens a pseudo-terminal, prints its device path as\n"
     "`device: /dev/pts/K` and then speaks the serial protocol on it (state packets at\n"
@@ -33,6 +33,9 @@ const char* kHelp =
     "  --trace-pwm     (one car) print `pwm T_NS MODE PWM` on stdout whenever the motor command the controller\n"
     "                  holds changes (a new command, or the watchdog's brake; MODE 0 brake, 1 fwd, 2 rev)\n"
     "  --corrupt-rate P  flip one random byte in a state frame with probability P (tests the link)\n"
+    "  --truth_topic T   where the true poses go and the other cars' come from (default\n"
+    "                  vehicleObservation; vehicleObservationTruth in a lab whose positioning\n"
+    "                  system, ips_node, writes vehicleObservation)\n"
     "On SIGINT/SIGTERM it prints one JSON line of statistics per car and exits 0.\n";
 
 int run(int argc, char** argv)
@@ -40,7 +43,7 @@ int run(int argc, char** argv)
     auto parsed = cpm::cli::parse_flags(argc, argv,
                                        {{"--vehicle_id", true}, {"--map", true}, {"--params", true}, {"--start", true},
                                         {"--link", true}, {"--seed", true}, {"--trace-pwm", false},
-                                        {"--corrupt-rate", true}, {"--device", true}, {"--baud", true}},
+                                        {"--corrupt-rate", true}, {"--device", true}, {"--baud", true}, {"--truth_topic", true}},
                                        "firmware_sim");
     if (!parsed.has("--vehicle_id")) throw cpm::cli::UsageError("firmware_sim: --vehicle_id is required");
     if (parsed.has("--device") && parsed.has("--link"))
@@ -67,6 +70,7 @@ int run(int argc, char** argv)
     o.trace_pwm = parsed.has("--trace-pwm");
     o.corrupt_rate = cpm::cli::parse_number("--corrupt-rate", parsed.get("--corrupt-rate", "0"), 0, 1);
     o.device = parsed.get("--device");
+    o.truth_topic = parsed.get("--truth_topic", o.truth_topic);
     o.baud = int(cpm::cli::parse_integer("--baud", parsed.get("--baud", "115200"), 1, 4'000'000));
     cpm::init(argc, argv);
 

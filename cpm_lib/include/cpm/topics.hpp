@@ -77,6 +77,10 @@ inline constexpr TopicSpec vehicle_observation{"vehicleObservation", "VehicleObs
                                                "each car's pose as seen from outside (the simulator's ground truth, the camera)"};
 inline constexpr TopicSpec aruco_markers{"arucoMarkers", "ArucoMarkers", {}, {}, "the markers a car's camera sees in one frame"};
 inline constexpr TopicSpec camera_frame{"cameraFrame", "CameraFrame", {}, {}, "a car camera's image, exposure time as create_stamp"};
+inline constexpr TopicSpec vehicle_observation_truth{"vehicleObservationTruth", "VehicleObservation", {}, {},
+                                                     "each simulated car's true pose when the lab's positioning camera writes vehicleObservation"};
+inline constexpr TopicSpec ips_camera_frame{"ipsCameraFrame", "CameraFrame", {}, {},
+                                            "the overhead positioning camera's image (vehicle_id 0), exposure time as create_stamp"};
 inline constexpr TopicSpec vehicle_command_direct{"vehicleCommandDirect", "VehicleCommandDirect", {}, {},
                                                   "throttle and steering, -1..1"};
 inline constexpr TopicSpec vehicle_command_speed_curvature{"vehicleCommandSpeedCurvature", "VehicleCommandSpeedCurvature", {}, {},
@@ -136,7 +140,8 @@ inline constexpr TopicSpec history_status{"historyStatus", "HistoryStatus", qos:
                                           qos::reliable_reader(1, true), "the history service's counts, once a second"};
 
 inline constexpr std::array all{&vehicle_state,          &range_sensors,          &vehicle_observation,
-                                &aruco_markers,          &camera_frame,           &vehicle_command_direct,
+                                &aruco_markers,          &camera_frame,           &vehicle_observation_truth,
+                                &ips_camera_frame,       &vehicle_command_direct,
                                 &vehicle_command_speed_curvature, &vehicle_command_trajectory, &vehicle_command_path_tracking,
                                 &stop_request,           &fsm_status,             &vehicle_state_list,
                                 &log,

@@ -25,6 +25,8 @@ struct FirmwareHilOptions
     World world;
     bool trace_pwm = false;     ///< print `pwm T_NS MODE PWM` when the chip's motor outputs change
     double corrupt_rate = 0;    ///< probability of flipping one byte of a state frame on its way out
+    /// Where the true pose goes (and the other cars' come from), as FirmwareSimNodeOptions's.
+    std::string truth_topic = "vehicleObservation";
 };
 
 /// What the run saw of the chip.

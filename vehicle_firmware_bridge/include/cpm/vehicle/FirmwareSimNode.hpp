@@ -56,6 +56,9 @@ struct FirmwareSimNodeOptions
     int baud = 115200;     ///< with `device`
     bool trace_pwm = false;     ///< print `pwm T_NS MODE PWM` whenever the held motor command changes (one car only)
     double corrupt_rate = 0;    ///< probability of flipping one byte of a state frame
+    /// Where the true poses go (and the other cars' come from): vehicleObservation, or
+    /// vehicleObservationTruth in a lab whose positioning system writes vehicleObservation.
+    std::string truth_topic = "vehicleObservation";
 };
 
 /// firmware_sim's loop: one or many FirmwareSims, each behind its own pseudo-terminal (or one
