@@ -60,7 +60,8 @@ nlohmann::json read_json(const std::string& path)
 /// rest is dropped as the recording is read, so that a long run's samples fit in memory.
 bool read_for_figures(const std::string& topic)
 {
-    return topic == topics::vehicle_observation.name || topic == topics::vehicle_state.name || topic == topics::fsm_status.name ||
+    return topic == topics::vehicle_observation.name || topic == topics::vehicle_observation_truth.name || topic == topics::vehicle_state.name ||
+           topic == topics::fsm_status.name ||
            topic == topics::log.name || topic == topics::bookmark.name;
 }
 
@@ -281,12 +282,12 @@ void read_log_sample(const nlohmann::json& j, const RecordedSample& s, uint64_t 
 }
 
 /// A car's sample of vehicleObservation, vehicleState or fsmStatus at lab time t.
-void read_car_sample(const std::string& topic, const nlohmann::json& j, double t, bool path_topic, RunFigures& f)
+void read_car_sample(const std::string& topic, const nlohmann::json& j, double t, bool path_topic, bool ips_topic, RunFigures& f)
 {
     CarFigures& car = f.cars[j.value("vehicle_id", 0)];
-    if (path_topic) {
+    if (path_topic || ips_topic) {
         const auto& pose = j.at("pose");
-        car.path.push_back({.t_s = t, .x_m = pose.value("x", 0.0), .y_m = pose.value("y", 0.0), .yaw_rad = pose.value("yaw", 0.0)});
+        (path_topic ? car.path : car.ips).push_back({.t_s = t, .x_m = pose.value("x", 0.0), .y_m = pose.value("y", 0.0), .yaw_rad = pose.value("yaw", 0.0)});
     }
     if (topic == topics::vehicle_state.name) {
         car.speed_m_s.push_back({.t_s = t, .value = j.value("speed", 0.0)});
@@ -295,22 +296,56 @@ void read_car_sample(const std::string& topic, const nlohmann::json& j, double t
     if (topic == topics::fsm_status.name) car.states.push_back({.t_s = t, .state = j.value("state_type", std::string("?"))});
 }
 
-/// The cars' series and the log's lines; a car's path is its true one (vehicleObservation)
-/// when the run recorded any, else its own estimate (vehicleState).
+/// The cars' series and the log's lines; a car's path is its true one (the simulator's
+/// vehicleObservationTruth beside a positioning system, else vehicleObservation) when the run
+/// recorded any, else its own estimate (vehicleState). Beside the truth, vehicleObservation is
+/// the positioning system's view.
 void read_samples(const RecordedRun& recording, RunFigures& f)
 {
     const uint64_t t0 = lab_zero_ns(recording);
-    const bool observed = std::any_of(recording.instances.begin(), recording.instances.end(),
-                                      [](const RecordedInstance& o) { return o.topic == topics::vehicle_observation.name; });
+    auto recorded = [&](const char* topic) {
+        return std::any_of(recording.instances.begin(), recording.instances.end(), [&](const RecordedInstance& o) { return o.topic == topic; });
+    };
+    const bool truth = recorded(topics::vehicle_observation_truth.name);
+    const bool observed = truth || recorded(topics::vehicle_observation.name);
+    const std::string path = truth ? topics::vehicle_observation_truth.name : observed ? topics::vehicle_observation.name : topics::vehicle_state.name;
     for (const auto& o : recording.instances) {
-        const bool path_topic = o.topic == (observed ? topics::vehicle_observation.name : topics::vehicle_state.name);
-        if (!path_topic && o.topic != topics::vehicle_state.name && o.topic != topics::fsm_status.name && o.topic != topics::log.name) continue;
+        const bool path_topic = o.topic == path;
+        const bool ips_topic = truth && o.topic == topics::vehicle_observation.name;
+        if (!path_topic && !ips_topic && o.topic != topics::vehicle_state.name && o.topic != topics::fsm_status.name && o.topic != topics::log.name) {
+            continue;
+        }
         for (const auto& s : o.samples) {
             if (s.value.is_null()) continue;
             if (o.topic == topics::log.name) read_log_sample(s.value, s, t0, f.simulated(), f);
-            else read_car_sample(o.topic, s.value, seconds_since(t0, s.data_ns), path_topic, f);
+            else read_car_sample(o.topic, s.value, seconds_since(t0, s.data_ns), path_topic, ips_topic, f);
         }
     }
+}
+
+/// The positioning system's error: each IPS pose against the true pose at its moment (linear
+/// between the two true poses around it; none outside the truth's span).
+void judge_ips(CarFigures& car)
+{
+    std::sort(car.ips.begin(), car.ips.end(), [](const CarPose& a, const CarPose& b) { return a.t_s < b.t_s; });
+    std::vector<double> metres, degrees;
+    for (const auto& seen : car.ips) {
+        auto after = std::lower_bound(car.path.begin(), car.path.end(), seen.t_s, [](const CarPose& p, double t) { return p.t_s < t; });
+        if (after == car.path.end() || (after == car.path.begin() && after->t_s > seen.t_s)) continue;
+        const CarPose& b = *after;
+        const CarPose& a = after == car.path.begin() ? b : *std::prev(after);
+        const double k = b.t_s > a.t_s ? (seen.t_s - a.t_s) / (b.t_s - a.t_s) : 0;
+        const double x = a.x_m + k * (b.x_m - a.x_m), y = a.y_m + k * (b.y_m - a.y_m);
+        const double yaw = a.yaw_rad + k * std::remainder(b.yaw_rad - a.yaw_rad, 2 * M_PI);
+        const double d = std::hypot(seen.x_m - x, seen.y_m - y);
+        car.ips_error_m.push_back({.t_s = seen.t_s, .value = d});
+        metres.push_back(d);
+        degrees.push_back(std::abs(std::remainder(seen.yaw_rad - yaw, 2 * M_PI)) * 180 / M_PI);
+    }
+    if (metres.empty()) return;
+    car.ips_error_m_p50 = percentile(metres, 0.5);
+    car.ips_error_m_p99 = percentile(metres, 0.99);
+    car.ips_yaw_error_deg_p99 = percentile(degrees, 0.99);
 }
 
 /// The run's bookmarks on the lab's time axis. A mark stamped on the real clock in a simulated
@@ -368,6 +403,7 @@ void complete_car(CarFigures& car, const vehicle::World* world)
     for (const auto& d : car.clearance_m) clearance_min = std::min(clearance_min, d.value);
     if (std::isfinite(clearance_min)) car.min_clearance_m = clearance_min;
     if (world && !world->gates().empty()) judge_gates(car, *world);
+    if (!car.ips.empty()) judge_ips(car);
 }
 
 /// The smallest distance between two cars' reference points, every 0.1 s of the run.
@@ -401,6 +437,13 @@ nlohmann::json json_of(const CarFigures& car, size_t gates)
     nlohmann::json c{{"driven_m", car.driven_m}, {"max_speed_mps", car.max_speed_m_s}, {"states_entered", car.states.size()}};
     c["min_clearance_m"] = car.min_clearance_m ? nlohmann::json(*car.min_clearance_m) : nlohmann::json(nullptr);
     if (!car.states.empty()) c["last_state"] = car.states.back().state;
+    if (!car.ips.empty()) {
+        c["ips_samples"] = car.ips.size();
+        for (const auto& [name, v] : {std::pair{"ips_error_m_p50", car.ips_error_m_p50}, {"ips_error_m_p99", car.ips_error_m_p99},
+                                      {"ips_yaw_error_deg_p99", car.ips_yaw_error_deg_p99}}) {
+            c[name] = v ? nlohmann::json(*v) : nlohmann::json(nullptr);
+        }
+    }
     if (gates > 0) {
         nlohmann::json list = nlohmann::json::array();
         for (const auto& g : car.gates) {
@@ -591,17 +634,23 @@ void plot_states(PlotScript& p, const RunFigures& f)
 /// Speed, steering, states and clearance of each car over time, the closest two cars' distance.
 void plot_cars_over_time(PlotScript& p, const RunFigures& f)
 {
-    std::vector<std::pair<std::string, std::string>> speed, steering, clearance;
+    std::vector<std::pair<std::string, std::string>> speed, steering, clearance, ips;
     for (const auto& [id, car] : f.cars) {
         const std::string n = std::to_string(id);
         if (!car.speed_m_s.empty()) speed.emplace_back(p.data("speed_" + n + ".dat", points_of(car.speed_m_s)), "car " + n);
         if (!car.steering.empty()) steering.emplace_back(p.data("steering_" + n + ".dat", points_of(car.steering)), "car " + n);
         if (!car.clearance_m.empty()) clearance.emplace_back(p.data("clearance_" + n + ".dat", points_of(car.clearance_m)), "car " + n);
+        if (!car.ips_error_m.empty()) {
+            std::vector<TimedValue> mm;
+            for (const auto& e : car.ips_error_m) mm.push_back({.t_s = e.t_s, .value = e.value * 1000});
+            ips.emplace_back(p.data("ips_error_" + n + ".dat", points_of(mm)), "car " + n);
+        }
     }
     p.over_time("speed.png", "speed", "m/s", speed);
     p.over_time("steering.png", "steering (servo command)", "-1 .. 1", steering);
     plot_states(p, f);
     p.over_time("clearance.png", "clearance to the nearest wall (reference point)", "m", clearance);
+    p.over_time("ips_error.png", "positioning system (IPS) against the simulator's truth", "error (mm)", ips);
     if (!f.closest_m.empty()) {
         p.over_time("cars.png", "smallest distance between two cars (reference points)", "m", {{p.data("closest.dat", points_of(f.closest_m)), "closest pair"}});
     }

@@ -11,6 +11,8 @@
 #include <cpm/timer_ids.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
 #include <cpm/vehicle/World.hpp>
+#include <cpm/aruco/Camera.hpp>
+#include <cpm/topics.hpp>
 
 #include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
@@ -285,6 +287,55 @@ void read_routing(Checker& c, const YAML::Node& root, Scenario& s)
     }
 }
 
+/// ips: {camera, world, host, rate, noise, blur}: the overhead camera located in the map, a world
+/// with a roof marker on every car of the run.
+void read_ips(Checker& c, const YAML::Node& root, Scenario& s)
+{
+    const YAML::Node n = root["ips"];
+    if (!n) return;
+    if (!n.IsMap()) {
+        c.error(n, "ips", "expected a map (camera, world, host, rate, noise, blur)");
+        return;
+    }
+    c.keys(n, "ips", {"camera", "world", "host", "rate", "noise", "blur"});
+    s.ips.enabled = true;
+    if (!n["camera"]) c.error(n, "ips.camera", "missing (the overhead camera's file, with its pose in the map)");
+    else s.ips.camera = c.file(n["camera"], "ips.camera", s.dir, "camera file");
+    if (n["world"]) s.ips.world = c.file(n["world"], "ips.world", s.dir, "world file");
+    else if (!s.world.empty()) s.ips.world = s.world;
+    else c.error(n, "ips.world", "missing (a map with roof_markers, which marker is on which car, and floor_markers)");
+    if (n["host"]) s.ips.host = host_name(c, s, n["host"], "ips.host");
+    auto in_range = [&](const char* key, double lo, double hi, double& field) {
+        const std::string p = std::string("ips.") + key;
+        if (auto v = c.number(n[key], p)) {
+            if (*v < lo || *v > hi) c.error(n[key], p, std::to_string(*v) + " is out of range (" + std::to_string(lo) + " to " + std::to_string(hi) + ")");
+            else field = *v;
+        }
+    };
+    if (n["rate"]) in_range("rate", 1, 200, s.ips.rate_hz);
+    if (n["noise"]) in_range("noise", 0, 128, s.ips.noise);
+    if (n["blur"]) s.ips.blur = int(c.integer(n["blur"], "ips.blur", 0, 31).value_or(0));
+    if (!s.ips.camera.empty()) {
+        try {
+            aruco::Camera::load(s.ips.camera, aruco::CameraPlacement::overhead);
+        } catch (const cpm::Error& e) {
+            c.error(n["camera"], "ips.camera", e.what());
+        }
+    }
+    if (s.ips.world.empty()) return;
+    const YAML::Node at = n["world"] ? n["world"] : root["world"];
+    try {
+        const auto world = vehicle::World::load(s.ips.world);
+        for (const auto& v : s.vehicles) {
+            bool worn = false;
+            for (const auto& r : world.roof_markers()) worn = worn || r.vehicle_id == v.id;
+            if (!worn) c.error(at, "ips.world", "car " + std::to_string(v.id) + " has no roof marker in " + s.ips.world + " (roof_markers)");
+        }
+    } catch (const cpm::Error& e) {
+        c.error(at, "ips.world", e.what());
+    }
+}
+
 /// A controller's `program:` that names one of cpm's programs (hlc_platoon): a bare name, neither a
 /// file beside the scenario nor a Python script.
 bool is_cpm_program(const std::string& name, const std::string& dir)
@@ -499,7 +550,7 @@ Scenario load_scenario(const std::string& path)
     if (!root.IsMap()) throw ScenarioError(std::vector<Diagnostic>{{path, "expected a map of keys (name, time, duration, world, vehicles, ...)"}});
     c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor",
                     "parameters", "security", "hosts", "ssh_config", "max_clock_offset", "discovery", "discovery_server", "history",
-                    "controllers"});
+                    "controllers", "ips"});
     read_hosts(c, root, s);  // before anything names a host
     read_discovery(c, root, s);
 
@@ -541,6 +592,7 @@ Scenario load_scenario(const std::string& path)
     read_vehicles(c, root, vehicles, s);
     read_routing(c, root, s);
     read_controllers(c, root, s);
+    read_ips(c, root, s);
     check_cars_on_lanes(c, root, vehicles, s);
     if (!s.cars_on_lanes() && !root["world"]) c.error(root, "world", "missing (the map the cars drive in)");
 
@@ -766,8 +818,10 @@ public:
             for (const auto& v : s_.vehicles) first = std::min(first, v.id), restart = restart || v.restart, realtime = std::max(realtime, v.realtime);
             add("cars", "vehicle_sim",
                 common({program("cpm"), "vehicle", "sim", "--id", std::to_string(first), "--count", std::to_string(s_.vehicles.size()), "--lanes",
-                        s_.lanes, "--seed", std::to_string(s_.routing.seed), "--firmware", s_.vehicles.front().avr ? "avr" : "sim"}, realtime),
+                        s_.lanes, "--seed", std::to_string(s_.routing.seed), "--firmware", s_.vehicles.front().avr ? "avr" : "sim"},
+                       realtime),
                 restart, 5, first, s_.vehicles.front().host);
+            truth_only(plan_.back(), true);
             plan_.back().timer = timer_ids::firmware_sim(first) + "," + timer_ids::vehicle_bridge(first);
             return;
         }
@@ -779,6 +833,7 @@ public:
             add("sim_" + id, microcontroller,
                 common({program(microcontroller), "--vehicle_id", id, "--map", s_.world, "--start", start, "--link", link}, v.realtime),
                 v.restart, 6, v.id, v.host);
+            truth_only(plan_.back(), false);
             add("bridge_" + id, "vehicle_bridge", common({program("vehicle_bridge"), "--vehicle_id", id, "--device", link, "--start", start}, v.realtime),
                 v.restart, 5, v.id, v.host);
             // In real time the camera starts at once; on the simulated clock it ticks with the car.
@@ -786,8 +841,28 @@ public:
                 add("camera_" + id, "camera_sim",
                     common({program("camera_sim"), "--vehicle_id", id, "--camera", v.camera, "--map", s_.world, "--rate", "30"}, v.realtime), v.restart, 4,
                     v.id, v.host, simulated());
+                truth_only(plan_.back(), false);
+                erase(plan_.back().publish, topics::ips_camera_frame.name);
             }
         }
+    }
+
+    /// The lab's positioning system: the overhead camera (simulated) and ips_node, on the clock
+    /// with the cars.
+    void positioning()
+    {
+        if (!s_.ips.enabled) return;
+        const std::string rate = number(s_.ips.rate_hz);
+        add("ips_camera", "camera_sim",
+            common({program("camera_sim"), "--overhead", "--camera", s_.ips.camera, "--map", s_.ips.world, "--rate", rate, "--noise",
+                    number(s_.ips.noise), "--blur", std::to_string(s_.ips.blur)}),
+            false, 4, 0, s_.ips.host, simulated());
+        if (simulated()) plan_.back().timer = timer_ids::ips_camera;
+        truth_only(plan_.back(), false);
+        erase(plan_.back().publish, topics::camera_frame.name);
+        std::vector<std::string> ips{program("ips_node"), "--camera", s_.ips.camera, "--world", s_.ips.world};
+        if (simulated()) ips.insert(ips.end(), {"--rate", rate});
+        add("ips", "ips_node", common(ips), false, 3, 0, s_.ips.host, simulated());
     }
 
     /// What drives the cars: each camera's marker finder, central routing, the state machines.
@@ -879,6 +954,24 @@ public:
 
 private:
     bool simulated() const { return r_.time == TimeMode::simulated; }
+    static void erase(std::vector<std::string>& topics, const std::string& topic)
+    {
+        topics.erase(std::remove(topics.begin(), topics.end(), topic), topics.end());
+    }
+    /// A simulator or camera of the run writes and reads the cars' true poses on one topic:
+    /// vehicleObservationTruth beside a positioning system (given --truth_topic), else
+    /// vehicleObservation; it is allowed that one only (and the lab's vehicleObservation for a
+    /// bridge in the same process, `bridge`).
+    void truth_only(ProcessPlan& p, bool bridge) const
+    {
+        const std::string other = s_.ips.enabled ? topics::vehicle_observation.name : topics::vehicle_observation_truth.name;
+        erase(p.publish, other);
+        if (!(bridge && other == topics::vehicle_observation.name)) erase(p.subscribe, other);
+        if (!s_.ips.enabled) return;
+        // --truth_topic before the common flags, as the program's own.
+        const auto at = std::find(p.argv.begin(), p.argv.end(), "--dds_domain");
+        p.argv.insert(at, {"--truth_topic", topics::vehicle_observation_truth.name});
+    }
     std::string program(const std::string& name)
     {
         const std::string p = (fs::path(r_.bin_dir) / name).string();
@@ -923,6 +1016,7 @@ std::vector<ProcessPlan> plan_run(const Scenario& s, const RunSettings& r)
     PlanBuilder plan(s, r);
     plan.services();
     plan.cars();
+    plan.positioning();
     plan.drivers();
     return plan.finish();
 }

@@ -206,7 +206,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
                                        "qos: {vehicleState: {reliable: maybe}}\n"); // 14
     const auto errors = errors_of(file);
     const std::vector<std::string> expected = {
-        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, discovery_server, history, controllers",
+        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, discovery_server, history, controllers, ips",
         file + ":1: name: 'bad run': use letters, digits, - and _ only",
         file + ":2: time: 'sometimes': expected real or simulated",
         file + ":1: duration: missing (how long the run lasts, e.g. 30s)",

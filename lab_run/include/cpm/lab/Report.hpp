@@ -104,6 +104,11 @@ struct CarFigures
     std::optional<double> min_clearance_m;     ///< none without walls
     std::vector<GateFigures> gates;            ///< one per gate of the world; empty without gates
     int gates_passed = 0;
+    /// With a positioning system beside the simulator's truth: where the IPS saw the car
+    /// (vehicleObservation), its distance from the true pose at the same moment, and the figures.
+    std::vector<CarPose> ips;
+    std::vector<TimedValue> ips_error_m;
+    std::optional<double> ips_error_m_p50, ips_error_m_p99, ips_yaw_error_deg_p99;
 };
 
 /// A topic's figures, over all its instances.

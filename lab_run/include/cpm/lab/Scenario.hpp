@@ -83,6 +83,20 @@ struct RoutingSpec
     Realtime realtime = Realtime::off;
 };
 
+/// The lab's positioning system (`ips:`): an overhead camera (simulated: camera_sim --overhead)
+/// and ips_node, which then writes every car's vehicleObservation; the simulators write their
+/// truth to vehicleObservationTruth.
+struct IpsSpec
+{
+    bool enabled = false;
+    std::string camera;     ///< absolute path of the overhead camera's file (with its pose in the map)
+    std::string world;      ///< absolute path of the map with roof_markers and floor_markers
+    std::string host;       ///< where the camera and ips_node run; "" the run's own
+    double rate_hz = 50;    ///< the camera's frame rate
+    double noise = 0;       ///< the simulated camera's sensor noise (grey levels)
+    int blur = 0;           ///< and blur (box, px)
+};
+
 /// A user's high-level controller and what it drives (`controllers:`).
 struct ControllerSpec
 {
@@ -121,6 +135,7 @@ struct Scenario
     std::string security;    ///< absolute path of the lab's security folder (`cpm security init`), or empty
     std::vector<VehicleSpec> vehicles;
     RoutingSpec routing;
+    IpsSpec ips;
     std::vector<ControllerSpec> controllers;
     /// The cars run in one simulator spread over the lanes (with routing or controllers).
     bool cars_on_lanes() const { return routing.enabled || !controllers.empty(); }
