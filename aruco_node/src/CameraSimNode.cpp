@@ -37,15 +37,18 @@ public:
     /// `exposure` to the moment it is for.
     vehicle::Pose at(const vehicle::Pose& newest_pose, uint64_t stamp, uint64_t now, uint64_t& exposure)
     {
-        if (stamp != newest_stamp_) {
+        // A first observation may be stamped 0 (the simulated clock's start): not "the same one".
+        if (!any_ || stamp != newest_stamp_) {
             previous_ = newest_;
-            previous_stamp_ = newest_stamp_;
+            previous_stamp_ = any_ ? newest_stamp_ : 0;
+            has_previous_ = any_;
             newest_ = newest_pose;
             newest_stamp_ = stamp;
+            any_ = true;
         }
         vehicle::Pose p = newest_;
         exposure = newest_stamp_;
-        if (previous_stamp_ && newest_stamp_ > previous_stamp_ && now > newest_stamp_ && now - newest_stamp_ <= 100'000'000) {
+        if (has_previous_ && newest_stamp_ > previous_stamp_ && now > newest_stamp_ && now - newest_stamp_ <= 100'000'000) {
             const double k = double(now - newest_stamp_) / double(newest_stamp_ - previous_stamp_);
             p.x += k * (newest_.x - previous_.x);
             p.y += k * (newest_.y - previous_.y);
@@ -58,6 +61,7 @@ public:
 private:
     vehicle::Pose newest_, previous_;
     uint64_t newest_stamp_ = 0, previous_stamp_ = 0;
+    bool any_ = false, has_previous_ = false;
 };
 
 /// The frame's bytes and stamps from a mono8 image.
