@@ -2,28 +2,18 @@
 
 #include "FrameLoop.hpp"
 
-#include <cpm/AsyncReader.hpp>
-#include <cpm/Error.hpp>
-#include <cpm/LogThrottle.hpp>
 #include <cpm/Logging.hpp>
-#include <cpm/Reader.hpp>
-#include <cpm/Timer.hpp>
 #include <cpm/timer_ids.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
-#include <cpm/init.hpp>
-#include <cpm/percentile.hpp>
 #include <cpm/topics.hpp>
 
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cstdio>
-#include <deque>
 #include <mutex>
-#include <thread>
 
 namespace cpm::aruco {
 
@@ -103,24 +93,14 @@ struct ArucoNode::Impl
     /// One frame: detect, publish, count.
     void process(const cv::Mat& gray, uint64_t exposure_ns)
     {
-        // Processing on the real clock (lab time stands still in a simulated tick); latency on the lab's.
-        const auto start = std::chrono::steady_clock::now();
         // Counted aside and added under the lock afterwards: stats() never waits for a detection.
         ArucoNodeStats frame;
         const ArucoMarkers message = markers_message(detector, options.vehicle_id, gray, exposure_ns, &frame);
         (void)writer.write(message);
-        const uint64_t done = get_time_ns();
-        const auto took = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count();
         std::lock_guard<std::mutex> lock(mutex);
         counts.frames += frame.frames;
         counts.markers += frame.markers;
         counts.unknown_size += frame.unknown_size;
-        processing_ns.push_back(uint64_t(took));
-        latency_ns.push_back(done > exposure_ns ? done - exposure_ns : 0);
-        if (processing_ns.size() > 100000) {  // bounded: keep the newest
-            processing_ns.pop_front();
-            latency_ns.pop_front();
-        }
     }
 
     ArucoNodeOptions options;
@@ -128,7 +108,6 @@ struct ArucoNode::Impl
     Writer<ArucoMarkers> writer;
     mutable std::mutex mutex;
     ArucoNodeStats counts;
-    std::deque<uint64_t> processing_ns, latency_ns;
     FrameLoop loop;  ///< last: its thread calls process()
 };
 
@@ -159,16 +138,14 @@ ArucoNodeStats ArucoNode::stats() const
 std::string ArucoNode::stats_json() const
 {
     const ArucoNodeStats c = stats();
-    std::lock_guard<std::mutex> lock(impl_->mutex);
-    std::vector<uint64_t> proc(impl_->processing_ns.begin(), impl_->processing_ns.end());
-    std::vector<uint64_t> lat(impl_->latency_ns.begin(), impl_->latency_ns.end());
+    const FrameTimes t = impl_->loop.times();
     char line[512];
     std::snprintf(line, sizeof line,
                   "{\"vehicle_id\": %u, \"frames\": %llu, \"dropped\": %llu, \"bad_frames\": %llu, \"markers\": %llu, "
                   "\"unknown_size\": %llu, \"processing_ms_p50\": %.3f, \"latency_ms_p50\": %.3f, \"latency_ms_p99\": %.3f}",
                   unsigned(impl_->options.vehicle_id), (unsigned long long)c.frames, (unsigned long long)c.dropped,
                   (unsigned long long)c.bad_frames, (unsigned long long)c.markers, (unsigned long long)c.unknown_size,
-                  percentile(proc, 0.5) * 1e-6, percentile(lat, 0.5) * 1e-6, percentile(lat, 0.99) * 1e-6);
+                  t.processing_ms_p50, t.latency_ms_p50, t.latency_ms_p99);
     return line;
 }
 

@@ -10,9 +10,11 @@
 #include <cpm/Timer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/init.hpp>
+#include <cpm/percentile.hpp>
 
 #include <algorithm>
 #include <chrono>
+#include <deque>
 #include <mutex>
 #include <thread>
 
@@ -27,6 +29,24 @@ struct FrameLoop::Impl
     uint64_t dropped = 0, bad_frames = 0;
     LogThrottle bad_log;
     LogThrottle no_frame_log;  ///< simulated time: a tick whose frame never came
+    std::deque<uint64_t> processing_ns, latency_ns;
+
+    /// One usable frame to the node's work, timed: processing on the real clock (lab time
+    /// stands still in a simulated tick), latency on the lab's.
+    void handle(const cv::Mat& gray, uint64_t exposure_ns)
+    {
+        const auto start = std::chrono::steady_clock::now();
+        process(gray, exposure_ns);
+        const uint64_t done = get_time_ns();
+        const auto took = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count();
+        std::lock_guard<std::mutex> lock(mutex);
+        processing_ns.push_back(uint64_t(took));
+        latency_ns.push_back(done > exposure_ns ? done - exposure_ns : 0);
+        if (processing_ns.size() > 100000) {  // bounded: keep the newest
+            processing_ns.pop_front();
+            latency_ns.pop_front();
+        }
+    }
 
     void bad_frame(const std::string& why)
     {
@@ -46,7 +66,7 @@ struct FrameLoop::Impl
             bad_frame(why);
             return;
         }
-        process(gray, f.header().create_stamp().nanoseconds());
+        handle(gray, f.header().create_stamp().nanoseconds());
     }
 
     /// The topic source: the newest frame of the camera in each batch; the others are dropped.
@@ -155,7 +175,7 @@ void FrameLoop::run(const std::function<bool()>& stop_requested, const std::func
             d.bad_frame(d.source->current() + ": " + why);
             continue;
         }
-        d.process(gray, get_time_ns());
+        d.handle(gray, get_time_ns());
     }
 }
 
@@ -163,6 +183,14 @@ uint64_t FrameLoop::dropped() const
 {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     return impl_->dropped;
+}
+
+FrameTimes FrameLoop::times() const
+{
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    const std::vector<uint64_t> proc(impl_->processing_ns.begin(), impl_->processing_ns.end());
+    const std::vector<uint64_t> lat(impl_->latency_ns.begin(), impl_->latency_ns.end());
+    return {percentile(proc, 0.5) * 1e-6, percentile(proc, 0.99) * 1e-6, percentile(lat, 0.5) * 1e-6, percentile(lat, 0.99) * 1e-6};
 }
 
 uint64_t FrameLoop::bad_frames() const

@@ -31,6 +31,13 @@ struct FrameLoopOptions
     double frame_rate_hz = 30;
 };
 
+/// How long the node's work took per frame (real time) and how long after its exposure each
+/// frame's result was out (the lab's clock), over the newest 100000 frames.
+struct FrameTimes
+{
+    double processing_ms_p50 = 0, processing_ms_p99 = 0, latency_ms_p50 = 0, latency_ms_p99 = 0;
+};
+
 class FrameLoop
 {
 public:
@@ -45,6 +52,7 @@ public:
 
     uint64_t dropped() const;
     uint64_t bad_frames() const;
+    FrameTimes times() const;
 
 private:
     struct Impl;

@@ -6,13 +6,11 @@
 #include <cpm/Logging.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
-#include <cpm/percentile.hpp>
 #include <cpm/timer_ids.hpp>
 #include <cpm/topics.hpp>
 
 #include <chrono>
 #include <cstdio>
-#include <deque>
 #include <mutex>
 #include <set>
 
@@ -55,12 +53,10 @@ struct IpsNode::Impl
 
     void process(const cv::Mat& gray, uint64_t exposure_ns)
     {
-        const auto start = std::chrono::steady_clock::now();
         const OverheadView view = locator.locate(gray);
         const auto observations = observations_of(view, exposure_ns);
         for (const auto& o : observations) (void)writer.write(o);
         const uint64_t done = get_time_ns();
-        const auto took = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count();
         std::lock_guard<std::mutex> lock(mutex);
         ++counts.frames;
         counts.observations += observations.size();
@@ -92,12 +88,6 @@ struct IpsNode::Impl
                              view.floor_residual_px, options.moved_px, (unsigned long long)held);
             }
         }
-        processing_ns.push_back(uint64_t(took));
-        latency_ns.push_back(done > exposure_ns ? done - exposure_ns : 0);
-        if (processing_ns.size() > 100000) {  // bounded: keep the newest
-            processing_ns.pop_front();
-            latency_ns.pop_front();
-        }
     }
 
     IpsNodeOptions options;
@@ -107,7 +97,6 @@ struct IpsNode::Impl
     IpsNodeStats counts;
     std::set<int> unknown_logged;
     LogThrottle twice_log, misfit_log, moved_log;
-    std::deque<uint64_t> processing_ns, latency_ns;
     FrameLoop loop;  ///< last: its thread calls process()
 };
 
@@ -136,9 +125,7 @@ IpsNodeStats IpsNode::stats() const
 std::string IpsNode::stats_json() const
 {
     const IpsNodeStats c = stats();
-    std::lock_guard<std::mutex> lock(impl_->mutex);
-    std::vector<uint64_t> proc(impl_->processing_ns.begin(), impl_->processing_ns.end());
-    std::vector<uint64_t> lat(impl_->latency_ns.begin(), impl_->latency_ns.end());
+    const FrameTimes t = impl_->loop.times();
     char line[768];
     std::snprintf(line, sizeof line,
                   "{\"frames\": %llu, \"dropped\": %llu, \"bad_frames\": %llu, \"observations\": %llu, \"unknown_markers\": %llu, "
@@ -146,8 +133,8 @@ std::string IpsNode::stats_json() const
                   "\"processing_ms_p50\": %.3f, \"processing_ms_p99\": %.3f, \"latency_ms_p50\": %.3f, \"latency_ms_p99\": %.3f}",
                   (unsigned long long)c.frames, (unsigned long long)c.dropped, (unsigned long long)c.bad_frames,
                   (unsigned long long)c.observations, (unsigned long long)c.unknown_markers, (unsigned long long)c.seen_twice,
-                  (unsigned long long)c.misfits, (unsigned long long)c.moved_frames, c.floor_residual_px, percentile(proc, 0.5) * 1e-6,
-                  percentile(proc, 0.99) * 1e-6, percentile(lat, 0.5) * 1e-6, percentile(lat, 0.99) * 1e-6);
+                  (unsigned long long)c.misfits, (unsigned long long)c.moved_frames, c.floor_residual_px, t.processing_ms_p50,
+                  t.processing_ms_p99, t.latency_ms_p50, t.latency_ms_p99);
     return line;
 }
 

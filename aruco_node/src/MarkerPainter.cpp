@@ -10,6 +10,23 @@
 
 namespace cpm::aruco {
 
+QuadSize quad_size(const std::array<cv::Point2d, 4>& corners)
+{
+    QuadSize q{0, 1e9};
+    for (size_t i = 0; i < 4; ++i) {
+        const double edge = cv::norm(corners[i] - corners[(i + 1) % 4]);
+        q.side += edge / 4;
+        q.shortest = std::min(q.shortest, edge);
+    }
+    return q;
+}
+
+bool whole_in_view(const std::array<cv::Point2d, 4>& corners, int width, int height)
+{
+    return std::all_of(corners.begin(), corners.end(),
+                       [&](const cv::Point2d& p) { return p.x >= 3 && p.y >= 3 && p.x <= width - 4 && p.y <= height - 4; });
+}
+
 MarkerPainter::MarkerPainter(const RenderOptions& options)
     : options_(options), dictionary_(compat::dictionary(options.dictionary)), cells_(compat::marker_bits(*dictionary_) + 2),
       rng_(options.seed)
@@ -40,17 +57,12 @@ const cv::Mat& MarkerPainter::texture(int id, int px_per_cell)
 
 bool MarkerPainter::paint(cv::Mat& frame, int id, const std::array<cv::Point2d, 4>& black, const std::array<cv::Point2d, 4>& outer)
 {
-    double side = 0, shortest = 1e9;
-    for (int i = 0; i < 4; ++i) {
-        const double edge = cv::norm(black[i] - black[(i + 1) % 4]);
-        side += edge / 4;
-        shortest = std::min(shortest, edge);
-    }
-    if (side < 4) return false;
+    const QuadSize size = quad_size(black);
+    if (size.side < 4) return false;
     // A texture no finer than the marker's most foreshortened edge: warping then only
     // magnifies, and a bilinear edge crosses mid-grey where the true edge is (minifying
     // would alias and move edges by a good part of a pixel).
-    const int ppc = std::clamp(int(std::floor(shortest / cells_)), 1, 64);
+    const int ppc = std::clamp(int(std::floor(size.shortest / cells_)), 1, 64);
     const cv::Mat& tex = texture(id, ppc);
     const double a = ppc - 0.5, b = ppc + cells_ * ppc - 0.5;  // the black square's edges in the texture
     const cv::Point2f src[4] = {{float(a), float(a)}, {float(b), float(a)}, {float(b), float(b)}, {float(a), float(b)}};

@@ -15,6 +15,15 @@
 
 namespace cpm::aruco {
 
+/// A projected quad's mean side and its shortest side, px.
+struct QuadSize
+{
+    double side = 0, shortest = 0;
+};
+QuadSize quad_size(const std::array<cv::Point2d, 4>& corners);
+/// All four corners at least 3 px inside a width × height image.
+bool whole_in_view(const std::array<cv::Point2d, 4>& corners, int width, int height);
+
 class MarkerPainter
 {
 public:

@@ -77,13 +77,17 @@ double rotation_angle(const cv::Matx33d& a, const cv::Matx33d& b)
 
 struct OverheadRenderer::Impl
 {
-    Impl(const Camera& camera, const RenderOptions& o, const vehicle::VehicleParameters& b)
-        : painter(o), options(o), body(b), pose(extrinsics(overhead_pose_of(camera, "the overhead camera")))
+    Impl(const Camera& c, const RenderOptions& o, const vehicle::VehicleParameters& b)
+        : camera(c), painter(o), options(o), body(b), pose(extrinsics(overhead_pose_of(camera, "the overhead camera")))
     {
         canvas_k = camera.camera_matrix;
-        if (!has_distortion(camera)) return;
-        // Where each pixel of the distorted frame looks, on an ideal pinhole canvas large enough
-        // to hold all of them: the frame is then the canvas remapped.
+        if (has_distortion(camera)) make_canvas();
+    }
+
+    /// Where each pixel of the distorted frame looks, on an ideal pinhole canvas large enough
+    /// to hold all of them: the frame is then the canvas remapped.
+    void make_canvas()
+    {
         std::vector<cv::Point2f> pixels, ideal;
         pixels.reserve(size_t(camera.width) * camera.height);
         for (int v = 0; v < camera.height; ++v) {
@@ -112,6 +116,73 @@ struct OverheadRenderer::Impl
         distorted = true;
     }
 
+    std::vector<cv::Point2d> on_canvas(const std::vector<cv::Point3d>& points) const
+    {
+        return project_points(points, pose, canvas_k, cv::Vec<double, 5>(0, 0, 0, 0, 0));
+    }
+    std::vector<cv::Point2d> in_frame(const std::vector<cv::Point3d>& points) const
+    {
+        return project_points(points, pose, camera.camera_matrix, camera.distortion);
+    }
+
+    /// With distortion: the frame region a shape covers once the lens has bent its straight
+    /// edges (5 points along each side of its outline), to be remapped from the canvas.
+    void mark_dirty(const std::array<cv::Vec3d, 4>& outline)
+    {
+        if (!distorted) return;
+        std::vector<cv::Point3d> points;
+        for (size_t i = 0; i < 4; ++i) {
+            for (int k = 0; k < 5; ++k) points.emplace_back(outline[i] + (outline[(i + 1) % 4] - outline[i]) * (k / 5.0));
+        }
+        const auto image = in_frame(points);
+        cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>(image.begin(), image.end()));
+        box.x -= 3;
+        box.y -= 3;
+        box.width += 7;
+        box.height += 7;
+        box &= cv::Rect(0, 0, camera.width, camera.height);
+        if (!box.empty()) dirty.push_back(box);
+    }
+
+    /// A flat marker at (x, y, z) painted on the target; its truth in the frame (if asked).
+    void flat_marker(cv::Mat& target, std::vector<OverheadTruth>* truth, int id, int vehicle_id, double x, double y, double z, double yaw,
+                     double size)
+    {
+        const auto black = flat_marker_corners(x, y, z, yaw, size);
+        const auto outer = flat_marker_corners(x, y, z, yaw, size * painter.quiet_zone_scale());
+        std::vector<cv::Point3d> object(black.begin(), black.end());
+        object.insert(object.end(), outer.begin(), outer.end());
+        const auto ideal = on_canvas(object);
+        if (!painter.paint(target, id, {ideal[0], ideal[1], ideal[2], ideal[3]}, {ideal[4], ideal[5], ideal[6], ideal[7]})) return;
+        mark_dirty(outer);
+        if (!truth) return;
+        const auto seen = in_frame({object.begin(), object.begin() + 4});
+        const std::array<cv::Point2d, 4> corners{seen[0], seen[1], seen[2], seen[3]};
+        OverheadTruth t{.id = id, .vehicle_id = vehicle_id};
+        for (size_t i = 0; i < 4; ++i) t.corners[i] = corners[i];
+        t.side_px = quad_size(corners).side;
+        t.whole_in_view = whole_in_view(corners, camera.width, camera.height);
+        truth->push_back(t);
+    }
+
+    /// A car: a dark box from the rear overhang to the front, its top at the roof's height, and
+    /// its roof marker (if it wears one).
+    void draw_car(cv::Mat& target, std::vector<OverheadTruth>* truth, const OverheadCar& car, const vehicle::RoofMarker* roof)
+    {
+        const double z = roof ? roof->z : 0.1;
+        const double c = std::cos(car.pose.yaw), s = std::sin(car.pose.yaw);
+        const double back = -body.rear_overhang, front = body.length - body.rear_overhang, half = body.width / 2;
+        std::array<cv::Vec3d, 4> outline;
+        const double xs[4] = {back, front, front, back}, ys[4] = {half, half, -half, -half};
+        for (size_t i = 0; i < 4; ++i) outline[i] = {car.pose.x + c * xs[i] - s * ys[i], car.pose.y + s * xs[i] + c * ys[i], z};
+        std::vector<cv::Point> poly;
+        for (const auto& p : on_canvas({outline.begin(), outline.end()})) poly.emplace_back(int(std::lround(p.x * 16)), int(std::lround(p.y * 16)));
+        cv::fillConvexPoly(target, poly, cv::Scalar(40), cv::LINE_AA, 4);
+        mark_dirty(outline);
+        if (roof) flat_marker(target, truth, roof->id, car.vehicle_id, car.pose.x, car.pose.y, z, car.pose.yaw, roof->size);
+    }
+
+    const Camera& camera;
     MarkerPainter painter;
     RenderOptions options;
     vehicle::VehicleParameters body;
@@ -131,92 +202,22 @@ OverheadRenderer::OverheadRenderer(vehicle::World world, Camera camera, RenderOp
 
 OverheadRenderer::~OverheadRenderer() = default;
 
-cv::Point2d OverheadRenderer::project(const cv::Vec3d& p) const
-{
-    return project_points({cv::Point3d(p)}, impl_->pose, camera_.camera_matrix, camera_.distortion)[0];
-}
+cv::Point2d OverheadRenderer::project(const cv::Vec3d& p) const { return impl_->in_frame({cv::Point3d(p)})[0]; }
 
 void OverheadRenderer::render(const std::vector<OverheadCar>& cars, cv::Mat& frame, std::vector<OverheadTruth>* truth)
 {
     Impl& d = *impl_;
-    const int w = camera_.width, h = camera_.height;
-    frame.create(h, w, CV_8UC1);
+    frame.create(camera_.height, camera_.width, CV_8UC1);
     frame.setTo(d.options.floor_grey);
     cv::Mat& target = d.distorted ? d.canvas : frame;
     if (d.distorted) target.setTo(d.options.floor_grey);
     d.dirty.clear();
     if (truth) truth->clear();
-    const cv::Vec<double, 5> none(0, 0, 0, 0, 0);
-
-    // The outline's points (5 along each side), for the frame region a shape covers once the
-    // lens has bent its straight edges.
-    auto mark_dirty = [&](const std::array<cv::Vec3d, 4>& outline) {
-        if (!d.distorted) return;
-        std::vector<cv::Point3d> points;
-        for (int i = 0; i < 4; ++i) {
-            for (int k = 0; k < 5; ++k) points.emplace_back(outline[size_t(i)] + (outline[size_t((i + 1) % 4)] - outline[size_t(i)]) * (k / 5.0));
-        }
-        const auto image = project_points(points, d.pose, camera_.camera_matrix, camera_.distortion);
-        std::vector<cv::Point2f> fp(image.begin(), image.end());
-        cv::Rect box = cv::boundingRect(fp);
-        box.x -= 3;
-        box.y -= 3;
-        box.width += 7;
-        box.height += 7;
-        box &= cv::Rect(0, 0, w, h);
-        if (!box.empty()) d.dirty.push_back(box);
-    };
-    // A flat marker at (x, y, z): painted on the canvas, its truth in the frame.
-    auto flat_marker = [&](int id, int vehicle_id, double x, double y, double z, double yaw, double size) {
-        const auto black = flat_marker_corners(x, y, z, yaw, size);
-        const auto outer = flat_marker_corners(x, y, z, yaw, size * d.painter.quiet_zone_scale());
-        std::vector<cv::Point3d> object(black.begin(), black.end());
-        object.insert(object.end(), outer.begin(), outer.end());
-        const auto ideal = project_points(object, d.pose, d.canvas_k, none);
-        if (!d.painter.paint(target, id, {ideal[0], ideal[1], ideal[2], ideal[3]}, {ideal[4], ideal[5], ideal[6], ideal[7]})) return;
-        mark_dirty(outer);
-        if (!truth) return;
-        const auto seen = project_points({object.begin(), object.begin() + 4}, d.pose, camera_.camera_matrix, camera_.distortion);
-        OverheadTruth t;
-        t.id = id;
-        t.vehicle_id = vehicle_id;
-        t.whole_in_view = true;
-        for (int i = 0; i < 4; ++i) {
-            t.corners[size_t(i)] = seen[size_t(i)];
-            t.side_px += cv::norm(seen[size_t(i)] - seen[size_t((i + 1) % 4)]) / 4;
-            t.whole_in_view = t.whole_in_view && seen[size_t(i)].x >= 3 && seen[size_t(i)].y >= 3 && seen[size_t(i)].x <= w - 4 &&
-                              seen[size_t(i)].y <= h - 4;
-        }
-        truth->push_back(t);
-    };
-
-    for (const auto& f : world_.floor_markers()) flat_marker(f.id, 0, f.x, f.y, 0, f.yaw, f.size);
-    for (const auto& car : cars) {
-        const vehicle::RoofMarker* roof = nullptr;
-        for (const auto& r : world_.roof_markers()) {
-            if (r.vehicle_id == car.vehicle_id) roof = &r;
-        }
-        const double z = roof ? roof->z : 0.1;
-        // The body: a dark box from the rear overhang to the front, its top at the roof's height.
-        const double c = std::cos(car.pose.yaw), s = std::sin(car.pose.yaw);
-        const double back = -d.body.rear_overhang, front = d.body.length - d.body.rear_overhang, half = d.body.width / 2;
-        std::array<cv::Vec3d, 4> outline;
-        const double xs[4] = {back, front, front, back}, ys[4] = {half, half, -half, -half};
-        for (int i = 0; i < 4; ++i) {
-            outline[size_t(i)] = {car.pose.x + c * xs[i] - s * ys[i], car.pose.y + s * xs[i] + c * ys[i], z};
-        }
-        const auto ideal = project_points({outline.begin(), outline.end()}, d.pose, d.canvas_k, none);
-        std::vector<cv::Point> poly;
-        for (const auto& p : ideal) poly.emplace_back(int(std::lround(p.x * 16)), int(std::lround(p.y * 16)));
-        cv::fillConvexPoly(target, poly, cv::Scalar(40), cv::LINE_AA, 4);
-        mark_dirty(outline);
-        if (roof) flat_marker(roof->id, car.vehicle_id, car.pose.x, car.pose.y, z, car.pose.yaw, roof->size);
-    }
-    if (d.distorted) {
-        for (const auto& box : d.dirty) {
-            cv::Mat out = frame(box);
-            cv::remap(d.canvas, out, d.map1(box), d.map2(box), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(d.options.floor_grey));
-        }
+    for (const auto& f : world_.floor_markers()) d.flat_marker(target, truth, f.id, 0, f.x, f.y, 0, f.yaw, f.size);
+    for (const auto& car : cars) d.draw_car(target, truth, car, world_.roof_marker_of(car.vehicle_id));
+    for (const auto& box : d.dirty) {
+        cv::Mat out = frame(box);
+        cv::remap(d.canvas, out, d.map1(box), d.map2(box), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(d.options.floor_grey));
     }
     d.painter.sensor(frame);
 }

@@ -305,15 +305,8 @@ void read_ips(Checker& c, const YAML::Node& root, Scenario& s)
     else if (!s.world.empty()) s.ips.world = s.world;
     else c.error(n, "ips.world", "missing (a map with roof_markers, which marker is on which car, and floor_markers)");
     if (n["host"]) s.ips.host = host_name(c, s, n["host"], "ips.host");
-    auto in_range = [&](const char* key, double lo, double hi, double& field) {
-        const std::string p = std::string("ips.") + key;
-        if (auto v = c.number(n[key], p)) {
-            if (*v < lo || *v > hi) c.error(n[key], p, std::to_string(*v) + " is out of range (" + std::to_string(lo) + " to " + std::to_string(hi) + ")");
-            else field = *v;
-        }
-    };
-    if (n["rate"]) in_range("rate", 1, 200, s.ips.rate_hz);
-    if (n["noise"]) in_range("noise", 0, 128, s.ips.noise);
+    if (n["rate"]) s.ips.rate_hz = c.number(n["rate"], "ips.rate", 1, 200).value_or(s.ips.rate_hz);
+    if (n["noise"]) s.ips.noise = c.number(n["noise"], "ips.noise", 0, 128).value_or(0);
     if (n["blur"]) s.ips.blur = int(c.integer(n["blur"], "ips.blur", 0, 31).value_or(0));
     if (!s.ips.camera.empty()) {
         try {
@@ -327,9 +320,7 @@ void read_ips(Checker& c, const YAML::Node& root, Scenario& s)
     try {
         const auto world = vehicle::World::load(s.ips.world);
         for (const auto& v : s.vehicles) {
-            bool worn = false;
-            for (const auto& r : world.roof_markers()) worn = worn || r.vehicle_id == v.id;
-            if (!worn) c.error(at, "ips.world", "car " + std::to_string(v.id) + " has no roof marker in " + s.ips.world + " (roof_markers)");
+            if (!world.roof_marker_of(v.id)) c.error(at, "ips.world", "car " + std::to_string(v.id) + " has no roof marker in " + s.ips.world + " (roof_markers)");
         }
     } catch (const cpm::Error& e) {
         c.error(at, "ips.world", e.what());

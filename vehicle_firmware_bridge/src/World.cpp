@@ -219,6 +219,14 @@ const RoofMarker* World::roof_marker(int marker_id) const
     return nullptr;
 }
 
+const RoofMarker* World::roof_marker_of(int vehicle_id) const
+{
+    for (const auto& r : roof_markers_) {
+        if (r.vehicle_id == vehicle_id) return &r;
+    }
+    return nullptr;
+}
+
 World::World(std::vector<Segment> walls, std::vector<Marker> markers, std::vector<Gate> gates)
     : walls_(std::move(walls)), markers_(std::move(markers)), gates_(std::move(gates))
 {

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,22 @@ public:
             return std::nullopt;
         }
         return v;
+    }
+    /// A finite number in [min, max].
+    std::optional<double> number(const YAML::Node& n, const std::string& path, double min, double max)
+    {
+        const auto v = number(n, path);
+        if (v && (*v < min || *v > max)) {
+            error(n, path, shown(n) + " is out of range (" + shown_number(min) + " to " + shown_number(max) + ")");
+            return std::nullopt;
+        }
+        return v;
+    }
+    static std::string shown_number(double v)
+    {
+        std::ostringstream s;
+        s << v;
+        return s.str();
     }
     std::optional<long long> integer(const YAML::Node& n, const std::string& path, long long min, long long max)
     {

@@ -74,6 +74,8 @@ public:
     const std::vector<FloorMarker>& floor_markers() const { return floor_markers_; }
     /// The roof marker with this marker id, or nullptr.
     const RoofMarker* roof_marker(int marker_id) const;
+    /// The roof marker car `vehicle_id` wears, or nullptr.
+    const RoofMarker* roof_marker_of(int vehicle_id) const;
 
     /// Distance (m) from (x, y) along direction `angle` (rad) to the nearest wall or extra
     /// segment, or max_range when nothing is closer. O(walls + extra).
