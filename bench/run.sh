@@ -47,6 +47,7 @@ bench "bench_history_store (the history store vs SQLite in memory, indexed, prep
 bench "bench_history_service (cpm_history: ingest without loss, query round trip vs plain ping-pong, memory)" "$bin/bench_history_service"
 bench "bench_recording (recordings: ingest with --record on vs off, at from a recording vs live vs SQLite, size, replay timing)" "$bin/bench_recording"
 bench "bench_aruco (perception: aruco_node vs plain OpenCV and AprilTag 3; detection, pose, latency, CameraFrame over DDS)" "$bin/bench_aruco"
+bench "bench_ips (positioning: ips_node vs plain OpenCV per frame, 8 and 20 cars; accuracy; latency)" "$bin/bench_ips"
 bench "bench_hlc (a user's controller: the list built, a step from list to answer, 20 cars)" "$bin/bench_hlc"
 bench "bench_python (cpm from Python: one-way latency vs C++, a 100k-sample recording into columns vs C++)" \
   /usr/bin/python3 "$(dirname "$0")/python/bench_python.py" "$build"

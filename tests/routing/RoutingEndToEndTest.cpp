@@ -15,6 +15,7 @@
 #include <VehicleObservation.h>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -56,6 +57,26 @@ double path_length(const std::vector<VehicleObservation>& track)
 }
 
 std::string log_text(const Process& p) { return p.output() + p.errors(); }
+
+/// The tests' own referee of the bodies' gap (not the planner's): each car's pose against every
+/// other car's newest, in the order of their stamps.
+double referee_gap(std::vector<VehicleObservation> all)
+{
+    std::stable_sort(all.begin(), all.end(), [](const auto& a, const auto& b) {
+        return a.header().create_stamp().nanoseconds() < b.header().create_stamp().nanoseconds();
+    });
+    const cpm::routing::Footprint f;
+    std::map<int, cpm::routing::Pose> newest;
+    double gap = std::numeric_limits<double>::infinity();
+    for (const auto& o : all) {
+        const cpm::routing::Pose p{o.pose().x(), o.pose().y(), o.pose().yaw()};
+        for (const auto& [id, q] : newest) {
+            if (id != o.vehicle_id()) gap = routing_test::least_gap(f, p, q, gap);
+        }
+        newest[o.vehicle_id()] = p;
+    }
+    return gap;
+}
 
 }  // namespace
 
@@ -100,18 +121,8 @@ TEST(RoutingEndToEnd, EightCarsDriveTwoSimulatedMinutesWithoutTouchingAndNoneSta
     for (const auto& o : all) watch.add(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
     EXPECT_EQ(watch.overlaps(), 0u) << watch.report();
     EXPECT_GT(watch.min_distance(), 0.0) << watch.report();
-    // The tests' own referee of the bodies' gap (not the planner's): each car's pose against
-    // every other car's newest, as the observations came.
-    const cpm::routing::Footprint f;
-    std::map<int, cpm::routing::Pose> newest;
-    double gap = std::numeric_limits<double>::infinity();
-    for (const auto& o : all) {
-        const cpm::routing::Pose p{o.pose().x(), o.pose().y(), o.pose().yaw()};
-        for (const auto& [id, q] : newest) {
-            if (id != o.vehicle_id()) gap = routing_test::least_gap(f, p, q, gap);
-        }
-        newest[o.vehicle_id()] = p;
-    }
+    // The tests' own referee of the bodies' gap (not the planner's).
+    const double gap = referee_gap(all);
     EXPECT_GT(gap, 0.0) << "two bodies touched (the tests' referee)";
     EXPECT_NEAR(gap, watch.min_distance(), 0.0005);
     for (const auto& [id, car] : watch.cars()) {
@@ -208,4 +219,47 @@ TEST(RoutingEndToEnd, CheckAndRenderTheLabMap)
     EXPECT_NE(svg.find(">31</text>"), std::string::npos);  // node ids are drawn
     EXPECT_NE(svg.find("#e4572e"), std::string::npos);     // and the conflict zones
     std::filesystem::remove(png);
+}
+
+TEST(RoutingEndToEnd, EightCarsPlacedOnlyByTheOverheadCameraDriveWithoutTouchingAndItsErrorStaysWithin2Cm)
+{
+    // scenarios/labs/ips.yaml: the cars' vehicleObservation comes from ips_node alone (the
+    // overhead camera's frames); the simulator's truth is on a topic of its own, which the test
+    // reads (joining once the run has started: the run refuses a domain somebody is on).
+    const auto dir = std::filesystem::temp_directory_path() / ("cpm_ips_e2e_" + std::to_string(::getpid()));
+    const std::string out = (dir / "run").string();
+    std::filesystem::remove_all(dir);
+    Process run({built_program("cpm"), "lab", "run", kRoot + "/scenarios/labs/ips.yaml", "--duration", "20s", "--out", out, "--monitor", "off"});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("processes on domain") != std::string::npos; }, 60s)) << run.errors();
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<VehicleObservation> truth(participant, "vehicleObservationTruth", {.keep_all = true});
+    std::vector<VehicleObservation> all;
+    int exit = -1;
+    const auto give_up = std::chrono::steady_clock::now() + 300s;
+    while ((exit = run.wait(20ms)) == -1 && std::chrono::steady_clock::now() < give_up) {
+        for (auto& o : truth.take()) all.push_back(o);
+    }
+    ASSERT_EQ(exit, 0) << run.output() << run.errors();
+    std::ifstream in(out + "/summary.json");
+    const auto summary = nlohmann::json::parse(in);
+    EXPECT_EQ(summary["ok"], true) << summary.dump(2);
+    const auto& cars = summary["report"]["cars"];
+    ASSERT_EQ(cars.size(), 8u) << summary.dump(2);
+    for (const auto& [id, car] : cars.items()) {
+        EXPECT_GE(car["driven_m"].get<double>(), 5.0) << "car " << id << " drives";
+        EXPECT_GE(car["ips_samples"].get<int>(), 900) << "car " << id << ": seen in nearly every one of 1000 frames";
+        EXPECT_LE(car["ips_error_m_p99"].get<double>(), 0.02) << "car " << id;
+        std::printf("car %s: driven %.1f m, IPS error p50 %.2f mm, p99 %.2f mm, yaw p99 %.2f°\n", id.c_str(), car["driven_m"].get<double>(),
+                    car["ips_error_m_p50"].get<double>() * 1000, car["ips_error_m_p99"].get<double>() * 1000,
+                    car["ips_yaw_error_deg_p99"].get<double>());
+    }
+    std::ifstream ips_log(out + "/ips.log");
+    const std::string ips_text((std::istreambuf_iterator<char>(ips_log)), std::istreambuf_iterator<char>());
+    EXPECT_NE(ips_text.find("\"unknown_markers\": 0, \"seen_twice\": 0, \"misfits\": 0, \"moved_frames\": 0"), std::string::npos) << ips_text;
+    // The bodies by the simulator's truth, as the test's own referee sees them.
+    ASSERT_GT(all.size(), 8u * 500) << "the truth of most of the run";
+    const double gap = referee_gap(all);
+    EXPECT_GT(gap, 0.0) << "two bodies touched (the tests' referee)";
+    std::printf("smallest gap between two bodies: %.3f m over %zu true poses\n", gap, all.size());
+    std::filesystem::remove_all(dir);
 }
