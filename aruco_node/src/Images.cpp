@@ -21,6 +21,17 @@ void write_image(const std::string& path, const cv::Mat& image)
     if (!ok) throw Error(path + ": cannot write the image");
 }
 
+cv::Mat read_camera_image(const std::string& path, const Camera& camera)
+{
+    cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+    if (image.empty()) throw Error(path + ": cannot read the image");
+    if (image.cols != camera.width || image.rows != camera.height) {
+        throw Error(path + ": " + std::to_string(image.cols) + "×" + std::to_string(image.rows) + " px, but the camera file says " +
+                    std::to_string(camera.width) + "×" + std::to_string(camera.height));
+    }
+    return image;
+}
+
 std::vector<std::string> list_images(const std::string& folder)
 {
     std::error_code ec;

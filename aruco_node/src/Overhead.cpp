@@ -364,32 +364,37 @@ CameraLocation locate_camera(const Camera& lens, const vehicle::World& world, co
         throw Error("the image shows " + std::to_string(out.markers.size()) + " of the world's floor markers" +
                     (ids.empty() ? "" : " (" + ids.substr(1) + ")") + "; locating the camera needs at least 2");
     }
-    // All floor corners lie in one plane: IPPE's two solutions, the one with the camera above
-    // the floor and the smaller error, refined over every corner.
+    // All floor corners lie in one plane, and a camera looking nearly straight down is the case
+    // where a plane's two poses are hard to tell apart (a small tilt one way or the other): each
+    // of IPPE's solutions and the iterative solver's is refined over every corner by
+    // Levenberg-Marquardt, and the one with the camera above the floor that reprojects best wins.
     std::vector<cv::Mat> rvecs, tvecs;
-    std::vector<double> errors;
-    cv::solvePnPGeneric(object, image, lens.camera_matrix, lens.distortion, rvecs, tvecs, false, cv::SOLVEPNP_IPPE, cv::noArray(),
-                        cv::noArray(), errors);
-    int best = -1;
-    for (size_t i = 0; i < rvecs.size(); ++i) {
-        cv::Matx33d r;
-        cv::Rodrigues(rvecs[i], r);
-        const cv::Vec3d centre = -(r.t() * cv::Vec3d(tvecs[i].ptr<double>()));
-        if (centre[2] <= 0) continue;
-        if (best < 0 || errors[i] < errors[size_t(best)]) best = int(i);
+    cv::solvePnPGeneric(object, image, lens.camera_matrix, lens.distortion, rvecs, tvecs, false, cv::SOLVEPNP_IPPE);
+    cv::Mat r_iter, t_iter;
+    if (cv::solvePnP(object, image, lens.camera_matrix, lens.distortion, r_iter, t_iter, false, cv::SOLVEPNP_ITERATIVE)) {
+        rvecs.push_back(r_iter);
+        tvecs.push_back(t_iter);
     }
-    if (best < 0) throw Error("no camera pose above the floor fits the floor markers seen");
-    cv::Mat rvec = rvecs[size_t(best)], tvec = tvecs[size_t(best)];
-    cv::solvePnPRefineLM(object, image, lens.camera_matrix, lens.distortion, rvec, tvec);
-    cv::Matx33d map_to_camera;
-    cv::Rodrigues(rvec, map_to_camera);
-    out.pose.rotation = map_to_camera.t();
-    out.pose.position = -(map_to_camera.t() * cv::Vec3d(tvec.ptr<double>()));
-    std::vector<cv::Point2d> back;
-    cv::projectPoints(object, rvec, tvec, lens.camera_matrix, lens.distortion, back);
-    double sq = 0;
-    for (size_t i = 0; i < back.size(); ++i) sq += (back[i] - image[i]).dot(back[i] - image[i]);
-    out.pose.residual_px = std::sqrt(sq / double(back.size()));
+    double best = std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < rvecs.size(); ++i) {
+        cv::Mat rvec = rvecs[i].clone(), tvec = tvecs[i].clone();
+        cv::solvePnPRefineLM(object, image, lens.camera_matrix, lens.distortion, rvec, tvec);
+        cv::Matx33d map_to_camera;
+        cv::Rodrigues(rvec, map_to_camera);
+        const cv::Vec3d centre = -(map_to_camera.t() * cv::Vec3d(tvec.ptr<double>()));
+        if (centre[2] <= 0) continue;
+        std::vector<cv::Point2d> back;
+        cv::projectPoints(object, rvec, tvec, lens.camera_matrix, lens.distortion, back);
+        double sq = 0;
+        for (size_t k = 0; k < back.size(); ++k) sq += (back[k] - image[k]).dot(back[k] - image[k]);
+        const double rms = std::sqrt(sq / double(back.size()));
+        if (rms >= best) continue;
+        best = rms;
+        out.pose.rotation = map_to_camera.t();
+        out.pose.position = centre;
+        out.pose.residual_px = rms;
+    }
+    if (!std::isfinite(best)) throw Error("no camera pose above the floor fits the floor markers seen");
     return out;
 }
 

@@ -7,6 +7,7 @@
 #include <cpm/aruco/Calibration.hpp>
 #include <cpm/aruco/Camera.hpp>
 #include <cpm/aruco/GateCourse.hpp>
+#include <cpm/aruco/Overhead.hpp>
 #include <cpm/aruco/Renderer.hpp>
 #include <cpm/get_time_ns.hpp>
 
@@ -20,6 +21,7 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/videoio.hpp>
 
 #include <cmath>
@@ -317,6 +319,126 @@ TEST(ArucoEndToEnd, CalibrationFromRenderedCharucoPhotosFindsTheIntrinsics)
     Process even({built_program("cpm"), "camera", "calibrate", "--images", dir.string(), "--board", "charuco:5x6,0.04,0.03", "--out", out});
     EXPECT_EQ(even.wait(20s), 2);
     EXPECT_NE(even.errors().find("use an odd number of rows"), std::string::npos) << even.errors();
+    std::filesystem::remove_all(dir);
+}
+
+TEST(ArucoEndToEnd, IpsNodeNamesBadFramesAndMarkersAndGoesOn)
+{
+    // ips_node on the overhead frames of the test's own writer: a good frame (two cars), a frame
+    // of the wrong size, then a frame where two cars wear one marker and a marker of no car lies
+    // about: each named and counted, the cars it can tell apart still published.
+    const std::string ceiling = std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/ceiling_1280x1024.yaml";
+    const std::string floor = std::string(CPM_SOURCE_DIR) + "/scenarios/maps/lab_floor.json";
+    const auto camera = cpm::aruco::Camera::load(ceiling, cpm::aruco::CameraPlacement::overhead);
+    const auto world = cpm::vehicle::World::load(floor);
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::Writer<CameraFrame> frames(participant, "ipsCameraFrame");
+    cpm::ReaderAbstract<VehicleObservation> seen(participant, "vehicleObservation", {.keep_all = true});
+    Process node({built_program("ips_node"), "--camera", ceiling, "--world", floor});
+    ASSERT_TRUE(frames.wait_for_matched(1, 20s)) << node.errors();
+    ASSERT_TRUE(seen.wait_for_matched(1, 20s)) << node.errors();
+    auto send = [&](const cv::Mat& image) {
+        CameraFrame f;
+        f.width(uint32_t(image.cols));
+        f.height(uint32_t(image.rows));
+        f.encoding("mono8");
+        f.data(std::vector<uint8_t>(image.datastart, image.dataend));
+        f.header().create_stamp().nanoseconds(cpm::get_time_ns());
+        ASSERT_TRUE(frames.write(f));
+    };
+    cpm::aruco::OverheadRenderer lab(world, camera);
+    cv::Mat good;
+    lab.render({{3, {1.0, 1.0, 0.0}}, {4, {3.0, 2.0, 1.0}}}, good);
+    std::vector<VehicleObservation> got;
+    auto observed = [&](size_t n) {
+        return cpm_test::wait_until([&] {
+            for (auto& o : seen.take()) got.push_back(o);
+            return got.size() >= n;
+        }, 2s);
+    };
+    bool up = false;
+    for (int i = 0; i < 20 && !up; ++i) {
+        send(good);
+        up = observed(2);
+    }
+    ASSERT_TRUE(up) << node.errors();
+    EXPECT_NEAR(got[0].pose().x(), got[0].vehicle_id() == 3 ? 1.0 : 3.0, 0.01);
+    send(cv::Mat(480, 640, CV_8UC1, cv::Scalar(95)));  // the wrong size
+    std::this_thread::sleep_for(300ms);
+    auto roofs = world.roof_markers();
+    roofs[4].id = 3;                  // car 5 wears car 3's marker
+    roofs.push_back({30, 30, 0.12, 0.12});  // marker 30: on no roof of the node's world
+    cpm::vehicle::World wrong = world;
+    wrong.set_overhead_markers(roofs, world.floor_markers());
+    cpm::aruco::OverheadRenderer mixed(wrong, camera);
+    cv::Mat confusing;
+    mixed.render({{3, {1.0, 1.0, 0.0}}, {5, {2.0, 3.0, 0.0}}, {4, {3.0, 2.0, 1.0}}, {30, {3.6, 1.0, 0.0}}}, confusing);
+    const size_t before = got.size();
+    send(confusing);
+    ASSERT_TRUE(observed(before + 1)) << node.errors();
+    std::this_thread::sleep_for(300ms);
+    for (auto& o : seen.take()) got.push_back(o);
+    ASSERT_EQ(got.size(), before + 1) << "only car 4 can be told from the frame";
+    EXPECT_EQ(got.back().vehicle_id(), 4);
+    node.kill(SIGINT);
+    ASSERT_EQ(node.wait(10s), 0) << node.errors();
+    const auto stats = last_json_line(node.output());
+    EXPECT_EQ(stats["bad_frames"].get<int>() + stats["dropped"].get<int>(), 1) << node.output();
+    EXPECT_EQ(stats["seen_twice"], 1) << node.output();
+    EXPECT_EQ(stats["unknown_markers"], 1) << node.output();
+    const std::string errors = node.errors();
+    if (stats["bad_frames"] == 1) {
+        EXPECT_NE(errors.find("640×480 px, the camera file says 1280×1024"), std::string::npos) << errors;
+    }
+    EXPECT_NE(errors.find("roof marker 3 seen twice in one frame"), std::string::npos) << errors;
+    EXPECT_NE(errors.find("marker 30 is on no car's roof and no floor marker"), std::string::npos) << errors;
+    // Without a pose in the map, or without roof markers: named at the start.
+    Process no_pose({built_program("ips_node"), "--camera", kCamera, "--world", floor});
+    EXPECT_EQ(no_pose.wait(20s), 1);
+    EXPECT_NE(no_pose.errors().find("sim_640x480.yaml: no overhead pose"), std::string::npos) << no_pose.errors();
+    Process no_roofs({built_program("ips_node"), "--camera", ceiling, "--world", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/gates.json"});
+    EXPECT_EQ(no_roofs.wait(20s), 1);
+    EXPECT_NE(no_roofs.errors().find("gates.json: no roof_markers"), std::string::npos) << no_roofs.errors();
+}
+
+TEST(ArucoEndToEnd, CameraLocateFindsTheOverheadCameraThatMovedAndWritesItsPose)
+{
+    // A user's way: a frame of the ceiling camera where it hangs now (moved 6 cm and 5 cm down,
+    // turned 1°, which the camera file does not know), drawn by cpm camera render --overhead;
+    // cpm camera locate against the lab's file finds it and says how far it moved.
+    const auto dir = temp_dir("locate");
+    const std::string lab = std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/ceiling_1280x1024.yaml";
+    const std::string floor = std::string(CPM_SOURCE_DIR) + "/scenarios/maps/lab_floor.json";
+    auto now = cpm::aruco::Camera::load(lab, cpm::aruco::CameraPlacement::overhead);
+    cv::Matx33d turn;
+    cv::Rodrigues(cv::Vec3d(0, 1, 0) * (1.0 * M_PI / 180), turn);
+    now.overhead->rotation = turn * now.overhead->rotation;
+    now.overhead->position += cv::Vec3d(0.06, 0, -0.05);
+    const std::string moved = (dir / "moved.yaml").string(), image = (dir / "ceiling.png").string(), out = (dir / "located.yaml").string();
+    now.save(moved);
+    Process render({built_program("cpm"), "camera", "render", "--overhead", "--world", floor, "--camera", moved, "--cars", "1:1,1.2,0.3;2:3,2.5,2",
+                    "--out", image});
+    ASSERT_EQ(render.wait(30s), 0) << render.errors();
+    EXPECT_NE(render.output().find("8 marker(s) drawn"), std::string::npos) << render.output();
+    Process locate({built_program("cpm"), "camera", "locate", "--camera", lab, "--world", floor, "--image", image, "--out", out});
+    ASSERT_EQ(locate.wait(30s), 0) << locate.errors();
+    EXPECT_NE(locate.output().find("floor markers used: 40 41 42 43 44 45; other markers seen: 1 2"), std::string::npos) << locate.output();
+    EXPECT_NE(locate.output().find("moved since it was last located: 78."), std::string::npos) << locate.output();
+    const auto found = cpm::aruco::Camera::load(out, cpm::aruco::CameraPlacement::overhead);
+    EXPECT_LT(cv::norm(found.overhead->position - now.overhead->position), 0.01);
+    EXPECT_LT(cpm::aruco::rotation_angle(found.overhead->rotation, now.overhead->rotation) * 180 / M_PI, 0.2);
+    EXPECT_LT(found.overhead->residual_px, 0.5);
+    // A world whose floor is not this one, and a car's camera file: named, nothing written.
+    std::filesystem::remove(out);
+    Process other({built_program("cpm"), "camera", "locate", "--camera", lab, "--world", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/gates.json",
+                   "--image", image, "--out", out});
+    EXPECT_EQ(other.wait(30s), 1);
+    EXPECT_NE(other.errors().find("gates.json: the world has 0 floor_markers"), std::string::npos) << other.errors();
+    Process car({built_program("cpm"), "camera", "locate", "--camera", std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/sim_640x480.yaml",
+                 "--world", floor, "--image", image, "--out", out});
+    EXPECT_EQ(car.wait(30s), 1);
+    EXPECT_NE(car.errors().find("ceiling.png: 1280×1024 px, but the camera file says 640×480"), std::string::npos) << car.errors();
+    EXPECT_FALSE(std::filesystem::exists(out));
     std::filesystem::remove_all(dir);
 }
 

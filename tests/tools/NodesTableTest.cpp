@@ -103,13 +103,19 @@ TEST(NodesTable, EachProgramWritesAndReadsWhatItsRowSays)
     start({built_program("vehicle_bridge"), "--vehicle_id", "6", "--device", link, "--start", "0,0,0.3"});
     start({built_program("camera_sim"), "--vehicle_id", "6", "--camera", camera, "--map", map, "--rate", "5"});
     start({built_program("aruco_node"), "--vehicle_id", "6", "--camera", camera, "--world", map});
+    // Beside a positioning system: a simulator writing its truth to a topic of its own, the
+    // overhead camera drawing from it, and ips_node (a row is what a program may use in any mode).
+    const std::string ceiling = kRoot + "/scenarios/cameras/ceiling_1280x1024.yaml", floor = kRoot + "/scenarios/maps/lab_floor.json";
+    start({built_program("firmware_sim"), "--vehicle_id", "7", "--start", "2,2,0", "--truth_topic", "vehicleObservationTruth"});
+    start({built_program("camera_sim"), "--overhead", "--camera", ceiling, "--map", floor, "--rate", "5"});
+    start({built_program("ips_node"), "--camera", ceiling, "--world", floor});
     start({built_program("fsm_node"), "--vehicle_id", "6", "--fsm", kRoot + "/scenarios/fsm/gates.json"});
     start({built_program("central_routing"), "--vehicle_ids", "6", "--lanes", kRoot + "/scenarios/lanes/ring.json", "--period", "100ms"});
     start({built_program("cpm_history"), "--window", "10s"});
     start({built_program("cpm"), "param", "serve", dir.write("p.json", R"({"speed": 1})"), "--node_id", "parameter_server"});
     start({built_program("cpm"), "monitor", "--port", std::to_string(cpm_test::free_tcp_port()), "--allow-stop", "--node_id", "monitor"});
 
-    const std::vector<std::string> programs{"firmware_sim", "vehicle_bridge", "camera_sim", "aruco_node", "fsm_node",
+    const std::vector<std::string> programs{"firmware_sim", "vehicle_bridge", "camera_sim", "aruco_node", "ips_node", "fsm_node",
                                             "central_routing", "cpm_history", "parameter_server", "monitor"};
     const bool all_seen = cpm_test::wait_until([&] {
         for (const auto& p : programs) {

@@ -4,6 +4,8 @@
 #include <cpm/Error.hpp>
 #include <cpm/aruco/Calibration.hpp>
 #include <cpm/aruco/DetectorFlags.hpp>
+#include <cpm/aruco/Images.hpp>
+#include <cpm/aruco/Overhead.hpp>
 #include <cpm/aruco/Renderer.hpp>
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/aruco/GateCourse.hpp>
@@ -47,15 +49,7 @@ int aruco_detect(const std::vector<std::string>& args)
     auto setup = cpm::aruco::detector_setup(parsed, "cpm aruco detect");
     // Every image is read before any is searched: a wrong path fails at once.
     std::vector<cv::Mat> images;
-    for (const auto& path : parsed.positional) {
-        cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-        if (image.empty()) throw cpm::Error(path + ": cannot read the image");
-        if (image.cols != setup.camera.width || image.rows != setup.camera.height) {
-            throw cpm::Error(path + ": " + std::to_string(image.cols) + "×" + std::to_string(image.rows) + " px, but the camera file says " +
-                             std::to_string(setup.camera.width) + "×" + std::to_string(setup.camera.height));
-        }
-        images.push_back(image);
-    }
+    for (const auto& path : parsed.positional) images.push_back(cpm::aruco::read_camera_image(path, setup.camera));
     cpm::aruco::MarkerDetector detector(setup.camera, setup.options, setup.sizes);
     const bool json = parsed.has("--json");
     for (size_t i = 0; i < images.size(); ++i) {
@@ -92,25 +86,69 @@ int aruco_detect(const std::vector<std::string>& args)
 const char* const kRenderHelp =
     "usage: cpm camera render --world FILE --camera FILE --pose X,Y,YAW --out FRAME.png\n"
     "                         [--noise SIGMA] [--blur K] [--seed S] [--dictionary NAME]\n"
+    "       cpm camera render --overhead --world FILE --camera FILE [--cars ID:X,Y,YAW;...] --out FRAME.png [...]\n"
     "\n"
     "Renders one frame of the synthetic camera (what camera_sim publishes) for a car at the\n"
     "pose (rear axle, world frame: metres, radians) and lists the markers drawn, as they truly\n"
-    "are in the car frame.\n";
+    "are in the car frame. --overhead: the lab's positioning camera instead (camera_sim\n"
+    "--overhead), its pose in the map from the camera file, the world's floor markers and the\n"
+    "cars of --cars (each wearing its roof marker of the world), with each marker's corners in px.\n";
+
+/// `--cars "1:1.0,1.2,0.3;2:3,2.5,2"`: cars by id and pose.
+std::vector<cpm::aruco::OverheadCar> parse_cars(const std::string& text)
+{
+    std::vector<cpm::aruco::OverheadCar> cars;
+    size_t start = 0;
+    while (start < text.size()) {
+        const size_t end = std::min(text.find(';', start), text.size());
+        const std::string item = text.substr(start, end - start);
+        const size_t colon = item.find(':');
+        if (colon == std::string::npos) throw UsageError("cpm camera render: --cars: '" + item + "': expected ID:X,Y,YAW");
+        const int id = int(cpm::cli::parse_integer("--cars", item.substr(0, colon), 1, 255));
+        cars.push_back({id, cpm::vehicle::parse_pose("--cars", item.substr(colon + 1))});
+        start = end + 1;
+    }
+    return cars;
+}
+
+int overhead_render(const cpm::tools::ParsedArgs& parsed, const cpm::aruco::RenderOptions& options)
+{
+    if (parsed.has("--pose")) throw UsageError("cpm camera render: --overhead draws the cars of --cars; leave out --pose");
+    cpm::aruco::OverheadRenderer renderer(cpm::vehicle::World::load(parsed.get("--world")),
+                                          cpm::aruco::Camera::load(parsed.get("--camera"), cpm::aruco::CameraPlacement::overhead), options);
+    std::vector<cpm::aruco::OverheadTruth> truth;
+    cv::Mat frame;
+    renderer.render(parse_cars(parsed.get("--cars")), frame, &truth);
+    cpm::aruco::write_image(parsed.get("--out"), frame);
+    std::printf("%s: %d×%d, %zu marker(s) drawn\n", parsed.get("--out").c_str(), frame.cols, frame.rows, truth.size());
+    for (const auto& t : truth) {
+        std::printf("  id %d (%s): corners (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f) px, side %.1f px%s\n", t.id,
+                    t.vehicle_id ? ("car " + std::to_string(t.vehicle_id)).c_str() : "floor", t.corners[0].x, t.corners[0].y, t.corners[1].x,
+                    t.corners[1].y, t.corners[2].x, t.corners[2].y, t.corners[3].x, t.corners[3].y, t.side_px,
+                    t.whole_in_view ? "" : " (partly outside the image)");
+    }
+    return 0;
+}
 
 int camera_render(const std::vector<std::string>& args)
 {
     auto parsed = cpm::tools::parse_flags(args,
                                           {{"--world", true}, {"--camera", true}, {"--pose", true}, {"--out", true}, {"--noise", true},
-                                           {"--blur", true}, {"--seed", true}, {"--dictionary", true}},
+                                           {"--blur", true}, {"--seed", true}, {"--dictionary", true}, {"--overhead", false}, {"--cars", true}},
                                           "cpm camera render");
+    const bool overhead = parsed.has("--overhead");
     for (const char* flag : {"--world", "--camera", "--pose", "--out"}) {
-        if (!parsed.has(flag)) throw UsageError(std::string("cpm camera render: ") + flag + " is required");
+        if (!parsed.has(flag) && !(overhead && std::string(flag) == "--pose")) {
+            throw UsageError(std::string("cpm camera render: ") + flag + " is required");
+        }
     }
+    if (!overhead && parsed.has("--cars")) throw UsageError("cpm camera render: --cars is for --overhead; the car's camera takes --pose");
     cpm::aruco::RenderOptions options;
     options.noise_sigma = cpm::cli::parse_number("--noise", parsed.get("--noise", "0"), 0, 128);
     options.blur = int(cpm::cli::parse_integer("--blur", parsed.get("--blur", "0"), 0, 31));
     options.seed = uint32_t(cpm::cli::parse_integer("--seed", parsed.get("--seed", "1"), 0, UINT32_MAX));
     options.dictionary = parsed.get("--dictionary", "DICT_4X4_50");
+    if (overhead) return overhead_render(parsed, options);
     const auto pose = cpm::vehicle::parse_pose("--pose", parsed.get("--pose"));
     cpm::aruco::Renderer renderer(cpm::vehicle::World::load(parsed.get("--world")), cpm::aruco::Camera::load(parsed.get("--camera")), options);
     std::vector<cpm::aruco::RenderedMarker> truth;
@@ -121,6 +159,58 @@ int camera_render(const std::vector<std::string>& args)
         std::printf("  id %d: x %.3f m, y %.3f m, yaw %.1f°, distance %.3f m, side %.1f px%s\n", t.id, t.x, t.y, t.yaw * 180 / M_PI,
                     t.distance, t.side_px, t.whole_in_view ? "" : " (partly outside the image)");
     }
+    return 0;
+}
+
+const char* const kLocateHelp =
+    "usage: cpm camera locate --camera FILE --world FILE --image IMAGE [--out FILE] [--max-residual PX]\n"
+    "\n"
+    "Finds the overhead camera's pose in the map from one image of it: the world's floor_markers\n"
+    "(at least 2 in view) at their known places, through solvePnP refined over every corner. Writes\n"
+    "the camera file (--out, default the camera file itself) with world_x, world_y, world_z,\n"
+    "world_rotation and world_residual_px. When the file already held a pose, says how far the\n"
+    "camera moved since. A residual over --max-residual (default 2 px) writes nothing and exits 1:\n"
+    "the floor does not look as the world says (a marker moved, a wrong size or id).\n";
+
+int camera_locate(const std::vector<std::string>& args)
+{
+    auto parsed = cpm::tools::parse_flags(args, {{"--camera", true}, {"--world", true}, {"--image", true}, {"--out", true}, {"--max-residual", true}},
+                                          "cpm camera locate");
+    for (const char* flag : {"--camera", "--world", "--image"}) {
+        if (!parsed.has(flag)) throw UsageError(std::string("cpm camera locate: ") + flag + " is required");
+    }
+    const double max_residual = cpm::cli::parse_number("--max-residual", parsed.get("--max-residual", "2"), 0.01, 100);
+    auto camera = cpm::aruco::Camera::load(parsed.get("--camera"), cpm::aruco::CameraPlacement::lens_only);
+    const auto world = cpm::vehicle::World::load(parsed.get("--world"));
+    const cv::Mat image = cpm::aruco::read_camera_image(parsed.get("--image"), camera);
+    const auto found = [&] {
+        try {
+            return cpm::aruco::locate_camera(camera, world, image);
+        } catch (const cpm::Error& e) {
+            throw cpm::Error(parsed.get("--image") + " with " + parsed.get("--world") + ": " + e.what());
+        }
+    }();
+    std::string used, unknown;
+    for (int id : found.markers) used += " " + std::to_string(id);
+    for (int id : found.unknown) unknown += " " + std::to_string(id);
+    const auto& p = found.pose;
+    const cv::Vec3d axis = p.rotation * cv::Vec3d(0, 0, 1);  // where the camera looks, in the map
+    std::printf("floor markers used:%s%s\n", used.c_str(), unknown.empty() ? "" : ("; other markers seen:" + unknown).c_str());
+    std::printf("camera at x %.4f m, y %.4f m, z %.4f m; looks %.2f° off straight down; residual %.3f px\n", p.position[0], p.position[1],
+                p.position[2], std::acos(std::clamp(-axis[2], -1.0, 1.0)) * 180 / M_PI, p.residual_px);
+    if (camera.overhead) {
+        std::printf("moved since it was last located: %.1f mm, turned %.3f°\n", cv::norm(p.position - camera.overhead->position) * 1000,
+                    cpm::aruco::rotation_angle(p.rotation, camera.overhead->rotation) * 180 / M_PI);
+    }
+    if (p.residual_px > max_residual) {
+        throw cpm::Error(parsed.get("--image") + ": the floor markers fit the pose only to " + std::to_string(p.residual_px) +
+                         " px (over " + std::to_string(max_residual) + "): does the floor look as " + parsed.get("--world") +
+                         " says (a marker moved, a wrong size or id)? nothing written");
+    }
+    camera.overhead = p;
+    const std::string out = parsed.get("--out", parsed.get("--camera"));
+    camera.save(out);
+    std::printf("wrote %s\n", out.c_str());
     return 0;
 }
 
@@ -243,7 +333,9 @@ std::vector<Command> aruco_commands()
              .help = kDetectHelp.c_str(), .run = aruco_detect},
             {.group = "aruco", .verb = "gates", .summary = "print each gate of a map as a car drives through it", .help = kGatesHelp, .run = aruco_gates},
             {.group = "camera", .verb = "render", .summary = "render one frame of the synthetic camera from a pose", .help = kRenderHelp, .run = camera_render},
-            {.group = "camera", .verb = "calibrate", .summary = "calibrate a camera from ChArUco board photos", .help = kCalibrateHelp, .run = camera_calibrate}};
+            {.group = "camera", .verb = "calibrate", .summary = "calibrate a camera from ChArUco board photos", .help = kCalibrateHelp, .run = camera_calibrate},
+            {.group = "camera", .verb = "locate", .summary = "find the overhead camera's pose in the map from floor markers", .help = kLocateHelp,
+             .run = camera_locate}};
 }
 
 }  // namespace cpm::tools
