@@ -109,6 +109,16 @@ void LiveState::count(const std::string& topic, size_t n, uint64_t now_ns)
     while (!arrivals.empty() && arrivals.front() + window < now_ns) arrivals.pop_front();
 }
 
+void LiveState::set_observation_writers(std::vector<std::string> names)
+{
+    std::sort(names.begin(), names.end());
+    names.erase(std::unique(names.begin(), names.end()), names.end());
+    std::lock_guard lock(mutex_);
+    if (observation_writers_ == names) return;
+    observation_writers_ = std::move(names);
+    ++version_;
+}
+
 void LiveState::set_source(const std::string& source)
 {
     std::lock_guard lock(mutex_);
@@ -140,6 +150,22 @@ std::optional<Placed> pose_of(const Car& c, uint64_t now_ns, double stale_after_
     }
     if (c.state) return Placed{c.state->pose(), topics::vehicle_state.name, c.state->header().create_stamp().nanoseconds()};
     return std::nullopt;
+}
+
+/// In words, who placed a car: its own estimate, or the writers of vehicleObservation that
+/// discovery shows (the positioning system, a simulator's ground truth).
+std::string pose_source(const std::string& from, const std::vector<std::string>& writers)
+{
+    if (from != topics::vehicle_observation.name) return "its own estimate (vehicleState)";
+    const bool ips = std::find(writers.begin(), writers.end(), "ips_node") != writers.end();
+    const bool simulator = std::any_of(writers.begin(), writers.end(), [](const std::string& w) {
+        return w.rfind("firmware_sim", 0) == 0 || w.rfind("firmware_hil", 0) == 0;
+    });
+    if (ips && !simulator) return "the positioning system (ips_node)";
+    if (simulator && !ips) return "the simulator's ground truth";
+    std::string names;
+    for (const auto& w : writers) names += (names.empty() ? "" : ", ") + w;
+    return names.empty() ? "vehicleObservation" : "vehicleObservation from " + names;
 }
 
 }  // namespace
@@ -191,6 +217,7 @@ nlohmann::json LiveState::snapshot(uint64_t now_ns) const
                          {"y", number(pose.y())},
                          {"yaw", number(pose.yaw())},
                          {"pose_from", placed->from},
+                         {"pose_source", pose_source(placed->from, observation_writers_)},
                          {"pose_stamp_ns", placed->stamp_ns},
                          {"age_ms", age_s * 1e3},
                          {"stale", age_s > options_.stale_after_s}};

@@ -200,11 +200,17 @@ struct Monitor::Impl
         while (!stopping) {
             lock.unlock();
             bool replay = false;
+            std::vector<std::string> observers;
             try {
                 for (const auto& name : probe->participants()) replay = replay || name.rfind("cpm_play", 0) == 0;
+                for (const auto& t : probe->topics()) {
+                    if (t.name != topics::vehicle_observation.name) continue;
+                    for (const auto& w : t.writers) observers.push_back(w.participant);
+                }
             } catch (const std::exception&) {
             }
             state.set_source(replay ? "replay" : "live");
+            state.set_observation_writers(std::move(observers));
             lock.lock();
             ended.wait_for(lock, std::chrono::seconds(1), [&] { return stopping; });
         }

@@ -136,6 +136,7 @@ function panelFor(v, allowStop) {
     ["speed", `${fixed(v.speed, 2)} m/s`],
     ["steering", fixed(v.steering, 2)],
     ["pose", `${fixed(v.x, 2)}, ${fixed(v.y, 2)} m, ${fixed(deg(v.yaw), 0)}°`],
+    ["placed by", v.pose_source || "–"],
     ["ranges", r ? `F ${fixed(r.front, 2)} L ${fixed(r.left, 2)} R ${fixed(r.right, 2)} m` : "–"],
     ["battery", v.battery_voltage !== undefined ? `${fixed(v.battery_voltage, 2)} V` : "–"],
     ["nearest", v.clearance_m !== null && v.clearance_m !== undefined ? `${fixed(v.clearance_m, 2)} m (${v.clearance_to})` : "–"],

@@ -78,6 +78,24 @@ TEST(LiveState, ACarIsDrawnWhereItIsSeenAndItsPanelShowsItsOwnState)
     EXPECT_DOUBLE_EQ(v["speed"], 0.4) << "speed still from the car's own state";
 }
 
+TEST(LiveState, TheCarsPanelSaysWhoPlacedIt)
+{
+    LiveState live;
+    live.on_state(state(5, 1.0, 2.0, 0.4, kT0), kT0);
+    EXPECT_EQ(car(live.snapshot(kT0), 5)["pose_source"], "its own estimate (vehicleState)");
+    live.on_observation(observation(5, 1.1, 2.2), kT0);
+    EXPECT_EQ(car(live.snapshot(kT0), 5)["pose_source"], "vehicleObservation") << "no writer discovered yet";
+    const uint64_t before = live.version();
+    live.set_observation_writers({"ips_node"});
+    EXPECT_GT(live.version(), before) << "a new snapshot goes out";
+    EXPECT_EQ(car(live.snapshot(kT0), 5)["pose_source"], "the positioning system (ips_node)");
+    live.set_observation_writers({"firmware_sim", "firmware_sim"});
+    EXPECT_EQ(car(live.snapshot(kT0), 5)["pose_source"], "the simulator's ground truth");
+    live.set_observation_writers({"firmware_sim", "ips_node"});
+    EXPECT_EQ(car(live.snapshot(kT0), 5)["pose_source"], "vehicleObservation from firmware_sim, ips_node")
+        << "two sources on one topic: both named";
+}
+
 TEST(LiveState, ACarThatFallsSilentIsStaleNotStandingStill)
 {
     LiveState live;

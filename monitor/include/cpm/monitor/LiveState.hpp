@@ -55,6 +55,9 @@ public:
     void count(const std::string& topic, size_t n, uint64_t now_ns);
     /// What feeds the lab: "live", or "replay" while `cpm play` is on the domain.
     void set_source(const std::string& source);
+    /// The participants (node names) discovery shows writing vehicleObservation: a car placed by
+    /// it is said to be placed by them (the positioning system, ips_node, or a simulator).
+    void set_observation_writers(std::vector<std::string> names);
 
     /// `GET /api/state`: {"t_ns", "source", "vehicles": [...], "topics": [...], "log": [...]}.
     nlohmann::json snapshot(uint64_t now_ns) const;
@@ -101,6 +104,7 @@ private:
     std::map<std::string, Topic> topics_;
     std::deque<nlohmann::json> log_;
     std::string source_ = "live";
+    std::vector<std::string> observation_writers_;
     uint64_t version_ = 0;
 };
 
