@@ -123,11 +123,30 @@ TEST(Writer, AKeepAllWriterWithSamplesAFrozenReaderNeverAcknowledgedIsDestroyedP
     // teardown (bench_recording: 8 minutes at 100 % CPU): each round here gave it the chance.
     const std::string topic = cpm_test::unique_topic("vehicleState");
     cpm_test::Process reader({cpm_test::built_program("reliable_reader"), topic, "--dds_lease", "1h"});
-    cpm_test::Process writer({cpm_test::built_program("keep_all_writer"), topic, "--rounds", "12", "--cars", "20", "--pause", "1s"});
+    cpm_test::Process writer({cpm_test::built_program("keep_all_writer"), topic, "--rounds", "12", "--cars", "8", "--pause", "1s"});
     ASSERT_TRUE(cpm_test::wait_until([&] { return writer.output().find("matched") != std::string::npos; }, 20000ms))
         << writer.output() << writer.errors();
     reader.kill(SIGSTOP);  // from now on it acknowledges nothing
-    const int status = writer.wait(45000ms);  // about 20 s with the fix; without, it hangs in the first rounds
+    // A hang is a round that never ends: writing a round's 8192 samples to the frozen reader
+    // takes 0.5-2 s by the machine, so a round gets 30 s (without the fix it hung in the first
+    // rounds); the whole stays within the suite's minute.
+    auto rounds_done = [&] {
+        const std::string out = writer.output();
+        size_t n = 0;
+        for (size_t at = out.find("destroyed in "); at != std::string::npos; at = out.find("destroyed in ", at + 1)) ++n;
+        return n;
+    };
+    int status = -1;
+    size_t done = 0;
+    auto progress = std::chrono::steady_clock::now();
+    const auto give_up = progress + 55s;
+    while ((status = writer.wait(200ms)) == -1 && std::chrono::steady_clock::now() < give_up) {
+        if (rounds_done() != done) {
+            done = rounds_done();
+            progress = std::chrono::steady_clock::now();
+        }
+        if (std::chrono::steady_clock::now() - progress > 30s) break;  // a round that does not end
+    }
     reader.kill(SIGCONT);
     EXPECT_EQ(status, 0) << "a writer's destruction hung:\n" << writer.output() << writer.errors();
     EXPECT_NE(writer.output().find("round 11 destroyed in "), std::string::npos) << writer.output();

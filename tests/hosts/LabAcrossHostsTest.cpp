@@ -125,7 +125,9 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
     const std::string file = scenario();
     const std::string out = dir.file("across-" + std::to_string(::getpid()));
     const uint64_t central_received_before = hosts().received_bytes(0);
-    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
+    // 10 s: a car's programs start over ssh a few seconds into the run (2.5-3.5 s here), and its
+    // states are to span at least 3 s.
+    cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off", "--duration", "10s"}));
     // While it runs: each car's programs on its own host, none of them on the others.
     bool seen = false;
     cpm_test::wait_until([&] {

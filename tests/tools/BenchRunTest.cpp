@@ -21,7 +21,7 @@ TEST(BenchRun, AProgramThatFailsOrHangsIsNamedAndTheNextOnesStillRun)
     dir.write("bench/python/bench_python.py", "print('ran bench_python')\n");
     fs::create_directories(dir.path / "build" / "bin");
     for (const char* name : {"bench_latency", "bench_throughput", "bench_large", "bench_startup", "bench_timer", "bench_vehicle", "bench_firmware", "bench_fsm",
-                             "bench_history_store", "bench_history_service", "bench_recording", "bench_aruco", "bench_hlc", "bench_routing",
+                             "bench_history_store", "bench_history_service", "bench_recording", "bench_aruco", "bench_ips", "bench_hlc", "bench_routing",
                              "bench_monitor"}) {
         const std::string body = std::string(name) == "bench_timer" ? "exec sleep 600\n"
                                  : std::string(name) == "bench_fsm" ? "echo broken >&2; exit 3\n"
