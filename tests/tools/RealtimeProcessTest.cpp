@@ -140,8 +140,13 @@ TEST(RealtimeProcess, ACarsProgramsRunTheirLoopsFifoWithMemoryLockedAndDdsThread
                fifo_priorities(bridge) == std::multiset<int>{cpm::realtime_priority::serial_loop};
     }, 10s)) << "firmware_sim " << fifo_priorities(sim).size() << " FIFO thread(s), vehicle_bridge "
              << fifo_priorities(bridge).size();
-    EXPECT_GT(locked_kb(sim), 0) << "firmware_sim's memory is locked";
-    EXPECT_GT(locked_kb(bridge), 0) << "vehicle_bridge's memory is locked";
+    // Locked from cpm::init on; /proc counts the locked pages as they are touched (MCL_ONFAULT),
+    // and read once it showed none at all now and then (2 of 8 runs after a full suite, never
+    // alone): asked again until it shows them.
+    EXPECT_TRUE(cpm_test::wait_until([&] { return locked_kb(sim) > 0; }, 5s))
+        << "firmware_sim's memory is locked\n" << cpm_test::file_text("/proc/" + std::to_string(sim) + "/status");
+    EXPECT_TRUE(cpm_test::wait_until([&] { return locked_kb(bridge) > 0; }, 5s))
+        << "vehicle_bridge's memory is locked\n" << cpm_test::file_text("/proc/" + std::to_string(bridge) + "/status");
     EXPECT_EQ(count_of(sut.errors(), "real time"), 0u) << sut.errors();
     sut.kill(SIGINT);
     EXPECT_EQ(sut.wait(15s), 0) << sut.errors();
