@@ -112,7 +112,8 @@ void spin_if_asked(const std::string& role)
     for (;;) asm volatile("" ::: "memory");  // spin: keep a core busy
 }
 
-std::string cyclone_loopback_env() { return "CYCLONEDDS_URI=file://" CPM_CYCLONE_LOOPBACK_XML; }
+std::string cyclone_loopback_xml() { return CPM_CYCLONE_LOOPBACK_XML; }
+std::string cyclone_loopback_env() { return "CYCLONEDDS_URI=file://" + cyclone_loopback_xml(); }
 
 namespace {
 
@@ -219,14 +220,20 @@ std::vector<std::string> on_far_side(std::vector<std::string> argv) { return g_l
 std::string cyclone_env_here() { return g_link ? g_link->cyclone_env(0) : cyclone_loopback_env(); }
 std::string cyclone_env_far() { return g_link ? g_link->cyclone_env(1) : cyclone_loopback_env(); }
 
-CyclonePinger::CyclonePinger(int domain, size_t size, const std::vector<std::string>& extra)
+CyclonePinger::CyclonePinger(int domain, size_t size, const std::vector<std::string>& extra, const std::string& env)
     : ping_([&] {
           std::vector<std::string> argv{cpm::sibling_executable("cyclone_bench"), "ping", "--domain", std::to_string(domain), "--size",
                                         std::to_string(size), "--blocks"};
           argv.insert(argv.end(), extra.begin(), extra.end());
-          return cpm::ProcessOptions{.argv = argv, .env = {cyclone_env_here()}, .capture_stdout = true, .pipe_stdin = true};
+          return cpm::ProcessOptions{.argv = argv, .env = {env.empty() ? cyclone_env_here() : env}, .capture_stdout = true, .pipe_stdin = true};
       }())
 {
+}
+
+CyclonePinger::~CyclonePinger()
+{
+    ping_.close_stdin();
+    (void)ping_.wait(std::chrono::seconds(5));
 }
 
 bool CyclonePinger::block(int count, int warmup, std::vector<double>& one_way_us)

@@ -58,6 +58,8 @@ void spin_if_asked(const std::string& role);
 
 /// CYCLONEDDS_URI=... for loopback only, unicast discovery, no multicast.
 std::string cyclone_loopback_env();
+/// That configuration file's path (share/cyclonedds-localhost.xml).
+std::string cyclone_loopback_xml();
 
 /// Two hosts on one machine: network namespaces joined by a veth pair (root only), for the cases
 /// that measure what goes between hosts. Made by use_veth_link(); gone when the program exits.
@@ -107,7 +109,13 @@ std::string cyclone_env_far();
 class CyclonePinger
 {
 public:
-    CyclonePinger(int domain, size_t size, const std::vector<std::string>& extra = {});
+    /// `env`: its environment ("CYCLONEDDS_URI=…"); empty: Cyclone on loopback UDP (or the veth link).
+    CyclonePinger(int domain, size_t size, const std::vector<std::string>& extra = {}, const std::string& env = "");
+    /// Ends its input and lets it leave on its own (Cyclone's shared memory keeps files of a
+    /// process that was killed).
+    ~CyclonePinger();
+    CyclonePinger(const CyclonePinger&) = delete;
+    CyclonePinger& operator=(const CyclonePinger&) = delete;
     /// `warmup` round trips, then `count` whose one-way latencies (µs) are appended. False when the
     /// block did not complete (the process then has ended: every later block is false too).
     bool block(int count, int warmup, std::vector<double>& one_way_us);

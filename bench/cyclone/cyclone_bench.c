@@ -16,6 +16,11 @@
  * --touch: every sample taken has all its bytes read (a checksum), on whichever side takes it.
  * --type blob sends BenchBlob (BenchLarge.idl, up to 1 MiB) instead of BenchPayload (up to 70,000 B):
  * the same layout, so the code below handles both as BenchPayload.
+ * --type frame sends the plain BenchFrame307k or BenchFrame1M (--size 307200 or 1048576; ping and
+ * pong only): fixed-size, the types Cyclone carries through iceoryx shared memory.
+ * --loan (with --type frame): every sample written is loaned from Cyclone (dds_loan_sample), a
+ * chunk in iceoryx's shared memory, and only its sequence number written, as cpm's write_in_place
+ * does; refused unless iox-roudi runs and CYCLONEDDS_URI enables SharedMemory.
  *
  * QoS as in the cpm benchmarks: reliable; keep-last 1 for ping-pong, keep-all for throughput.
  * Transports come from CYCLONEDDS_URI (the benchmarks pin Cyclone to loopback UDP). */
@@ -25,6 +30,7 @@
 #include <stddef.h>
 
 #include <dds/dds.h>
+#include <dds/ddsc/dds_loan_api.h>
 
 #include <signal.h>
 #include <stdatomic.h>
@@ -41,14 +47,44 @@ static volatile sig_atomic_t g_stop = 0;
  * what it receives does; bench_large asks for it on both sides of every case. */
 static int g_touch = 0;
 static volatile uint64_t g_checksum = 0;
+/* --type frame: the plain type's size (its data follows a 32-bit sequence number); 0 otherwise. */
+static size_t g_frame = 0;
+static int g_loan = 0;
 
 static void touch(const void* sample)
 {
     if (!g_touch) return;
-    const BenchPayload* p = (const BenchPayload*)sample;
     uint64_t sum = 0;
-    for (uint32_t i = 0; i < p->data._length; ++i) sum += p->data._buffer[i];
+    if (g_frame) {
+        const unsigned char* data = (const unsigned char*)sample + sizeof(uint32_t);
+        for (size_t i = 0; i < g_frame - sizeof(uint32_t); ++i) sum += data[i];
+    } else {
+        const BenchPayload* p = (const BenchPayload*)sample;
+        for (uint32_t i = 0; i < p->data._length; ++i) sum += p->data._buffer[i];
+    }
     g_checksum += sum;
+}
+
+/* A sample's sequence number, whatever the type (a frame's is 32 bits). */
+static uint64_t seq_of(const void* sample)
+{
+    if (g_frame) return *(const uint32_t*)sample;
+    return ((const BenchPayload*)sample)->seq;
+}
+
+static void check(dds_return_t rc, const char* what);
+
+/* Writes a sample numbered `seq`: `own` (this side's sample) with its number set, or with
+ * --loan a chunk loaned from Cyclone with only its number written. */
+static void write_numbered(dds_entity_t writer, void* own, uint64_t seq, const char* what)
+{
+    void* sample = own;
+    if (g_loan) check(dds_loan_sample(writer, &sample), "loan a sample");
+    if (g_frame)
+        *(uint32_t*)sample = (uint32_t)seq;
+    else
+        ((BenchPayload*)sample)->seq = seq;
+    check(dds_write(writer, sample), what);
 }
 static void on_signal(int sig)
 {
@@ -191,13 +227,26 @@ static struct side open_side(dds_entity_t participant, const char* read_topic, c
     return s;
 }
 
+/* --loan needs Cyclone's shared memory under the writer; says what is missing otherwise. */
+static void require_loans(dds_entity_t writer)
+{
+    if (!g_loan || dds_is_loan_available(writer)) return;
+    fprintf(stderr, "cyclone_bench: --loan: no loans on this writer: Cyclone's shared memory needs iox-roudi running, "
+                    "SharedMemory enabled in CYCLONEDDS_URI and a fixed-size type (--type frame)\n");
+    exit(1);
+}
+
 static int pong(dds_entity_t participant)
 {
     const struct side s = open_side(participant, "bench_ping", "bench_pong");
+    require_loans(s.writer);
     void* sample[1];
     while (!g_stop) {
         if (!take_one(s.waitset, s.reader, sample, DDS_MSECS(100))) continue;
-        check(dds_write(s.writer, sample[0]), "write pong");
+        if (g_loan)
+            write_numbered(s.writer, NULL, seq_of(sample[0]), "write pong");
+        else
+            check(dds_write(s.writer, sample[0]), "write pong");
         dds_return_loan(s.reader, sample, 1);
     }
     return 0;
@@ -205,19 +254,18 @@ static int pong(dds_entity_t participant)
 
 /* `warmup` + `count` round trips on a matched side, numbered from *seq on; prints each counted
  * one-way time (µs) on a line of its own. */
-static int ping_block(const struct side* s, BenchPayload* msg, uint64_t* seq, long count, long warmup)
+static int ping_block(const struct side* s, void* msg, uint64_t* seq, long count, long warmup)
 {
     void* sample[1];
     for (long i = 0; i < warmup + count && !g_stop; ++i, ++*seq) {
-        msg->seq = *seq;
         const int64_t t0 = now_ns();
-        check(dds_write(s->writer, msg), "write ping");
+        write_numbered(s->writer, msg, *seq, "write ping");
         if (!take_one(s->waitset, s->reader, sample, DDS_SECS(5))) {
             fprintf(stderr, "cyclone_bench: no pong for ping %llu within 5 s\n", (unsigned long long)*seq);
             return 1;
         }
         const int64_t t1 = now_ns();
-        const uint64_t got = ((BenchPayload*)sample[0])->seq;
+        const uint64_t got = seq_of(sample[0]);
         dds_return_loan(s->reader, sample, 1);
         if (got != *seq) {
             fprintf(stderr, "cyclone_bench: pong %llu for ping %llu\n", (unsigned long long)got, (unsigned long long)*seq);
@@ -228,19 +276,48 @@ static int ping_block(const struct side* s, BenchPayload* msg, uint64_t* seq, lo
     return 0;
 }
 
+/* Pings until one comes back (200 ms each, up to 20 s): iceoryx joins a publisher to a
+ * subscriber through RouDi after DDS matched them, and a ping sent before is lost. Later
+ * echoes of the lost pings are drained, so the blocks start clean. */
+static int handshake(const struct side* s, void* msg, uint64_t* seq)
+{
+    void* sample[1];
+    for (int attempt = 0; attempt < 100 && !g_stop; ++attempt, ++*seq) {
+        write_numbered(s->writer, msg, *seq, "write ping");
+        while (take_one(s->waitset, s->reader, sample, DDS_MSECS(200))) {
+            const uint64_t got = seq_of(sample[0]);
+            dds_return_loan(s->reader, sample, 1);
+            if (got != *seq) continue;
+            ++*seq;
+            while (take_one(s->waitset, s->reader, sample, DDS_MSECS(50))) dds_return_loan(s->reader, sample, 1);
+            return 0;
+        }
+    }
+    fprintf(stderr, "cyclone_bench: no pong to any of 100 pings in 20 s\n");
+    return 1;
+}
+
 /* One block, or with `blocks` one block per line of stdin ("COUNT WARMUP"), each ended by a
  * line "done", the process staying warm in between (as the cpm side's pingers do), until stdin ends. */
 static int ping(dds_entity_t participant, size_t size, long count, long warmup, int blocks)
 {
     const struct side s = open_side(participant, "bench_pong", "bench_ping");
+    require_loans(s.writer);
     wait_matched(s.writer, 1);
     wait_matched(s.reader, 0); /* the pong's writer must see this reader before the first ping counts */
     BenchPayload msg;
-    fill(&msg, size);
+    void* own = &msg;
+    if (g_frame) {
+        own = dds_alloc(g_frame);
+        memset(own, 0x5a, g_frame);
+    } else {
+        fill(&msg, size);
+    }
     uint64_t seq = 0;
-    int rc = 0;
-    if (!blocks) {
-        rc = ping_block(&s, &msg, &seq, count, warmup);
+    int rc = handshake(&s, own, &seq);
+    if (rc != 0) {
+    } else if (!blocks) {
+        rc = ping_block(&s, own, &seq, count, warmup);
     } else {
         char line[64];
         while (rc == 0 && fgets(line, sizeof line, stdin)) {
@@ -249,12 +326,15 @@ static int ping(dds_entity_t participant, size_t size, long count, long warmup, 
                 rc = 1;
                 break;
             }
-            rc = ping_block(&s, &msg, &seq, count, warmup);
+            rc = ping_block(&s, own, &seq, count, warmup);
             printf("done\n");
             fflush(stdout);
         }
     }
-    BenchPayload_free(&msg, DDS_FREE_CONTENTS);
+    if (g_frame)
+        dds_free(own);
+    else
+        BenchPayload_free(&msg, DDS_FREE_CONTENTS);
     return rc;
 }
 
@@ -363,7 +443,7 @@ int main(int argc, char** argv)
 {
     if (argc < 2 || flag(argc, argv, "--help")) {
         fputs("usage: cyclone_bench pong|ping|sub|pub [--domain D] [--size B] [--count N] [--warmup W]"
-              " [--seconds S] [--batch] [--listener] [--type payload|blob]\n",
+              " [--seconds S] [--batch] [--listener] [--type payload|blob|frame] [--touch] [--loan]\n",
               argc < 2 ? stderr : stdout);
         return argc < 2 ? 2 : 0;
     }
@@ -372,14 +452,32 @@ int main(int argc, char** argv)
     const int domain = atoi(arg(argc, argv, "--domain", "0"));
     const char* type = arg(argc, argv, "--type", "payload");
     size_t bound = 70000;
+    const size_t size = (size_t)atol(arg(argc, argv, "--size", "100"));
+    g_loan = flag(argc, argv, "--loan");
     if (strcmp(type, "blob") == 0) {
         g_type = &BenchBlob_desc;
         bound = 1048576;
+    } else if (strcmp(type, "frame") == 0) {
+        if (size != sizeof(BenchFrame307k) && size != sizeof(BenchFrame1M)) {
+            fprintf(stderr, "cyclone_bench: --type frame: --size %zu is neither %zu nor %zu (BenchFrame307k, BenchFrame1M)\n", size,
+                    sizeof(BenchFrame307k), sizeof(BenchFrame1M));
+            return 2;
+        }
+        if (strcmp(role, "ping") != 0 && strcmp(role, "pong") != 0) {
+            fprintf(stderr, "cyclone_bench: --type frame is for ping and pong only\n");
+            return 2;
+        }
+        g_frame = size;
+        g_type = size == sizeof(BenchFrame1M) ? &BenchFrame1M_desc : &BenchFrame307k_desc;
+        bound = size;
     } else if (strcmp(type, "payload") != 0) {
-        fprintf(stderr, "cyclone_bench: --type %s: expected payload or blob\n", type);
+        fprintf(stderr, "cyclone_bench: --type %s: expected payload, blob or frame\n", type);
         return 2;
     }
-    const size_t size = (size_t)atol(arg(argc, argv, "--size", "100"));
+    if (g_loan && !g_frame) {
+        fprintf(stderr, "cyclone_bench: --loan needs --type frame (Cyclone loans fixed-size samples only)\n");
+        return 2;
+    }
     if (size > bound) {
         fprintf(stderr, "cyclone_bench: --size %zu is larger than the type's bound (%zu; --type blob takes up to 1048576)\n", size, bound);
         return 2;

@@ -8,14 +8,21 @@
 //   in_place  BenchFrame (plain) with data_sharing, Writer::write_in_place and
 //             ReaderAbstract::take_each: written and read where it lies, no copy
 //   Cyclone   cyclone_bench --type blob (BenchBlob through idlc), loopback UDP
+//   Cyclone shared memory
+//             cyclone_bench --type frame --loan (the plain BenchFrame, each sample loaned from
+//             Cyclone: a chunk of iceoryx's shared memory), with iox-roudi (iceoryx's broker,
+//             Debian's iceoryx) started for the run and SharedMemory enabled in Cyclone's file
 //
 // Every side that takes a sample reads each of its bytes (a checksum), in every case, Cyclone's
-// too (cyclone_bench --touch): a reader uses what it receives. Only udp has a verdict against
-// Cyclone: the other paths are shared memory, and Cyclone's (iceoryx with a loanable fixed-size
-// type and iox-roudi running) is not set up here, so they are shown beside it without one.
+// too (cyclone_bench --touch): a reader uses what it receives. Each cpm path is judged against
+// Cyclone's path of its class: udp against Cyclone on UDP, the shared-memory paths (shm,
+// sharing, in_place) against Cyclone's shared memory, one way. Throughput has no verdict:
+// Cyclone 0.10's shared-memory path takes keep-last writers only (keep-all turns it off) and
+// does not hold a writer back for a slow reader, so it has no lossless keep-all run to compare.
 //
 //   bench_large [--count 500] [--seconds 3] [--sizes 307200,1048576] [--domain 220]
-//   (domains D to D+4: one per cpm case, the last for Cyclone DDS, whose highest is 232)
+//   (domains D to D+5: one per cpm case, then Cyclone DDS on UDP and on shared memory, whose
+//   highest is 232)
 //
 // Every sample carries only a fresh sequence number; its bytes are written once, before the run,
 // in every case (as ddsperf and cyclone_bench do), so the figures are what carrying costs.
@@ -35,6 +42,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -42,6 +50,11 @@
 #include <memory>
 #include <thread>
 
+#include <optional>
+#include <regex>
+#include <sstream>
+
+#include <poll.h>
 #include <unistd.h>
 
 CPM_REGISTER_TYPE(BenchBlob)
@@ -317,6 +330,83 @@ Rate cpm_throughput(int domain, const std::string& mode, size_t size, int second
     return r;
 }
 
+/// Cyclone's shared-memory path for the run: iox-roudi with chunks for both frame sizes, and
+/// Cyclone's loopback file with SharedMemory enabled. `missing` says why it is not there
+/// (empty when it runs). RouDi is stopped last (it ends its clients with it).
+class CycloneSharedMemory
+{
+public:
+    CycloneSharedMemory()
+    {
+        char dir[] = "/tmp/bench_large_iox.XXXXXX";
+        dir_ = ::mkdtemp(dir);
+        std::ofstream(dir_ + "/roudi.toml") << "[general]\nversion = 1\n\n[[segment]]\n\n"
+                                            << "[[segment.mempool]]\nsize = " << sizeof(BenchFrame307k) + 64 << "\ncount = 16\n\n"
+                                            << "[[segment.mempool]]\nsize = " << sizeof(BenchFrame1M) + 64 << "\ncount = 16\n";
+        std::ifstream in(bench::cyclone_loopback_xml());
+        std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        const auto end = xml.find("</Domain>");
+        if (end == std::string::npos) {
+            missing = bench::cyclone_loopback_xml() + " has no </Domain>";
+            return;
+        }
+        xml.insert(end, "  <SharedMemory><Enable>true</Enable><LogLevel>warn</LogLevel></SharedMemory>\n  ");
+        std::ofstream(dir_ + "/cyclone-shm.xml") << xml;
+        const std::string roudi = on_path("iox-roudi");
+        if (roudi.empty()) {
+            missing = "iox-roudi is not installed (Debian's iceoryx)";
+            return;
+        }
+        roudi_.emplace(cpm::ProcessOptions{.argv = {roudi, "-c", dir_ + "/roudi.toml"}, .stderr_path = dir_ + "/roudi.err",
+                                           .capture_stdout = true, .die_with_parent = true});
+        const auto deadline = Clock::now() + 10s;
+        std::string last;
+        while (Clock::now() < deadline) {
+            pollfd out{roudi_->stdout_fd(), POLLIN, 0};
+            if (::poll(&out, 1, 100) <= 0) continue;
+            const auto line = roudi_->read_line();
+            if (!line) break;
+            if (line->find("RouDi is ready for clients") != std::string::npos) return;
+            if (!line->empty()) last = *line;
+        }
+        // Its last words (colour codes taken out), from stderr or else stdout.
+        std::ifstream err(dir_ + "/roudi.err");
+        for (std::string line; std::getline(err, line);) {
+            if (!line.empty()) last = line;
+        }
+        last = std::regex_replace(last, std::regex("\x1b\\[[0-9;]*m"), "");
+        missing = "iox-roudi did not come up within 10 s (" + last + "; another RouDi on this host?)";
+        roudi_->stop();
+        roudi_.reset();
+    }
+    ~CycloneSharedMemory()
+    {
+        if (roudi_) {
+            roudi_->signal(SIGINT);  // it removes its shared memory and files
+            if (!roudi_->wait(10s)) roudi_->stop();
+        }
+        std::filesystem::remove_all(dir_);
+    }
+    CycloneSharedMemory(const CycloneSharedMemory&) = delete;
+    CycloneSharedMemory& operator=(const CycloneSharedMemory&) = delete;
+    std::string env() const { return "CYCLONEDDS_URI=file://" + dir_ + "/cyclone-shm.xml"; }
+
+    std::string missing;
+
+private:
+    static std::string on_path(const std::string& name)
+    {
+        const char* path = std::getenv("PATH");
+        std::stringstream dirs(path ? path : "/usr/bin:/bin");
+        for (std::string d; std::getline(dirs, d, ':');) {
+            if (::access((d + "/" + name).c_str(), X_OK) == 0) return d + "/" + name;
+        }
+        return "";
+    }
+    std::string dir_;
+    std::optional<cpm::ChildProcess> roudi_;
+};
+
 Rate cyclone_throughput(int domain, size_t size, int seconds)
 {
     return bench::cyclone_pub_sub(domain, size - 28, seconds, {"--type", "blob"}, {"--type", "blob", "--touch"});
@@ -329,7 +419,8 @@ const char* kHelp =
     "  --count N      round trips per case and size, in 10 alternating blocks (at least 10)\n"
     "  --seconds S    how long each throughput case writes\n"
     "  --sizes A,B    each 307200 or 1048576 (the plain frame types)\n"
-    "  uses domains D to D+4; the last is Cyclone DDS's, which must be at most 232\n"
+    "  uses domains D to D+5; the last two are Cyclone DDS's (UDP, shared memory), at most 232\n"
+    "Cyclone's shared memory needs iox-roudi (Debian's iceoryx): started for the run, stopped after it\n"
     "       bench_large --camera [--hz 30] [--seconds 3] [--link loopback|veth] [--domain 220]\n"
     "  --camera       a camera's stream instead: 307,200 B frames at --hz with cameraFrame's QoS,\n"
     "                 latency and frames lost, on this host and (--link veth) to a second host: a\n"
@@ -383,9 +474,9 @@ int run(int argc, char** argv)
         }
         return here.ok && far.ok ? 0 : 1;
     }
-    if (domain + 4 > 232) {
+    if (domain + 5 > 232) {
         throw cpm::cli::UsageError("bench_large: --domain " + std::to_string(domain) + ": the run uses domains " + std::to_string(domain) +
-                                   " to " + std::to_string(domain + 4) + ", and Cyclone DDS (the last) takes at most 232");
+                                   " to " + std::to_string(domain + 5) + ", and Cyclone DDS (the last two) takes at most 232");
     }
     const int count = int(cpm::cli::parse_integer("--count", flags.get("--count", "500"), 10, 10'000'000));
     std::vector<size_t> sizes;
@@ -398,7 +489,10 @@ int run(int argc, char** argv)
     bench::print_machine("one way: reliable keep-last 1, " + std::to_string(count) +
                          " round trips in 10 alternating blocks, one-way = RTT/2 (µs); throughput: reliable keep-all, "
                          "a window of " + std::to_string(kWindow) + " samples, " + std::to_string(seconds) +
-                         " s; cpm on its default transports (shared memory + loopback UDP), Cyclone DDS on loopback UDP");
+                         " s; cpm on its default transports (shared memory + loopback UDP), Cyclone DDS on loopback UDP and "
+                         "on its shared memory (iceoryx)");
+    const CycloneSharedMemory iceoryx;
+    if (!iceoryx.missing.empty()) std::printf("Cyclone's shared memory left out: %s\n", iceoryx.missing.c_str());
     struct Mode
     {
         std::string name, label;
@@ -408,6 +502,7 @@ int run(int argc, char** argv)
                                   {"sharing", "cpm, data_sharing (BenchBlob)"},
                                   {"in_place", "cpm, data_sharing + in place (plain BenchFrame)"}};
     const std::string cyclone_label = "Cyclone DDS, same work (BenchBlob, UDP)";
+    const std::string cyclone_shm_label = "Cyclone DDS, shared memory (loaned BenchFrame)";
     int exit_code = 0;
     for (size_t size : sizes) {
         const std::string sized = std::to_string(size) + " B";
@@ -426,45 +521,64 @@ int run(int argc, char** argv)
         pongs.push_back(bench::spawn({cpm::sibling_executable("cyclone_bench"), "pong", "--type", "blob", "--touch", "--domain",
                                       std::to_string(cyclone_domain)},
                                      {bench::cyclone_loopback_env()}, ""));
-        std::vector<std::vector<double>> samples(modes.size() + 1);
-        std::vector<bool> ok(modes.size() + 1, true);
+        // Cyclone's two paths after cpm's cases: on UDP, and (when it runs) on shared memory.
+        const bool shm = iceoryx.missing.empty();
+        const int cyclone_shm_domain = cyclone_domain + 1;
+        if (shm) {
+            pongs.push_back(bench::spawn({cpm::sibling_executable("cyclone_bench"), "pong", "--type", "frame", "--size", std::to_string(size),
+                                          "--loan", "--touch", "--domain", std::to_string(cyclone_shm_domain)},
+                                         {iceoryx.env()}, ""));
+        }
+        const size_t cases = modes.size() + 1 + (shm ? 1 : 0);
+        std::vector<std::vector<double>> samples(cases);
+        std::vector<bool> ok(cases, true);
         std::vector<uint64_t> seqs(modes.size(), 0);
         for (size_t k = 0; k < modes.size(); ++k) ok[k] = sides[k]->connected();
-        bench::CyclonePinger cyclone(cyclone_domain, size - 28, {"--type", "blob", "--touch"});  // warm across the blocks, as the cpm sides
-        for (int block = 0; block < 10; ++block) {
-            const int warmup = block == 0 ? 50 : 5;
-            for (size_t k = 0; k < modes.size(); ++k) {
-                if (ok[k]) ok[k] = ping_block(*sides[k], seqs[k], count / 10, warmup, samples[k]);
+        {
+            // Warm across the blocks, as the cpm sides.
+            std::vector<std::unique_ptr<bench::CyclonePinger>> cyclone;
+            cyclone.push_back(std::make_unique<bench::CyclonePinger>(cyclone_domain, size - 28, std::vector<std::string>{"--type", "blob", "--touch"}));
+            if (shm) {
+                cyclone.push_back(std::make_unique<bench::CyclonePinger>(
+                    cyclone_shm_domain, size, std::vector<std::string>{"--type", "frame", "--loan", "--touch"}, iceoryx.env()));
             }
-            if (ok.back()) ok.back() = cyclone.block(count / 10, warmup, samples.back());
-        }
+            for (int block = 0; block < 10; ++block) {
+                const int warmup = block == 0 ? 50 : 5;
+                for (size_t k = 0; k < modes.size(); ++k) {
+                    if (ok[k]) ok[k] = ping_block(*sides[k], seqs[k], count / 10, warmup, samples[k]);
+                }
+                for (size_t c = 0; c < cyclone.size(); ++c) {
+                    if (ok[modes.size() + c]) ok[modes.size() + c] = cyclone[c]->block(count / 10, warmup, samples[modes.size() + c]);
+                }
+            }
+        }  // the Cyclone pingers end before RouDi can
         sides.clear();
         participants.clear();
         for (auto& p : pongs) p.signal(SIGTERM);
         for (auto& p : pongs) bench::wait_child(p, 10);
 
         std::map<std::string, bench::Stats> latency;
-        for (size_t k = 0; k <= modes.size(); ++k) {
-            const std::string label = k < modes.size() ? modes[k].label : cyclone_label;
+        for (size_t k = 0; k < cases; ++k) {
+            const std::string name = k < modes.size() ? modes[k].name : k == modes.size() ? "cyclone" : "cyclone_shm";
+            const std::string label = k < modes.size() ? modes[k].label : k == modes.size() ? cyclone_label : cyclone_shm_label;
             if (!ok[k]) {
                 std::printf("%-48s FAILED after %zu round trips\n", label.c_str(), samples[k].size());
                 exit_code = 1;
                 continue;
             }
-            latency[k < modes.size() ? modes[k].name : "cyclone"] = bench::stats_of(samples[k]);
-            bench::print_row(label, latency[k < modes.size() ? modes[k].name : "cyclone"]);
+            latency[name] = bench::stats_of(samples[k]);
+            bench::print_row(label, latency[name]);
         }
-        if (latency.count("cyclone")) {
-            for (const auto& m : modes) {
-                if (!latency.count(m.name)) continue;
-                bench::print_ratio(m.name + " / Cyclone" + (m.name == "udp" ? " (same transport)" : " (no verdict: shared memory against UDP)"),
-                                   latency[m.name], latency["cyclone"]);
-                // 1 MiB one way no slower than Cyclone's, judged on the same transport only.
-                const double target = size >= 1048576 && m.name == "udp" ? 1.0 : 0;
-                bench::record_latency("large", sized + " one-way, " + m.label.substr(5), latency[m.name], cyclone_label, latency["cyclone"],
-                                      target);
-            }
+        for (const auto& m : modes) {
+            // Each path against Cyclone's of its class; 1 MiB one way no slower than Cyclone's.
+            const bool udp = m.name == "udp";
+            const std::string peer = udp ? "cyclone" : "cyclone_shm";
+            if (!latency.count(m.name) || !latency.count(peer)) continue;
+            bench::print_ratio(m.name + " / Cyclone" + (udp ? " on UDP" : " on shared memory"), latency[m.name], latency[peer]);
+            bench::record_latency("large", sized + " one-way, " + m.label.substr(5), latency[m.name], udp ? cyclone_label : cyclone_shm_label,
+                                  latency[peer], size >= 1048576 ? 1.0 : 0);
         }
+        if (!shm) std::printf("(no verdict for the shared-memory paths: %s)\n", iceoryx.missing.c_str());
         if (latency.count("shm") && latency.count("in_place"))
             bench::print_ratio("in_place / shared-memory transport", latency["in_place"], latency["shm"]);
 
