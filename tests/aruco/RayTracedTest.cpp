@@ -1,6 +1,6 @@
 // Perception on ray-traced frames: POV-Ray (Debian's povray) renders marker cards (OpenCV's own
-// marker images as image maps) standing on a checkered floor before a wall, lit by an area light
-// whose soft shadows fall across them, some through a pole's shadow band, seen by a perspective
+// marker images as image maps) above a checkered floor before a wall, lit by an area light
+// whose soft shadows fall across them, half of them crossed by a post's shadow band, seen by a perspective
 // camera whose projection is the ideal pinhole of the same field of view (POV-Ray samples each
 // pixel at its centre: a vertical edge at x = 0 falls between columns 319 and 320 of 640). The
 // ground truth comes from the scene this test writes (each card's corners and place), not from
