@@ -391,6 +391,7 @@ void RecordingWriter::sample_committed(Oid oid, const Incoming& s, uint64_t comm
     e.lost = s.lost_before;
     e.payload.assign(s.data, s.data + s.size);
     queued_bytes_ += s.size;
+    ++counters_.waiting;
     queue_.push_back(std::move(e));
     if (queue_.size() >= 4096) cv_.notify_one();
 }
@@ -430,6 +431,9 @@ void RecordingWriter::run()
             }
             queued_bytes_ -= std::min(queued_bytes_, bytes);
         }
+        counters_.waiting -= std::min<uint64_t>(counters_.waiting, uint64_t(std::count_if(batch.begin(), batch.end(), [](const Event& e) {
+                                                      return e.kind == Event::sample;
+                                                  })));
         more = !queue_.empty();
         const bool last = closing_ && !more;
         lock.unlock();
@@ -448,6 +452,7 @@ void RecordingWriter::run()
         if (!ok) {
             counters_.dropped += uint64_t(std::count_if(queue_.begin(), queue_.end(), [](const Event& e) { return e.kind == Event::sample; }));
             queue_.clear();
+            counters_.waiting = 0;
         }
         if (last || failed_) return;
     }

@@ -6,6 +6,7 @@
 #include <cpm/rtdb/Recording.hpp>
 #include <cpm/rtdb/Requests.hpp>
 
+#include <cpm_test/Isolation.hpp>
 #include <cpm_test/TempDir.hpp>
 
 #include <gtest/gtest.h>
@@ -226,7 +227,14 @@ TEST(Recording, AFullDiskStopsTheRecordingWithAnErrorAndKeepsWhatWasWritten)
         for (int i = 0; i < 2000 && !lab.writer.counters().failed; ++i) {
             lab.commit(o, now, payload, now);
             now += 1000;
-            if (i % 50 == 49) std::this_thread::sleep_for(std::chrono::milliseconds(5));  // let batches reach the disk
+            // Let the writer's thread take up each 50 before the next (on a busy machine it may not
+            // run for a while, and the first batch would then overflow the limit alone).
+            if (i % 50 == 49) {
+                (void)cpm_test::wait_until([&] {
+                    const auto c = lab.writer.counters();
+                    return c.failed || c.waiting == 0;
+                }, std::chrono::seconds(5));
+            }
         }
         for (int i = 0; i < 200 && !lab.writer.counters().failed; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
         const auto c = lab.writer.counters();
@@ -239,6 +247,7 @@ TEST(Recording, AFullDiskStopsTheRecordingWithAnErrorAndKeepsWhatWasWritten)
         lab.commit(o, now, payload, now);
         EXPECT_EQ(lab.store.info(o)->samples_total, c.queued + 1);
         lab.writer.close();
+        EXPECT_EQ(lab.writer.counters().waiting, 0u);
         const auto rec = load_recording(path);
         EXPECT_EQ(rec.samples, lab.writer.counters().written);
         auto first = answer(*rec.store, request("at", "big", "", 1000));

@@ -66,6 +66,7 @@ struct RecordingCounters
     uint64_t queued = 0;   ///< samples handed to the recording
     uint64_t written = 0;  ///< samples committed to the file
     uint64_t dropped = 0;  ///< samples that never reached the file (queue full, or after a failure)
+    uint64_t waiting = 0;  ///< samples queued that the writer's thread has not taken up yet (how far it is behind)
     bool failed = false;
     std::string error;     ///< why the recording stopped, naming the file
 };
