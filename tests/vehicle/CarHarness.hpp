@@ -108,6 +108,17 @@ struct Car
         }
         return out;
     }
+    /// How often the motor went from forward to brake in the trace: the car's stops while it
+    /// drove (a stop of a standing car, as the watchdog's before the first command, is not one).
+    int stops_while_driving() const
+    {
+        int stops = 0, mode = -1;
+        for (const auto& [t, m] : pwm_trace_after(0)) {
+            stops += mode == 1 && m == 0;
+            mode = m;
+        }
+        return stops;
+    }
 };
 
 /// Collects every VehicleObservation and VehicleState of the car as it arrives.

@@ -167,7 +167,10 @@ TEST_F(FirmwareHilEndToEnd, KillingTheBridgeLetsTheFirmwaresWatchdogBrakeWithin2
     std::this_thread::sleep_for(100ms);
     car.sim->kill(SIGTERM);
     ASSERT_EQ(car.sim->wait(5s), 0);
-    EXPECT_EQ(last_json_line(car.sim->output()).at("watchdog_stops"), 1) << car.sim->output();
+    // Stopped once while it drove, at the kill; the firmware's watchdog also stops a standing
+    // car whose bridge takes over 250 ms to start (seen with a busy loop beside).
+    EXPECT_GE(last_json_line(car.sim->output()).at("watchdog_stops").get<int>(), 1) << car.sim->output();
+    EXPECT_EQ(car.stops_while_driving(), 1) << car.sim->output();
     std::printf("firmware's watchdog braked %.0f ms after the bridge was killed\n", after * 1000);
 }
 
