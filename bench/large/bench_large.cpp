@@ -33,6 +33,7 @@
 #include <cpm/TopicType.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/read_text_file.hpp>
 #include <cpm/topics.hpp>
 
 #include <BenchLargePubSubTypes.h>
@@ -343,8 +344,7 @@ public:
         std::ofstream(dir_ + "/roudi.toml") << "[general]\nversion = 1\n\n[[segment]]\n\n"
                                             << "[[segment.mempool]]\nsize = " << sizeof(BenchFrame307k) + 64 << "\ncount = 16\n\n"
                                             << "[[segment.mempool]]\nsize = " << sizeof(BenchFrame1M) + 64 << "\ncount = 16\n";
-        std::ifstream in(bench::cyclone_loopback_xml());
-        std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        std::string xml = cpm::read_text_file(bench::cyclone_loopback_xml(), "Cyclone DDS configuration");
         const auto end = xml.find("</Domain>");
         if (end == std::string::npos) {
             missing = bench::cyclone_loopback_xml() + " has no </Domain>";
@@ -352,7 +352,7 @@ public:
         }
         xml.insert(end, "  <SharedMemory><Enable>true</Enable><LogLevel>warn</LogLevel></SharedMemory>\n  ");
         std::ofstream(dir_ + "/cyclone-shm.xml") << xml;
-        const std::string roudi = on_path("iox-roudi");
+        const std::string roudi = cpm::program_on_path("iox-roudi");
         if (roudi.empty()) {
             missing = "iox-roudi is not installed (Debian's iceoryx)";
             return;
@@ -394,15 +394,6 @@ public:
     std::string missing;
 
 private:
-    static std::string on_path(const std::string& name)
-    {
-        const char* path = std::getenv("PATH");
-        std::stringstream dirs(path ? path : "/usr/bin:/bin");
-        for (std::string d; std::getline(dirs, d, ':');) {
-            if (::access((d + "/" + name).c_str(), X_OK) == 0) return d + "/" + name;
-        }
-        return "";
-    }
     std::string dir_;
     std::optional<cpm::ChildProcess> roudi_;
 };

@@ -6,7 +6,9 @@
 #include <climits>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <sstream>
 #include <thread>
 
 #include <fcntl.h>
@@ -201,6 +203,17 @@ std::string executable_dir()
     if (n <= 0) return ".";
     const std::string exe(path, size_t(n));
     return exe.substr(0, exe.rfind('/'));
+}
+
+std::string program_on_path(const std::string& name)
+{
+    const char* path = std::getenv("PATH");
+    std::istringstream dirs(path && *path ? path : "/usr/bin:/bin");
+    for (std::string d; std::getline(dirs, d, ':');) {
+        const std::string candidate = (d.empty() ? std::string(".") : d) + "/" + name;
+        if (::access(candidate.c_str(), X_OK) == 0) return candidate;
+    }
+    return "";
 }
 
 std::string sibling_executable(const std::string& name)

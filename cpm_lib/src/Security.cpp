@@ -31,13 +31,9 @@ constexpr const char* kOrganisation = "cpm lab";
 
 std::string find_openssl()
 {
-    const char* path = std::getenv("PATH");
-    std::istringstream dirs(path && *path ? path : "/usr/bin:/bin");
-    for (std::string d; std::getline(dirs, d, ':');) {
-        const auto candidate = fs::path(d.empty() ? "." : d) / "openssl";
-        if (::access(candidate.c_str(), X_OK) == 0) return candidate.string();
-    }
-    throw Error("the openssl command is not installed (Debian package openssl; ./lab installs it)");
+    std::string found = program_on_path("openssl");
+    if (found.empty()) throw Error("the openssl command is not installed (Debian package openssl; ./lab installs it)");
+    return found;
 }
 
 /// Runs openssl with these arguments in `dir`; throws naming `what` with openssl's own message.

@@ -90,5 +90,7 @@ std::string executable_dir();
 /// A program installed (or built) beside the running one: executable_dir()/name. Throws
 /// cpm::Error naming the path when it is missing or not executable.
 std::string sibling_executable(const std::string& name);
+/// A program on $PATH (/usr/bin:/bin when unset): its path, or "" when none is executable.
+std::string program_on_path(const std::string& name);
 
 }  // namespace cpm
