@@ -59,15 +59,17 @@ SerialPort::SerialPort(const std::string& path, int baud)
         if (errno == ENOENT || errno == ENODEV || errno == ENXIO || errno == EIO) throw DeviceUnavailable(message);
         throw Error(message);
     }
+    // The lock first: a program refused the line must not have set its speed or mode under the
+    // one that holds it.
+    if (flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+        ::close(fd_);
+        throw DeviceUnavailable(path + ": in use by another program (it holds the device's lock)");
+    }
     try {
         make_raw(fd_, speed, path);
     } catch (...) {
         ::close(fd_);
         throw;
-    }
-    if (flock(fd_, LOCK_EX | LOCK_NB) != 0) {
-        ::close(fd_);
-        throw DeviceUnavailable(path + ": in use by another program (it holds the device's lock)");
     }
     tcflush(fd_, TCIOFLUSH);
     struct stat st{};
