@@ -76,12 +76,13 @@ TimeMaster::TimeMaster(Participant& participant) : impl_(std::make_unique<Impl>(
 TimeMaster::~TimeMaster() = default;
 
 uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uint64_t end_ns,
-                                   std::chrono::milliseconds step_timeout, const std::function<void()>& before_start)
+                                   std::chrono::milliseconds step_timeout, const std::function<void()>& before_start,
+                                   std::chrono::milliseconds ready_timeout)
 {
     if (node_ids.empty()) throw Error("TimeMaster: no node ids to drive");
     bool started = false;
     uint64_t now = 0, steps = 0;
-    auto deadline = std::chrono::steady_clock::now() + step_timeout;
+    auto deadline = std::chrono::steady_clock::now() + ready_timeout;
     for (;;) {
         impl_->collect();
         // Every node must have announced a tick later than the current time: then all ticks
@@ -112,6 +113,10 @@ uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uin
         }
         const auto remaining = deadline - std::chrono::steady_clock::now();
         if (remaining <= std::chrono::steady_clock::duration::zero()) {
+            if (!started) {
+                throw Error("TimeMaster: simulated time not started within " + std::to_string(ready_timeout.count()) +
+                            " ms: no announcement from " + join(waiting_for));
+            }
             throw Error("TimeMaster: simulated time stuck at " + std::to_string(now) + " ns: no announcement from " +
                         join(waiting_for) + " within " + std::to_string(step_timeout.count()) + " ms");
         }

@@ -507,10 +507,12 @@ public:
         if (simulated()) {
             thread_ = std::thread([this, timers] {
                 try {
+                    // 30 s for every process to come up and join (as for a start in real time: over
+                    // ssh on a busy host too), then 10 s for each step.
                     master_.run_simulated(timers, settings_.duration_ns, std::chrono::seconds(10), [this] {
                         if (before_start_) before_start_();
                         stepping_since_ = std::chrono::steady_clock::now();
-                    });
+                    }, std::chrono::seconds(30));
                     until_ = settings_.duration_ns;
                     stepped_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - stepping_since_).count();
                 } catch (const std::exception& e) {

@@ -422,11 +422,30 @@ TEST_F(TimerTest, TimeMasterNamesTheNodesThatNeverAnnounce)
 {
     cpm::TimeMaster sut(lab);
     try {
-        sut.run_simulated({"ghost"}, 1000 * kMs, 300ms);
+        sut.run_simulated({"ghost"}, 1000 * kMs, 300ms, {}, 300ms);
         FAIL() << "no error";
     } catch (const cpm::Error& e) {
-        EXPECT_THAT(e.what(), HasSubstr("'ghost'"));
+        EXPECT_THAT(e.what(), HasSubstr("not started within 300 ms: no announcement from 'ghost'"));
     }
+}
+
+// A process still starting (on a busy host, over ssh) may take longer to join than a step may
+// take: the start has a timeout of its own.
+TEST_F(TimerTest, TimeMasterWaitsItsReadyTimeoutNotItsStepTimeoutForANodeThatJoinsLate)
+{
+    const char* argv[] = {"timer_test", "--simulated_time"};
+    cpm::init(2, const_cast<char**>(argv));
+    cpm::TimeMaster master(lab);
+    std::atomic<int> ticks{0};
+    std::shared_ptr<cpm::Timer> late;
+    std::thread joiner([&] {
+        std::this_thread::sleep_for(900ms);  // three step timeouts
+        late = cpm::Timer::create(node, "late", 20 * kMs, 0, cpm::TimerOptions{.wait_for_start = true, .simulated_time_allowed = true});
+        late->start_async([&](uint64_t) { ++ticks; });
+    });
+    EXPECT_NO_THROW(master.run_simulated({"late"}, 200 * kMs, 300ms, {}, 10'000ms));
+    joiner.join();
+    EXPECT_EQ(ticks.load(), 10);  // 0, 20, ..., 180 ms
 }
 
 TEST_F(TimerTest, CpmLabsTwoBooleanFormStillWorks)

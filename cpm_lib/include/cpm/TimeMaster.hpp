@@ -27,13 +27,16 @@ public:
     TimeMaster& operator=(const TimeMaster&) = delete;
 
     /// Drives simulated time for the named nodes from 0 until `end_ns`, then stops all timers.
-    /// Throws cpm::Error naming the silent nodes when a step waits longer than `step_timeout`.
-    /// Returns the number of steps (distinct tick times) it triggered. `before_start` (if given)
-    /// runs once every node has announced, before the first trigger: what must be ready before
-    /// lab time moves (cpm lab run: the recorder reading every writer).
+    /// Waits up to `ready_timeout` for every node's first announcement (processes still
+    /// starting, on other hosts too), then up to `step_timeout` for each step; throws cpm::Error
+    /// naming the silent nodes when either runs out. Returns the number of steps (distinct tick
+    /// times) it triggered. `before_start` (if given) runs once every node has announced, before
+    /// the first trigger: what must be ready before lab time moves (cpm lab run: the recorder
+    /// reading every writer).
     uint64_t run_simulated(const std::vector<std::string>& node_ids, uint64_t end_ns,
                            std::chrono::milliseconds step_timeout = std::chrono::seconds(10),
-                           const std::function<void()>& before_start = {});
+                           const std::function<void()>& before_start = {},
+                           std::chrono::milliseconds ready_timeout = std::chrono::seconds(30));
 
     /// The simulated time run_simulated last triggered (0 before); safe from any thread.
     uint64_t simulated_now() const;
