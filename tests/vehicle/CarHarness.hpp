@@ -21,6 +21,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <fcntl.h>
@@ -151,6 +152,25 @@ public:
         size_t n = 0;
         for (auto& s : states()) n += s.header().create_stamp().nanoseconds() >= t;
         return n;
+    }
+    /// The gaps over 30 ms between the stamps of consecutive states created in [t0, t1), for a
+    /// failed rate check to say where the states went missing ("none" when there is none).
+    std::string state_gaps_between(uint64_t t0, uint64_t t1) const
+    {
+        std::vector<uint64_t> stamps;
+        for (auto& s : states()) {
+            const uint64_t t = s.header().create_stamp().nanoseconds();
+            if (t >= t0 && t < t1) stamps.push_back(t);
+        }
+        std::sort(stamps.begin(), stamps.end());
+        std::string out;
+        for (size_t k = 1; k < stamps.size(); ++k) {
+            const uint64_t gap = stamps[k] - stamps[k - 1];
+            if (gap > 30'000'000ull)
+                out += (out.empty() ? "" : ", ") + std::to_string(gap / 1'000'000) + " ms at +" +
+                       std::to_string((stamps[k - 1] - t0) / 1'000'000) + " ms";
+        }
+        return out.empty() ? "none" : out;
     }
     /// Observations created in [t0, t1).
     std::vector<VehicleObservation> observations_between(uint64_t t0, uint64_t t1) const

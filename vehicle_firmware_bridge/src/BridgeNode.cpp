@@ -152,7 +152,7 @@ struct BridgeCar
     }
     BridgeNodeStats stats;
     LogThrottle throttles[kAnomalyKinds];
-    LogThrottle foreign_throttle, leave_throttle{10'000'000'000ull};
+    LogThrottle foreign_throttle, superseded_throttle, leave_throttle{10'000'000'000ull};
 };
 
 }  // namespace
@@ -281,6 +281,7 @@ bool BridgeCar::serve(int timeout_ms, const std::function<bool()>& stop_requeste
         // Only the newest of this car's states counts: older ones in the same read waited in a
         // buffer. Another car's packets are never used.
         std::optional<StatePacket> newest;
+        unsigned superseded_in_read = 0;
         std::optional<uint8_t> foreign_id;
         decoder.feed(buffer, size_t(n), [&](const Packet& packet) {
             const auto* state = std::get_if<StatePacket>(&packet);
@@ -292,7 +293,10 @@ bool BridgeCar::serve(int timeout_ms, const std::function<bool()>& stop_requeste
                 return;
             }
             foreign_in_a_row = 0;
-            if (newest) ++stats.superseded_states;
+            if (newest) {
+                ++stats.superseded_states;
+                ++superseded_in_read;
+            }
             newest = *state;
         });
         if (foreign_id && foreign_in_a_row < options.foreign_packets_to_leave) {
@@ -317,6 +321,15 @@ bool BridgeCar::serve(int timeout_ms, const std::function<bool()>& stop_requeste
             return false;
         }
         if (!newest) return false;
+        if (superseded_in_read > 0) {
+            // A measurement no one will see: the loop read the line late (a busy machine, a
+            // stalled thread). Said, not only counted.
+            uint64_t held = 0;
+            if (superseded_throttle.allow(t_received, held))
+                CPM_LOG_WARN("vehicle %u: %u state packet(s) waited in the line and were passed over for the newest: "
+                             "the serial loop read late (%llu more reads like it since the last report)",
+                             id, superseded_in_read, (unsigned long long)held);
+        }
         cycle(*newest, t_received);
         return true;
     }
