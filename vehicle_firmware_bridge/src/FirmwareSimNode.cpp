@@ -308,6 +308,13 @@ void FirmwareSimNode::run(const std::function<bool()>& stop_requested)
     // answers between two), the physics steps in between run at once; and a state packet on
     // the first tick, so the host's first tick has one to answer.
     d.simulated = init_settings().simulated_time;
+    // Real time: the microcontrollers' timer never reads a line itself (a pty's read waits for
+    // the kernel's worker). Simulated time: the tick reads what the hosts answered, at once.
+    if (!d.simulated) {
+        for (auto& car : d.cars) {
+            if (car->pty) car->pty->read_on_own_thread(init_settings().realtime);
+        }
+    }
     const uint64_t period = d.simulated ? d.physics_period_ns * d.steps_per_state : d.physics_period_ns;
     if (d.simulated) d.steps = d.steps_per_state - 1;
     d.timer = Timer::create(d.participant, timer_name(d.cars[0]->options.vehicle_id), period, 0,

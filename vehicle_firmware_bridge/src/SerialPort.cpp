@@ -2,15 +2,20 @@
 
 #include <cpm/Error.hpp>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <deque>
 #include <fcntl.h>
+#include <mutex>
 #include <poll.h>
 #include <stdlib.h>
+#include <sys/eventfd.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
 #include <termios.h>
+#include <thread>
 #include <unistd.h>
 
 namespace cpm::vehicle {
@@ -140,15 +145,82 @@ PseudoTerminal::PseudoTerminal(const std::string& link_path) : link_path_(link_p
     }
 }
 
+/// The thread of read_on_own_thread and what it has read.
+struct PseudoTerminal::Reader
+{
+    static constexpr size_t kCapacity = 64 * 1024;
+    std::mutex mutex;
+    std::deque<uint8_t> bytes;
+    bool failed = false;
+    int stop_fd = -1;
+    std::thread thread;
+
+    void run(int master, Realtime mode, int priority)
+    {
+        const RealtimeThread realtime(mode, priority, "the simulated controller's line reader");
+        pollfd fds[2] = {{master, POLLIN, 0}, {stop_fd, POLLIN, 0}};
+        uint8_t buffer[512];
+        for (;;) {
+            size_t room = 0;
+            {
+                std::lock_guard<std::mutex> lock(mutex);
+                room = kCapacity - std::min(kCapacity, bytes.size());
+            }
+            const bool full = room == 0;
+            fds[0].events = full ? 0 : POLLIN;  // full: only a stop ends the wait, 1 ms at a time
+            const int ready = ::poll(fds, 2, full ? 1 : -1);
+            if (ready < 0 && errno != EINTR) break;
+            if (fds[1].revents != 0) return;
+            if (ready <= 0 || full) continue;
+            if (fds[0].revents & POLLIN) {
+                const ssize_t n = ::read(master, buffer, std::min(sizeof buffer, room));
+                if (n > 0) {
+                    std::lock_guard<std::mutex> lock(mutex);
+                    bytes.insert(bytes.end(), buffer, buffer + n);
+                    continue;
+                }
+                if (n < 0 && (errno == EAGAIN || errno == EINTR)) continue;
+            }
+            if (fds[0].revents & (POLLHUP | POLLERR | POLLNVAL)) break;
+        }
+        std::lock_guard<std::mutex> lock(mutex);
+        failed = true;
+    }
+};
+
 PseudoTerminal::~PseudoTerminal()
 {
+    if (reader_) {
+        const uint64_t one = 1;
+        [[maybe_unused]] const ssize_t n = ::write(reader_->stop_fd, &one, sizeof one);
+        reader_->thread.join();
+        ::close(reader_->stop_fd);
+    }
     if (!link_path_.empty()) ::unlink(link_path_.c_str());
     if (slave_ >= 0) ::close(slave_);
     if (master_ >= 0) ::close(master_);
 }
 
+void PseudoTerminal::read_on_own_thread(Realtime mode, int priority)
+{
+    if (reader_) throw Error(slave_path_ + ": read_on_own_thread called a second time");
+    auto reader = std::make_unique<Reader>();
+    reader->stop_fd = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
+    if (reader->stop_fd < 0) throw Error(slave_path_ + ": cannot create an eventfd (" + std::strerror(errno) + ")");
+    reader->thread = std::thread([r = reader.get(), master = master_, mode, priority] { r->run(master, mode, priority); });
+    reader_ = std::move(reader);
+}
+
 long PseudoTerminal::read_available(uint8_t* data, size_t size)
 {
+    if (reader_) {
+        std::lock_guard<std::mutex> lock(reader_->mutex);
+        const size_t n = std::min(size, reader_->bytes.size());
+        if (n == 0 && reader_->failed) return -1;
+        std::copy_n(reader_->bytes.begin(), n, data);
+        reader_->bytes.erase(reader_->bytes.begin(), reader_->bytes.begin() + long(n));
+        return long(n);
+    }
     ssize_t n = ::read(master_, data, size);
     if (n < 0) return (errno == EAGAIN || errno == EINTR) ? 0 : -1;
     return n;

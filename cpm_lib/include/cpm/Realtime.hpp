@@ -25,6 +25,10 @@ inline constexpr int timer = 60;
 /// The bridge's serial loop (one per car): it answers the car's state packets as they come,
 /// before the timers of the same computer.
 inline constexpr int serial_loop = 70;
+/// firmware_sim's line reader (one per car): takes what the host wrote off the pseudo-terminal,
+/// a read that may wait for the kernel's worker, so the microcontroller's timer never does; above
+/// the timer, so what came in is there before its next tick.
+inline constexpr int line_reader = 65;
 }  // namespace realtime_priority
 
 /// "off", "on" or "required".
