@@ -104,7 +104,12 @@ public:
             ::close(fd_);
             throw cpm::Error(named + " is taken by another cpm lab run on this host (" + lock + " is locked); " + remedy);
         }
-        rtdb::TopicProbe probe(options);
+        // The probe over UDP only: a shared-memory port it freed would be taken over at once by
+        // the run's own participant, unreachable for a while by a peer that had seen the probe
+        // (a monitor left open on the domain).
+        ParticipantOptions udp_only = options;
+        udp_only.shared_memory = false;
+        rtdb::TopicProbe probe(udp_only);
         std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // discovery over loopback and shared memory
         // A cpm monitor only watches (and sends StopRequests when allowed): one left open on the
         // domain between runs is welcome.
@@ -674,7 +679,6 @@ std::vector<std::unique_ptr<DomainClaim>> claim_controller_domains(const Scenari
             ParticipantOptions po;  // this host only, as the controller's and its middleware's
             po.domain_id = domain;
             po.name = "cpm_lab_run";
-            po.shared_memory = false;
             return std::make_unique<DomainClaim>(domain, po, s, "controller " + name + "'s domain");
         }));
     }
@@ -824,14 +828,14 @@ RunSettings settings_of(const Scenario& s, const RunOptions& o)
     return settings;
 }
 
-/// The run's own participant: its domain, UDP (short-lived beside many processes: see cpm
-/// history), and across hosts this host's address with the others as peers.
+/// The run's own participant: its domain, shared memory with the processes on this host (the
+/// lab's clock steps a simulated run through it), and across hosts this host's address with the
+/// others as peers.
 ParticipantOptions participant_options(const Scenario& s, const RunSettings& settings)
 {
     ParticipantOptions po = ParticipantOptions::from_init();
     po.domain_id = settings.domain;
     po.name = "cpm_lab_run";
-    po.shared_memory = false;
     if (const HostSpec* here = s.local_host()) {
         po.interfaces = {here->address};
         if (s.discovery_server) {
