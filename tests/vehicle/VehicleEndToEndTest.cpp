@@ -22,6 +22,8 @@
 #include <VehicleObservation.h>
 #include <VehicleState.h>
 
+#include <ReadyStatus.h>
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -431,10 +433,18 @@ TEST_F(VehicleEndToEnd, OneSimulatorAndOneBridgeProcessCarryTwentyCarsEachOnItsO
 TEST_F(VehicleEndToEnd, InSimulatedTimeTheCarsWaitForTheLabClockAndStillStopOnCtrlC)
 {
     cpm::ReaderAbstract<VehicleState> states(participant, "vehicleState", {.keep_all = true});
+    cpm::ReaderAbstract<ReadyStatus> ready(participant, "readyStatus", {.reliable = true, .history_depth = 10, .transient_local = true});
     Process sut({built_program("cpm"), "vehicle", "sim", "--id", "4", "--count", "2", "--simulated_time"});
     ASSERT_TRUE(cpm_test::wait_until([&] {
         return sut.output().find("cpm lab clock --simulated --nodes firmware_sim_4,vehicle_bridge_4") != std::string::npos;
     }, 10s)) << sut.output() << sut.errors();
+    // Both processes wait on the lab's clock: each announced its first tick (a busy machine starts
+    // them later than the message above).
+    std::set<std::string> waiting;
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        for (auto& r : ready.take()) waiting.insert(r.source_id());
+        return waiting.count("firmware_sim_4") && waiting.count("vehicle_bridge_4");
+    }, 20s)) << sut.errors() << "announced: " << ::testing::PrintToString(waiting);
     EXPECT_TRUE(cpm_test::holds_for([&] { return states.take().empty(); }, 1000ms)) << "no lab clock runs: no car may tick";
     // Ctrl-C while the clock stands still: every process ends at once and reports.
     const auto t0 = std::chrono::steady_clock::now();
