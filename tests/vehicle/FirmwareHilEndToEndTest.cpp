@@ -218,7 +218,8 @@ TEST_F(FirmwareHilEndToEnd, AFloodOfBytesNeverLocksTheFirmwareUp)
     const uint64_t flood_end = cpm::get_time_ns();
     // The chip went on sending its state packets through the flood (the bridge publishes each).
     size_t during = watch.states_created_after(flood_start) - watch.states_created_after(flood_end);
-    EXPECT_GT(during, 50u) << flooded << " bytes flooded";
+    EXPECT_GT(during, 50u) << flooded << " bytes flooded; gaps: " << watch.state_gaps_between(flood_start, flood_end)
+                           << "\nbridge:\n" << car.bridge->errors() << "firmware_hil:\n" << car.sim->errors();
     // And drives again once the line is quiet: the pty still holds what the chip could not
     // take at 115200 baud (about 1.5 s of it), then the commands get through - and the car
     // does not run off faster than commanded (the bridge's speed loop did not wind up while the
@@ -324,7 +325,8 @@ TEST_F(FirmwareHilEndToEnd, ACarDrivenIntoAWallStopsAgainstIt)
     ranges.reset();
     ASSERT_FALSE(front_ranges.empty());
     const double ranger_x = cpm::vehicle::VehicleParameters{}.ultrasonic[0].x;
-    EXPECT_NEAR(front_ranges.back(), 1.0 - (furthest + ranger_x), 0.02);
+    EXPECT_NEAR(front_ranges.back(), 1.0 - (furthest + ranger_x), 0.02)
+        << "firmware_hil:\n" << car.sim->output() << car.sim->errors() << "bridge:\n" << car.bridge->errors();
     EXPECT_GT(*std::max_element(front_ranges.begin(), front_ranges.end()), 0.7) << "it came closer";
 }
 
