@@ -7,8 +7,8 @@ namespace cpm {
 ///
 /// Real time means: memory locked (mlockall of what the process has and will have, each page
 /// locked once touched, so thread stacks are not filled up front) and the threads that keep a
-/// car's period, the timer thread and the bridge's serial loop, at a SCHED_FIFO priority (see
-/// realtime_priority). Fast DDS's own threads keep their normal priority.
+/// car's period, the timer thread, the bridge's serial loop and firmware_sim's line readers, at a
+/// SCHED_FIFO priority (see realtime_priority). Fast DDS's own threads keep their normal priority.
 enum class Realtime
 {
     off,       ///< normal scheduling
