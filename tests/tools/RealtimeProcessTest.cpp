@@ -121,8 +121,8 @@ TEST(RealtimeProcess, ACarsProgramsRunTheirLoopsFifoWithMemoryLockedAndDdsThread
     const int sim = pid_after(sut.output(), "firmware_sim pid "), bridge = pid_after(sut.output(), "vehicle_bridge pid ");
     ASSERT_GT(sim, 0) << sut.output();
     ASSERT_GT(bridge, 0) << sut.output();
-    // Each program's loop thread turns FIFO once it runs: the sim's timer (60), the bridge's
-    // serial loop (70). No other thread of theirs does.
+    // Each program's loop threads turn FIFO once they run: the sim's timer (60) and its line
+    // reader (65), the bridge's serial loop (70). No other thread of theirs does.
     const auto fifo_priorities = [](int pid) {
         std::multiset<int> out;
         for (const auto& t : threads_of(pid))
@@ -136,7 +136,7 @@ TEST(RealtimeProcess, ACarsProgramsRunTheirLoopsFifoWithMemoryLockedAndDdsThread
         return;
     }
     EXPECT_TRUE(cpm_test::wait_until([&] {
-        return fifo_priorities(sim) == std::multiset<int>{cpm::realtime_priority::timer} &&
+        return fifo_priorities(sim) == std::multiset<int>{cpm::realtime_priority::timer, cpm::realtime_priority::line_reader} &&
                fifo_priorities(bridge) == std::multiset<int>{cpm::realtime_priority::serial_loop};
     }, 10s)) << "firmware_sim " << fifo_priorities(sim).size() << " FIFO thread(s), vehicle_bridge "
              << fifo_priorities(bridge).size();
