@@ -112,9 +112,11 @@ TEST(OverheadCamera, TheCameraFilesPoseIsReadSavedAndDemandedWhereItIsNeeded)
         text.assign(std::istreambuf_iterator<char>(in), {});
     }
     const std::string bad = text.substr(0, text.find("data: [ 1., 0., 0., 0., -1.")) + "data: [ 1., 0., 0., 0., 1., 0., 0., 0., -1. ]\n";
-    EXPECT_NE(error_from([&] { Camera::load(scratch_file("bad.yaml", bad), CameraPlacement::overhead); }).find("world_rotation: not a rotation matrix"),
+    const std::string bad_path = scratch_file("bad.yaml", bad);
+    EXPECT_NE(error_from([&] { Camera::load(bad_path, CameraPlacement::overhead); }).find("world_rotation: not a rotation matrix"),
               std::string::npos);
     std::remove(path.c_str());
+    std::remove(bad_path.c_str());  // it was left in /tmp by every run
 }
 
 TEST(OverheadLocator, EveryCarIsFoundWithin1CmAnd1DegreeOverTheWholeMapAndTheImagesCorners)
