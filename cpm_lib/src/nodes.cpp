@@ -74,7 +74,8 @@ std::vector<NodeSpec> make_table()
          .subscribe = {t::vehicle_state.name, t::vehicle_observation.name, t::range_sensors.name, t::stop_request.name},
          .about = "a user's controller (examples/vehicle_drive): commands to its cars, their states in"},
         {.name = "lab_run", .publish = {t::stop_request.name, t::system_trigger.name, t::bookmark.name},
-         .subscribe = {t::log.name, t::history_status.name, t::ready_status.name}, .about = "cpm lab run: starts, clocks and stops a run"},
+         .subscribe = {t::log.name, t::history_status.name, t::ready_status.name, t::vehicle_state.name},
+         .about = "cpm lab run: starts, clocks and stops a run (real time from every car's first state)"},
     };
     // `cpm vehicle sim`: a simulator and a bridge in one process group, one node in a secured lab.
     auto row = [&](const char* name) { return *std::find_if(rows.begin(), rows.end(), [&](const NodeSpec& n) { return n.name == name; }); };

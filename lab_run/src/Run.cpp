@@ -21,6 +21,7 @@
 #include <HistoryStatus.h>
 #include <Log.h>
 #include <StopRequest.h>
+#include <VehicleState.h>
 #include <cpm_topic_types.hpp>
 
 #include <cpm/rtdb/HistoryService.hpp>
@@ -45,6 +46,7 @@
 #include <future>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -492,23 +494,68 @@ ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, const RunSettings
     return spec;
 }
 
-/// The lab's clock for one run: simulated time driven through the timers' ticks on a thread of
-/// its own, or real time (started together a second ahead when a planner waits for the start).
+/// The cars of a real-time run that have sent their first state: each car's programs are up
+/// (over ssh a few seconds into the run), so its lab time can start (as cpm_lab's control
+/// centre waits for its vehicles).
+class CarsUp
+{
+public:
+    CarsUp(Participant& participant, std::set<int> cars)
+        : waiting_(std::move(cars)),
+          states_([this](std::vector<VehicleState>& states) { on_states(states); }, participant, topics::vehicle_state.name,
+                  topics::vehicle_state.reader)
+    {
+    }
+    /// Waits up to `timeout` (or until `cancelled`) for every car's first state; the cars still
+    /// silent then.
+    std::set<int> wait(std::chrono::milliseconds timeout, const std::function<bool()>& cancelled)
+    {
+        const auto deadline = Clock::now() + timeout;
+        std::unique_lock<std::mutex> lock(mutex_);
+        while (!waiting_.empty() && Clock::now() < deadline && !cancelled()) {
+            changed_.wait_for(lock, std::chrono::milliseconds(50));
+        }
+        return waiting_;
+    }
+    std::set<int> waiting() const
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return waiting_;
+    }
+
+private:
+    void on_states(const std::vector<VehicleState>& states)
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        for (const auto& state : states) waiting_.erase(state.vehicle_id());
+        changed_.notify_all();
+    }
+    mutable std::mutex mutex_;
+    std::condition_variable changed_;
+    std::set<int> waiting_;
+    AsyncReader<VehicleState> states_;
+};
+
+/// The lab's clock for one run, started on a thread of its own: simulated time driven through
+/// the timers' ticks, or real time, which starts once every car has sent its first state
+/// (a second later, together, when a planner waits for the start).
 class LabClock
 {
 public:
     LabClock(Participant& participant, const RunSettings& settings, std::function<void()> before_start)
-        : master_(participant), settings_(settings), before_start_(std::move(before_start))
+        : participant_(participant), master_(participant), settings_(settings), before_start_(std::move(before_start))
     {
     }
-    ~LabClock() { stop(); }  // also when the run unwinds: a simulated clock's thread waits for its timers otherwise
+    ~LabClock() { stop(); }  // also when the run unwinds: the clock's thread waits for its timers otherwise
     LabClock(const LabClock&) = delete;
     LabClock& operator=(const LabClock&) = delete;
 
-    /// Starts it; an error message when it cannot start ("" when it did).
-    std::string start(const std::vector<std::string>& timers, const std::vector<std::string>& planners)
+    /// Starts it: `timers` every timer of the run (simulated time steps them), `planners` those
+    /// a real-time start waits for, `cars` each car with its processes (named when a car stays
+    /// silent). A clock that cannot start says why through ended().
+    void start(const std::vector<std::string>& timers, const std::vector<std::string>& planners,
+               const std::map<int, std::vector<std::string>>& cars)
     {
-        real_start_ = cpm::get_time_ns();
         if (simulated()) {
             thread_ = std::thread([this, timers] {
                 try {
@@ -521,61 +568,106 @@ public:
                     until_ = settings_.duration_ns;
                     stepped_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - stepping_since_).count();
                 } catch (const std::exception& e) {
-                    error_ = e.what();
+                    error_ = std::string("the simulated clock stopped: ") + e.what();
                 }
                 done_ = true;
             });
-        } else if (!planners.empty()) {
-            try {
-                real_start_ = master_.start_real_time(planners, std::chrono::milliseconds(1000), std::chrono::seconds(30));
-            } catch (const std::exception& e) {
-                return std::string("the lab clock could not start: ") + e.what();
-            }
+            return;
         }
-        return "";
+        thread_ = std::thread([this, planners, cars] {
+            try {
+                wait_for_cars(cars);
+                real_start_ = planners.empty() ? cpm::get_time_ns()
+                                               : master_.start_real_time(planners, std::chrono::milliseconds(1000), std::chrono::seconds(30));
+                started_ = true;
+            } catch (const std::exception& e) {
+                error_ = std::string("the lab clock could not start: ") + e.what();
+                done_ = true;
+            }
+        });
     }
     bool simulated() const { return settings_.time == TimeMode::simulated; }
     /// A simulated clock that ran to its end: the real seconds from its first step to its last.
     double stepped_seconds() const { return done_ ? stepped_.load() : 0; }
-    /// Lab time now: the simulated clock's last step, or real time since the start.
+    /// Lab time now: the simulated clock's last step, or real time since the start (0 before).
     uint64_t now() const
     {
         if (simulated()) return done_ && error_.empty() ? until_.load() : master_.simulated_now();
+        if (!started_) return 0;
         const uint64_t t = cpm::get_time_ns();  // once: two reads in one expression may come in either order
-        return std::min(settings_.duration_ns, t - std::min(t, real_start_));
+        return std::min(settings_.duration_ns, t - std::min(t, real_start_.load()));
     }
-    /// Whether the run's duration has passed; `error` says why a simulated clock stopped early.
+    /// What the start still waits for ("" once started): "car 6's first state".
+    std::string waiting_for() const
+    {
+        if (simulated() || started_ || done_) return "";
+        std::lock_guard<std::mutex> lock(cars_mutex_);
+        if (!cars_up_) return "";
+        std::string out;
+        for (int car : cars_up_->waiting()) out += (out.empty() ? "" : ", ") + std::to_string(car);
+        return out.empty() ? "" : "car " + out + "'s first state";
+    }
+    /// Whether the run's duration has passed; `error` says why the clock stopped or never started.
     bool ended(std::string& error) const
     {
-        if (!simulated()) return now() >= settings_.duration_ns;
-        if (done_ && !error_.empty()) error = "the simulated clock stopped: " + error_;
+        if (done_ && !error_.empty()) {
+            error = error_;
+            return true;
+        }
+        if (!simulated()) return started_ && now() >= settings_.duration_ns;
         return done_;
     }
-    /// Stops every timer of the lab and waits for a simulated clock's thread.
+    /// Stops every timer of the lab and waits for the clock's thread.
     void stop()
     {
         if (stopped_) return;
         stopped_ = true;
         master_.stop_all();
-        join();
+        if (thread_.joinable()) thread_.join();
     }
 
 private:
-    void join()
+    /// Until every car has sent its first state (30 s, as for the timers of a simulated run);
+    /// throws naming the silent cars and their processes.
+    void wait_for_cars(const std::map<int, std::vector<std::string>>& cars)
     {
-        if (thread_.joinable()) thread_.join();
+        std::set<int> ids;
+        for (const auto& [car, processes] : cars) ids.insert(car);
+        if (ids.empty()) return;
+        {
+            std::lock_guard<std::mutex> lock(cars_mutex_);
+            cars_up_.emplace(participant_, ids);
+        }
+        const auto silent = cars_up_->wait(std::chrono::seconds(30), [this] { return stopped_.load(); });
+        {
+            std::lock_guard<std::mutex> lock(cars_mutex_);
+            cars_up_.reset();  // its reader of every state is needed no more
+        }
+        if (silent.empty() || stopped_) return;
+        std::string named;
+        for (int car : silent) {
+            named += (named.empty() ? "" : "; ") + std::string("car ") + std::to_string(car) + " (";
+            const auto& processes = cars.at(car);
+            for (size_t i = 0; i < processes.size(); ++i) named += (i ? ", '" : "'") + processes[i] + "'";
+            named += ")";
+        }
+        throw Error("no state within 30000 ms from " + named);
     }
+    Participant& participant_;
     TimeMaster master_;
     const RunSettings& settings_;
     const std::function<void()> before_start_;
     std::thread thread_;
     std::atomic<bool> done_{false};
+    std::atomic<bool> started_{false};  // real time: the lab's time runs from real_start_
     std::atomic<uint64_t> until_{0};
     std::string error_;  // written by the thread before done_
     std::chrono::steady_clock::time_point stepping_since_;  // the thread's
     std::atomic<double> stepped_{0};
-    uint64_t real_start_ = 0;
-    bool stopped_ = false;
+    std::atomic<uint64_t> real_start_{0};
+    std::atomic<bool> stopped_{false};
+    mutable std::mutex cars_mutex_;
+    std::optional<CarsUp> cars_up_;  // while a real-time start waits for the cars
 };
 
 /// Until the run's time is up, it is stopped (Ctrl-C), or a process dies: a process that
@@ -619,9 +711,11 @@ void supervise(ProcessGroup& group, std::set<std::string>& died, RunResult& resu
         }
         if (!result.error.empty()) break;
         if (clock.ended(result.error)) {
-            // A node the simulated clock waited for in vain: what its log says (it may be waiting itself).
+            // A node or car the clock waited for in vain: what its log says (it may be waiting itself).
             for (const auto& p : plan) {
-                if (p.timer.empty() || result.error.find("'" + p.timer + "'") == std::string::npos) continue;
+                const bool named = result.error.find("'" + p.name + "'") != std::string::npos ||
+                                   (!p.timer.empty() && result.error.find("'" + p.timer + "'") != std::string::npos);
+                if (!named) continue;
                 result.error += "\n" + p.name + "'s log (" + (dir / (p.name + ".log")).string() + ") ends:\n" + group.tail(p.name, 5);
             }
             break;
@@ -644,6 +738,17 @@ std::vector<std::string> timers_of(const std::vector<ProcessPlan>& plan)
         for (std::string t; std::getline(list, t, ',');) timers.push_back(t);
     }
     return timers;
+}
+
+/// Each car of the run with the processes that serve it (a process of several cars serves its first).
+std::map<int, std::vector<std::string>> cars_of(const Scenario& s, const std::vector<ProcessPlan>& plan)
+{
+    std::map<int, std::vector<std::string>> out;
+    for (const auto& v : s.vehicles) out[v.id];
+    for (const auto& p : plan) {
+        if (out.count(p.vehicle_id)) out[p.vehicle_id].push_back(p.name);
+    }
+    return out;
 }
 
 /// The timers that a run in real time waits for before it starts the lab a second ahead: those
@@ -851,8 +956,10 @@ ParticipantOptions participant_options(const Scenario& s, const RunSettings& set
 
 /// The end, in order: every car told to stop, the timers stopped, then the processes that
 /// command the cars, the cars, and the history last (it closes the recording). The stop is
-/// stamped on the run's one clock: lab time in a simulated run, as every other sample.
-void stop_in_order(Writer<StopRequest>& stops, LabClock& clock, ProcessGroup& group, const Scenario& s, const RunSettings& settings)
+/// stamped on the run's one clock: lab time in a simulated run, as every other sample. A host
+/// that ssh finds lost only now (cut off in the run's last seconds) is lost all the same.
+void stop_in_order(Writer<StopRequest>& stops, LabClock& clock, ProcessGroup& group, const Scenario& s, const RunSettings& settings,
+                   const std::set<std::string>& died, RunResult& result, const RunOptions& o)
 {
     StopRequest all;
     all.vehicle_id(0);
@@ -860,7 +967,11 @@ void stop_in_order(Writer<StopRequest>& stops, LabClock& clock, ProcessGroup& gr
     (void)stops.write(all);
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     clock.stop();
-    (void)group.stop_all();
+    for (const auto& e : group.stop_all()) {
+        if (!e.host_lost || died.count(e.name)) continue;  // one lost during the run was told then
+        for (auto& h : result.hosts) h.lost = h.lost || h.name == e.host;
+        if (o.progress) std::fprintf(o.progress, "cpm lab run: %s %s while the run stopped\n", e.name.c_str(), e.describe().c_str());
+    }
     remove_from_hosts(s, settings);
 }
 
@@ -910,19 +1021,22 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
             std::fprintf(o.progress, "cpm lab run: watch it live at http://127.0.0.1:%d/ (cpm monitor, while the run lasts)\n", *s.monitor_port);
         }
     }
-    if (result.error.empty()) result.error = clock.start(timers_of(plan), planners_of(s));
+    if (result.error.empty()) clock.start(timers_of(plan), planners_of(s), cars_of(s, plan));
     supervise(group, died, result, clock, [&] {
         const double real = std::chrono::duration<double>(Clock::now() - t0).count();
-        char line[240];
+        const std::string waiting = clock.waiting_for();
+        const std::string note = clock.simulated()   ? " (simulated, " + std::to_string(int(real)) + " s real)"
+                                 : waiting.empty() ? ""
+                                                   : " (waiting for " + waiting + ")";
+        char line[320];
         std::snprintf(line, sizeof line, "lab time %.1f / %.1f s%s, %zu car(s), %llu missed deadline(s), %llu samples recorded",
-                      double(clock.now()) * 1e-9, double(settings.duration_ns) * 1e-9,
-                      clock.simulated() ? (" (simulated, " + std::to_string(int(real)) + " s real)").c_str() : "", s.vehicles.size(),
+                      double(clock.now()) * 1e-9, double(settings.duration_ns) * 1e-9, note.c_str(), s.vehicles.size(),
                       (unsigned long long)watch.missed(), (unsigned long long)watch.recorded());
         return std::string(line);
     }, o, dir, plan);
     result.lab_time_ns = clock.now();
     result.clock_seconds = clock.stepped_seconds();
-    stop_in_order(stops, clock, group, s, settings);
+    stop_in_order(stops, clock, group, s, settings, died, result, o);
     result.real_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
 
     const nlohmann::json processes = process_ends(plan, group, died, result);

@@ -467,6 +467,31 @@ TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
     EXPECT_EQ(pid_with("/bin/fsm_node ", run_tag(out)), 0) << "the frozen node is stopped with the run";
 }
 
+TEST(LabRun, InRealTimeACarThatNeverSendsAStateIsNamedWithItsProcessesLogs)
+{
+    // Lab time in real time starts with every car's first state: the car's simulator frozen
+    // (SIGSTOP) before its first packet, the run waits, says for what, and after 30 s ends
+    // naming the car and its processes. Never a run whose time ran without its car.
+    TempDir dir;
+    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string file = dir.write("silent.yaml", "name: silent\ntime: real\nduration: 10s\nworld: " + source +
+                                                          "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0]}\n");
+    const std::string out = dir.file("run");
+    Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
+    int pid = 0;
+    ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with("/bin/firmware_sim ", run_tag(out))) != 0; }, 30s, 1ms)) << run.errors();
+    ASSERT_EQ(::kill(pid, SIGSTOP), 0);
+    EXPECT_EQ(run.wait(90s), 1) << run.output() << run.errors();
+    const std::string said = run.output() + run.errors();
+    EXPECT_NE(said.find("lab time 0.0 / 10.0 s (waiting for car 5's first state)"), std::string::npos) << said;
+    EXPECT_NE(said.find("the lab clock could not start: no state within 30000 ms from car 5 ('sim_5', 'bridge_5')"), std::string::npos) << said;
+    EXPECT_NE(said.find("sim_5's log (" + out + "/sim_5.log) ends:"), std::string::npos) << said;
+    EXPECT_NE(said.find("bridge_5's log (" + out + "/bridge_5.log) ends:"), std::string::npos) << said;
+    const auto summary = summary_of(out);
+    EXPECT_EQ(summary["lab_time_s"], 0.0) << "no lab time ran without the car: " << summary.dump(2);
+    EXPECT_EQ(pid_with("/bin/firmware_sim ", run_tag(out)), 0) << "the frozen simulator is stopped with the run";
+}
+
 TEST(LabRun, AMachineThatLooksForGatesOnACarWithoutACameraIsRefusedBeforeAnythingStarts)
 {
     TempDir dir;
