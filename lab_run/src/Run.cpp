@@ -577,6 +577,7 @@ public:
         thread_ = std::thread([this, planners, cars] {
             try {
                 wait_for_cars(cars);
+                if (stopped_) return;  // stopped while it waited: nothing to start
                 real_start_ = planners.empty() ? cpm::get_time_ns()
                                                : master_.start_real_time(planners, std::chrono::milliseconds(1000), std::chrono::seconds(30));
                 started_ = true;
@@ -603,9 +604,11 @@ public:
         if (simulated() || started_ || done_) return "";
         std::lock_guard<std::mutex> lock(cars_mutex_);
         if (!cars_up_) return "";
+        const auto silent = cars_up_->waiting();
         std::string out;
-        for (int car : cars_up_->waiting()) out += (out.empty() ? "" : ", ") + std::to_string(car);
-        return out.empty() ? "" : "car " + out + "'s first state";
+        for (int car : silent) out += (out.empty() ? "" : ", ") + std::to_string(car);
+        if (silent.empty()) return "";
+        return silent.size() == 1 ? "car " + out + "'s first state" : "the first states of cars " + out;
     }
     /// Whether the run's duration has passed; `error` says why the clock stopped or never started.
     bool ended(std::string& error) const
