@@ -500,14 +500,15 @@ TEST(BridgeCore, ALineThatLagsItsCommandsPausesTheSpeedFeedbackAndSaysSo)
     for (int i = 0; i < 60; ++i) out = cycle_with_echo(sent > 50 ? sent - 50 : 1, 0.1);  // a second behind, car slow
     EXPECT_NEAR(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000, 1) << "feed-forward only";
     EXPECT_EQ(sut.anomalies(Anomaly::line_lag), 1u) << "once per lagging spell";
-    // Catching up: still 9, then 3 commands (180 ms, 60 ms) behind. Feedback acting on the car
+    // Catching up: still 9, then 5 commands (180 ms, 100 ms) behind. Feedback acting on the car
     // that far late sent it off at 0.89 m/s for 0.5 commanded after a flood of its line.
-    for (uint32_t behind : {9u, 3u}) {
+    for (uint32_t behind : {9u, 5u}) {
         out = cycle_with_echo(sent - behind, 0.1);
         EXPECT_NEAR(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000, 1) << behind << " behind: feed-forward still";
     }
     EXPECT_EQ(sut.anomalies(Anomaly::line_lag), 1u) << "the same spell";
-    // In step again: feedback resumes (the car is slow: more than feed-forward).
-    out = cycle_with_echo(sent, 0.1);
+    // About in step again (4 behind: a slower line's normal): feedback resumes (the car is
+    // slow: more than feed-forward).
+    out = cycle_with_echo(sent - 4, 0.1);
     EXPECT_GT(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000 + 50);
 }

@@ -289,10 +289,10 @@ void BridgeCore::watch_line_lag(const StatePacket& packet, std::vector<Notice>& 
 {
     // The controller echoes the tick of the last command it applied; at 50 Hz it is one or two
     // behind the newest sent. Ten (200 ms) behind, the line holds a backlog; the spell lasts
-    // until the echo is back in step (two behind): feedback through a line still catching up
-    // (180, 60 ms late) overshoots. A controller that has applied none yet (0) says nothing
-    // about the line.
-    constexpr uint32_t kLagLimit = 10, kInStep = 2;
+    // until the echo is about back in step (four behind at most: a slower line may run three
+    // behind): feedback through a line still catching up (180, 100 ms late) overshoots. A
+    // controller that has applied none yet (0) says nothing about the line.
+    constexpr uint32_t kLagLimit = 10, kInStep = 4;
     const uint32_t behind = command_tick_ - packet.command_tick;
     const bool known = packet.command_tick != 0 && behind < 0x80000000u;
     const bool lagging = known && behind > (line_lagging_ ? kInStep : kLagLimit);

@@ -34,6 +34,18 @@ Browser::Browser(int width, int height)
                                   "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1", "--proxy-server=127.0.0.1:9",
                                   "--proxy-bypass-list=127.0.0.1", "--remote-debugging-pipe", "--user-data-dir=" + profile_,
                                   "--window-size=" + std::to_string(width) + "," + std::to_string(height), "about:blank"};
+    // Chromium's own scratch folders (org.chromium.Chromium.*) go into the profile folder,
+    // removed with it: in /tmp every run of a browser test left one behind.
+    std::vector<std::string> env{"TMPDIR=" + profile_};
+    for (char** e = environ; *e; ++e) {
+        if (std::string(*e).rfind("TMPDIR=", 0) != 0) env.emplace_back(*e);
+    }
+    std::vector<char*> envp;
+    for (auto& e : env) envp.push_back(e.data());
+    envp.push_back(nullptr);
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
     pid_ = ::fork();
     if (pid_ < 0) throw std::runtime_error("Browser: fork failed");
     if (pid_ == 0) {
@@ -43,10 +55,7 @@ Browser::Browser(int width, int height)
         const int null = ::open("/dev/null", O_WRONLY);
         ::dup2(null, 1);
         ::dup2(null, 2);
-        std::vector<char*> argv;
-        for (auto& a : args) argv.push_back(a.data());
-        argv.push_back(nullptr);
-        ::execv(argv[0], argv.data());
+        ::execve(argv[0], argv.data(), envp.data());
         ::_exit(127);
     }
     ::close(in[0]);
