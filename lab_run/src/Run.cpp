@@ -641,7 +641,7 @@ private:
             std::lock_guard<std::mutex> lock(cars_mutex_);
             cars_up_.emplace(participant_, ids);
         }
-        const auto silent = cars_up_->wait(std::chrono::seconds(30), [this] { return stopped_.load(); });
+        const auto silent = cars_up_->wait(kCarsTimeout, [this] { return stopped_.load(); });
         {
             std::lock_guard<std::mutex> lock(cars_mutex_);
             cars_up_.reset();  // its reader of every state is needed no more
@@ -654,8 +654,9 @@ private:
             for (size_t i = 0; i < processes.size(); ++i) named += (i ? ", '" : "'") + processes[i] + "'";
             named += ")";
         }
-        throw Error("no state within 30000 ms from " + named);
+        throw Error("no state within " + std::to_string(kCarsTimeout.count()) + " ms from " + named);
     }
+    static constexpr std::chrono::milliseconds kCarsTimeout{30'000};
     Participant& participant_;
     TimeMaster master_;
     const RunSettings& settings_;
@@ -672,6 +673,12 @@ private:
     mutable std::mutex cars_mutex_;
     std::optional<CarsUp> cars_up_;  // while a real-time start waits for the cars
 };
+
+/// Marks the host of a process that ended with it lost (ssh ended without the process's end).
+void mark_host_lost(std::vector<RunResult::Host>& hosts, const ProcessEvent& e)
+{
+    for (auto& h : hosts) h.lost = h.lost || (e.host_lost && h.name == e.host);
+}
 
 /// Until the run's time is up, it is stopped (Ctrl-C), or a process dies: a process that
 /// ends with code 0 is done (an fsm_node whose machine stopped, a node the simulated clock
@@ -702,7 +709,7 @@ void supervise(ProcessGroup& group, std::set<std::string>& died, RunResult& resu
                 continue;
             }
             died.insert(e.name);
-            for (auto& h : result.hosts) h.lost = h.lost || (e.host_lost && h.name == e.host);
+            mark_host_lost(result.hosts, e);
             if (e.host_lost && carries_only_cars(plan, e.host)) {  // its cars are lost; the others drive on
                 if (o.progress) std::fprintf(o.progress, "cpm lab run: %s %s; the run goes on without it\n", e.name.c_str(), e.describe().c_str());
                 continue;
@@ -972,7 +979,7 @@ void stop_in_order(Writer<StopRequest>& stops, LabClock& clock, ProcessGroup& gr
     clock.stop();
     for (const auto& e : group.stop_all()) {
         if (!e.host_lost || died.count(e.name)) continue;  // one lost during the run was told then
-        for (auto& h : result.hosts) h.lost = h.lost || h.name == e.host;
+        mark_host_lost(result.hosts, e);
         if (o.progress) std::fprintf(o.progress, "cpm lab run: %s %s while the run stopped\n", e.name.c_str(), e.describe().c_str());
     }
     remove_from_hosts(s, settings);

@@ -31,10 +31,10 @@ struct EchoOf : Echo
     cpm::AsyncReader<T> in;
     explicit EchoOf(const std::string& name)
         : out("py_out_" + name, cpm::WriterOptions{.reliable = true, .keep_all = true}),
-          in([this](std::vector<T>& samples) {
+          in([this, name](std::vector<T>& samples) {
               // The test's reader found this writer, but this writer may not have found the
               // reader yet (discovery is per side): a sample written before then is not delivered.
-              if (!out.wait_for_matched(1, std::chrono::seconds(10))) std::fprintf(stderr, "py_echo: no reader of py_out_ in 10 s\n");
+              if (!out.wait_for_matched(1, std::chrono::seconds(10))) std::fprintf(stderr, "py_echo: no reader of py_out_%s in 10 s\n", name.c_str());
               for (const auto& s : samples) (void)out.write(s);
           },
              "py_in_" + name, cpm::ReaderOptions{.reliable = true, .keep_all = true})
