@@ -188,6 +188,8 @@ struct FsmNode::Impl
     std::string stale_reason;
     uint64_t last_range_stamp = 0, last_stop_sent = 0;
     uint64_t entered_ns = 0;  ///< when the active state was entered, lab time
+    const bool needs_markers = uses_markers(*machine);
+    bool markers_came = false;  ///< the first fresh ArucoMarkers came (the machine may start)
     int last_state = -1;
 };
 
@@ -214,7 +216,13 @@ bool FsmNode::Impl::tick()
     }
     auto state = states.get_sample(now);
     auto range = ranges.get_sample(now);
-    const std::string reason = stale(state, range);
+    auto seen = markers.get_sample(now);
+    std::string reason = stale(state, range);
+    // A machine that looks for markers starts once its camera's first markers have come (the
+    // camera and its marker finder come up later than the car): driven before, it would pass
+    // the gates it has not seen yet. Later a frame's lag is a frame without markers.
+    markers_came = markers_came || (needs_markers && seen.valid && seen.age_ns <= options.max_age_ns);
+    if (reason.empty() && needs_markers && !markers_came) reason = "no ArucoMarkers yet (the machine looks for markers)";
     if (!reason.empty()) {
         if (reason.substr(0, 8) != stale_reason.substr(0, 8)) {
             CPM_LOG_WARN("vehicle %u: %s; braking until fresh input arrives", id, reason.c_str());
@@ -232,7 +240,6 @@ bool FsmNode::Impl::tick()
     const double dt = last_range_stamp ? double(range_stamp - last_range_stamp) * 1e-9 : 1.0 / options.rate_hz;
     last_range_stamp = range_stamp;
 
-    auto seen = markers.get_sample(now);
     const bool markers_fresh = seen.valid && seen.age_ns <= options.max_age_ns;
     const Inputs in = inputs_from(state.sample, range.sample, markers_fresh ? &seen.sample : nullptr, double(now) * 1e-9);
     const int ticked_state = machine->active().id();

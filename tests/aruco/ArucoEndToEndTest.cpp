@@ -17,6 +17,7 @@
 
 #include <ArucoMarkers.h>
 #include <CameraFrame.h>
+#include <FsmStatus.h>
 #include <VehicleObservation.h>
 
 #include <gtest/gtest.h>
@@ -452,6 +453,7 @@ struct GateDrive
     std::vector<cpm::aruco::PathPoint> path;
     int fsm_exit = -1;
     std::string output;
+    std::string states;  // each state the machine entered, with the car's pose then
 };
 
 enum class Clock
@@ -482,10 +484,22 @@ GateDrive drive_gates(const std::string& world_file, const std::string& start, C
                                                    "firmware_sim_5,vehicle_bridge_5,camera_sim_5,aruco_node_5,fsm_node_5",
                                                    "--simulated", "--until", "120s"});
     }
+    cpm::ReaderAbstract<FsmStatus> statuses(participant, "fsmStatus", {.keep_all = true});
     GateDrive run;
+    int32_t state = -1;
     auto collect = [&] {
         for (auto& o : observations.take()) {
             run.path.push_back({o.header().create_stamp().nanoseconds() * 1e-9, {o.pose().x(), o.pose().y(), o.pose().yaw()}});
+        }
+        for (auto& s : statuses.take()) {
+            if (s.state_id() == state) continue;
+            state = s.state_id();
+            char line[160];
+            const auto& at = run.path.empty() ? cpm::aruco::PathPoint{} : run.path.back();
+            std::snprintf(line, sizeof line, "  t %.2f s: state %d (%s), car at x %.3f y %.3f yaw %.3f\n",
+                          at.t - (run.path.empty() ? 0 : run.path.front().t), state, s.state_type().c_str(), at.pose.x, at.pose.y,
+                          at.pose.yaw);
+            run.states += line;
         }
     };
     // On the lab clock the course ends in lab time (the machine stops, or the clock at 120 s of
@@ -498,7 +512,8 @@ GateDrive drive_gates(const std::string& world_file, const std::string& start, C
         return machine_stopped || (lab_clock && lab_clock->wait(0ms) >= 0);
     }, simulated ? 600s : 120s, 20ms);
     EXPECT_TRUE(machine_stopped) << "the machine did not reach its final state"
-                                 << (simulated ? " within 120 s of lab time or 10 minutes\n" : " within 120 s\n") << fsm.output()
+                                 << (simulated ? " within 120 s of lab time or 10 minutes\n" : " within 120 s\n")
+                                 << "its states:\n" << run.states << fsm.output()
                                  << fsm.errors() << "\naruco_node: " << node.errors() << "\ncar: " << car.errors()
                                  << (lab_clock ? "\nclock: " + lab_clock->output() + lab_clock->errors() : std::string());
     collect();
@@ -535,7 +550,8 @@ void drive_seeded_courses(const std::vector<uint32_t>& seeds, Clock clock)
         EXPECT_EQ(run.fsm_exit, 0) << run.output;
         auto passages = cpm::aruco::gate_passages(world, run.path, params.width);
         std::string why;
-        EXPECT_TRUE(cpm::aruco::all_gates_passed(passages, 0.05, &why)) << "seed " << seed << ": " << why << "\n" << run.output;
+        EXPECT_TRUE(cpm::aruco::all_gates_passed(passages, 0.05, &why)) << "seed " << seed << ": " << why << "\n" << run.states << run.output;
+        std::printf("seed %u, the machine's states:\n%s", seed, run.states.c_str());
         for (const auto& p : passages) std::printf("seed %u gate %d: %.3f m from its centre\n", seed, p.gate + 1, p.offset);
     }
     std::filesystem::remove_all(dir);
@@ -565,6 +581,36 @@ TEST(ArucoEndToEnd, FsmNodeDrivesThroughEveryGateOfSeededCoursesOnTheLabClock)
 #else
     drive_seeded_courses({11, 12, 13}, Clock::simulated);
 #endif
+}
+
+// A machine that looks for gates does not drive blind while its camera and marker finder come
+// up (later than the car): it brakes, says what it waits for, and drives once markers come.
+TEST(ArucoEndToEnd, AGateMachineStandsBrakedUntilItsCamerasFirstMarkersCome)
+{
+    cpm::Participant participant(cpm_test::isolated_options());
+    cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
+    Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", kGates, "--camera", kCamera, "--start", "1.0,0.1,0.2"});
+    Process fsm({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", kRoot + "/scenarios/fsm/gates.json"});
+    ASSERT_TRUE(cpm_test::wait_until([&] {
+        return fsm.errors().find("vehicle 5: no ArucoMarkers yet (the machine looks for markers); braking until fresh input arrives") !=
+               std::string::npos;
+    }, 20s)) << fsm.errors();
+    std::this_thread::sleep_for(1s);
+    auto moved = [&] {
+        double most = 0;
+        for (const auto& o : observations.take()) most = std::max(most, std::hypot(o.pose().x() - 1.0, o.pose().y() - 0.1));
+        return most;
+    };
+    EXPECT_LT(moved(), 0.01) << "the car drove before the machine saw a marker\n" << fsm.errors();
+    Process node({built_program("aruco_node"), "--vehicle_id", "5", "--camera", kCamera, "--world", kGates});
+    double most = 0;
+    EXPECT_TRUE(cpm_test::wait_until([&] { return (most = std::max(most, moved())) > 0.2; }, 20s))
+        << "the car stood " << most << " m from its start\n" << fsm.errors() << node.errors();
+    EXPECT_NE(fsm.errors().find("vehicle 5: input fresh again; running"), std::string::npos) << fsm.errors();
+    for (auto* p : {&fsm, &node, &car}) {
+        p->kill(SIGINT);
+        p->wait(10s);
+    }
 }
 
 // A marker finder told another rate than the camera's waits in vain on the ticks without a frame:
