@@ -542,8 +542,9 @@ private:
 class LabClock
 {
 public:
-    LabClock(Participant& participant, const RunSettings& settings, std::function<void()> before_start)
-        : participant_(participant), master_(participant), settings_(settings), before_start_(std::move(before_start))
+    /// `progress` (may be null) is told when a real-time run's lab time starts.
+    LabClock(Participant& participant, const RunSettings& settings, std::function<void()> before_start, FILE* progress)
+        : participant_(participant), master_(participant), settings_(settings), before_start_(std::move(before_start)), progress_(progress)
     {
     }
     ~LabClock() { stop(); }  // also when the run unwinds: the clock's thread waits for its timers otherwise
@@ -576,11 +577,19 @@ public:
         }
         thread_ = std::thread([this, planners, cars] {
             try {
+                const auto since = std::chrono::steady_clock::now();
                 wait_for_cars(cars);
                 if (stopped_) return;  // stopped while it waited: nothing to start
                 real_start_ = planners.empty() ? cpm::get_time_ns()
                                                : master_.start_real_time(planners, std::chrono::milliseconds(1000), std::chrono::seconds(30));
                 started_ = true;
+                if (progress_) {
+                    // Over ssh the cars come up seconds late: the run's duration counts from here.
+                    std::fprintf(progress_, "cpm lab run: lab time starts, %.1f s after the processes were started%s\n",
+                                 std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count(),
+                                 cars.empty() ? "" : " (every car has sent its first state)");
+                    std::fflush(progress_);
+                }
             } catch (const std::exception& e) {
                 error_ = std::string("the lab clock could not start: ") + e.what();
                 done_ = true;
@@ -661,6 +670,7 @@ private:
     TimeMaster master_;
     const RunSettings& settings_;
     const std::function<void()> before_start_;
+    FILE* const progress_;
     std::thread thread_;
     std::atomic<bool> done_{false};
     std::atomic<bool> started_{false};  // real time: the lab's time runs from real_start_
@@ -1016,7 +1026,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     Writer<StopRequest> stops(participant, topics::stop_request.name, topics::stop_request.writer);
     HistoryClient history(participant, std::chrono::milliseconds(2000));
     RunWatch watch(participant);
-    LabClock clock(participant, settings, [&] { recorder.wait(std::chrono::seconds(10), o.progress); });
+    LabClock clock(participant, settings, [&] { recorder.wait(std::chrono::seconds(10), o.progress); }, o.progress);
     ProcessGroup group;          // every process of the run, stopped in order on every way out
     std::set<std::string> died;  // ended badly while the run went on
 

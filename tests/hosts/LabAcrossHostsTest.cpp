@@ -153,6 +153,7 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
     EXPECT_TRUE(seen) << "car_a runs " << ::testing::PrintToString(programs_on(hosts(), 1)) << ", car_b "
                       << ::testing::PrintToString(programs_on(hosts(), 2)) << ", central " << ::testing::PrintToString(programs_on(hosts(), 0));
     ASSERT_EQ(run.wait(90s), 0) << run.output() << run.errors();
+    EXPECT_NE(run.errors().find(" s after the processes were started (every car has sent its first state)"), std::string::npos) << run.errors();
 
     std::ifstream in(out + "/summary.json");
     const auto summary = nlohmann::json::parse(in);
@@ -376,8 +377,9 @@ TEST_F(LabAcrossHosts, ACarHostLostJustBeforeTheEndIsNamedThoughSshNoticesItOnly
     // stops its processes: the host is lost all the same, not a process that "exited with code 255".
     const std::string out = dir.file("late-" + std::to_string(::getpid()));
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", out, "--monitor", "off", "--duration", "6s"}));
-    ASSERT_TRUE(cpm_test::wait_until([&] { return runs(programs_on(hosts(), 2), "vehicle_bridge"); }, 30s)) << run.errors();
-    std::this_thread::sleep_for(4500ms);  // its first state, then the run's 6 s start
+    // The run's 6 s count from every car's first state (over ssh seconds after the start).
+    ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("lab time starts") != std::string::npos; }, 40s)) << run.errors();
+    std::this_thread::sleep_for(4500ms);
     ASSERT_TRUE(hosts().cut(2));
     EXPECT_EQ(run.wait(90s), 1) << "a run that lost a host is not ok\n" << run.output() << run.errors();
     EXPECT_NE((run.output() + run.errors()).find("sim_6 lost with host car_b (ssh ended: the host was not reached or the connection broke) while the run stopped"),

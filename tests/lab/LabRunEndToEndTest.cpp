@@ -487,6 +487,7 @@ TEST(LabRun, InRealTimeACarThatNeverSendsAStateIsNamedWithItsProcessesLogs)
     EXPECT_NE(said.find("the lab clock could not start: no state within 30000 ms from car 5 ('sim_5', 'bridge_5')"), std::string::npos) << said;
     EXPECT_NE(said.find("sim_5's log (" + out + "/sim_5.log) ends:"), std::string::npos) << said;
     EXPECT_NE(said.find("bridge_5's log (" + out + "/bridge_5.log) ends:"), std::string::npos) << said;
+    EXPECT_EQ(said.find("lab time starts"), std::string::npos) << said;
     const auto summary = summary_of(out);
     EXPECT_EQ(summary["lab_time_s"], 0.0) << "no lab time ran without the car: " << summary.dump(2);
     EXPECT_EQ(pid_with("/bin/firmware_sim ", run_tag(out)), 0) << "the frozen simulator is stopped with the run";
