@@ -218,6 +218,21 @@ void Writer::flush_chunk()
         drop_chunk();
         throw cpm::Error("mcap: " + path_ + " reached its size limit of " + std::to_string(max_bytes_) + " bytes");
     }
+    // The disk's room for it and for the summary after it, taken before the chunk is written
+    // (allocated past the file's end): a disk that fills refuses this chunk here, while the
+    // room taken with the chunk before is still there for close().
+    const uint64_t room_end = offset_ + chunk_record.size() + indexes.size() + summary_room;
+    if (room_end > reserved_end_ && reserve_) {
+        if (::fallocate(fd_, FALLOC_FL_KEEP_SIZE, off_t(offset_), off_t(room_end - offset_)) == 0) {
+            reserved_end_ = room_end;
+        } else if (errno == ENOSPC || errno == EFBIG || errno == EDQUOT) {
+            const std::string why = std::strerror(errno);
+            drop_chunk();
+            throw cpm::Error("mcap: cannot write " + path_ + ": " + why);
+        } else {
+            reserve_ = false;  // a file system without fallocate: put() takes back what does not fit
+        }
+    }
     // The chunk and its indexes in one write: both in the file, or neither (put takes back
     // what did not fit).
     try {
@@ -318,6 +333,7 @@ void Writer::finish()
     put(offsets);
     put(footer_head.b + Out().u32(summary_crc).b);
     put(std::string(kMagic, kMagicSize));
+    if (reserved_end_ > offset_) (void)!::ftruncate(fd_, off_t(offset_));  // the room left over is freed
     const bool ok = ::fsync(fd_) == 0;
     ::close(fd_);
     fd_ = -1;

@@ -12,6 +12,10 @@
 #include <fstream>
 #include <iterator>
 
+#include <cerrno>
+#include <cstring>
+#include <unistd.h>
+
 namespace {
 
 namespace mcap = cpm::rtdb::mcap;
@@ -198,6 +202,46 @@ TEST(Mcap, AChunkPastTheSizeLimitIsRefusedAndTheFileClosesValidWithoutIt)
     const auto f = mcap::read(path);
     EXPECT_EQ(f.messages.size(), kept);
     EXPECT_EQ(f.statistics_messages, kept) << "the statistics count what is in the file";
+}
+
+// A real full disk (a 64 KiB tmpfs; root here and in CI): the chunk that does not fit is refused
+// and the file still closes with its summary, although the summary (a schema of 6 KB) is larger
+// than what the disk had left after the last chunk: the writer keeps room for it as it goes.
+TEST(Mcap, AFullDiskRefusesTheChunkThatDoesNotFitAndTheFileClosesValidWithEveryOneBefore)
+{
+    if (::geteuid() != 0) GTEST_SKIP() << "mounting a small disk needs root";
+    cpm_test::TempDir dir;
+    const std::string disk = dir.file("disk");
+    std::filesystem::create_directories(disk);
+    ASSERT_EQ(std::system(("mount -t tmpfs -o size=64k tmpfs " + disk).c_str()), 0);
+    struct Unmount
+    {
+        std::string at;
+        ~Unmount() { (void)std::system(("umount " + at).c_str()); }
+    } unmount{disk};
+    const std::string path = disk + "/full.mcap";
+    uint64_t kept = 0;
+    {
+        mcap::Writer w(path, "cpm test", 4096);
+        const auto c = w.add_channel(w.add_schema("T", "omgidl", "struct T { long x; };" + std::string(6000, ' ')), "t", "cdr");
+        const std::vector<uint8_t> payload(1000, 1);
+        bool refused = false;
+        for (uint64_t i = 0; i < 1000 && !refused; ++i) {
+            try {
+                w.write(c, i, i, payload.data(), payload.size());
+            } catch (const cpm::Error& e) {
+                EXPECT_NE(std::string(e.what()).find(std::strerror(ENOSPC)), std::string::npos) << e.what();
+                refused = true;
+            }
+        }
+        ASSERT_TRUE(refused) << "64 KiB cannot hold a thousand samples of 1000 bytes";
+        kept = w.messages();
+        EXPECT_GT(kept, 5u);  // a chunk of about 7 KB each (the schema in each)
+        EXPECT_NO_THROW(w.close());
+    }
+    const auto f = mcap::read(path);
+    EXPECT_EQ(f.messages.size(), kept);
+    EXPECT_EQ(f.statistics_messages, kept);
 }
 
 }  // namespace

@@ -116,6 +116,8 @@ private:
     size_t chunk_size_;
     uint64_t max_bytes_;
     uint64_t offset_ = 0;        // bytes written so far
+    uint64_t reserved_end_ = 0;  // the disk's room taken (fallocate) up to here: the last chunk and the summary after it
+    bool reserve_ = true;        // false where the file system has no fallocate
     uint32_t data_crc_ = 0;      // over the data section so far
     bool in_data_ = true;        // still writing the data section
     bool closed_ = false;
