@@ -212,13 +212,8 @@ TEST(Mcap, AFullDiskRefusesTheChunkThatDoesNotFitAndTheFileClosesValidWithEveryO
     if (::geteuid() != 0) GTEST_SKIP() << "mounting a small disk needs root";
     cpm_test::TempDir dir;
     const std::string disk = dir.file("disk");
-    std::filesystem::create_directories(disk);
-    ASSERT_EQ(std::system(("mount -t tmpfs -o size=64k tmpfs " + disk).c_str()), 0);
-    struct Unmount
-    {
-        std::string at;
-        ~Unmount() { (void)std::system(("umount " + at).c_str()); }
-    } unmount{disk};
+    const cpm_test::SmallDisk small(disk, "64k");
+    ASSERT_TRUE(small.mounted());
     const std::string path = disk + "/full.mcap";
     uint64_t kept = 0;
     {

@@ -676,13 +676,8 @@ TEST(RecordingEndToEnd, AnMcapRecordingOnADiskThatFillsIsClosedValidUpToItsLastC
     if (::geteuid() != 0) GTEST_SKIP() << "mounting a small disk needs root";
     TempDir dir;
     const std::string disk = dir.file("disk");
-    fs::create_directories(disk);
-    ASSERT_EQ(std::system(("mount -t tmpfs -o size=256k tmpfs " + disk).c_str()), 0);
-    struct Unmount
-    {
-        std::string at;
-        ~Unmount() { (void)std::system(("umount " + at).c_str()); }
-    } unmount{disk};
+    const cpm_test::SmallDisk small(disk, "256k");
+    ASSERT_TRUE(small.mounted());
     const std::string file = disk + "/full.mcap";
     cpm::Participant participant{udp_only()};
     cpm::HistoryClient client{participant};

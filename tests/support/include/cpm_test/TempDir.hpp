@@ -35,4 +35,24 @@ struct TempDir
     }
 };
 
+/// A real disk of `size` (a tmpfs, e.g. "256k") mounted at `at` (made) for a test that fills
+/// it; unmounted at the end. Mounting needs root: check mounted().
+struct SmallDisk
+{
+    std::string at;
+    bool mounted_ = false;
+    SmallDisk(const std::string& where, const std::string& size) : at(where)
+    {
+        std::filesystem::create_directories(at);
+        mounted_ = std::system(("mount -t tmpfs -o size=" + size + " tmpfs " + at).c_str()) == 0;
+    }
+    ~SmallDisk()
+    {
+        if (mounted_) (void)std::system(("umount " + at).c_str());
+    }
+    SmallDisk(const SmallDisk&) = delete;
+    SmallDisk& operator=(const SmallDisk&) = delete;
+    bool mounted() const { return mounted_; }
+};
+
 }  // namespace cpm_test
