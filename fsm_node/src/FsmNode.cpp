@@ -216,13 +216,15 @@ bool FsmNode::Impl::tick()
     }
     auto state = states.get_sample(now);
     auto range = ranges.get_sample(now);
-    auto seen = markers.get_sample(now);
     std::string reason = stale(state, range);
     // A machine that looks for markers starts once its camera's first markers have come (the
     // camera and its marker finder come up later than the car): driven before, it would pass
     // the gates it has not seen yet. Later a frame's lag is a frame without markers.
-    markers_came = markers_came || (needs_markers && seen.valid && seen.age_ns <= options.max_age_ns);
-    if (reason.empty() && needs_markers && !markers_came) reason = "no ArucoMarkers yet (the machine looks for markers)";
+    if (reason.empty() && needs_markers && !markers_came) {
+        const auto first = markers.get_sample(now);
+        markers_came = first.valid && first.age_ns <= options.max_age_ns;
+        if (!markers_came) reason = "no ArucoMarkers yet (the machine looks for markers)";
+    }
     if (!reason.empty()) {
         if (reason.substr(0, 8) != stale_reason.substr(0, 8)) {
             CPM_LOG_WARN("vehicle %u: %s; braking until fresh input arrives", id, reason.c_str());
@@ -240,6 +242,7 @@ bool FsmNode::Impl::tick()
     const double dt = last_range_stamp ? double(range_stamp - last_range_stamp) * 1e-9 : 1.0 / options.rate_hz;
     last_range_stamp = range_stamp;
 
+    auto seen = markers.get_sample(now);
     const bool markers_fresh = seen.valid && seen.age_ns <= options.max_age_ns;
     const Inputs in = inputs_from(state.sample, range.sample, markers_fresh ? &seen.sample : nullptr, double(now) * 1e-9);
     const int ticked_state = machine->active().id();
