@@ -106,6 +106,14 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
     EXPECT_EQ(plan[2].timer, "firmware_sim_1,vehicle_bridge_1");
     EXPECT_EQ(plan[3].name, "central_routing");
     EXPECT_EQ(plan[3].argv.back(), "--simulated_time");
+
+    // The loop: four cars whose machines drive until stopped, in real time, with stop buttons.
+    const Scenario loop = load_scenario(labs("loop.yaml"));
+    EXPECT_EQ(loop.time, TimeMode::real);
+    ASSERT_EQ(loop.vehicles.size(), 4u);
+    EXPECT_EQ(loop.monitor_port, std::optional<int>(8080));
+    EXPECT_TRUE(loop.monitor_allow_stop);
+    for (const auto& v : loop.vehicles) EXPECT_EQ(v.fsm, fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/loop.json").string());
 }
 
 TEST(Scenario, AMonitorIsAPortOrAPortWithItsStopButtons)
