@@ -58,6 +58,29 @@ struct Drive
         });
         return (it == track.end() ? track.back() : *it).pose().x();
     }
+    /// The state fsm_node was in at data time t (its status messages' entered_ns).
+    int state_at(uint64_t t) const
+    {
+        int state = -1;
+        for (auto& s : statuses)
+            if (s.entered_ns() <= t) state = s.state_id();
+        return state;
+    }
+    /// Where the car went, every `step` metres of x: for a failure message, so that a run that
+    /// went wrong says where and in which state.
+    std::string profile(double step = 0.25) const
+    {
+        std::ostringstream out;
+        out.precision(3);
+        double next = -1e9;
+        for (auto& o : track) {
+            if (o.pose().x() < next && &o != &track.back()) continue;
+            next = o.pose().x() + step;
+            out << "x " << o.pose().x() << " y " << o.pose().y() << " yaw " << o.pose().yaw() << " clearance "
+                << clearance(o) << " state " << state_at(o.header().create_stamp().nanoseconds()) << "\n";
+        }
+        return out.str();
+    }
 };
 
 /// `tick`: fsm_node's --tick (timer, on-sample), or "avr": on the timer, the car's
@@ -197,8 +220,8 @@ TEST(FsmNodeEndToEnd, RampsTheClearanceFromHalfAMetreToPointEightOverTwoMetres)
         if (o.pose().x() > 3.0 && o.pose().x() < 3.4) before = std::max(before, std::abs(Drive::clearance(o) - 0.5));
         if (o.pose().x() > 5.8) after_worst = std::max(after_worst, std::abs(Drive::clearance(o) - 0.8));
     }
-    EXPECT_LT(before, 0.05);
-    EXPECT_LT(after_worst, 0.05);
+    EXPECT_LT(before, 0.05) << run.profile();
+    EXPECT_LT(after_worst, 0.05) << run.profile() << run.output;
     const double end_clearance = Drive::clearance(run.track.back());
     EXPECT_NEAR(end_clearance, 0.8, 0.05);
     std::printf("before the ramp within %.0f mm of 0.5 m; after it within %.0f mm of 0.8 m; at rest %.3f m\n",
