@@ -146,16 +146,20 @@ struct FsmNode::Impl
             stopped_by_request = stamp;
         }
     }
-    void publish_status(uint64_t now)
+    void write_status(uint64_t now, int state_id, const std::string& type, uint64_t entered, int transition)
     {
         FsmStatus s;
         s.vehicle_id(options.vehicle_id);
         stamp_message(s, now, 0);
-        s.state_id(machine->active().id());
-        s.state_type(machine->active().type());
-        s.entered_ns(entered_ns);
-        s.last_transition_id(machine->last_transition());
+        s.state_id(state_id);
+        s.state_type(type);
+        s.entered_ns(entered);
+        s.last_transition_id(transition);
         (void)status.write(s);
+    }
+    void publish_status(uint64_t now)
+    {
+        write_status(now, machine->active().id(), machine->active().type(), entered_ns, machine->last_transition());
     }
     /// Why the input cannot be used now; empty when it can.
     std::string stale(const SampleResult<VehicleState>& state, const SampleResult<RangeSensors>& range) const
@@ -168,6 +172,16 @@ struct FsmNode::Impl
     }
     /// One timer tick; false when the machine stopped in a final state.
     bool tick();
+    /// After a StopRequest: says so once (log and status), and keeps the car braked.
+    void halt(uint64_t now);
+    /// Why the machine cannot tick now (stale input, a camera's first markers not come); empty when it can.
+    std::string not_ready(const SampleResult<VehicleState>& state, const SampleResult<RangeSensors>& range, uint64_t now);
+    /// Brakes while `reason` holds (logged when it changes), and says when the input is fresh again.
+    bool brake_while(const std::string& reason, uint64_t now);
+    /// The machine's active state changed: printed (with what it saw) and published.
+    void on_state_change(const Inputs& in, uint64_t now);
+    /// The machine's output to the car: a command, or a brake.
+    bool apply(const Output& out, uint64_t now);
 
     FsmNodeOptions options;
     std::unique_ptr<Machine> machine;
@@ -193,29 +207,19 @@ struct FsmNode::Impl
     int last_state = -1;
 };
 
-bool FsmNode::Impl::tick()
+void FsmNode::Impl::halt(uint64_t now)
 {
-    const unsigned id = options.vehicle_id;
-    const uint64_t now = get_time_ns();
-    if (stopped_by_request) {
-        if (!halted) {
-            CPM_LOG_WARN("vehicle %u: stopped by a StopRequest; the machine halts in state %d (%s) and the car stays braked until fsm_node "
-                         "is started again", id, machine->active().id(), machine->active().type().c_str());
-            halted = true;
-            FsmStatus s;
-            s.vehicle_id(options.vehicle_id);
-            stamp_message(s, now, 0);
-            s.state_id(-1);
-            s.state_type("StoppedByRequest");
-            s.entered_ns(now);
-            s.last_transition_id(-1);
-            (void)status.write(s);
-        }
-        brake(now);
-        return true;
+    if (!halted) {
+        CPM_LOG_WARN("vehicle %u: stopped by a StopRequest; the machine halts in state %d (%s) and the car stays braked until fsm_node "
+                     "is started again", unsigned(options.vehicle_id), machine->active().id(), machine->active().type().c_str());
+        halted = true;
+        write_status(now, -1, "StoppedByRequest", now, -1);
     }
-    auto state = states.get_sample(now);
-    auto range = ranges.get_sample(now);
+    brake(now);
+}
+
+std::string FsmNode::Impl::not_ready(const SampleResult<VehicleState>& state, const SampleResult<RangeSensors>& range, uint64_t now)
+{
     std::string reason = stale(state, range);
     // A machine that looks for markers starts once its camera's first markers have come (the
     // camera and its marker finder come up later than the car): driven before, it would pass
@@ -225,6 +229,12 @@ bool FsmNode::Impl::tick()
         markers_came = first.valid && first.age_ns <= options.max_age_ns;
         if (!markers_came) reason = "no ArucoMarkers yet (the machine looks for markers)";
     }
+    return reason;
+}
+
+bool FsmNode::Impl::brake_while(const std::string& reason, uint64_t now)
+{
+    const unsigned id = options.vehicle_id;
     if (!reason.empty()) {
         if (reason.substr(0, 8) != stale_reason.substr(0, 8)) {
             CPM_LOG_WARN("vehicle %u: %s; braking until fresh input arrives", id, reason.c_str());
@@ -235,6 +245,47 @@ bool FsmNode::Impl::tick()
     }
     if (!stale_reason.empty()) CPM_LOG_INFO("vehicle %u: input fresh again; running", id);
     stale_reason.clear();
+    return false;
+}
+
+void FsmNode::Impl::on_state_change(const Inputs& in, uint64_t now)
+{
+    if (last_state >= 0) {
+        std::printf("%.3f vehicle %u: state %d -> %d (%s) by transition %d at %.2f m driven; front %.2f left %.2f right %.2f\n", in.t,
+                    unsigned(options.vehicle_id), last_state, machine->active().id(), machine->active().type().c_str(),
+                    machine->last_transition(), in.odometer, in.front, in.left, in.right);
+        std::fflush(stdout);
+    }
+    last_state = machine->active().id();
+    publish_status(now);
+}
+
+bool FsmNode::Impl::apply(const Output& out, uint64_t now)
+{
+    if (out.brake) {
+        brake(now);
+        return !machine->in_final_state();
+    }
+    last_stop_sent = 0;
+    VehicleCommandDirect c;
+    c.vehicle_id(options.vehicle_id);
+    stamp_message(c, now, 0);
+    c.motor_throttle(out.throttle);
+    c.steering_servo(out.steering);
+    (void)commands.write(c);
+    return true;
+}
+
+bool FsmNode::Impl::tick()
+{
+    const uint64_t now = get_time_ns();
+    if (stopped_by_request) {
+        halt(now);
+        return true;
+    }
+    auto state = states.get_sample(now);
+    auto range = ranges.get_sample(now);
+    if (brake_while(not_ready(state, range, now), now)) return true;
     // The machine ticks once per new range sample: the wall followers' derivative term must
     // see each measurement once (tick_period in the machine = the sensors' period).
     const uint64_t range_stamp = range.sample.header().create_stamp().nanoseconds();
@@ -251,28 +302,8 @@ bool FsmNode::Impl::tick()
     // the state's entry is kept here as the tick's integer time.
     if (machine->entered_t() == in.t) entered_ns = now;
     report.add(in, ticked_state);
-    if (machine->active().id() != last_state) {
-        if (last_state >= 0) {
-            std::printf("%.3f vehicle %u: state %d -> %d (%s) by transition %d at %.2f m driven; front %.2f left %.2f right %.2f\n",
-                        in.t, id, last_state, machine->active().id(), machine->active().type().c_str(),
-                        machine->last_transition(), in.odometer, in.front, in.left, in.right);
-            std::fflush(stdout);
-        }
-        last_state = machine->active().id();
-        publish_status(now);
-    }
-    if (out.brake) {
-        brake(now);
-        return !machine->in_final_state();
-    }
-    last_stop_sent = 0;
-    VehicleCommandDirect c;
-    c.vehicle_id(options.vehicle_id);
-    stamp_message(c, now, 0);
-    c.motor_throttle(out.throttle);
-    c.steering_servo(out.steering);
-    (void)commands.write(c);
-    return true;
+    if (machine->active().id() != last_state) on_state_change(in, now);
+    return apply(out, now);
 }
 
 FsmNode::FsmNode(FsmNodeOptions options, std::unique_ptr<Machine> machine, const std::string& machine_json)

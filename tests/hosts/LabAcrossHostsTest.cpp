@@ -296,16 +296,18 @@ TEST_F(LabAcrossHosts, WithADiscoveryServerEveryProcessFindsTheOthersThroughIt)
     const auto summary = nlohmann::json::parse(in);
     // What ran where, from the run's own account (a poll of the hosts' processes missed the
     // short run on a loaded machine): the server on the central host, car_a's bridge told to use it.
-    std::string server_command, bridge_command;
+    std::vector<std::string> server, bridge;
     for (const auto& p : summary["processes"]) {
-        std::string argv;
-        for (const auto& a : p["argv"]) argv += a.get<std::string>() + " ";
-        if (p["host"] == "central" && argv.rfind("/usr/bin/fast-discovery-server ", 0) == 0) server_command = argv;
-        if (p["host"] == "car_a" && argv.find("/bin/vehicle_bridge ") != std::string::npos) bridge_command = argv;
+        const auto argv = p["argv"].get<std::vector<std::string>>();
+        if (p["host"] == "central" && argv.at(0) == "/usr/bin/fast-discovery-server") server = argv;
+        if (p["host"] == "car_a" && argv.at(0).ends_with("/bin/vehicle_bridge")) bridge = argv;
     }
-    EXPECT_EQ(server_command, "/usr/bin/fast-discovery-server -i 0 -l " + hosts().address(0) + " -p 11811 ") << summary.dump(2);
-    EXPECT_NE(bridge_command.find("--dds_discovery_server " + hosts().address(0) + ":11811"), std::string::npos) << summary.dump(2);
-    EXPECT_EQ(bridge_command.find("--dds_initial_peer"), std::string::npos) << bridge_command;
+    EXPECT_EQ(server, (std::vector<std::string>{"/usr/bin/fast-discovery-server", "-i", "0", "-l", hosts().address(0), "-p", "11811"}))
+        << summary.dump(2);
+    const auto flag = std::find(bridge.begin(), bridge.end(), "--dds_discovery_server");
+    ASSERT_TRUE(flag != bridge.end() && flag + 1 != bridge.end()) << "car_a's bridge with --dds_discovery_server ADDRESS: " << summary.dump(2);
+    EXPECT_EQ(*(flag + 1), hosts().address(0) + ":11811") << summary.dump(2);
+    EXPECT_EQ(std::find(bridge.begin(), bridge.end(), "--dds_initial_peer"), bridge.end()) << ::testing::PrintToString(bridge);
     EXPECT_TRUE(summary["ok"].get<bool>()) << summary.dump(2);
     auto recording = cpm::HistoryClient::open_recording(out + "/recording.db");
     for (int car : {5, 6}) {
