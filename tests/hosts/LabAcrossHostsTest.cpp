@@ -79,6 +79,13 @@ std::vector<std::string> ssh_clients_on(const cpm_test::NamespaceHosts& hosts, s
     return out;
 }
 
+/// Whether a real-time `cpm lab run` said its lab time started (every car has sent its first
+/// state: the cars over ssh are up) within a minute.
+bool lab_time_started(cpm_test::Process& run)
+{
+    return cpm_test::wait_until([&] { return run.errors().find("lab time starts") != std::string::npos; }, 60s);
+}
+
 bool runs(const std::vector<std::string>& programs, const std::string& name)
 {
     return std::any_of(programs.begin(), programs.end(), [&](const std::string& p) { return std::filesystem::path(p).filename() == name; });
@@ -128,7 +135,9 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
     // A car's programs start over ssh a few seconds into the run (2.5-3.5 s here, more on a busy
     // host): the run's 6 s of lab time start once every car has sent its first state.
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
-    // While it runs: each car's programs on its own host, none of them on the others.
+    // While it runs (its lab time started: every car's programs are up): each car's programs on
+    // its own host, none of them on the others.
+    ASSERT_TRUE(lab_time_started(run)) << run.errors();
     bool seen = false;
     cpm_test::wait_until([&] {
         const auto a = programs_on(hosts(), 1), b = programs_on(hosts(), 2), central = programs_on(hosts(), 0);
@@ -349,7 +358,7 @@ TEST_F(LabAcrossHosts, ACarHostLostMidRunIsNamedAndTheOtherCarDrivesOnToTheEnd)
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", out, "--monitor", "off", "--duration", "12s"}));
     // Mid-run: 2 s after the lab time started (every car's first state; on a loaded machine a
     // cut 2 s after car_b's bridge came up came before its first state, and the clock never started).
-    ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("lab time starts") != std::string::npos; }, 40s)) << run.errors();
+    ASSERT_TRUE(lab_time_started(run)) << run.errors();
     ASSERT_TRUE(runs(programs_on(hosts(), 2), "vehicle_bridge")) << run.errors();
     std::this_thread::sleep_for(2s);
     const uint64_t cut_ns = cpm::get_time_ns();
@@ -386,7 +395,7 @@ TEST_F(LabAcrossHosts, ACarHostLostJustBeforeTheEndIsNamedThoughSshNoticesItOnly
     const std::string out = dir.file("late-" + std::to_string(::getpid()));
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", out, "--monitor", "off", "--duration", "6s"}));
     // The run's 6 s count from every car's first state (over ssh seconds after the start).
-    ASSERT_TRUE(cpm_test::wait_until([&] { return run.errors().find("lab time starts") != std::string::npos; }, 40s)) << run.errors();
+    ASSERT_TRUE(lab_time_started(run)) << run.errors();
     std::this_thread::sleep_for(4500ms);
     ASSERT_TRUE(hosts().cut(2));
     EXPECT_EQ(run.wait(90s), 1) << "a run that lost a host is not ok\n" << run.output() << run.errors();
@@ -419,7 +428,10 @@ TEST_F(LabAcrossHosts, APlannerHostLostMidRunBrakesTheCarsOnTheirOwnHostAndEndsT
                                        "vehicles:\n  - {id: 1, host: car_a}\n  - {id: 2, host: car_a}\n");
     const std::string out = dir.file("routed-" + std::to_string(::getpid()));
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
-    ASSERT_TRUE(cpm_test::wait_until([&] { return runs(programs_on(hosts(), 2), "central_routing"); }, 30s)) << run.errors();
+    // Mid-run: once the lab time started (routing starts with it), polled from the run's own
+    // output, not from car_b's process list (a fresh build's first tests missed it within 30 s).
+    ASSERT_TRUE(lab_time_started(run)) << run.errors();
+    ASSERT_TRUE(runs(programs_on(hosts(), 2), "central_routing")) << run.errors();
     std::this_thread::sleep_for(5s);  // the cars drive on its trajectories
     const uint64_t cut_ns = cpm::get_time_ns();
     ASSERT_TRUE(hosts().cut(2));  // the planner's cable pulled
