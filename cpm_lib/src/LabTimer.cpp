@@ -40,7 +40,7 @@ std::shared_ptr<Timer> Timer::create(const std::string& node_id, uint64_t period
 std::shared_ptr<Timer> Timer::create(Participant& participant, const std::string& node_id, uint64_t period_ns,
                                      uint64_t offset_ns, TimerOptions options)
 {
-    const bool simulated = init_settings().simulated_time && options.simulated_time_allowed;
+    const bool simulated = options.simulated_time.value_or(init_settings().simulated_time && options.simulated_time_allowed);
     if (options.realtime_priority < 1 || options.realtime_priority > 99) {
         throw Error("Timer '" + node_id + "': realtime_priority " + std::to_string(options.realtime_priority) +
                     " is outside SCHED_FIFO's 1..99");

@@ -908,10 +908,18 @@ nlohmann::json controllers_json(const Scenario& s, const RunSettings& settings)
     return out;
 }
 
-void write_summary(const Scenario& s, const RunSettings& settings, const std::string& qos, const RunResult& result,
+void write_summary(const Scenario& s, const RunSettings& settings, const std::string& qos, RunResult& result,
                    const nlohmann::json& processes, const RunWatch& watch, const std::string& history_log)
 {
     const auto recorded = last_json(history_log);
+    nlohmann::json recording = recorded.contains("recording") ? recorded["recording"] : nlohmann::json();
+    if (recording.is_object()) {
+        // The history's count of samples that never reached it, beside what reached the file.
+        result.recording_lost = recorded.value("lost", uint64_t(0));
+        recording["lost"] = result.recording_lost;
+        recording["lost_by_topic"] = recorded.value("lost_by_topic", nlohmann::json::object());
+        for (const auto& [topic, n] : recording["lost_by_topic"].items()) result.recording_lost_by_topic[topic] = n.get<uint64_t>();
+    }
     nlohmann::json summary{{"name", s.name},
                            {"scenario", fs::absolute(s.file).string()},
                            {"time", settings.time == TimeMode::simulated ? "simulated" : "real"},
@@ -932,7 +940,7 @@ void write_summary(const Scenario& s, const RunSettings& settings, const std::st
                            {"samples_recorded", recorded.contains("recording") ? recorded["recording"].value("written", watch.recorded())
                                                                                : watch.recorded()},
                            {"qos", qos.empty() ? nlohmann::json::object() : nlohmann::json::parse(qos)},
-                           {"recording", recorded.contains("recording") ? recorded["recording"] : nlohmann::json()},
+                           {"recording", recording},
                            {"hosts", hosts_json(result.hosts)},
                            {"controllers", controllers_json(s, settings)}};
     std::ofstream(fs::path(settings.run_dir) / "summary.json") << summary.dump(2) << "\n";

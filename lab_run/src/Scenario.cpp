@@ -782,7 +782,11 @@ public:
                                .host = s_.discovery_server_host};
             plan_.push_back(server);
         }
+        // On the simulated clock the recorder is one of the clock's nodes: a clock that outran it
+        // (a busy machine) would lose samples to the recording, which then differs run to run.
+        if (simulated()) history.push_back("--simulated-clock");
         add("cpm_history", "cpm_history", history, false, 9, 0, s_.history_host);
+        if (simulated()) plan_.back().timer = timer_ids::history;
         if (!s_.parameters.empty()) {
             add("parameters", "parameter_server", {program("cpm"), "param", "serve", s_.parameters, "--dds_domain", domain_}, false, 8, 0, "");
         }

@@ -1,6 +1,7 @@
 #include <cpm/rtdb/HistoryService.hpp>
 
 #include <cpm/Logging.hpp>
+#include <cpm/Timer.hpp>
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
@@ -93,6 +94,8 @@ struct HistoryService::Impl
     std::map<std::string, uint64_t> received_at_last_status;  // per topic, on the control thread
     std::thread control;
     std::thread trigger_thread;  // --save-on's saves
+    std::unique_ptr<Participant> clock_participant;  // the clock's, with options.participant (else the default one)
+    std::shared_ptr<Timer> clock;                    // options.clock_node's
 
     explicit Impl(ServiceOptions o)
         : options(std::move(o)), store(StoreOptions{{options.window_ns, options.max_bytes_per_topic}, options.max_bytes_total}),
@@ -102,6 +105,27 @@ struct HistoryService::Impl
         for (const auto& [topic, window] : options.topic_windows_ns) store.set_retention(topic, {window, options.max_bytes_per_topic});
         control = std::thread([this] { control_loop(); });
         if (!options.save_on.empty()) trigger_thread = std::thread([this] { trigger_loop(); });
+        if (!options.clock_node.empty()) follow_clock();
+    }
+
+    /// Joins the lab's simulated clock (ServiceOptions::clock_node): a tick returns once the
+    /// recorder has every other node's announcement of a tick at or after it. A node that never
+    /// announces (gone without a word) holds it back once, for kClockWait, and is named.
+    void follow_clock()
+    {
+        constexpr auto kClockWait = std::chrono::seconds(5);  // within the lab clock's 10 s per step
+        if (options.participant) clock_participant = std::make_unique<Participant>(*options.participant);
+        Participant& p = clock_participant ? *clock_participant : Participant::default_participant();
+        clock = Timer::create(p, options.clock_node, options.clock_period_ns, 0, TimerOptions{.simulated_time = true});
+        clock->start_async([this, kClockWait](uint64_t t) {
+            const auto behind = ingest.wait_for_clock(t, kClockWait);
+            std::string names;
+            for (const auto& n : behind) names += (names.empty() ? "'" : ", '") + n + "'";
+            if (!behind.empty())
+                CPM_LOG_ERROR("cpm_history: at %.3f s of lab time the recorder still lacks the announcement of the next tick "
+                              "from %s after %lld s: the clock goes on without waiting for them (what they write may be lost to the recording)",
+                              double(t) * 1e-9, names.c_str(), (long long)kClockWait.count());
+        });
     }
 
     /// The options' sinks, and the watch for --save-on triggers when there are any.
@@ -177,6 +201,9 @@ struct HistoryService::Impl
 
     ~Impl()
     {
+        if (clock) clock->stop();
+        ingest.stop();  // a tick waiting for the clock's announcements returns
+        clock.reset();
         {
             std::lock_guard lock(saves_mutex);
             saves_stopping = true;
@@ -385,8 +412,11 @@ ServiceCounters HistoryService::counters() const
 {
     const auto& d = *impl_;
     const auto [answered, refused] = d.request_counts();
-    return {d.ingest.topic_count(), d.ingest.received(), d.ingest.dropped(), answered, refused,
-            d.ingest.lost()};
+    ServiceCounters c{d.ingest.topic_count(), d.ingest.received(), d.ingest.dropped(), answered, refused, d.ingest.lost(), {}};
+    for (const auto& t : d.ingest.topic_counts()) {
+        if (t.lost > 0) c.lost_by_topic[t.topic] = t.lost;
+    }
+    return c;
 }
 
 }  // namespace cpm::rtdb

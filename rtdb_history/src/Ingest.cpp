@@ -15,8 +15,12 @@
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
 #include <map>
 #include <optional>
+#include <set>
 
 namespace cpm::rtdb {
 
@@ -82,6 +86,7 @@ struct Ingest::Impl
         std::string name, type_name;
         bool keyed = false;
         const IdlDecoder* types = nullptr;  ///< the lab's IDL when it describes the type: keys and stamps exact
+        bool recorded = true;               ///< false: read only for the clock's announcements (excluded from the recording)
         std::optional<bool> has_header;     ///< decided from the IDL, else from the first sample
         dds::Topic* topic = nullptr;
         dds::DataReader* reader = nullptr;
@@ -112,12 +117,25 @@ struct Ingest::Impl
     std::deque<Event> events;
     bool stopping = false;
 
+    /// The lab's simulated clock as the recording participant sees it (ServiceOptions::clock_node):
+    /// every node's newest announced tick, from the readyStatus samples this participant took.
+    struct ClockWatch
+    {
+        std::string self;  ///< the service's own node: not waited for ("" when it follows no clock)
+        std::mutex mutex;
+        std::condition_variable changed;
+        std::map<std::string, uint64_t> announced;
+        std::set<std::string> given_up;  ///< waited for in vain: not again until it announces anew
+        bool stopping = false;
+    } clock;
+
     Impl(Ingest& i, const ServiceOptions& options, Outlet& o)
         : self(i), out(o), registry(o), include(compile(options.include, "--include")), exclude(compile(options.exclude, "--exclude"))
     {
         recorder_options = options.participant.value_or(ParticipantOptions::from_init());
         recorder_options.name = recorder_name(recorder_options.name);
         recorder_options.on_discovery = [this](const DiscoveryEvent& e) { on_discovery(e); };
+        clock.self = options.clock_node;
         open();
     }
 
@@ -226,6 +244,7 @@ struct Ingest::Impl
         rec->name = e.topic;
         rec->type_name = e.type_name;
         rec->keyed = e.keyed;
+        rec->recorded = wanted(e.topic);
         const IdlDecoder* types = IdlDecoder::lab_types();
         if (types && types->knows(e.type_name)) {
             rec->types = types;
@@ -249,7 +268,7 @@ struct Ingest::Impl
             participant->delete_topic(rec->topic);
             return;
         }
-        CPM_LOG_INFO("cpm_history: recording topic '%s' (type '%s'%s)", e.topic.c_str(), e.type_name.c_str(), e.keyed ? ", keyed" : "");
+        if (rec->recorded) CPM_LOG_INFO("cpm_history: recording topic '%s' (type '%s'%s)", e.topic.c_str(), e.type_name.c_str(), e.keyed ? ", keyed" : "");
         std::lock_guard lock(self.mutex_);
         if (auto c = carried.find(e.topic); c != carried.end()) {
             rec->received = c->second.received;
@@ -290,6 +309,25 @@ struct Ingest::Impl
         return lost;
     }
 
+    /// A node's announcement of its next tick on the lab's simulated clock. This participant's
+    /// receive thread delivers what a node wrote in the order it wrote it, so once its
+    /// announcement is here, all it wrote before (in the tick that ended with it) is here too.
+    void note_announcement(const TopicRec& t, const std::vector<uint8_t>& bytes)
+    {
+        const auto ready = t.types ? t.types->decode(t.type_name, bytes) : std::nullopt;
+        if (!ready) return;
+        const std::string node = ready->value("source_id", "");
+        const uint64_t next = ready->value(nlohmann::json::json_pointer("/next_start_stamp/nanoseconds"), uint64_t(0));
+        if (node.empty() || node == clock.self) return;
+        {
+            std::lock_guard lock(clock.mutex);
+            uint64_t& newest = clock.announced[node];
+            newest = std::max(newest, next);  // an older announcement may come after a newer one
+            clock.given_up.erase(node);
+        }
+        clock.changed.notify_all();
+    }
+
     /// Takes every sample the reader holds to the outlet; under the lock.
     void take_all(TopicRec& t, dds::DataReader* reader, Skipped& skipped)
     {
@@ -301,13 +339,15 @@ struct Ingest::Impl
             rtps::iHandle2GUID(writer, info.publication_handle);
             const auto gap = lost_before(t, writer, info.sample_identity.sequence_number().to64long());
             if (!gap) continue;  // taken before
-            const uint64_t lost = *gap;
+            const uint64_t lost = t.recorded ? *gap : 0;
             t.lost += lost;
             self.lost_ += lost;
             if (!info.valid_data) {
                 if (info.instance_state != dds::ALIVE_INSTANCE_STATE) registry.instance_ended(t.name, info.instance_handle, now);
                 continue;
             }
+            if (!clock.self.empty() && t.name == topics::ready_status.name) note_announcement(t, raw.bytes);
+            if (!t.recorded) continue;
             ++t.received;
             ++self.received_;
             const auto& b = raw.bytes;
@@ -360,7 +400,8 @@ void Ingest::rebuild() { impl_->rebuild(); }
 bool Ingest::records(const std::string& topic) const
 {
     std::lock_guard lock(mutex_);
-    return impl_->topics.count(topic) != 0;
+    const auto it = impl_->topics.find(topic);
+    return it != impl_->topics.end() && it->second->recorded;
 }
 
 Ingest::~Ingest()
@@ -371,9 +412,31 @@ Ingest::~Ingest()
 
 void Ingest::stop()
 {
+    {
+        std::lock_guard lock(impl_->clock.mutex);
+        impl_->clock.stopping = true;
+    }
+    impl_->clock.changed.notify_all();
     std::lock_guard lock(impl_->events_mutex);
     impl_->stopping = true;
     impl_->events_cv.notify_all();
+}
+
+std::vector<std::string> Ingest::wait_for_clock(uint64_t t_ns, std::chrono::milliseconds timeout)
+{
+    auto& c = impl_->clock;
+    std::unique_lock lock(c.mutex);
+    auto behind = [&] {
+        std::vector<std::string> out;
+        for (const auto& [node, next] : c.announced) {
+            if (next < t_ns && !c.given_up.count(node)) out.push_back(node);
+        }
+        return out;
+    };
+    if (c.changed.wait_for(lock, timeout, [&] { return c.stopping || behind().empty(); })) return {};
+    auto late = behind();
+    c.given_up.insert(late.begin(), late.end());
+    return late;
 }
 
 bool Ingest::process_events(std::chrono::milliseconds wait)
@@ -392,7 +455,8 @@ bool Ingest::process_events(std::chrono::milliseconds wait)
         // call ingest(): never under the lock.
         if (e.kind == Event::writer_found) {
             const bool known = locked([&] { return d.topics.count(e.writer.topic) != 0; });
-            if (!known && d.wanted(e.writer.topic)) d.subscribe(e.writer);
+            const bool clock_topic = !d.clock.self.empty() && e.writer.topic == topics::ready_status.name;
+            if (!known && (d.wanted(e.writer.topic) || clock_topic)) d.subscribe(e.writer);
         } else {
             locked([&] { d.handle(e, now); });
         }
@@ -403,7 +467,7 @@ bool Ingest::process_events(std::chrono::milliseconds wait)
 size_t Ingest::topic_count() const
 {
     std::lock_guard lock(mutex_);
-    return impl_->topics.size();
+    return size_t(std::count_if(impl_->topics.begin(), impl_->topics.end(), [](const auto& t) { return t.second->recorded; }));
 }
 
 uint64_t Ingest::received(const std::string& topic) const
@@ -417,7 +481,9 @@ std::vector<TopicCount> Ingest::topic_counts() const
 {
     std::lock_guard lock(mutex_);
     std::vector<TopicCount> out;
-    for (const auto& [name, t] : impl_->topics) out.push_back({name, t->type_name, t->received, t->lost});
+    for (const auto& [name, t] : impl_->topics) {
+        if (t->recorded) out.push_back({name, t->type_name, t->received, t->lost});
+    }
     return out;
 }
 

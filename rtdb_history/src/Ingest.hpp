@@ -53,6 +53,11 @@ public:
     /// Replaces the recording participant with a new one (see Ingest.cpp); on the caller's
     /// thread, not in a DDS callback.
     void rebuild();
+    /// With ServiceOptions::clock_node: waits up to `timeout` until every other node of the
+    /// lab's simulated clock has announced to the recording participant a tick at or after
+    /// `t_ns` (all it wrote before has then reached the recorder). Returns the nodes still behind,
+    /// which are not waited for again until they announce anew; empty once stop() was called.
+    std::vector<std::string> wait_for_clock(uint64_t t_ns, std::chrono::milliseconds timeout);
     /// Whether a reader records this topic.
     bool records(const std::string& topic) const;
 

@@ -1,6 +1,7 @@
 #include <cpm/rtdb/ServiceCommand.hpp>
 
 #include <cpm/rtdb/IdlDecoder.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/topics.hpp>
 
 #include <algorithm>
@@ -71,7 +72,8 @@ const std::vector<cli::FlagSpec>& service_flags()
                                                   {"--save-before", true},
                                                   {"--save-after", true},
                                                   {"--save-format", true},
-                                                  {"--record-name", true}};
+                                                  {"--record-name", true},
+                                                  {"--simulated-clock", false}};
     return flags;
 }
 
@@ -122,6 +124,7 @@ ServiceCommand read_service_flags(const cli::ParsedArgs& parsed)
     }
     options.save_before_ns = cli::parse_duration("--save-before", parsed.get("--save-before", "30s"));
     options.save_after_ns = cli::parse_duration("--save-after", parsed.get("--save-after", "10s"));
+    if (parsed.has("--simulated-clock")) options.clock_node = timer_ids::history;
     options.save_format = parsed.get("--save-format", "sqlite");
     if (options.save_format != "sqlite" && options.save_format != "mcap") {
         throw UsageError("cpm_history: --save-format '" + options.save_format + "': expected sqlite or mcap");
@@ -180,7 +183,8 @@ int serve(ServiceCommand command, const std::function<bool()>& stop_requested)
     const auto c = service->counters();
     service.reset();  // nothing more is ingested: the recording gets all there was
     nlohmann::json counts{{"topics", c.topics}, {"received", c.received}, {"dropped", c.dropped},
-                          {"lost", c.lost},     {"requests", c.requests}, {"bad_requests", c.bad_requests}};
+                          {"lost", c.lost},     {"requests", c.requests}, {"bad_requests", c.bad_requests},
+                          {"lost_by_topic", c.lost_by_topic}};
     if (recording) {
         recording->close();
         const auto r = recording->counters();

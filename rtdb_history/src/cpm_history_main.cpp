@@ -12,7 +12,7 @@ const char* kHelp =
     "                   [--record FILE [--record-format sqlite|mcap] [--foxglove-3d] [--record-max-bytes N] [--record-name NAME]]\n"
     "                   [--record-split 500MB|10min [--record-max 5GB]]\n"
     "                   [--save-dir DIR] [--save-on TOPIC[=FIELD==VALUE]]... [--save-before 30s] [--save-after 10s]\n"
-    "                   [--save-format sqlite|mcap] [--dds_domain N]\n"
+    "                   [--save-format sqlite|mcap] [--simulated-clock] [--dds_domain N]\n"
     "\n"
     "Finds topics by DDS discovery and records every one whose name matches an --include pattern\n"
     "(all when none is given) and no --exclude pattern (full-match ECMAScript regexes), types it\n"
@@ -47,7 +47,11 @@ const char* kHelp =
     "after it, into save_<UTC time>_<topic>[_<key>].db (.mcap with --save-format mcap) in the save\n"
     "folder; e.g. --save-on stopRequest, --save-on fsmStatus=state_type==Emergency. With a filter,\n"
     "the sample with which an object begins to match fires (a state entered, not each sample in it).\n"
-    "A trigger again while its save runs is within that save.\n";
+    "A trigger again while its save runs is within that save.\n"
+    "--simulated-clock: joins the lab's simulated clock (as node cpm_history; cpm lab run does so in a\n"
+    "simulated run) and holds it back, every 100 ms of lab time, until the recorder has received\n"
+    "what every other node wrote before: a clock faster than the recorder (a busy machine, a paused\n"
+    "process) waits instead of the recording losing samples. The service's own clock stays the wall clock.\n";
 
 int run(int argc, char** argv)
 {

@@ -25,6 +25,7 @@
 
 using namespace std::chrono_literals;
 using cpm_test::built_program;
+using cpm_test::pid_with;
 using cpm_test::Process;
 using cpm_test::TempDir;
 namespace fs = std::filesystem;
@@ -49,27 +50,6 @@ std::string rendered_dom(const std::string& file)
                       "file://" + file});
     EXPECT_EQ(chromium.wait(60s), 0) << chromium.errors();
     return chromium.output();
-}
-
-/// The pid of a process of one lab run (its environment holds `tag`, which the test gave the
-/// run and the run passes on to every process it starts) whose command line holds `needle`; 0
-/// if none. Only the run's own: other tests (a secured lab, the fsm tests) may run an fsm_node
-/// with the same arguments at the same time, and killing theirs would fail both.
-int pid_with(const std::string& needle, const std::string& tag)
-{
-    auto text_of = [](const fs::path& file) {
-        // A process may end while it is read: libstdc++ then throws (ESRCH), and it is no match.
-        std::string text = cpm_test::file_text(file.string());
-        std::replace(text.begin(), text.end(), '\0', ' ');
-        return text + ' ';
-    };
-    for (const auto& e : fs::directory_iterator("/proc")) {
-        const std::string name = e.path().filename();
-        if (name.find_first_not_of("0123456789") != std::string::npos) continue;
-        if (text_of(e.path() / "cmdline").find(needle) == std::string::npos) continue;
-        if (text_of(e.path() / "environ").find(tag + ' ') != std::string::npos) return std::stoi(name);
-    }
-    return 0;
 }
 
 /// The parent's pid of process `pid` (0 when it is gone).

@@ -20,6 +20,10 @@ struct TimerOptions
     bool wait_for_start = true;
     /// Under --simulated_time, follow the lab's simulated clock; else always the real clock.
     bool simulated_time_allowed = true;
+    /// Set: on the lab's simulated clock (true) or the real one (false) whatever --simulated_time
+    /// says, the process's own cpm::get_time_ns() unchanged. For a process that joins a simulated
+    /// run's clock and keeps the wall clock for itself (cpm_history --simulated-clock).
+    std::optional<bool> simulated_time;
     /// Run the timer's thread (the callbacks) SCHED_FIFO at realtime_priority; unset: cpm::init's
     /// --realtime. With Realtime::required and no privilege, Timer::create throws cpm::Error.
     std::optional<Realtime> realtime;

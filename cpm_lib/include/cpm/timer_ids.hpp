@@ -15,6 +15,9 @@ inline std::string camera_sim(int vehicle_id) { return "camera_sim_" + std::to_s
 inline std::string aruco_node(int vehicle_id) { return "aruco_node_" + std::to_string(vehicle_id); }
 inline std::string fsm_node(int vehicle_id) { return "fsm_node_" + std::to_string(vehicle_id); }
 inline constexpr const char* central_routing = "central_routing";
+/// The history service recording a simulated run (cpm_history --simulated-clock): it holds the
+/// clock back while the recorder has not yet received what the nodes wrote.
+inline constexpr const char* history = "cpm_history";
 /// The overhead positioning camera (camera_sim --overhead) and the positioning system (ips_node).
 inline constexpr const char* ips_camera = "ips_camera";
 inline constexpr const char* ips_node = "ips_node";

@@ -2,6 +2,8 @@
 
 #include <cpm_test/Isolation.hpp>
 
+#include <algorithm>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -62,6 +64,23 @@ std::string Process::output() const { return file_text(out_path_); }
 std::string Process::errors() const { return file_text(err_path_); }
 
 void Process::kill(int signal) { child_.signal(signal); }  // its whole process group: wrappers spawn children
+
+int pid_with(const std::string& needle, const std::string& tag)
+{
+    auto text_of = [](const std::filesystem::path& file) {
+        // A process may end while it is read: libstdc++ then throws (ESRCH), and it is no match.
+        std::string text = file_text(file.string());
+        std::replace(text.begin(), text.end(), '\0', ' ');
+        return text + ' ';
+    };
+    for (const auto& e : std::filesystem::directory_iterator("/proc")) {
+        const std::string name = e.path().filename();
+        if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+        if (text_of(e.path() / "cmdline").find(needle) == std::string::npos) continue;
+        if (tag.empty() || text_of(e.path() / "environ").find(tag + ' ') != std::string::npos) return std::stoi(name);
+    }
+    return 0;
+}
 
 std::string built_program(const std::string& name) { return std::string(CPM_BIN_DIR) + "/" + name; }
 

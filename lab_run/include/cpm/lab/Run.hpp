@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <functional>
 #include <optional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -57,6 +58,10 @@ struct RunResult
         bool lost = false;
     };
     std::vector<Host> hosts;
+    /// Samples the recorder never received (gaps in their writers' numbering): it could not keep
+    /// up. Also in summary.json (recording.lost) and the report.
+    uint64_t recording_lost = 0;
+    std::map<std::string, uint64_t> recording_lost_by_topic;
 };
 
 /// Runs the scenario. Throws ScenarioError for a missing program, a host that cannot be reached,

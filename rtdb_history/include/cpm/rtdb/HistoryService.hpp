@@ -62,11 +62,20 @@ struct ServiceOptions
     std::vector<SaveTrigger> save_on;
     uint64_t save_before_ns = 30'000'000'000ull, save_after_ns = 10'000'000'000ull;
     std::string save_format = "sqlite";
+    /// Not "": the service joins the lab's simulated clock as this node, ticking every
+    /// clock_period_ns of lab time, and each tick waits until every other node's announcement of
+    /// a tick at or after it has reached the recorder: all the nodes wrote before is then
+    /// recorded, so a clock that runs faster than the recorder can take (a busy machine, a
+    /// paused process) is held back instead of the recording losing samples. The service's own
+    /// clock (commit times, its window) stays the wall clock.
+    std::string clock_node;
+    uint64_t clock_period_ns = 100'000'000ull;
 };
 
 struct ServiceCounters
 {
     uint64_t topics = 0, received = 0, dropped = 0, requests = 0, bad_requests = 0, lost = 0;
+    std::map<std::string, uint64_t> lost_by_topic;  ///< the topics that lost samples (lost, per topic)
 };
 
 class HistoryService

@@ -37,6 +37,12 @@ private:
 /// A file's whole text ("" when it cannot be read).
 std::string file_text(const std::string& path);
 
+/// The pid of a running process whose command line holds `needle` and, unless `tag` is "",
+/// whose environment holds the entry `tag` (a test marks its own processes so, e.g. every process
+/// of a lab run it started); 0 if none. Only the test's own: other tests may run the same program
+/// with the same arguments at the same time.
+int pid_with(const std::string& needle, const std::string& tag = "");
+
 /// The path of a program built next to the tests (set by CMake as CPM_BIN_DIR).
 std::string built_program(const std::string& name);
 
