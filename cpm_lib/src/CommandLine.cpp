@@ -61,6 +61,8 @@ ParsedArgs parse_args(const std::vector<std::string>& args, const std::vector<Fl
         }
         if (spec == nullptr) throw UsageError(command + ": unknown flag '" + name + "' (see --help)");
         if (!spec->takes_value) {
+            if (eq != std::string::npos)
+                throw UsageError(command + ": " + name + " is a switch and takes no value ('" + args[i] + "'): give " + name + ", or leave it out");
             parsed.flags[name] = "1";
             continue;
         }

@@ -95,6 +95,15 @@ TEST(CommandLine, WhatIsNotATimeIsRefusedQuotingTheArgumentAsGiven)
     EXPECT_THAT(usage_error([] { parse_duration("--timeout", "infs"); }), HasSubstr("is not a duration"));
 }
 
+// `--foxglove-3d=false` once turned the switch on: a value given to a switch is refused.
+TEST(CommandLine, ASwitchGivenAValueIsRefusedNamingIt)
+{
+    const std::vector<FlagSpec> known{{"--json", false}};
+    EXPECT_THAT(usage_error([&] { parse_args({"--json=false"}, known, "cpm history"); }),
+                HasSubstr("cpm history: --json is a switch and takes no value ('--json=false'): give --json, or leave it out"));
+    EXPECT_TRUE(parse_args({"--json"}, known, "x").has("--json"));
+}
+
 TEST(CommandLine, AFlagFollowedByAnotherFlagIsToldItNeedsAValue)
 {
     const std::vector<FlagSpec> known{{"--topic", true}, {"--key", true}};
