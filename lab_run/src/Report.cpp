@@ -1,4 +1,5 @@
 #include <cpm/lab/Report.hpp>
+#include <cpm/lab/Run.hpp>
 
 #include "PageTemplate.hpp"
 
@@ -765,11 +766,8 @@ RunFigures figures_of(const RecordedRun& recording, const nlohmann::json& summar
     RunFigures f = outline_of(summary);
     f.recorded_samples = recording.samples;
     f.recording_warning = recording.warning;
-    const auto& rec = summary.contains("recording") ? summary["recording"] : nlohmann::json();
-    if (const uint64_t lost = rec.is_object() ? rec.value("lost", uint64_t(0)) : 0; lost > 0) {
-        f.recording_warning += (f.recording_warning.empty() ? "" : "; ") + std::to_string(lost) +
-                               " samples never reached the recorder (their writers numbered them; it could not keep up)";
-    }
+    const std::string loss = recording_loss(recording_lost_by_topic(summary.value("recording", nlohmann::json())));
+    if (!loss.empty()) f.recording_warning += (f.recording_warning.empty() ? "" : "; ") + loss;
     f.topics = topic_figures(recording, f.simulated());
     read_samples(recording, f);
     f.marks = marks_of(recording, lab_zero_ns(recording), f.simulated());

@@ -86,6 +86,29 @@ nlohmann::json last_json(const std::string& path)
     return found;
 }
 
+}  // namespace
+
+std::string recording_loss(const std::map<std::string, uint64_t>& lost_by_topic)
+{
+    uint64_t total = 0;
+    std::string topics;
+    for (const auto& [topic, n] : lost_by_topic) {
+        total += n;
+        topics += (topics.empty() ? "" : ", ") + topic + " " + std::to_string(n);
+    }
+    return total ? std::to_string(total) + " samples never reached the recorder (" + topics + "; it could not keep up)" : "";
+}
+
+std::map<std::string, uint64_t> recording_lost_by_topic(const nlohmann::json& recording)
+{
+    std::map<std::string, uint64_t> out;
+    if (!recording.is_object() || !recording.contains("lost_by_topic")) return out;
+    for (const auto& [topic, n] : recording["lost_by_topic"].items()) out[topic] = n.get<uint64_t>();
+    return out;
+}
+
+namespace {
+
 /// The lock file a cpm lab run holds on its domain (and on its controllers') while it lasts.
 std::string run_lock_path(int domain) { return "/tmp/cpm_lab_run_domain_" + std::to_string(domain) + ".lock"; }
 
@@ -908,18 +931,20 @@ nlohmann::json controllers_json(const Scenario& s, const RunSettings& settings)
     return out;
 }
 
-void write_summary(const Scenario& s, const RunSettings& settings, const std::string& qos, RunResult& result,
-                   const nlohmann::json& processes, const RunWatch& watch, const std::string& history_log)
+/// The recording's block of the summary: the history's final counts of what reached the file,
+/// and of what never reached the history (in all and per topic).
+nlohmann::json recording_of(const nlohmann::json& recorded)
 {
-    const auto recorded = last_json(history_log);
     nlohmann::json recording = recorded.contains("recording") ? recorded["recording"] : nlohmann::json();
-    if (recording.is_object()) {
-        // The history's count of samples that never reached it, beside what reached the file.
-        result.recording_lost = recorded.value("lost", uint64_t(0));
-        recording["lost"] = result.recording_lost;
-        recording["lost_by_topic"] = recorded.value("lost_by_topic", nlohmann::json::object());
-        for (const auto& [topic, n] : recording["lost_by_topic"].items()) result.recording_lost_by_topic[topic] = n.get<uint64_t>();
-    }
+    if (!recording.is_object()) return recording;
+    recording["lost"] = recorded.value("lost", uint64_t(0));
+    recording["lost_by_topic"] = recorded.value("lost_by_topic", nlohmann::json::object());
+    return recording;
+}
+
+void write_summary(const Scenario& s, const RunSettings& settings, const std::string& qos, const RunResult& result,
+                   const nlohmann::json& processes, const RunWatch& watch, const nlohmann::json& recorded)
+{
     nlohmann::json summary{{"name", s.name},
                            {"scenario", fs::absolute(s.file).string()},
                            {"time", settings.time == TimeMode::simulated ? "simulated" : "real"},
@@ -940,7 +965,7 @@ void write_summary(const Scenario& s, const RunSettings& settings, const std::st
                            {"samples_recorded", recorded.contains("recording") ? recorded["recording"].value("written", watch.recorded())
                                                                                : watch.recorded()},
                            {"qos", qos.empty() ? nlohmann::json::object() : nlohmann::json::parse(qos)},
-                           {"recording", recording},
+                           {"recording", recording_of(recorded)},
                            {"hosts", hosts_json(result.hosts)},
                            {"controllers", controllers_json(s, settings)}};
     std::ofstream(fs::path(settings.run_dir) / "summary.json") << summary.dump(2) << "\n";
@@ -1071,7 +1096,9 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     result.ok = result.error.empty() && !result.interrupted &&
                 std::none_of(result.processes.begin(), result.processes.end(), [](const ProcessEnd& e) { return e.failed; }) &&
                 std::none_of(result.hosts.begin(), result.hosts.end(), [](const RunResult::Host& h) { return h.lost; });
-    write_summary(s, settings, qos, result, processes, watch, (dir / "cpm_history.log").string());
+    const auto recorded = last_json((dir / "cpm_history.log").string());
+    result.recording_lost_by_topic = recording_lost_by_topic(recording_of(recorded));
+    write_summary(s, settings, qos, result, processes, watch, recorded);
     return result;
 }
 

@@ -87,6 +87,7 @@ struct Ingest::Impl
         bool keyed = false;
         const IdlDecoder* types = nullptr;  ///< the lab's IDL when it describes the type: keys and stamps exact
         bool recorded = true;               ///< false: read only for the clock's announcements (excluded from the recording)
+        bool announces_ticks = false;       ///< the clock's readyStatus, with a clock to follow
         std::optional<bool> has_header;     ///< decided from the IDL, else from the first sample
         dds::Topic* topic = nullptr;
         dds::DataReader* reader = nullptr;
@@ -214,6 +215,9 @@ struct Ingest::Impl
         push(std::move(e));
     }
 
+    /// readyStatus, read for the clock's announcements when the service follows a clock.
+    bool clock_topic(const std::string& topic) const { return !clock.self.empty() && topic == topics::ready_status.name; }
+
     bool wanted(const std::string& topic) const
     {
         if (topics::is_history_control(topic)) return false;
@@ -245,6 +249,7 @@ struct Ingest::Impl
         rec->type_name = e.type_name;
         rec->keyed = e.keyed;
         rec->recorded = wanted(e.topic);
+        rec->announces_ticks = clock_topic(e.topic);
         const IdlDecoder* types = IdlDecoder::lab_types();
         if (types && types->knows(e.type_name)) {
             rec->types = types;
@@ -346,7 +351,7 @@ struct Ingest::Impl
                 if (info.instance_state != dds::ALIVE_INSTANCE_STATE) registry.instance_ended(t.name, info.instance_handle, now);
                 continue;
             }
-            if (!clock.self.empty() && t.name == topics::ready_status.name) note_announcement(t, raw.bytes);
+            if (t.announces_ticks) note_announcement(t, raw.bytes);
             if (!t.recorded) continue;
             ++t.received;
             ++self.received_;
@@ -455,8 +460,7 @@ bool Ingest::process_events(std::chrono::milliseconds wait)
         // call ingest(): never under the lock.
         if (e.kind == Event::writer_found) {
             const bool known = locked([&] { return d.topics.count(e.writer.topic) != 0; });
-            const bool clock_topic = !d.clock.self.empty() && e.writer.topic == topics::ready_status.name;
-            if (!known && (d.wanted(e.writer.topic) || clock_topic)) d.subscribe(e.writer);
+            if (!known && (d.wanted(e.writer.topic) || d.clock_topic(e.writer.topic))) d.subscribe(e.writer);
         } else {
             locked([&] { d.handle(e, now); });
         }

@@ -3,6 +3,7 @@
 // figures are shown on, with hostile names in it.
 #include <cpm/Error.hpp>
 #include <cpm/lab/Report.hpp>
+#include <cpm/lab/Run.hpp>
 #include <cpm/vehicle/World.hpp>
 
 #include <gtest/gtest.h>
@@ -350,4 +351,13 @@ TEST(MakeReport, AFolderThatIsNotThereIsACpmErrorNamingIt)
     } catch (const cpm::Error& e) {
         EXPECT_EQ(std::string(e.what()), "no run folder /nonexistent/run-folder");
     }
+}
+
+// What a recording missed, from summary.json's recording block, as the run and its report say it.
+TEST(ReportFigures, ARecordingsLossesAreSaidPerTopicAndNothingWhenNoneWasLost)
+{
+    const auto lost = recording_lost_by_topic(json::parse(R"({"written": 10, "lost": 5, "lost_by_topic": {"systemTrigger": 2, "readyStatus": 3}})"));
+    EXPECT_EQ(recording_loss(lost), "5 samples never reached the recorder (readyStatus 3, systemTrigger 2; it could not keep up)");
+    EXPECT_EQ(recording_loss(recording_lost_by_topic(json::parse(R"({"written": 10, "lost": 0, "lost_by_topic": {}})"))), "");
+    EXPECT_EQ(recording_loss(recording_lost_by_topic(json())), "") << "a run without a recording block";
 }

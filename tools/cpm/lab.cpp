@@ -200,12 +200,8 @@ int lab_run(const std::vector<std::string>& args)
                                    p.restarts ? (" (restarted " + std::to_string(p.restarts) + " times)").c_str() : "", p.last_lines.c_str());
     }
     if (!r.error.empty()) std::fprintf(stderr, "%s: the run ended early: %s\n", command.c_str(), r.error.c_str());
-    if (r.recording_lost > 0) {
-        std::string topics;
-        for (const auto& [topic, n] : r.recording_lost_by_topic) topics += (topics.empty() ? "" : ", ") + topic + " " + std::to_string(n);
-        std::fprintf(stderr, "%s: the recording misses %llu samples that never reached the recorder (%s; it could not keep up)\n",
-                     command.c_str(), (unsigned long long)r.recording_lost, topics.c_str());
-    }
+    if (const std::string loss = cpm::lab::recording_loss(r.recording_lost_by_topic); !loss.empty())
+        std::fprintf(stderr, "%s: the recording misses what it should hold: %s\n", command.c_str(), loss.c_str());
     char speed[96] = "";
     if (r.clock_seconds > 0) {
         std::snprintf(speed, sizeof speed, " (the simulated clock: %.1f s, %.1fx real time)", r.clock_seconds,

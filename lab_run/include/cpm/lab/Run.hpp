@@ -6,11 +6,13 @@
 // process (its stdout and stderr), the recording (recording.db) and summary.json.
 #include <cpm/lab/Scenario.hpp>
 
+#include <nlohmann/json.hpp>
+
 #include <cstdint>
 #include <cstdio>
 #include <functional>
-#include <optional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -58,11 +60,16 @@ struct RunResult
         bool lost = false;
     };
     std::vector<Host> hosts;
-    /// Samples the recorder never received (gaps in their writers' numbering): it could not keep
-    /// up. Also in summary.json (recording.lost) and the report.
-    uint64_t recording_lost = 0;
+    /// Per topic, the samples the recorder never received (gaps in their writers' numbering):
+    /// it could not keep up. Also in summary.json (recording.lost_by_topic) and the report.
     std::map<std::string, uint64_t> recording_lost_by_topic;
 };
+
+/// What a recording misses, as the run and its report say it ("" when nothing):
+/// "N samples never reached the recorder (topic n, …; it could not keep up)".
+std::string recording_loss(const std::map<std::string, uint64_t>& lost_by_topic);
+/// The same from summary.json's recording block (recording.lost_by_topic).
+std::map<std::string, uint64_t> recording_lost_by_topic(const nlohmann::json& recording);
 
 /// Runs the scenario. Throws ScenarioError for a missing program, a host that cannot be reached,
 /// runs another cpm or whose clock is off by more than max_clock_offset, and cpm::Error when the
