@@ -478,37 +478,40 @@ TEST(BridgeCore, TheSpeedLoopDoesNotWindUpWhileTheControllerHoldsItsWatchdogBrak
 TEST(BridgeCore, ALineThatLagsItsCommandsPausesTheSpeedFeedbackAndSaysSo)
 {
     // The controller applies commands long after they were sent (a backed-up line: its echo of
-    // the last applied command's tick falls behind). Feedback through a second of delay would
-    // overshoot and oscillate; the bridge drives feed-forward only until the line catches up.
+    // the state tick the last applied command answered falls behind). Feedback through a second
+    // of delay would overshoot and oscillate; the bridge drives feed-forward only until the
+    // line catches up.
     BridgeCore sut(kId, Calibration{});
     Calibration c;
     uint64_t now = 50 * kSecond;
     CommandInputs inputs;
     uint32_t tick = 1000;
-    uint32_t sent = 0;
+    std::vector<uint32_t> sent;  // the ticks the commands answered, in order
+    auto answered_ago = [&](size_t n) { return sent.size() > n ? sent[sent.size() - 1 - n] : 0u; };
     auto cycle_with_echo = [&](uint32_t echoed, double speed) {
         inputs.speed_curvature = fresh(speed_curvature(0.5, 0), now - 10'000'000, now);
         auto p = moving(tick, speed);
         p.command_tick = echoed;
         auto out = sut.on_state_packet(p, now, inputs);
+        EXPECT_EQ(out.command.tick, tick) << "a command names the state it answers";
         tick += 20, now += 20'000'000;
-        sent = out.command.tick;
+        sent.push_back(out.command.tick);
         return out;
     };
-    for (int i = 0; i < 10; ++i) cycle_with_echo(sent, 0.5);  // in step: the last command applied
+    for (int i = 0; i < 10; ++i) cycle_with_echo(answered_ago(0), 0.5);  // in step: the last command applied
     BridgeCycle out;
-    for (int i = 0; i < 60; ++i) out = cycle_with_echo(sent > 50 ? sent - 50 : 1, 0.1);  // a second behind, car slow
+    for (int i = 0; i < 60; ++i) out = cycle_with_echo(answered_ago(50), 0.1);  // a second behind, car slow
     EXPECT_NEAR(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000, 1) << "feed-forward only";
     EXPECT_EQ(sut.anomalies(Anomaly::line_lag), 1u) << "once per lagging spell";
     // Catching up: still 9, then 5 commands (180 ms, 100 ms) behind. Feedback acting on the car
     // that far late sent it off at 0.89 m/s for 0.5 commanded after a flood of its line.
-    for (uint32_t behind : {9u, 5u}) {
-        out = cycle_with_echo(sent - behind, 0.1);
+    for (size_t behind : {9u, 5u}) {
+        out = cycle_with_echo(answered_ago(behind), 0.1);
         EXPECT_NEAR(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000, 1) << behind << " behind: feed-forward still";
     }
     EXPECT_EQ(sut.anomalies(Anomaly::line_lag), 1u) << "the same spell";
     // About in step again (4 behind: a slower line's normal): feedback resumes (the car is
     // slow: more than feed-forward).
-    out = cycle_with_echo(sent - 4, 0.1);
+    out = cycle_with_echo(answered_ago(4), 0.1);
     EXPECT_GT(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000 + 50);
 }

@@ -49,6 +49,7 @@ public:
     {
         auto frame = cpm::vehicle::encode_frame(c);
         ASSERT_TRUE(port_.write_all(frame.data(), frame.size()));
+        last_sent_tick_ = c.tick;
     }
     void send_raw(const std::vector<uint8_t>& bytes) { ASSERT_TRUE(port_.write_all(bytes.data(), bytes.size())); }
     /// The state packets that arrive within `ms`.
@@ -65,15 +66,22 @@ public:
                 }
             }
         }
+        if (!out.empty()) newest_tick_ = out.back().tick;
         return out;
     }
-    /// Sends `c` every 20 ms for `ms` and returns the state packets meanwhile and in the 60 ms
-    /// after the last (so the last packet reports what the chip made of the last command).
-    std::vector<cpm::vehicle::StatePacket> command_for(cpm::vehicle::CommandPacket c, int ms)
+    /// The tick of the newest state packet read (0 before the first).
+    uint32_t newest_tick() const { return newest_tick_; }
+    /// The tick the last command sent answered.
+    uint32_t last_sent_tick() const { return last_sent_tick_; }
+    /// Sends `c` every 20 ms for `ms`, each answering the newest state packet (as a bridge
+    /// does; with `answer_newest` false, c.tick as given), and returns the state packets
+    /// meanwhile and in the 60 ms after the last (so the last packet reports what the chip made
+    /// of the last command).
+    std::vector<cpm::vehicle::StatePacket> command_for(cpm::vehicle::CommandPacket c, int ms, bool answer_newest = true)
     {
-        std::vector<cpm::vehicle::StatePacket> out;
+        std::vector<cpm::vehicle::StatePacket> out = states_for(newest_tick_ ? 20 : 200);
         for (int t = 0; t < ms; t += 20) {
-            ++c.tick;
+            if (answer_newest) c.tick = newest_tick_;
             send(c);
             auto s = states_for(20);
             out.insert(out.end(), s.begin(), s.end());
@@ -86,6 +94,8 @@ public:
 private:
     cpm::vehicle::SerialPort port_;
     cpm::vehicle::FrameDecoder decoder_;
+    uint32_t newest_tick_ = 0;
+    uint32_t last_sent_tick_ = 0;
 };
 
 size_t with_status(const std::vector<cpm::vehicle::StatePacket>& states, uint8_t bit)
@@ -221,10 +231,19 @@ TEST_F(FirmwareHilEndToEnd, AFloodOfBytesNeverLocksTheFirmwareUp)
     EXPECT_GT(during, 50u) << flooded << " bytes flooded; gaps: " << watch.state_gaps_between(flood_start, flood_end)
                            << "\nbridge:\n" << car.bridge->errors() << "firmware_hil:\n" << car.sim->errors();
     // And drives again once the line is quiet: the pty still holds what the chip could not
-    // take at 115200 baud (about 1.5 s of it), then the commands get through - and the car
-    // does not run off faster than commanded (the bridge's speed loop did not wind up while the
-    // firmware reported its watchdog's brake).
-    std::this_thread::sleep_for(5s);
+    // take at 115200 baud (4-5 s of it here). The commands in that backlog answer states long
+    // gone, and the firmware ignores them (applied, each drove the car for 250 ms on a throttle
+    // meant for a standing car: up to 0.89 m/s for 0.5 commanded on a loaded machine). Once
+    // fresh ones get through, the car does not run off faster than commanded either (the
+    // bridge's speed loop did not wind up while the firmware reported its watchdog's brake).
+    auto driving_at = [&](uint64_t t) {
+        auto window = watch.observations_between(t - kSecond / 4, t);
+        return window.size() > 5 && mean_speed(window) > 0.4;
+    };
+    ASSERT_TRUE(cpm_test::wait_until([&] { return driving_at(cpm::get_time_ns()); }, 15s))
+        << "bridge:\n" << car.bridge->errors() << "firmware_hil:\n" << car.sim->errors();
+    const double back_after = double(cpm::get_time_ns() - flood_end) * 1e-9;
+    std::this_thread::sleep_for(2s);
     const uint64_t now = cpm::get_time_ns();
     double fastest = 0;
     for (uint64_t t = flood_end; t + kSecond / 4 <= now; t += kSecond / 4) {
@@ -235,11 +254,12 @@ TEST_F(FirmwareHilEndToEnd, AFloodOfBytesNeverLocksTheFirmwareUp)
     ASSERT_GT(recent.size(), 20u);
     EXPECT_NEAR(mean_speed(recent), 0.5, 0.1);
     EXPECT_LT(fastest, 0.75);
-    std::printf("flooded %zu bytes in 2 s; %zu states published meanwhile; fastest afterwards %.2f m/s\n", flooded, during,
-                fastest);
+    std::printf("flooded %zu bytes in 2 s; %zu states published meanwhile; driving again %.1f s after; fastest "
+                "afterwards %.2f m/s\n",
+                flooded, during, back_after, fastest);
 }
 
-TEST_F(FirmwareHilEndToEnd, CommandsOutOfRangeForAnotherCarOrWithABadCrcAreNotActedOn)
+TEST_F(FirmwareHilEndToEnd, CommandsOutOfRangeStaleForAnotherCarOrWithABadCrcAreNotActedOn)
 {
     Car car = avr_car({"--trace-pwm"}, /*start_bridge=*/false);
     Line line(car.device);
@@ -250,14 +270,25 @@ TEST_F(FirmwareHilEndToEnd, CommandsOutOfRangeForAnotherCarOrWithABadCrcAreNotAc
     c.servo_us = 1500;
     auto good = line.command_for(c, 300);
     ASSERT_FALSE(good.empty());
-    EXPECT_EQ(with_status(good, cpm::vehicle::kStatusBadCommand), 0u);
-    EXPECT_EQ(good.back().command_tick, c.tick + 15) << "the firmware echoes the tick of the last command it applied";
+    EXPECT_EQ(with_status(good, cpm::vehicle::kStatusBadCommand | cpm::vehicle::kStatusStaleCommand), 0u);
+    EXPECT_EQ(good.back().command_tick, line.last_sent_tick()) << "the firmware echoes the tick the last command it applied answered";
     const uint64_t t_bad = cpm::get_time_ns();
+
+    // Stale: answering a state packet sent 300 ms ago (as a command that waited in a backed-up
+    // line does), and one from the chip's future (sent before it restarted).
+    auto stale = c;
+    stale.tick = line.newest_tick() - 300;
+    auto states = line.command_for(stale, 200, /*answer_newest=*/false);
+    EXPECT_GT(with_status(states, cpm::vehicle::kStatusStaleCommand), 3u);
+    auto future = c;
+    future.tick = line.newest_tick() + 60'000;
+    states = line.command_for(future, 200, /*answer_newest=*/false);
+    EXPECT_GT(with_status(states, cpm::vehicle::kStatusStaleCommand), 3u);
 
     // Out of range: PWM over 1000, a servo pulse outside 1000..2000 us.
     auto pwm_over = c;
     pwm_over.motor_pwm = 1500;
-    auto states = line.command_for(pwm_over, 200);
+    states = line.command_for(pwm_over, 200);
     EXPECT_GT(with_status(states, cpm::vehicle::kStatusBadCommand), 3u);
     auto servo_over = c;
     servo_over.servo_us = 2600;

@@ -206,12 +206,12 @@ TEST(Protocol, SeededRandomCorruptionNeverYieldsABadPacketAndLosesNoIntactOne)
 TEST(Protocol, TheFirmwaresCSourceLaysOutACommandByteForByteAndDecodesItsOwnFrame)
 {
     // The C code the AVR firmware runs (firmware/protocol/cpm_serial.c), called directly: the
-    // bytes written by hand from the protocol's table (README), little-endian after version 1
+    // bytes written by hand from the protocol's table (README), little-endian after version 2
     // and kind 2.
     const cpm_command_packet c{0x01020304u, 7, CPM_MOTOR_FORWARD, 500, 1600};
     uint8_t payload[CPM_SERIAL_COMMAND_SIZE];
     ASSERT_EQ(cpm_command_pack(&c, payload), size_t(CPM_SERIAL_COMMAND_SIZE));
-    const std::vector<uint8_t> by_hand{0x01, 0x02, 0x04, 0x03, 0x02, 0x01, 0x07, 0x01, 0xF4, 0x01, 0x40, 0x06};
+    const std::vector<uint8_t> by_hand{0x02, 0x02, 0x04, 0x03, 0x02, 0x01, 0x07, 0x01, 0xF4, 0x01, 0x40, 0x06};
     EXPECT_EQ(std::vector<uint8_t>(payload, payload + sizeof payload), by_hand);
 
     uint8_t frame[CPM_SERIAL_MAX_WIRE + 4];

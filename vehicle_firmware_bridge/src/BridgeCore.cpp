@@ -287,27 +287,37 @@ double BridgeCore::plausible_battery(uint16_t battery_mv, std::vector<Notice>& n
 
 void BridgeCore::watch_line_lag(const StatePacket& packet, std::vector<Notice>& notices)
 {
-    // The controller echoes the tick of the last command it applied; at 50 Hz it is one or two
-    // behind the newest sent. Ten (200 ms) behind, the line holds a backlog; the spell lasts
-    // until the echo is about back in step (four behind at most: a slower line may run three
-    // behind): feedback through a line still catching up (180, 100 ms late) overshoots. A
-    // controller that has applied none yet (0) says nothing about the line.
+    // The controller echoes the tick of the last command it applied (the state it answered); at
+    // 50 Hz that command is one or two behind the newest sent. Ten (200 ms) behind, the line
+    // holds a backlog; the spell lasts until the echo is about back in step (four behind at
+    // most: a slower line may run three behind): feedback through a line still catching up
+    // (180, 100 ms late) overshoots. An echo older than every command kept is far behind; a
+    // controller that has applied none yet (0), or one we never sent, says nothing.
     constexpr uint32_t kLagLimit = 10, kInStep = 4;
-    const uint32_t behind = command_tick_ - packet.command_tick;
-    const bool known = packet.command_tick != 0 && behind < 0x80000000u;
-    const bool lagging = known && behind > (line_lagging_ ? kInStep : kLagLimit);
+    std::optional<uint32_t> behind;
+    if (packet.command_tick != 0 && !answered_.empty()) {
+        const auto echoed = std::find(answered_.rbegin(), answered_.rend(), packet.command_tick);
+        if (echoed != answered_.rend()) behind = uint32_t(echoed - answered_.rbegin());
+        else if (int32_t(packet.command_tick - answered_.front()) < 0) behind = uint32_t(answered_.size());
+    }
+    const bool lagging = behind && *behind > (line_lagging_ ? kInStep : kLagLimit);
     if (lagging && !line_lagging_) {
         notice(notices, Anomaly::line_lag,
-               "the controller applies commands " + std::to_string(behind) +
-                   " behind the newest sent (a backed-up line): speed feedback paused until it catches up");
+               "the controller applies commands " + std::to_string(*behind) +
+                   " behind the newest sent (a backed-up line; the AVR firmware ignores those answering a state over " +
+                   std::to_string(kCommandMaxAgeMs) + " ms old): speed feedback paused until it catches up");
     }
     line_lagging_ = lagging;
 }
 
-CommandPacket BridgeCore::to_packet(const Actuation& a)
+CommandPacket BridgeCore::to_packet(const Actuation& a, uint32_t answering)
 {
+    // Enough to tell an echo kLagLimit behind from one in step, and a second's worth more.
+    constexpr size_t kAnsweredKept = 64;
     CommandPacket packet;
-    packet.tick = ++command_tick_;
+    packet.tick = answering;
+    answered_.push_back(answering);
+    if (answered_.size() > kAnsweredKept) answered_.pop_front();
     packet.vehicle_id = vehicle_id_;
     if (a.brake || !std::isfinite(a.throttle) || !std::isfinite(a.steering)) {
         packet.motor_mode = MotorMode::brake;
@@ -333,6 +343,7 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
                "the controller restarted (tick " + std::to_string(*last_tick_) + " -> " + std::to_string(packet.tick) +
                    "): odometer and heading rebased, pose kept");
         last_steps_.reset();
+        answered_.clear();  // ticks of its previous life
     }
     out.measured_ns = measured_time(packet.tick, t_ns);
     last_tick_ = packet.tick;
@@ -347,7 +358,7 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     Actuation a = choose(commands, t_ns, speed, dt, out.active, out.notices);
     if (out.active != last_active_) speed_controller_.reset();
     last_active_ = out.active;
-    out.command = to_packet(a);
+    out.command = to_packet(a, packet.tick);
 
     VehicleState& s = out.state;
     s.vehicle_id(vehicle_id_);

@@ -13,7 +13,7 @@
 extern "C" {
 #endif
 
-#define CPM_SERIAL_VERSION 1u
+#define CPM_SERIAL_VERSION 2u
 #define CPM_SERIAL_KIND_STATE 0x01u
 #define CPM_SERIAL_KIND_COMMAND 0x02u
 /* Payload sizes: [version, kind, fields...], without the CRC. */
@@ -29,6 +29,13 @@ extern "C" {
 #define CPM_STATUS_WATCHDOG_STOP 0x02u /* no valid command for the watchdog period: motor braked */
 #define CPM_STATUS_WRONG_VEHICLE 0x04u /* the last command named another vehicle id (ignored) */
 #define CPM_STATUS_BAD_COMMAND 0x08u   /* the last command's values were out of range (ignored) */
+#define CPM_STATUS_STALE_COMMAND 0x10u /* the last command answered a state packet more than
+                                          CPM_COMMAND_MAX_AGE_MS old: it waited in a backed-up
+                                          line (ignored) */
+
+/* A command answers a state packet (its tick); the controller ignores one that answers a packet
+ * sent more than this long ago by its clock - applied that late, it would act on the past. */
+#define CPM_COMMAND_MAX_AGE_MS 100u
 
 /* Motor modes of a command. */
 #define CPM_MOTOR_BRAKE 0u
@@ -56,12 +63,12 @@ typedef struct cpm_state_packet {
     uint16_t us_left_mm;
     uint16_t us_right_mm;
     uint8_t status;               /* CPM_STATUS_* bits */
-    uint32_t command_tick;        /* tick of the last valid command applied */
+    uint32_t command_tick;        /* tick of the last valid command applied (a state's tick) */
 } cpm_state_packet;
 
 /* Host -> controller, once per state packet. */
 typedef struct cpm_command_packet {
-    uint32_t tick;                /* the host's command counter (echoed in the state) */
+    uint32_t tick;                /* the tick of the state packet this command answers */
     uint8_t vehicle_id;           /* a command for another id is ignored */
     uint8_t motor_mode;           /* CPM_MOTOR_* */
     uint16_t motor_pwm;           /* duty cycle in 1/1000 (0..1000) */

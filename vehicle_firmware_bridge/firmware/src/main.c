@@ -2,8 +2,9 @@
  * (protocol/cpm_serial.h, the same C code the bridge runs), drives the motor and the steering
  * servo from valid commands, reports odometer, speed, IMU, battery, motor current and the three
  * rangers in a state packet every 20 ms, and brakes when no valid command came for 250 ms.
- * A frame with a bad CRC or length, a command for another car or with values out of range is
- * never acted on; the hardware watchdog resets a loop that stops. */
+ * A frame with a bad CRC or length, a command for another car, with values out of range or
+ * answering a state packet over CPM_COMMAND_MAX_AGE_MS old is never acted on; the hardware
+ * watchdog resets a loop that stops. */
 #include "board.h"
 #include "cpm_serial.h"
 #include "hw.h"
@@ -45,7 +46,11 @@ static void on_command(const cpm_command_packet* c)
         status |= CPM_STATUS_BAD_COMMAND;
         return;
     }
-    status &= (uint8_t)~(CPM_STATUS_BAD_COMMAND | CPM_STATUS_WATCHDOG_STOP);
+    if ((uint32_t)(hw_millis() - c->tick) > CPM_COMMAND_MAX_AGE_MS) {
+        status |= CPM_STATUS_STALE_COMMAND; /* also one from before a restart: its tick is ahead */
+        return;
+    }
+    status &= (uint8_t)~(CPM_STATUS_BAD_COMMAND | CPM_STATUS_STALE_COMMAND | CPM_STATUS_WATCHDOG_STOP);
     watchdog_stopped = 0;
     command_tick = c->tick;
     last_command_ms = hw_millis();

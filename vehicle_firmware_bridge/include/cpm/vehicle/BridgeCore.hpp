@@ -124,7 +124,8 @@ private:
                      std::vector<Notice>& notices);
     Actuation drive(const MotionRequest& request, double speed, double dt);
     bool fresh(uint64_t age_ns, uint64_t create_ns, const CommandInputs& commands) const;
-    CommandPacket to_packet(const Actuation& actuation);
+    /// The command answering the state packet of controller tick `answering`.
+    CommandPacket to_packet(const Actuation& actuation, uint32_t answering);
 
     uint8_t vehicle_id_;
     Calibration c_;
@@ -134,7 +135,7 @@ private:
     std::optional<int32_t> last_steps_;
     std::optional<uint32_t> last_tick_;
     double distance_ = 0;
-    uint32_t command_tick_ = 0;
+    std::deque<uint32_t> answered_;  ///< the ticks the newest commands answered, oldest first
     bool line_lagging_ = false;  ///< the controller applies commands far behind the newest sent
     ActiveCommand last_active_ = ActiveCommand::none;
     std::deque<Estimate> history_;

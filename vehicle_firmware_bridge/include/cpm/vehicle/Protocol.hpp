@@ -14,7 +14,10 @@
 /// (cpm/vehicle/cpm_serial.h, from firmware/protocol/); these are its C++ faces.
 namespace cpm::vehicle {
 
-constexpr uint8_t kProtocolVersion = 1;
+constexpr uint8_t kProtocolVersion = CPM_SERIAL_VERSION;
+/// A command answers a state packet; the AVR firmware ignores one answering a packet sent more
+/// than this long ago by its clock (it waited in a backed-up line).
+constexpr uint32_t kCommandMaxAgeMs = CPM_COMMAND_MAX_AGE_MS;
 
 /// Status bits of StatePacket::status.
 enum StatusFlags : uint8_t {
@@ -22,6 +25,7 @@ enum StatusFlags : uint8_t {
     kStatusWatchdogStop = 1u << 1,   ///< no valid command for the watchdog period: motor braked
     kStatusWrongVehicle = 1u << 2,   ///< the last command named another vehicle id (ignored)
     kStatusBadCommand = 1u << 3,     ///< the last command's values were out of range (the AVR firmware ignores it)
+    kStatusStaleCommand = 1u << 4,   ///< the last command answered a state over kCommandMaxAgeMs old (the AVR firmware ignores it)
 };
 
 enum class MotorMode : uint8_t { brake = 0, forward = 1, reverse = 2 };
@@ -44,14 +48,14 @@ struct StatePacket
     uint16_t us_left_mm = 0;           ///< mm
     uint16_t us_right_mm = 0;          ///< mm
     uint8_t status = 0;                ///< StatusFlags
-    uint32_t command_tick = 0;         ///< tick of the last valid command applied
+    uint32_t command_tick = 0;         ///< tick of the last valid command applied (the state it answered)
     bool operator==(const StatePacket&) const;
 };
 
 /// Host → controller, once per state packet.
 struct CommandPacket
 {
-    uint32_t tick = 0;                 ///< the host's command counter (echoed in StatePacket)
+    uint32_t tick = 0;                 ///< the tick of the state packet it answers (echoed in StatePacket)
     uint8_t vehicle_id = 0;            ///< the controller ignores commands for another id
     MotorMode motor_mode = MotorMode::brake;
     uint16_t motor_pwm = 0;            ///< duty cycle in 1/1000 (0..1000)
