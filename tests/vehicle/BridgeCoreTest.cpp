@@ -498,10 +498,12 @@ TEST(BridgeCore, ALineThatLagsItsCommandsPausesTheSpeedFeedbackAndSaysSo)
         sent.push_back(out.command.tick);
         return out;
     };
-    for (int i = 0; i < 10; ++i) cycle_with_echo(answered_ago(0), 0.5);  // in step: the last command applied
     BridgeCycle out;
+    for (int i = 0; i < 10; ++i) out = cycle_with_echo(answered_ago(0), 0.5);  // in step: the last command applied
+    EXPECT_FALSE(out.discard_queued_output);
     for (int i = 0; i < 60; ++i) out = cycle_with_echo(answered_ago(50), 0.1);  // a second behind, car slow
     EXPECT_NEAR(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000, 1) << "feed-forward only";
+    EXPECT_TRUE(out.discard_queued_output) << "what waits in the line answers states long gone";
     EXPECT_EQ(sut.anomalies(Anomaly::line_lag), 1u) << "once per lagging spell";
     // Catching up: still 9, then 5 commands (180 ms, 100 ms) behind. Feedback acting on the car
     // that far late sent it off at 0.89 m/s for 0.5 commanded after a flood of its line.
@@ -514,4 +516,5 @@ TEST(BridgeCore, ALineThatLagsItsCommandsPausesTheSpeedFeedbackAndSaysSo)
     // slow: more than feed-forward).
     out = cycle_with_echo(answered_ago(4), 0.1);
     EXPECT_GT(out.command.motor_pwm, 0.5 * c.throttle_per_speed * 1000 + 50);
+    EXPECT_FALSE(out.discard_queued_output);
 }

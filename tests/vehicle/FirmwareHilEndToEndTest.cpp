@@ -230,12 +230,14 @@ TEST_F(FirmwareHilEndToEnd, AFloodOfBytesNeverLocksTheFirmwareUp)
     size_t during = watch.states_created_after(flood_start) - watch.states_created_after(flood_end);
     EXPECT_GT(during, 50u) << flooded << " bytes flooded; gaps: " << watch.state_gaps_between(flood_start, flood_end)
                            << "\nbridge:\n" << car.bridge->errors() << "firmware_hil:\n" << car.sim->errors();
-    // And drives again once the line is quiet: the pty still holds what the chip could not
-    // take at 115200 baud (4-5 s of it here). The commands in that backlog answer states long
-    // gone, and the firmware ignores them (applied, each drove the car for 250 ms on a throttle
-    // meant for a standing car: up to 0.89 m/s for 0.5 commanded on a loaded machine). Once
-    // fresh ones get through, the car does not run off faster than commanded either (the
-    // bridge's speed loop did not wind up while the firmware reported its watchdog's brake).
+    // And drives again once the line is quiet. The commands that waited in the line's backlog
+    // answer states long gone: the bridge drops what waits in the line while it lags (left
+    // there, the pty held 4-5 s of bytes the chip could not take at 115200 baud; dropped,
+    // the car drove again after 1.3-1.4 s), and the firmware ignores what still gets through
+    // (applied, each drove the car for 250 ms on a throttle meant for a standing car: up to
+    // 0.89 m/s for 0.5 commanded on a loaded machine). Once fresh ones get through, the car does
+    // not run off faster than commanded either (the bridge's speed loop did not wind up while
+    // the firmware reported its watchdog's brake).
     auto driving_at = [&](uint64_t t) {
         auto window = watch.observations_between(t - kSecond / 4, t);
         return window.size() > 5 && mean_speed(window) > 0.4;
@@ -254,9 +256,13 @@ TEST_F(FirmwareHilEndToEnd, AFloodOfBytesNeverLocksTheFirmwareUp)
     ASSERT_GT(recent.size(), 20u);
     EXPECT_NEAR(mean_speed(recent), 0.5, 0.1);
     EXPECT_LT(fastest, 0.75);
+    car.bridge->kill(SIGTERM);
+    ASSERT_EQ(car.bridge->wait(5s), 0);
+    const auto bridge_stats = last_json_line(car.bridge->output());
+    EXPECT_GT(bridge_stats.at("output_discards").get<int>(), 0) << bridge_stats;
     std::printf("flooded %zu bytes in 2 s; %zu states published meanwhile; driving again %.1f s after; fastest "
-                "afterwards %.2f m/s\n",
-                flooded, during, back_after, fastest);
+                "afterwards %.2f m/s; %d cycles dropped the line's backlog\n",
+                flooded, during, back_after, fastest, bridge_stats.at("output_discards").get<int>());
 }
 
 TEST_F(FirmwareHilEndToEnd, CommandsOutOfRangeStaleForAnotherCarOrWithABadCrcAreNotActedOn)

@@ -354,6 +354,7 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     // too fast once they do.
     if (packet.status & kStatusWatchdogStop) speed_controller_.reset();
     watch_line_lag(packet, out.notices);
+    out.discard_queued_output = line_lagging_;
 
     Actuation a = choose(commands, t_ns, speed, dt, out.active, out.notices);
     if (out.active != last_active_) speed_controller_.reset();

@@ -103,7 +103,8 @@ std::string BridgeNodeStats::to_json() const
                              {"foreign_packets", foreign_packets},
                              {"foreign_controller", foreign_controller},
                              {"controller_reported_bad_crc", controller_reported_bad_crc},
-                             {"decoder_errors", decoder_errors}};
+                             {"decoder_errors", decoder_errors},
+                             {"output_discards", output_discards}};
     for (size_t k = 0; k < kAnomalyKinds; ++k) j[to_string(Anomaly(k))] = anomalies[k];
     return j.dump();
 }
@@ -213,6 +214,7 @@ void BridgeCar::cycle(const StatePacket& packet, uint64_t t_received)
                          lab.stop_request_ns(id)};
     auto out = core.on_state_packet(packet, t_received, inputs);
     auto frame = encode_frame(out.command);
+    if (out.discard_queued_output && port->discard_output()) ++stats.output_discards;
     port->write_all(frame.data(), frame.size());
     report(out.notices);
 

@@ -124,6 +124,8 @@ bool SerialPort::write_all(const uint8_t* data, size_t size)
     return true;
 }
 
+bool SerialPort::discard_output() { return tcflush(fd_, TCOFLUSH) == 0; }
+
 PseudoTerminal::PseudoTerminal(const std::string& link_path) : link_path_(link_path)
 {
     master_ = posix_openpt(O_RDWR | O_NOCTTY | O_CLOEXEC);

@@ -71,6 +71,9 @@ struct BridgeCycle
     CommandPacket command;
     ActiveCommand active = ActiveCommand::none;
     uint64_t measured_ns = 0;  ///< when the controller measured the state, in host time
+    /// The line lags: what still waits in it answers states long gone (the AVR firmware would
+    /// ignore it), so the node drops it before writing `command`.
+    bool discard_queued_output = false;
     std::vector<Notice> notices;  ///< anomalies first seen in this cycle (a refused command once)
 };
 

@@ -35,6 +35,7 @@ struct BridgeNodeStats
     unsigned vehicle_id = 0;
     uint64_t cycles = 0, link_losses = 0, superseded_states = 0, foreign_packets = 0, foreign_controller = 0;
     uint64_t controller_reported_bad_crc = 0, decoder_errors = 0;
+    uint64_t output_discards = 0;  ///< cycles that dropped a lagging line's queued output first
     double cycle_cpu_us_p50 = 0, cycle_cpu_us_p99 = 0;
     uint64_t anomalies[kAnomalyKinds] = {};
     /// One JSON object: {"vehicle_id": …, "cycles": …, …, "refused_commands": …, …}.

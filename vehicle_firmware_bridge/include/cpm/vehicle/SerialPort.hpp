@@ -37,6 +37,9 @@ public:
     long read_some(uint8_t* data, size_t size, int timeout_ms);
     /// Writes all bytes (waits briefly when the line is full); false when the line is gone.
     bool write_all(const uint8_t* data, size_t size);
+    /// Drops what was written but not yet sent (tcflush TCOFLUSH: a serial driver's queue; on a
+    /// pty, what the other end has not taken into its line buffer); false when that failed.
+    bool discard_output();
 
     /// Throws cpm::Error naming the rate when `baud` is not one SerialPort can set.
     static void check_baud(int baud, const std::string& path);
