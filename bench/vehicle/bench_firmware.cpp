@@ -29,36 +29,48 @@
 #include <sstream>
 #include <thread>
 #include <unistd.h>
+#include <variant>
 
 namespace {
 
 using namespace std::chrono_literals;
 constexpr uint64_t kSlice = 20'000'000;  // chip time per step of the loops here: one state period
 
-/// The host's end of one chip's line: answers every state packet with a forward command.
+/// The tick of the newest state packet waiting on `port` (read without waiting), or `newest`.
+uint32_t newest_state_tick(cpm::vehicle::SerialPort& port, cpm::vehicle::FrameDecoder& decoder, uint32_t newest)
+{
+    uint8_t buffer[512];
+    for (long n; (n = port.read_some(buffer, sizeof buffer, 0)) > 0;) {
+        for (long i = 0; i < n; ++i) {
+            if (auto p = decoder.push(buffer[i])) {
+                if (auto* s = std::get_if<cpm::vehicle::StatePacket>(&*p)) newest = s->tick;
+            }
+        }
+    }
+    return newest;
+}
+
+/// The host's end of one chip's line: answers every state packet with a forward command (a
+/// command names the state it answers; the firmware ignores one answering an old state).
 class HostEnd
 {
 public:
     HostEnd(const std::string& device, uint8_t id) : port_(device, 115200), id_(id) {}
     void answer()
     {
-        uint8_t buffer[512];
-        for (long n; (n = port_.read_some(buffer, sizeof buffer, 0)) > 0;) {
-            for (long i = 0; i < n; ++i) {
-                if (decoder_.push(buffer[i])) {
-                    cpm::vehicle::CommandPacket c{++tick_, id_, cpm::vehicle::MotorMode::forward, 300, 1600};
-                    auto frame = cpm::vehicle::encode_frame(c);
-                    (void)port_.write_all(frame.data(), frame.size());
-                }
-            }
-        }
+        const uint32_t newest = newest_state_tick(port_, decoder_, answered_);
+        if (newest == answered_) return;
+        answered_ = newest;
+        cpm::vehicle::CommandPacket c{newest, id_, cpm::vehicle::MotorMode::forward, 300, 1600};
+        auto frame = cpm::vehicle::encode_frame(c);
+        (void)port_.write_all(frame.data(), frame.size());
     }
 
 private:
     cpm::vehicle::SerialPort port_;
     cpm::vehicle::FrameDecoder decoder_;
     uint8_t id_;
-    uint32_t tick_ = 0;
+    uint32_t answered_ = 0;
 };
 
 cpm::vehicle::FirmwareHilOptions chip_options(uint8_t id)
@@ -189,9 +201,17 @@ std::vector<double> command_latency(const std::string& program, int commands)
     std::vector<std::pair<uint64_t, uint16_t>> written;
     {
         cpm::vehicle::SerialPort port(device, 115200);
+        cpm::vehicle::FrameDecoder decoder;
+        uint32_t newest = 0;
+        for (int i = 0; i < 100 && newest == 0; ++i) {
+            std::this_thread::sleep_for(10ms);
+            newest = newest_state_tick(port, decoder, newest);
+        }
+        if (newest == 0) throw cpm::Error("bench_firmware: " + program + " sent no state packet within 1 s");
         for (int i = 0; i < commands; ++i) {
             const uint16_t pwm = i % 2 ? 400 : 300;
-            cpm::vehicle::CommandPacket c{uint32_t(i + 1), 7, cpm::vehicle::MotorMode::forward, pwm, 1500};
+            newest = newest_state_tick(port, decoder, newest);  // each command answers the newest state
+            cpm::vehicle::CommandPacket c{newest, 7, cpm::vehicle::MotorMode::forward, pwm, 1500};
             auto frame = cpm::vehicle::encode_frame(c);
             written.emplace_back(cpm::get_time_ns(), pwm);
             (void)port.write_all(frame.data(), frame.size());
