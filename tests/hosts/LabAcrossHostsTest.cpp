@@ -4,6 +4,7 @@
 #include <cpm/HistoryClient.hpp>
 #include <cpm/Security.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm_test/Gaps.hpp>
 #include <cpm_test/Hosts.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
@@ -190,16 +191,12 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
         EXPECT_GE(span_s, summary["lab_time_s"].get<double>() - 0.5) << "car " << car << "'s states span less than the run";
         EXPECT_NEAR(summary["lab_time_s"].get<double>(), 6.0, 0.1) << summary.dump(2);
         // A failure says where the states went missing, and what the recorder knew it lost.
-        std::string gaps;
-        for (size_t k = 1; k < states.samples.size(); ++k) {
-            const uint64_t gap = stamp(states.samples[k]) - stamp(states.samples[k - 1]);
-            if (gap > 30'000'000)
-                gaps += (gaps.empty() ? "" : ", ") + std::to_string(gap / 1'000'000) + " ms at +" +
-                        std::to_string((stamp(states.samples[k - 1]) - stamp(states.samples.front())) / 1'000'000) + " ms";
-        }
+        std::vector<uint64_t> stamps;
+        for (const auto& s : states.samples) stamps.push_back(stamp(s));
         EXPECT_GE(double(states.samples.size()), 0.98 * span_s * 50)
             << "car " << car << ": " << states.samples.size() << " states in " << span_s << " s; gaps over 30 ms: "
-            << (gaps.empty() ? "none" : gaps) << "; the recording's account: " << summary["recording"].dump();
+            << cpm_test::gaps_over(stamps, stamp(states.samples.front()), 30'000'000) << "; the recording's account: "
+            << summary["recording"].dump();
     }
     // So they came over the wire: the central host's link received at least their bytes.
     const uint64_t central_received = hosts().received_bytes(0) - central_received_before;

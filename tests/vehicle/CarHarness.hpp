@@ -10,6 +10,7 @@
 #include <cpm/stamp_message.hpp>
 
 #include <cpm_test/Dds.hpp>
+#include <cpm_test/Gaps.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 
@@ -162,15 +163,7 @@ public:
             const uint64_t t = s.header().create_stamp().nanoseconds();
             if (t >= t0 && t < t1) stamps.push_back(t);
         }
-        std::sort(stamps.begin(), stamps.end());
-        std::string out;
-        for (size_t k = 1; k < stamps.size(); ++k) {
-            const uint64_t gap = stamps[k] - stamps[k - 1];
-            if (gap > 30'000'000ull)
-                out += (out.empty() ? "" : ", ") + std::to_string(gap / 1'000'000) + " ms at +" +
-                       std::to_string((stamps[k - 1] - t0) / 1'000'000) + " ms";
-        }
-        return out.empty() ? "none" : out;
+        return cpm_test::gaps_over(std::move(stamps), t0, 30'000'000ull);
     }
     /// Observations created in [t0, t1).
     std::vector<VehicleObservation> observations_between(uint64_t t0, uint64_t t1) const
