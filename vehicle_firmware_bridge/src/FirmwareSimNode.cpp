@@ -13,6 +13,8 @@
 #include <cpm/stamp_message.hpp>
 #include <cpm/vehicle/SerialPort.hpp>
 
+#include "ObservationPublisher.hpp"
+
 #include <VehicleObservation.h>
 
 #include <nlohmann/json.hpp>
@@ -95,7 +97,6 @@ struct FirmwareSimNode::Impl
             cars.push_back(std::make_unique<Car>(c, options));
             own_ids.insert(c.vehicle_id);
         }
-        publisher = std::thread([this] { publish_loop(); });
     }
 
     void trace(Car& car, uint64_t now);
@@ -105,7 +106,6 @@ struct FirmwareSimNode::Impl
     void publish(Car& car, uint64_t t_model);
     void see_each_other();
     void report_collisions(Car& car);
-    void publish_loop();
 
     FirmwareSimNodeOptions options;
     std::vector<std::unique_ptr<Car>> cars;
@@ -118,30 +118,8 @@ struct FirmwareSimNode::Impl
     bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
     uint64_t last_tick_ns = 0, steps = 0, skipped_steps = 0;
-    // In real time the true poses go out from a thread of their own: a DDS write can stall (a
-    // reader's process killed while holding its shared-memory port), and the microcontrollers'
-    // clock, commands and watchdogs must not wait for it. Only the newest observation per car is
-    // kept. On the simulated clock the tick writes them itself (publish).
-    std::mutex publish_mutex;
-    std::condition_variable publish_ready;
-    std::map<uint8_t, VehicleObservation> to_publish;
-    bool publishing = true;
-    std::thread publisher;  // started once the lines are open (the constructor may throw before)
+    ObservationPublisher publisher{observations};  ///< real time: the true poses' own thread
 };
-
-void FirmwareSimNode::Impl::publish_loop()
-{
-    for (;;) {
-        std::map<uint8_t, VehicleObservation> batch;
-        {
-            std::unique_lock<std::mutex> lock(publish_mutex);
-            publish_ready.wait(lock, [&] { return !to_publish.empty() || !publishing; });
-            if (to_publish.empty()) return;
-            batch.swap(to_publish);
-        }
-        for (const auto& [id, o] : batch) (void)observations.write(o);
-    }
-}
 
 void FirmwareSimNode::Impl::trace(Car& car, uint64_t now)
 {
@@ -177,9 +155,7 @@ void FirmwareSimNode::Impl::publish(Car& car, uint64_t t_model)
         (void)observations.write(o);
         return;
     }
-    std::lock_guard<std::mutex> lock(publish_mutex);
-    to_publish[car.options.vehicle_id] = o;
-    publish_ready.notify_one();
+    publisher.publish(o);
 }
 
 void FirmwareSimNode::Impl::see_each_other()
@@ -279,15 +255,7 @@ FirmwareSimNode::FirmwareSimNode(FirmwareSimNodeOptions options) : impl_(std::ma
     std::fflush(stdout);
 }
 
-FirmwareSimNode::~FirmwareSimNode()
-{
-    {
-        std::lock_guard<std::mutex> lock(impl_->publish_mutex);
-        impl_->publishing = false;
-        impl_->publish_ready.notify_one();
-    }
-    impl_->publisher.join();
-}
+FirmwareSimNode::~FirmwareSimNode() = default;
 
 std::vector<std::pair<uint8_t, std::string>> FirmwareSimNode::devices() const
 {

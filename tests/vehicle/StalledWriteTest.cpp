@@ -1,0 +1,132 @@
+// A car's microcontroller is a chip of its own: nothing on the lab's network can stop its clock,
+// its answers or its watchdog. The simulators that play it (firmware_sim's model, firmware_hil's
+// AVR in simavr) also publish the car's true pose over DDS, and a DDS write can stall for
+// seconds: Fast DDS 2.9 waits a second per send, again and again, on the shared-memory port of a
+// reader whose process was killed while it held that port's lock (seen once in CI, where the
+// AVR car under firmware_hil never braked after its bridge was killed). These tests stall the
+// write on purpose - a reader in this process whose callback runs inside the writer's write()
+// and sleeps - and read the car's serial line meanwhile, as its bridge would.
+#include <cpm/vehicle/FirmwareHil.hpp>
+#include <cpm/vehicle/FirmwareSimNode.hpp>
+#include <cpm/vehicle/Protocol.hpp>
+#include <cpm/vehicle/SerialPort.hpp>
+
+#include <cpm/AsyncReader.hpp>
+#include <cpm/Participant.hpp>
+#include <cpm_test/Isolation.hpp>
+
+#include <VehicleObservation.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <functional>
+#include <thread>
+#include <variant>
+
+using namespace std::chrono_literals;
+
+namespace {
+
+/// Holds up the next write of a true pose, inside that write, for `how_long`, once armed.
+class WriteStaller
+{
+public:
+    explicit WriteStaller(std::chrono::milliseconds how_long)
+        : reader_(
+              [this, how_long](std::vector<VehicleObservation>&) {
+                  if (!armed_.exchange(false)) return;
+                  stalling_ = true;
+                  std::this_thread::sleep_for(how_long);
+                  stalling_ = false;
+              },
+              "vehicleObservation", {.dds_thread_callback = true})
+    {
+    }
+    void arm() { armed_ = true; }
+    bool stalling() const { return stalling_; }
+
+private:
+    std::atomic<bool> armed_{false}, stalling_{false};
+    cpm::AsyncReader<VehicleObservation> reader_;
+};
+
+/// Counts the state packets that come over the car's line for `how_long`.
+int state_packets_within(cpm::vehicle::SerialPort& line, std::chrono::milliseconds how_long)
+{
+    cpm::vehicle::FrameDecoder decoder;
+    int states = 0;
+    const auto end = std::chrono::steady_clock::now() + how_long;
+    uint8_t bytes[512];
+    while (std::chrono::steady_clock::now() < end) {
+        const long n = line.read_some(bytes, sizeof bytes, 5);
+        if (n < 0) break;
+        decoder.feed(bytes, size_t(n), [&](const cpm::vehicle::Packet& p) {
+            states += std::holds_alternative<cpm::vehicle::StatePacket>(p);
+        });
+    }
+    return states;
+}
+
+/// Runs a node's loop on a thread of its own until destroyed.
+class Running
+{
+public:
+    explicit Running(std::function<void(const std::function<bool()>&)> run)
+        : thread_([this, run = std::move(run)] { run([this] { return stop_.load(); }); })
+    {
+    }
+    ~Running()
+    {
+        stop_ = true;
+        thread_.join();
+    }
+
+private:
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+/// The line keeps talking at its 50 Hz while a true pose's write is held up for 1.5 s.
+void expect_state_packets_through_a_stalled_write(const std::string& device, WriteStaller& staller)
+{
+    cpm::vehicle::SerialPort line(device, 115200);
+    ASSERT_GT(state_packets_within(line, 500ms), 15) << "the car did not start talking on " << device;
+    staller.arm();
+    const auto deadline = std::chrono::steady_clock::now() + 2s;
+    while (!staller.stalling() && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(1ms);
+    ASSERT_TRUE(staller.stalling()) << "no true pose was written within 2 s";
+    const int during = state_packets_within(line, 1000ms);
+    EXPECT_TRUE(staller.stalling()) << "the write was held up for less than the second counted";
+    EXPECT_GE(during, 35) << "state packets in the second a write of the true pose stalled (50 due)";
+}
+
+}  // namespace
+
+class StalledWrite : public ::testing::Test
+{
+protected:
+    void SetUp() override { (void)cpm_test::test_domain_id(); }  // the nodes' default participant joins it
+};
+
+TEST_F(StalledWrite, TheAvrChipKeepsItsClockAndItsLineWhileItsTruePoseCannotBeWritten)
+{
+    WriteStaller staller(1500ms);
+    cpm::vehicle::FirmwareHilOptions options;
+    options.elf = CPM_FIRMWARE_ELF;
+    options.car.vehicle_id = 7;
+    cpm::vehicle::FirmwareHilNode node(options);
+    Running running([&](const std::function<bool()>& stop) { node.run(stop); });
+    expect_state_packets_through_a_stalled_write(node.device(), staller);
+}
+
+TEST_F(StalledWrite, TheModelCarKeepsItsClockAndItsLineWhileItsTruePoseCannotBeWritten)
+{
+    WriteStaller staller(1500ms);
+    cpm::vehicle::FirmwareSimNodeOptions options;
+    options.cars.push_back({.vehicle_id = 7});
+    cpm::vehicle::FirmwareSimNode node(options);
+    Running running([&](const std::function<bool()>& stop) { node.run(stop); });
+    expect_state_packets_through_a_stalled_write(node.devices().at(0).second, staller);
+}
