@@ -183,6 +183,8 @@ void Logging::vwrite(Severity severity, const char* format, va_list args)
     impl_->publish(log);
 }
 
+void Logging::connect() { impl_->start(); }
+
 void Logging::set_level(Severity level) { impl_->level = static_cast<uint16_t>(level); }
 
 Severity Logging::level() const { return static_cast<Severity>(impl_->level.load()); }

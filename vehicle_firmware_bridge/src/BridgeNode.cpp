@@ -353,6 +353,7 @@ struct BridgeNode::Impl
     explicit Impl(std::vector<BridgeNodeOptions> options) : lab(checked_ids(options))
     {
         for (auto& o : options) cars.push_back(std::make_unique<BridgeCar>(std::move(o), lab));
+        Logging::instance().connect();  // the serial loops' first message must not create DDS entities
     }
     LabTopics lab;
     std::vector<std::unique_ptr<BridgeCar>> cars;

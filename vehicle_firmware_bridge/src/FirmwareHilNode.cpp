@@ -34,6 +34,7 @@ struct FirmwareHilNode::Impl
           others(participant, truth_topic, topics::vehicle_observation.reader)
     {
         hil.on_state_period([this](uint64_t chip_ns) { publish(chip_ns); });
+        Logging::instance().connect();  // the chip's first message (a late tick) must not create DDS entities
     }
 
     void publish(uint64_t chip_ns)

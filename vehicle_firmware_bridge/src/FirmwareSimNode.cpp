@@ -21,12 +21,9 @@
 
 #include <algorithm>
 #include <chrono>
-#include <condition_variable>
-#include <mutex>
-#include <optional>
+#include <cmath>
 #include <thread>
 #include <cstdio>
-#include <map>
 #include <set>
 #include <random>
 
@@ -97,6 +94,7 @@ struct FirmwareSimNode::Impl
             cars.push_back(std::make_unique<Car>(c, options));
             own_ids.insert(c.vehicle_id);
         }
+        Logging::instance().connect();  // the cars' first message (a late tick) must not create DDS entities
     }
 
     void trace(Car& car, uint64_t now);

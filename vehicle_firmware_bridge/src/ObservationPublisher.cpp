@@ -9,6 +9,7 @@ ObservationPublisher::~ObservationPublisher()
     {
         std::lock_guard<std::mutex> lock(mutex_);
         running_ = false;
+        waiting_.clear();  // a pose of the moment the car stops: not worth a stalled write per car
     }
     ready_.notify_one();
     thread_.join();
@@ -30,7 +31,7 @@ void ObservationPublisher::run()
         {
             std::unique_lock<std::mutex> lock(mutex_);
             ready_.wait(lock, [&] { return !waiting_.empty() || !running_; });
-            if (waiting_.empty()) return;  // stopped, and the last poses written
+            if (!running_) return;
             batch.swap(waiting_);
         }
         for (const auto& [id, o] : batch) (void)writer_.write(o);

@@ -20,7 +20,7 @@ class ObservationPublisher
 {
 public:
     explicit ObservationPublisher(Writer<VehicleObservation>& writer);
-    /// Returns once the poses still waiting are written.
+    /// Returns once a write under way has ended; the poses still waiting are dropped.
     ~ObservationPublisher();
     ObservationPublisher(const ObservationPublisher&) = delete;
     ObservationPublisher& operator=(const ObservationPublisher&) = delete;

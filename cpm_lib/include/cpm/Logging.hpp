@@ -26,6 +26,12 @@ public:
     void write(Severity severity, const char* format, ...) __attribute__((format(printf, 3, 4)));
     void vwrite(Severity severity, const char* format, va_list args);
 
+    /// Creates the log's DDS entities now, if no thread has begun to, instead of at the first
+    /// message. Creating a DDS entity waits for what holds the process's readers (a reader's
+    /// callback, a write stalled inside one): a loop that must never wait on DDS (a simulated
+    /// microcontroller, a car's serial loop) calls this before it starts.
+    void connect();
+
     void set_level(Severity level);
     Severity level() const;
     /// Also append messages as CSV (`time_ns,node_id,level,"message"`) to this file; an empty
