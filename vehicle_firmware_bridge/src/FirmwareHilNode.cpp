@@ -13,7 +13,7 @@
 #include <cpm/timer_ids.hpp>
 #include <cpm/topics.hpp>
 
-#include "ObservationPublisher.hpp"
+#include "WriterThread.hpp"
 
 #include <VehicleObservation.h>
 
@@ -52,7 +52,7 @@ struct FirmwareHilNode::Impl
         if (simulated) {
             (void)observations.write(o);  // on the simulated clock the tick waits for it anyway
         } else {
-            publisher.publish(o);  // the chip runs on while a write stalls
+            publisher.write(o);  // the chip runs on while a write stalls
         }
     }
 
@@ -99,7 +99,7 @@ struct FirmwareHilNode::Impl
     LogThrottle lag_log;
     bool host_silent = false;
     bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
-    ObservationPublisher publisher{observations};  ///< real time: the true poses' own thread
+    WriterThread<VehicleObservation> publisher{observations, truth_topic, 256};  ///< real time: the true poses' own thread
 };
 
 FirmwareHilNode::FirmwareHilNode(FirmwareHilOptions options) : impl_(std::make_unique<Impl>(std::move(options)))

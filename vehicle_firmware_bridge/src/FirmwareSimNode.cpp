@@ -13,7 +13,7 @@
 #include <cpm/stamp_message.hpp>
 #include <cpm/vehicle/SerialPort.hpp>
 
-#include "ObservationPublisher.hpp"
+#include "WriterThread.hpp"
 
 #include <VehicleObservation.h>
 
@@ -116,7 +116,7 @@ struct FirmwareSimNode::Impl
     bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
     uint64_t last_tick_ns = 0, steps = 0, skipped_steps = 0;
-    ObservationPublisher publisher{observations};  ///< real time: the true poses' own thread
+    WriterThread<VehicleObservation> publisher{observations, options.truth_topic, 256};  ///< real time: the true poses' own thread
 };
 
 void FirmwareSimNode::Impl::trace(Car& car, uint64_t now)
@@ -153,7 +153,7 @@ void FirmwareSimNode::Impl::publish(Car& car, uint64_t t_model)
         (void)observations.write(o);
         return;
     }
-    publisher.publish(o);
+    publisher.write(o);
 }
 
 void FirmwareSimNode::Impl::see_each_other()
