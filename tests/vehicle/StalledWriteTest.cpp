@@ -1,11 +1,12 @@
 // A car's microcontroller is a chip of its own: nothing on the lab's network can stop its clock,
-// its answers or its watchdog. The simulators that play it (firmware_sim's model, firmware_hil's
-// AVR in simavr) also publish the car's true pose over DDS, and a DDS write can stall for
-// seconds: Fast DDS 2.9 waits a second per send, again and again, on the shared-memory port of a
-// reader whose process was killed while it held that port's lock (seen once in CI, where the
-// AVR car under firmware_hil never braked after its bridge was killed). These tests stall the
-// write on purpose - a reader in this process whose callback runs inside the writer's write()
-// and sleeps - and read the car's serial line meanwhile, as its bridge would.
+// its answers or its watchdog, and the bridge answers each of its state packets. The simulators
+// that play the chip (firmware_sim's model, firmware_hil's AVR in simavr) publish the car's true
+// pose over DDS, the bridge its state, and a DDS write can stall for seconds: Fast DDS 2.9 waits
+// a second per send, again and again, on the shared-memory port of a reader whose process was
+// killed while it held that port's lock (seen once in CI, where the AVR car under firmware_hil
+// never braked after its bridge was killed). These tests stall the write on purpose - a reader
+// in this process whose callback runs inside the writer's write() and sleeps - and work the
+// car's serial line meanwhile, as its bridge or its chip would.
 #include <cpm/vehicle/BridgeNode.hpp>
 #include <cpm/vehicle/FirmwareHil.hpp>
 #include <cpm/vehicle/FirmwareSimNode.hpp>
