@@ -249,7 +249,7 @@ TEST_F(StalledWrite, WhatAStalledWriteMadeTheWriterThreadDropIsCountedInAWarning
     cpm::Writer<VehicleState> writer(cpm::Participant::default_participant(), "vehicleState", cpm_test::kReliable);
     ASSERT_TRUE(writer.wait_for_matched(2, 5000ms));
     {
-        cpm::vehicle::WriterThread<VehicleState> thread(writer, "vehicleState", 4);
+        cpm::vehicle::WriterThread<VehicleState> thread(writer, "vehicleState", 4, true);
         staller.arm();
         thread.write(cpm_test::vehicle_state(7, 1, 1, 0));
         while (!staller.stalling()) std::this_thread::sleep_for(1ms);

@@ -79,11 +79,9 @@ struct LabTopics
     Writer<VehicleState> state{topics::vehicle_state.name, topics::vehicle_state.writer};
     Writer<RangeSensors> ranges{topics::range_sensors.name, topics::range_sensors.writer};
     /// In real time the serial loops hand their samples to threads of their own: a stalled DDS
-    /// write must not hold up the next command (the car's watchdog would brake it). On the lab's
-    /// simulated clock the tick writes them itself (the clock waits for them anyway).
-    const bool simulated = init_settings().simulated_time;
-    WriterThread<VehicleState> state_out{state, topics::vehicle_state.name, 256};
-    WriterThread<RangeSensors> ranges_out{ranges, topics::range_sensors.name, 256};
+    /// write must not hold up the next command (the car's watchdog would brake it).
+    WriterThread<VehicleState> state_out{state, topics::vehicle_state.name, 256, !init_settings().simulated_time};
+    WriterThread<RangeSensors> ranges_out{ranges, topics::range_sensors.name, 256, !init_settings().simulated_time};
 };
 
 std::vector<uint8_t> checked_ids(const std::vector<BridgeNodeOptions>& cars)
@@ -234,13 +232,8 @@ void BridgeCar::cycle(const StatePacket& packet, uint64_t t_received)
     out.state.is_real(!port->is_pseudo_terminal());
     stamp_message(out.state, out.measured_ns, delay);
     stamp_message(out.ranges, out.measured_ns, delay);
-    if (lab.simulated) {
-        (void)lab.state.write(out.state);
-        (void)lab.ranges.write(out.ranges);
-    } else {
-        lab.state_out.write(out.state);
-        lab.ranges_out.write(out.ranges);
-    }
+    lab.state_out.write(out.state);
+    lab.ranges_out.write(out.ranges);
     ++stats.cycles;
     ++cycle_cpu_us[std::min<uint64_t>((thread_cpu_ns() - cpu0) / 1000, kCycleBins - 1)];
     ++cycles_timed;

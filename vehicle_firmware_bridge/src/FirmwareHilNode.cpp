@@ -49,11 +49,7 @@ struct FirmwareHilNode::Impl
         o.pose().x(pose.x);
         o.pose().y(pose.y);
         o.pose().yaw(pose.yaw);
-        if (simulated) {
-            (void)observations.write(o);  // on the simulated clock the tick waits for it anyway
-        } else {
-            publisher.write(o);  // the chip runs on while a write stalls
-        }
+        publisher.write(o);  // in real time the chip runs on while a write stalls
     }
 
     /// The other cars' bodies, for the rangers: those seen within the last second.
@@ -98,8 +94,7 @@ struct FirmwareHilNode::Impl
     uint64_t t0 = 0;  ///< lab time of the chip's reset
     LogThrottle lag_log;
     bool host_silent = false;
-    bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
-    WriterThread<VehicleObservation> publisher{observations, truth_topic, 256};  ///< real time: the true poses' own thread
+    WriterThread<VehicleObservation> publisher{observations, truth_topic, 256, !init_settings().simulated_time};
 };
 
 FirmwareHilNode::FirmwareHilNode(FirmwareHilOptions options) : impl_(std::make_unique<Impl>(std::move(options)))
@@ -116,8 +111,7 @@ void FirmwareHilNode::run(const std::function<bool()>& stop_requested)
 {
     auto& d = *impl_;
     const auto& p = d.hil.car().parameters();
-    d.simulated = init_settings().simulated_time;
-    const bool simulated = d.simulated;
+    const bool simulated = init_settings().simulated_time;
     // Simulated time: a tick per state packet. The chip's clock runs 10 ms ahead of the lab's
     // so the packet it starts at each multiple of 20 ms is on the line (4 ms at 115200 baud)
     // before the tick ends. Real time: the chip catches up with the wall clock every 1 ms.

@@ -116,7 +116,7 @@ struct FirmwareSimNode::Impl
     bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
     uint64_t last_tick_ns = 0, steps = 0, skipped_steps = 0;
-    WriterThread<VehicleObservation> publisher{observations, options.truth_topic, 256};  ///< real time: the true poses' own thread
+    WriterThread<VehicleObservation> publisher{observations, options.truth_topic, 256, !init_settings().simulated_time};
 };
 
 void FirmwareSimNode::Impl::trace(Car& car, uint64_t now)
@@ -147,13 +147,7 @@ void FirmwareSimNode::Impl::publish(Car& car, uint64_t t_model)
     o.pose().x(pose.x);
     o.pose().y(pose.y);
     o.pose().yaw(pose.yaw);
-    if (simulated) {
-        // On the lab's simulated clock the tick waits for its poses anyway: written here, one
-        // thread hop less per step (the publisher thread is for real time, where a write may stall).
-        (void)observations.write(o);
-        return;
-    }
-    publisher.write(o);
+    publisher.write(o);  // in real time from its own thread: the cars run on while a write stalls
 }
 
 void FirmwareSimNode::Impl::see_each_other()

@@ -20,13 +20,16 @@ namespace cpm::vehicle {
 /// microcontroller's clock and watchdog, the bridge's serial loop) must not wait for it, as a real
 /// car never waits for the lab's network. While a write is held up, at most `capacity` samples
 /// wait; older ones are dropped, and a warning says how many once the writes go through again.
+/// On the lab's simulated clock (`own_thread` false) it writes on the caller's thread instead:
+/// the clock waits for the samples anyway, and the runs repeat sample for sample.
 template <class T>
 class WriterThread
 {
 public:
-    WriterThread(Writer<T>& writer, std::string topic, size_t capacity)
-        : writer_(writer), topic_(std::move(topic)), capacity_(capacity), thread_([this] { run(); })
+    WriterThread(Writer<T>& writer, std::string topic, size_t capacity, bool own_thread)
+        : writer_(writer), topic_(std::move(topic)), capacity_(capacity)
     {
+        if (own_thread) thread_ = std::thread([this] { run(); });
     }
     /// Returns once a write under way has ended; the samples still waiting are dropped (the
     /// loop has stopped: not worth a stalled write each).
@@ -38,14 +41,18 @@ public:
             waiting_.clear();
         }
         ready_.notify_one();
-        thread_.join();
+        if (thread_.joinable()) thread_.join();
     }
     WriterThread(const WriterThread&) = delete;
     WriterThread& operator=(const WriterThread&) = delete;
 
-    /// Hands the sample over to be written; never waits for DDS.
+    /// Hands the sample over to be written; with a thread of its own, never waits for DDS.
     void write(const T& sample)
     {
+        if (!thread_.joinable()) {
+            (void)writer_.write(sample);
+            return;
+        }
         {
             std::lock_guard<std::mutex> lock(mutex_);
             if (waiting_.size() >= capacity_) {
@@ -93,7 +100,7 @@ private:
     uint64_t dropped_ = 0;  ///< under mutex_, since the last warning
     double longest_write_s_ = 0;  ///< the writer thread's: the longest write since the last warning
     bool running_ = true;
-    std::thread thread_;  // last: starts once the rest exists
+    std::thread thread_;  // last: starts once the rest exists (none on the simulated clock)
 };
 
 }  // namespace cpm::vehicle
