@@ -377,6 +377,16 @@ void BridgeNode::run(const std::function<bool()>& stop_requested)
         // One tick per state packet, 1 ms after the controller's on the lab's clock: the
         // controllers' packets of a tick are answered before their next tick.
         auto& cars = impl_->cars;
+        // The bridge joins the clock once every line is open, as a node joins it once its inputs
+        // have writers: opening flushes a line, and the state packet the controller sent at lab
+        // time 0 must not go with it (that cost the bridge's first tick 100 ms of waiting, and
+        // the controller's next one 100 ms waiting for an answer).
+        for (auto& car : cars) {
+            while (!car->open_line()) {
+                if (stop_requested()) return;
+                std::this_thread::sleep_for(std::chrono::milliseconds(200));
+            }
+        }
         auto timer = Timer::create(timer_name(cars[0]->options.vehicle_id), cars[0]->options.simulated_state_period_ns, 1'000'000,
                                    TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
         timer->run_until(stop_requested, [&](uint64_t) {

@@ -116,6 +116,7 @@ struct FirmwareSimNode::Impl
     bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
     uint64_t last_tick_ns = 0, steps = 0, skipped_steps = 0;
+    bool ticked = false;  ///< a first tick ran (on the simulated clock it is at lab time 0)
     WriterThread<VehicleObservation> publisher{observations, options.truth_topic, 256, !init_settings().simulated_time};
 };
 
@@ -208,7 +209,11 @@ void FirmwareSimNode::Impl::tick(uint64_t t_nominal)
     // Catch up on ticks the timer skipped (up to 1 s), so model time keeps pace with real
     // time; but send only one state packet however many fell due: a controller that fell
     // behind must not flood its host (it would only use the newest anyway).
-    uint64_t due = last_tick_ns == 0 ? 1 : (t_nominal - last_tick_ns) / physics_period_ns;
+    // The first tick steps once. Not told by last_tick_ns == 0: on the simulated clock the first
+    // tick is at 0, and the second then stepped once instead of a state period's worth, sent no
+    // state packet, and the bridge waited 100 ms for it.
+    uint64_t due = ticked ? (t_nominal - last_tick_ns) / physics_period_ns : 1;
+    ticked = true;
     if (due > max_catch_up) {
         skipped_steps += due - max_catch_up;
         due = max_catch_up;
