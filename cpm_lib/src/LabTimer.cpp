@@ -158,6 +158,7 @@ LabTimer::~LabTimer()
 
 void LabTimer::on_trigger(std::vector<SystemTrigger>& triggers)
 {
+    bool wake = false;
     for (const auto& trigger : triggers) {
         const uint64_t next_start = trigger.next_start().nanoseconds();
         if (next_start == kStopTrigger) {
@@ -168,8 +169,11 @@ void LabTimer::on_trigger(std::vector<SystemTrigger>& triggers)
         // The lab clock only moves forward: a late-delivered older trigger must not wind it back.
         if (trigger_count_ == 0 || next_start > next_start_) next_start_ = next_start;
         ++trigger_count_;
+        // Another node's tick leaves this timer asleep: on the simulated clock most steps are
+        // other nodes', and a needless wake-up costs the step a context switch on a busy core.
+        wake = wake || next_start_ >= wake_at_;
     }
-    trigger_changed_.notify_all();
+    if (wake) trigger_changed_.notify_all();
 }
 
 void LabTimer::stop()
@@ -265,8 +269,9 @@ void LabTimer::run_simulated(const Callback& callback)
             lock.lock();
             announced = next;
         }
-        // Wait for the master to move the clock (stop() notifies too). A master that appears
-        // late still finds the announcement in the transient-local history.
+        // Wait for the master to move the clock to our tick (or past it; stop() notifies too).
+        // A master that appears late still finds the announcement in the transient-local history.
+        wake_at_ = next;
         trigger_changed_.wait(lock, [&] { return stopping_ || trigger_count_ != seen; });
         if (stopping_) break;
         seen = trigger_count_;

@@ -68,6 +68,9 @@ private:
     std::condition_variable trigger_changed_;
     uint64_t next_start_ = 0;      // the largest next_start received (the lab clock only advances)
     uint64_t trigger_count_ = 0;   // triggers received (a simulated trigger may be 0)
+    /// The lab time the timer's thread waits for: a trigger before it (another node's tick) is
+    /// counted without waking the thread. 0: every trigger wakes it.
+    uint64_t wake_at_ = 0;
 
     std::unique_ptr<Writer<ReadyStatus>> ready_writer_;
     std::unique_ptr<AsyncReader<SystemTrigger>> trigger_reader_;
