@@ -9,6 +9,7 @@
 #include <cpm/fsm/Machine.hpp>
 #include <cpm/nodes.hpp>
 #include <cpm/timer_ids.hpp>
+#include <cpm/vehicle/BridgeNode.hpp>
 #include <cpm/vehicle/FirmwareSim.hpp>
 #include <cpm/vehicle/World.hpp>
 #include <cpm/aruco/Camera.hpp>
@@ -882,7 +883,13 @@ public:
         for (const auto& v : s_.vehicles) {
             if (v.fsm.empty()) continue;
             const std::string id = std::to_string(v.id);
-            add("fsm_" + id, "fsm_node", common({program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"}, v.realtime), v.restart, 1, v.id, v.host);
+            std::vector<std::string> fsm{program("fsm_node"), "--vehicle_id", id, "--fsm", v.fsm, "--report"};
+            // On the simulated clock the machine looks at the sensors' rate, with the car's own
+            // tick: it ticks once per range sample anyway, and each of its ticks at 80 Hz was a
+            // step of the lab's clock of its own (17 steps per 100 ms instead of 10). A sample
+            // reaches the bridge's command at the same tick as before (the next one).
+            if (simulated()) fsm.insert(fsm.end(), {"--rate", number(1e9 / double(cpm::vehicle::BridgeNodeOptions{}.simulated_state_period_ns))});
+            add("fsm_" + id, "fsm_node", common(fsm, v.realtime), v.restart, 1, v.id, v.host);
         }
     }
 

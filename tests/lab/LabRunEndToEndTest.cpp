@@ -4,6 +4,7 @@
 // starts nothing.
 #include <cpm/rtdb/Mcap.hpp>
 #include <cpm/rtdb/Recording.hpp>
+#include <cpm/timer_ids.hpp>
 
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/McapCheck.hpp>
@@ -38,6 +39,17 @@ nlohmann::json summary_of(const std::string& dir)
 {
     std::ifstream in(dir + "/summary.json");
     return nlohmann::json::parse(in);
+}
+
+/// A car program's statistics: the last line of its log that is a JSON object.
+nlohmann::json final_stats(const std::string& log)
+{
+    std::ifstream in(log);
+    std::string stats;
+    for (std::string line; std::getline(in, line);) {
+        if (!line.empty() && line[0] == '{') stats = line;
+    }
+    return stats.empty() ? nlohmann::json() : nlohmann::json::parse(stats);
 }
 
 /// The page as headless Chromium (Debian's) leaves it after loading, scripts run; no request
@@ -119,6 +131,17 @@ TEST(LabRun, ACorridorRunLeavesItsLogsARecordingThatAnswersAndASummary)
     EXPECT_GE(stop_sample.sample.data_ns, 7'000'000'000u) << "stamped at the run's end in lab time";
     EXPECT_LE(stop_sample.sample.data_ns, 9'000'000'000u) << "not the wall clock";
     EXPECT_TRUE(rec.store->find("fsmStatus", "5")) << "the state machine's status is recorded";
+    // The car's simulator sent a state packet every 20 ms from lab time 0 on, the bridge answered
+    // each at its next tick, and the state machine ticked with them (50 a second, not 80).
+    const auto sim = final_stats(out + "/sim_5.log");
+    const auto bridge = final_stats(out + "/bridge_5.log");
+    EXPECT_EQ(sim["state_packets"], 400) << sim.dump();
+    EXPECT_EQ(sim["unanswered_states"], 0) << sim.dump();
+    EXPECT_EQ(bridge["cycles"], sim["state_packets"]) << bridge.dump();
+    const auto fsm_ticks = rec.store->find("readyStatus", cpm::timer_ids::fsm_node(5));
+    ASSERT_TRUE(fsm_ticks) << "the state machine's announcements of its ticks are recorded";
+    EXPECT_GE(rec.store->info(*fsm_ticks)->samples_total, 400u);
+    EXPECT_LE(rec.store->info(*fsm_ticks)->samples_total, 403u) << "one announcement per tick, a first and a last";
     // The lab clock's stop (a SystemTrigger, a type without a Header) is recorded, not skipped.
     const auto trigger = rec.store->find("systemTrigger", "");
     ASSERT_TRUE(trigger) << "the timers' stop is recorded";
@@ -605,13 +628,9 @@ TEST(LabRun, TheCorridorOnTheCarsAvrFirmwareInSimulatedTimeEndsInItsStopState)
     std::ifstream fsm_log(out + "/fsm_5.log");
     const std::string fsm_text((std::istreambuf_iterator<char>(fsm_log)), std::istreambuf_iterator<char>());
     EXPECT_NE(fsm_text.find("ended in state 3 (Stop)"), std::string::npos) << fsm_text;
-    std::ifstream sim_log(out + "/sim_5.log");
-    std::string stats;
-    for (std::string line; std::getline(sim_log, line);) {
-        if (!line.empty() && line[0] == '{') stats = line;
-    }
-    ASSERT_FALSE(stats.empty()) << "firmware_hil's statistics at its end";
-    const auto j = nlohmann::json::parse(stats);
+    const auto j = final_stats(out + "/sim_5.log");
+    ASSERT_TRUE(j.is_object()) << "firmware_hil's statistics at its end";
+    const std::string stats = j.dump();
     // One state packet per 20 ms of the chip's 40 s, every one answered in time.
     EXPECT_GE(j["state_packets"].get<int>(), 1990) << stats;
     EXPECT_EQ(j["watchdog_stops"], 0) << stats;
