@@ -151,7 +151,22 @@ void CameraSimNode::run(const std::function<bool()>& stop_requested)
     }
     auto timer = Timer::create(node_id, period_ns, 0,
                                TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
-    timer->run_until(stop_requested, [&](uint64_t) { impl_->tick(); });
+    bool first_tick = init_settings().simulated_time;
+    timer->run_until(stop_requested, [&](uint64_t t) {
+        // The first tick is at lab time 0 with the car simulator's: its pose of that time was
+        // written before the clock moved on, but may still be in flight. Without waiting (100 ms
+        // of real time at most) whether the first frame was rendered depended on delivery.
+        if (first_tick) {
+            first_tick = false;
+            const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+            while (!impl_->poses.get_sample(t).valid && !stop_requested()) {
+                const auto left = deadline - std::chrono::steady_clock::now();
+                if (left <= std::chrono::nanoseconds(0)) break;
+                (void)impl_->poses.wait_for_new_sample(left);
+            }
+        }
+        impl_->tick();
+    });
 }
 
 std::string CameraSimNode::stats_json() const
