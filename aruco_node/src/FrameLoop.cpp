@@ -89,8 +89,8 @@ struct FrameLoop::Impl
 
     /// The topic source on the lab's simulated clock: one tick per camera frame, kSimulatedDetection_ns
     /// after the camera's. The camera wrote its frame before the clock moved on, but it may still
-    /// be in flight: a tick with no new frame waits for one (up to 100 ms of real time; after the
-    /// first tick only once the camera has sent a frame).
+    /// be in flight: a tick with no new frame waits for one (up to 100 ms of real time, once the
+    /// camera has sent a first frame).
     void run_simulated(const std::function<bool()>& stop_requested)
     {
         const auto period_ns = static_cast<uint64_t>(1e9 / options.frame_rate_hz);
@@ -98,19 +98,13 @@ struct FrameLoop::Impl
         Reader<CameraFrame> frames(options.topic, options.reader);
         uint64_t last_stamp = 0;
         bool seen_any = false;
-        // The first tick waits too: the camera (on the clock from lab time 0) wrote its first
-        // frame before the clock reached this tick, but it may still be in flight. Without the
-        // wait whether the first detection came at this tick or the next depended on delivery.
-        bool first_tick = true;
         if (!wait_for_inputs(options.timer_id, {{options.topic, [&] { return frames.matched_publications(); }}}, stop_requested)) return;
         auto timer = Timer::create(options.timer_id, period_ns, offset_ns, TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
         timer->run_until(stop_requested, [&](uint64_t t) {
             auto newest = frames.get_sample(t);
             auto fresh = [&] { return newest.valid && newest.sample.header().create_stamp().nanoseconds() > last_stamp; };
             const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
-            const bool wait = seen_any || first_tick;
-            first_tick = false;
-            while (wait && !fresh() && !stop_requested()) {
+            while (seen_any && !fresh() && !stop_requested()) {
                 const auto left = deadline - std::chrono::steady_clock::now();
                 if (left <= std::chrono::nanoseconds(0)) break;
                 (void)frames.wait_for_new_sample(left);
