@@ -888,7 +888,7 @@ public:
             // tick: it ticks once per range sample anyway, and each of its ticks at 80 Hz was a
             // step of the lab's clock of its own (17 steps per 100 ms instead of 10). A sample
             // reaches the bridge's command at the same tick as before (the next one).
-            if (simulated()) fsm.insert(fsm.end(), {"--rate", number(1e9 / double(cpm::vehicle::BridgeNodeOptions{}.simulated_state_period_ns))});
+            if (simulated()) fsm.insert(fsm.end(), {"--rate", number(1e9 / double(cpm::vehicle::kSimulatedStatePeriod_ns))});
             add("fsm_" + id, "fsm_node", common(fsm, v.realtime), v.restart, 1, v.id, v.host);
         }
     }

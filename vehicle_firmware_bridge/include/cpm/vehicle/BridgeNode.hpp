@@ -11,6 +11,10 @@
 
 namespace cpm::vehicle {
 
+/// firmware_sim's state period on the lab's simulated clock (50 Hz): the bridge ticks 1 ms after
+/// each state packet, and a state machine that looks at the sensors ticks with them.
+inline constexpr uint64_t kSimulatedStatePeriod_ns = 20'000'000;
+
 /// What vehicle_bridge is told on its command line.
 struct BridgeNodeOptions
 {
@@ -26,7 +30,7 @@ struct BridgeNodeOptions
     int foreign_retry_ms = 1000;
     /// Under --simulated_time: the controller's state period (firmware_sim's 50 Hz). The bridge
     /// then ticks on the lab's clock 1 ms after each state packet instead of waiting on the line.
-    uint64_t simulated_state_period_ns = 20'000'000;
+    uint64_t simulated_state_period_ns = kSimulatedStatePeriod_ns;
 };
 
 /// What a run of the bridge counted; printed as one JSON line when it stops.
