@@ -13,6 +13,7 @@
 #include <cpm/timer_ids.hpp>
 #include <cpm/topics.hpp>
 
+#include "SimulatedWait.hpp"
 #include "WriterThread.hpp"
 
 #include <VehicleObservation.h>
@@ -63,24 +64,23 @@ struct FirmwareHilNode::Impl
     }
 
     /// Simulated time: the bridge answered the last state packet before the lab clock moved on,
-    /// but the pty hands its bytes over on its own thread; wait a little real time for them. A
-    /// bridge that is gone is not waited for again until it answers once more.
+    /// but the pty hands its bytes over on its own thread; wait for them (kSimulatedPacketWait of
+    /// real time at most). A bridge that is gone is not waited for again until it answers once more.
     void await_answer()
     {
-        const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
-        while (!hil.frame_waiting() && !host_silent && std::chrono::steady_clock::now() < deadline) {
-            std::this_thread::sleep_for(std::chrono::microseconds(50));
+        const bool answered = await_bytes([&] { return host_silent || hil.frame_waiting(); }) && hil.frame_waiting();
+        if (!answered && !host_silent) {
+            CPM_LOG_WARN("vehicle %u: no answer to the last state packet within %lld ms of real time at lab time %.3f s; not "
+                         "waiting again until the host answers (the run will not repeat exactly)",
+                         unsigned(vehicle_id), (long long)kSimulatedPacketWait.count(), double(get_time_ns()) * 1e-9);
         }
-        host_silent = !hil.frame_waiting();
+        host_silent = !answered;
     }
 
     /// The chip's last state packet out of uart_pty's hands before the tick ends.
     void await_output()
     {
-        const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
-        while (hil.output_pending() && std::chrono::steady_clock::now() < deadline) {
-            std::this_thread::sleep_for(std::chrono::microseconds(50));
-        }
+        (void)await_bytes([&] { return !hil.output_pending(); });
     }
 
     uint8_t vehicle_id;

@@ -13,6 +13,7 @@
 #include <cpm/stamp_message.hpp>
 #include <cpm/vehicle/SerialPort.hpp>
 
+#include "SimulatedWait.hpp"
 #include "WriterThread.hpp"
 
 #include <VehicleObservation.h>
@@ -185,18 +186,26 @@ void FirmwareSimNode::Impl::read_lines()
 void FirmwareSimNode::Impl::await_answers()
 {
     // In simulated time the hosts answered the last state packets before the lab clock moved
-    // on (their timers tick between ours), but a pty hands bytes over asynchronously: wait a
-    // little real time for answers still in flight. A car whose host is gone is not waited for
-    // again until it answers once more.
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
-    for (;;) {
+    // on (their timers tick between ours), but a pty hands bytes over asynchronously: wait for
+    // answers still in flight (kSimulatedPacketWait of real time at most: 100 ms ran out on a
+    // loaded machine, and that run differed from the one before). A car whose host is gone is
+    // not waited for again until it answers once more.
+    (void)await_bytes([&] {
         read_lines();
-        bool all = true;
-        for (const auto& car : cars) all = all && (car->sim.answered() || car->host_silent);
-        if (all || std::chrono::steady_clock::now() >= deadline) break;
-        std::this_thread::sleep_for(std::chrono::microseconds(50));
+        for (const auto& car : cars) {
+            if (!car->sim.answered() && !car->host_silent) return false;
+        }
+        return true;
+    });
+    for (auto& car : cars) {
+        const bool silent = !car->sim.answered();
+        if (silent && !car->host_silent) {
+            CPM_LOG_WARN("vehicle %u: no answer to the last state packet within %lld ms of real time at lab time %.3f s; not "
+                         "waiting again until the host answers (the run will not repeat exactly)",
+                         unsigned(car->options.vehicle_id), (long long)kSimulatedPacketWait.count(), double(get_time_ns()) * 1e-9);
+        }
+        car->host_silent = silent;
     }
-    for (auto& car : cars) car->host_silent = !car->sim.answered();
 }
 
 void FirmwareSimNode::Impl::tick(uint64_t t_nominal)

@@ -3,6 +3,7 @@
 #include <cpm/vehicle/Calibration.hpp>
 #include <cpm/vehicle/VehicleModel.hpp>
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -14,6 +15,11 @@ namespace cpm::vehicle {
 /// firmware_sim's state period on the lab's simulated clock (50 Hz): the bridge ticks 1 ms after
 /// each state packet, and a state machine that looks at the sensors ticks with them.
 inline constexpr uint64_t kSimulatedStatePeriod_ns = 20'000'000;
+/// On the lab's simulated clock, how long (real time) the bridge waits for a tick's state packet
+/// and the controller for the answer to its last one: a pty hands bytes over asynchronously.
+/// Long enough that a loaded machine never decides what the run computes; a side that stays
+/// silent this long is not waited for again until it sends once more.
+inline constexpr std::chrono::milliseconds kSimulatedPacketWait{1000};
 
 /// What vehicle_bridge is told on its command line.
 struct BridgeNodeOptions
@@ -40,6 +46,9 @@ struct BridgeNodeStats
     uint64_t cycles = 0, link_losses = 0, superseded_states = 0, foreign_packets = 0, foreign_controller = 0;
     uint64_t controller_reported_bad_crc = 0, decoder_errors = 0;
     uint64_t output_discards = 0;  ///< cycles that dropped a lagging line's queued output first
+    /// Simulated time: ticks whose state packet had not come within kSimulatedPacketWait of real
+    /// time (the run no longer repeats exactly from there).
+    uint64_t missed_ticks = 0;
     double cycle_cpu_us_p50 = 0, cycle_cpu_us_p99 = 0;
     uint64_t anomalies[kAnomalyKinds] = {};
     /// One JSON object: {"vehicle_id": …, "cycles": …, …, "refused_commands": …, …}.
