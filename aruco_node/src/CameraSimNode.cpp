@@ -153,12 +153,12 @@ void CameraSimNode::run(const std::function<bool()>& stop_requested)
                                TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     bool first_tick = init_settings().simulated_time;
     timer->run_until(stop_requested, [&](uint64_t t) {
-        // The first tick is at lab time 0 with the car simulator's: its pose of that time was
-        // written before the clock moved on, but may still be in flight. Without waiting (100 ms
-        // of real time at most) whether the first frame was rendered depended on delivery.
+        // The first tick is at lab time 0 with the car simulator's, which writes its pose of that
+        // time in the same step. Without waiting (1 s of real time at most: 100 ms ran out on a
+        // loaded machine) whether the first frame was rendered depended on which came first.
         if (first_tick) {
             first_tick = false;
-            const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+            const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
             while (!impl_->poses.get_sample(t).valid && !stop_requested()) {
                 const auto left = deadline - std::chrono::steady_clock::now();
                 if (left <= std::chrono::nanoseconds(0)) break;

@@ -16,6 +16,7 @@
 #include <chrono>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 namespace cpm::aruco {
@@ -89,22 +90,26 @@ struct FrameLoop::Impl
 
     /// The topic source on the lab's simulated clock: one tick per camera frame, kSimulatedDetection_ns
     /// after the camera's. The camera wrote its frame before the clock moved on, but it may still
-    /// be in flight: a tick with no new frame waits for one (up to 100 ms of real time, once the
-    /// camera has sent a first frame).
+    /// be in flight: a tick with no new frame waits for one, up to 1 s of real time (a frame took
+    /// more than 100 ms on a loaded machine, and that run differed). Once a frame did not come,
+    /// 100 ms at most: the camera runs at another rate, and each tick between its frames would
+    /// wait in vain. The first tick waits too: it takes the frame of lab time 0 (stamped 0 it was
+    /// never "newer" than none, and which frame came first then depended on delivery).
     void run_simulated(const std::function<bool()>& stop_requested)
     {
         const auto period_ns = static_cast<uint64_t>(1e9 / options.frame_rate_hz);
         const uint64_t offset_ns = std::min(kSimulatedDetection_ns, period_ns / 2);
         Reader<CameraFrame> frames(options.topic, options.reader);
-        uint64_t last_stamp = 0;
-        bool seen_any = false;
+        std::optional<uint64_t> last_stamp;  ///< the newest frame processed
+        bool missed = false;                 ///< a tick's frame never came
         if (!wait_for_inputs(options.timer_id, {{options.topic, [&] { return frames.matched_publications(); }}}, stop_requested)) return;
         auto timer = Timer::create(options.timer_id, period_ns, offset_ns, TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
         timer->run_until(stop_requested, [&](uint64_t t) {
             auto newest = frames.get_sample(t);
-            auto fresh = [&] { return newest.valid && newest.sample.header().create_stamp().nanoseconds() > last_stamp; };
-            const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
-            while (seen_any && !fresh() && !stop_requested()) {
+            auto fresh = [&] { return newest.valid && (!last_stamp || newest.sample.header().create_stamp().nanoseconds() > *last_stamp); };
+            const auto wait = std::chrono::milliseconds(missed ? 100 : 1000);
+            const auto deadline = std::chrono::steady_clock::now() + wait;
+            while (!fresh() && !stop_requested()) {
                 const auto left = deadline - std::chrono::steady_clock::now();
                 if (left <= std::chrono::nanoseconds(0)) break;
                 (void)frames.wait_for_new_sample(left);
@@ -112,14 +117,15 @@ struct FrameLoop::Impl
             }
             if (!fresh()) {
                 uint64_t held = 0;
-                if (seen_any && no_frame_log.allow(t, held)) {
-                    CPM_LOG_WARN("%s: no new camera frame at lab time %.3f s within 100 ms; is its camera on the simulated clock at "
+                if (no_frame_log.allow(t, held)) {
+                    CPM_LOG_WARN("%s: no new camera frame at lab time %.3f s within %lld ms; is its camera on the simulated clock at "
                                  "--rate %g Hz? (%llu more since the last report)",
-                                 options.who.c_str(), double(t) * 1e-9, options.frame_rate_hz, (unsigned long long)held);
+                                 options.who.c_str(), double(t) * 1e-9, (long long)wait.count(), options.frame_rate_hz,
+                                 (unsigned long long)held);
                 }
+                missed = true;
                 return;
             }
-            seen_any = true;
             last_stamp = newest.sample.header().create_stamp().nanoseconds();
             process_frame(newest.sample);
         });
