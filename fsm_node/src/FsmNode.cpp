@@ -20,10 +20,12 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <deque>
 #include <mutex>
+#include <thread>
 
 namespace cpm::fsm {
 
@@ -113,10 +115,30 @@ struct FsmNode::Impl
     /// already (the last tick of a simulated run, whose clock stands still then). A second one
     /// says nothing new, and written as the process exits (best effort, from its shared memory)
     /// it reached the recorder in some runs and not in others (1 corridor run in about 30).
+    /// In real time the node also sees the car stop before it goes: its StopRequest written
+    /// just before the process ended was lost in one run of the suite, and the car drove on its
+    /// last command until that went stale (1 s, half a metre past the stop). It repeats the request every 100 ms until a state the
+    /// car measured after the first says it stands, 2 s at most, and says so if it never does.
+    /// A node with no fresh state of its car (none came, or it is gone) does not wait.
     void brake_and_leave()
     {
         const uint64_t now = get_time_ns();
         if (now != last_stop_sent) brake(now, true);
+        if (init_settings().simulated_time) return;
+        const uint64_t first = last_stop_sent;
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+        for (int k = 1;; ++k) {
+            const auto state = states.get_sample(get_time_ns());
+            if (!state.valid || state.age_ns > options.max_age_ns) return;
+            if (state.sample.header().create_stamp().nanoseconds() > first && std::abs(state.sample.speed()) < 0.02) return;
+            if (std::chrono::steady_clock::now() >= deadline) {
+                CPM_LOG_WARN("vehicle %u: still at %.2f m/s 2 s after the node's last StopRequest; leaving anyway",
+                             unsigned(options.vehicle_id), state.sample.speed());
+                return;
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+            if (k % 5 == 0) brake(get_time_ns(), true);
+        }
     }
 
     void brake(uint64_t now, bool force = false)
