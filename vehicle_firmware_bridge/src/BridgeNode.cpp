@@ -2,6 +2,7 @@
 #include <cpm/vehicle/BridgeNode.hpp>
 
 #include <cpm/LogThrottle.hpp>
+#include <cpm/AsyncReader.hpp>
 #include <cpm/Error.hpp>
 #include <cpm/Logging.hpp>
 #include <cpm/Timer.hpp>
@@ -51,18 +52,13 @@ struct LabTopics
           speed_curvature(topics::vehicle_command_speed_curvature.name, ids, topics::vehicle_command_speed_curvature.reader),
           trajectory(topics::vehicle_command_trajectory.name, ids, topics::vehicle_command_trajectory.reader),
           path_tracking(topics::vehicle_command_path_tracking.name, ids, topics::vehicle_command_path_tracking.reader),
-          observation(topics::vehicle_observation.name, ids, topics::vehicle_observation.reader),
-          stop(topics::stop_request.name, topics::stop_request.reader)
+          observation(topics::vehicle_observation.name, ids, topics::vehicle_observation.reader)
     {
     }
     /// create_stamp of the newest StopRequest for this car or for all (vehicle_id 0).
     std::optional<uint64_t> stop_request_ns(uint8_t id)
     {
         std::lock_guard<std::mutex> lock(stop_mutex);
-        for (const auto& s : stop.take()) {
-            auto& newest = stop_requests[s.vehicle_id()];
-            newest = std::max(newest.value_or(0), s.header().create_stamp().nanoseconds());
-        }
         auto all = stop_requests[0], mine = stop_requests[id];
         if (!all) return mine;
         if (!mine) return all;
@@ -73,9 +69,26 @@ struct LabTopics
     MultiVehicleReader<VehicleCommandTrajectory> trajectory;
     MultiVehicleReader<VehicleCommandPathTracking> path_tracking;
     MultiVehicleReader<VehicleObservation> observation;
-    ReaderAbstract<StopRequest> stop;
     std::mutex stop_mutex;
     std::map<uint8_t, std::optional<uint64_t>> stop_requests;
+    /// StopRequests come by the reader's callback on the DDS thread that receives them: the
+    /// serial loop (a real-time thread) never calls into Fast DDS, whose reader lock a DDS thread
+    /// of normal priority may hold (matching the writers of processes starting elsewhere).
+    AsyncReader<StopRequest> stop{[this](std::vector<StopRequest>& batch) { on_stops(batch); }, topics::stop_request.name,
+                                  dds_thread_options(topics::stop_request.reader)};
+    void on_stops(const std::vector<StopRequest>& batch)
+    {
+        std::lock_guard<std::mutex> lock(stop_mutex);
+        for (const auto& s : batch) {
+            auto& newest = stop_requests[s.vehicle_id()];
+            newest = std::max(newest.value_or(0), s.header().create_stamp().nanoseconds());
+        }
+    }
+    static ReaderOptions dds_thread_options(ReaderOptions o)
+    {
+        o.dds_thread_callback = true;
+        return o;
+    }
     Writer<VehicleState> state{topics::vehicle_state.name, topics::vehicle_state.writer};
     Writer<RangeSensors> ranges{topics::range_sensors.name, topics::range_sensors.writer};
     /// In real time the serial loops hand their samples to threads of their own: a stalled DDS

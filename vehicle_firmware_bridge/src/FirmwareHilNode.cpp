@@ -13,6 +13,7 @@
 #include <cpm/timer_ids.hpp>
 #include <cpm/topics.hpp>
 
+#include "OtherCarsReader.hpp"
 #include "SimulatedWait.hpp"
 #include "WriterThread.hpp"
 
@@ -32,7 +33,7 @@ struct FirmwareHilNode::Impl
     explicit Impl(FirmwareHilOptions o)
         : vehicle_id(o.car.vehicle_id), truth_topic(o.truth_topic), hil(std::move(o)), participant(Participant::default_participant()),
           observations(participant, truth_topic, topics::vehicle_observation.writer),
-          others(participant, truth_topic, topics::vehicle_observation.reader)
+          others(participant, truth_topic, {vehicle_id})
     {
         hil.on_state_period([this](uint64_t chip_ns) { publish(chip_ns); });
         Logging::instance().connect();  // the chip's first message (a late tick) must not create DDS entities
@@ -56,11 +57,7 @@ struct FirmwareHilNode::Impl
     /// The other cars' bodies, for the rangers: those seen within the last second.
     void see_others(uint64_t now)
     {
-        for (auto& o : others.take()) {
-            if (o.vehicle_id() == vehicle_id) continue;
-            other_cars.seen(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
-        }
-        hil.car().set_other_cars(other_cars.current(now));
+        hil.car().set_other_cars(others.current(now));
     }
 
     /// Simulated time: the bridge answered the last state packet before the lab clock moved on,
@@ -69,11 +66,7 @@ struct FirmwareHilNode::Impl
     void await_answer()
     {
         const bool answered = await_bytes([&] { return host_silent || hil.frame_waiting(); }) && hil.frame_waiting();
-        if (!answered && !host_silent) {
-            CPM_LOG_WARN("vehicle %u: no answer to the last state packet within %lld ms of real time at lab time %.3f s; not "
-                         "waiting again until the host answers (the run will not repeat exactly)",
-                         unsigned(vehicle_id), (long long)kSimulatedPacketWait.count(), double(get_time_ns()) * 1e-9);
-        }
+        if (!answered && !host_silent) say_host_silent(vehicle_id);
         host_silent = !answered;
     }
 
@@ -88,8 +81,7 @@ struct FirmwareHilNode::Impl
     FirmwareHil hil;
     Participant& participant;
     Writer<VehicleObservation> observations;
-    ReaderAbstract<VehicleObservation> others;
-    OtherCars other_cars;
+    OtherCarsReader others;
     std::shared_ptr<Timer> timer;
     uint64_t t0 = 0;  ///< lab time of the chip's reset
     LogThrottle lag_log;

@@ -13,6 +13,7 @@
 #include <cpm/stamp_message.hpp>
 #include <cpm/vehicle/SerialPort.hpp>
 
+#include "OtherCarsReader.hpp"
 #include "SimulatedWait.hpp"
 #include "WriterThread.hpp"
 
@@ -81,6 +82,13 @@ void checked(const FirmwareSimNodeOptions& o)
         throw Error("firmware_sim: the pwm trace is for one car; " + std::to_string(o.cars.size()) + " were given");
 }
 
+std::set<uint8_t> ids_of(const FirmwareSimNodeOptions& o)
+{
+    std::set<uint8_t> ids;
+    for (const auto& c : o.cars) ids.insert(c.vehicle_id);
+    return ids;
+}
+
 }  // namespace
 
 struct FirmwareSimNode::Impl
@@ -88,13 +96,10 @@ struct FirmwareSimNode::Impl
     explicit Impl(FirmwareSimNodeOptions o)
         : options(std::move(o)), participant(Participant::default_participant()),
           observations(participant, options.truth_topic, topics::vehicle_observation.writer),
-          others(participant, options.truth_topic, topics::vehicle_observation.reader)
+          others(participant, options.truth_topic, ids_of(options))
     {
         checked(options);
-        for (const auto& c : options.cars) {
-            cars.push_back(std::make_unique<Car>(c, options));
-            own_ids.insert(c.vehicle_id);
-        }
+        for (const auto& c : options.cars) cars.push_back(std::make_unique<Car>(c, options));
         Logging::instance().connect();  // the cars' first message (a late tick) must not create DDS entities
     }
 
@@ -108,11 +113,9 @@ struct FirmwareSimNode::Impl
 
     FirmwareSimNodeOptions options;
     std::vector<std::unique_ptr<Car>> cars;
-    std::set<uint8_t> own_ids;
     Participant& participant;
     Writer<VehicleObservation> observations;
-    ReaderAbstract<VehicleObservation> others;
-    OtherCars other_cars;  ///< cars of other processes
+    OtherCarsReader others;  ///< cars of other processes
     std::shared_ptr<Timer> timer;
     bool simulated = false;  ///< on the lab's simulated clock (--simulated_time)
     uint64_t physics_period_ns = 0, steps_per_state = 1, max_catch_up = 1;
@@ -155,11 +158,7 @@ void FirmwareSimNode::Impl::publish(Car& car, uint64_t t_model)
 void FirmwareSimNode::Impl::see_each_other()
 {
     const uint64_t now = get_time_ns();
-    for (auto& o : others.take()) {
-        if (own_ids.count(o.vehicle_id())) continue;
-        other_cars.seen(o.vehicle_id(), o.header().create_stamp().nanoseconds(), {o.pose().x(), o.pose().y(), o.pose().yaw()});
-    }
-    std::vector<Pose> everyone = other_cars.current(now);  // other processes' cars first, then this process's in order
+    std::vector<Pose> everyone = others.current(now);  // other processes' cars first, then this process's in order
     const size_t foreign = everyone.size();
     for (const auto& car : cars) everyone.push_back(car->sim.model().pose());
     std::vector<Pose> poses;
@@ -199,11 +198,7 @@ void FirmwareSimNode::Impl::await_answers()
     });
     for (auto& car : cars) {
         const bool silent = !car->sim.answered();
-        if (silent && !car->host_silent) {
-            CPM_LOG_WARN("vehicle %u: no answer to the last state packet within %lld ms of real time at lab time %.3f s; not "
-                         "waiting again until the host answers (the run will not repeat exactly)",
-                         unsigned(car->options.vehicle_id), (long long)kSimulatedPacketWait.count(), double(get_time_ns()) * 1e-9);
-        }
+        if (silent && !car->host_silent) say_host_silent(car->options.vehicle_id);
         car->host_silent = silent;
     }
 }

@@ -1,4 +1,6 @@
 #pragma once
+#include <cpm/Logging.hpp>
+#include <cpm/get_time_ns.hpp>
 #include <cpm/vehicle/BridgeNode.hpp>
 
 #include <chrono>
@@ -18,6 +20,15 @@ bool await_bytes(Arrived arrived, std::chrono::milliseconds timeout = kSimulated
         if (std::chrono::steady_clock::now() >= deadline) return false;
         std::this_thread::sleep_for(std::chrono::microseconds(50));
     }
+}
+
+/// A simulated controller's host did not answer its last state packet within kSimulatedPacketWait:
+/// said once per silence (the controller then stops waiting for it).
+inline void say_host_silent(unsigned vehicle_id)
+{
+    CPM_LOG_WARN("vehicle %u: no answer to the last state packet within %lld ms of real time at lab time %.3f s; not waiting "
+                 "again until the host answers (the run will not repeat exactly)",
+                 vehicle_id, (long long)kSimulatedPacketWait.count(), double(get_time_ns()) * 1e-9);
 }
 
 }  // namespace cpm::vehicle
