@@ -117,9 +117,10 @@ struct FsmNode::Impl
     /// it reached the recorder in some runs and not in others (1 corridor run in about 30).
     /// In real time the node also sees the car stop before it goes: its StopRequest written
     /// just before the process ended was lost in one run of the suite, and the car drove on its
-    /// last command until that went stale (1 s, half a metre past the stop). It repeats the request every 100 ms until a state the
-    /// car measured after the first says it stands, 2 s at most, and says so if it never does.
-    /// A node with no fresh state of its car (none came, or it is gone) does not wait.
+    /// last command until that went stale (1 s, half a metre past the stop). It repeats the
+    /// request every 100 ms until a state the car measured after the first says it stands, 2 s
+    /// at most, and says so if it never does. A node with no fresh state of its car (none came,
+    /// or it is gone) does not wait.
     void brake_and_leave()
     {
         const uint64_t now = get_time_ns();
