@@ -149,6 +149,21 @@ void CameraSimNode::run(const std::function<bool()>& stop_requested)
                          stop_requested)) {
         return;
     }
+    // And its frames must reach their reader (the marker finder): a best-effort writer sends
+    // only to the readers it has matched itself, which on a loaded machine came after the frame
+    // of lab time 0 had gone to no one (the finder waited 1 s for it in vain, and the run
+    // differed). Without any reader after 5 s it says so and runs.
+    if (init_settings().simulated_time) {
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+        while (!impl_->frames.wait_for_matched(1, std::chrono::milliseconds(100))) {
+            if (stop_requested()) return;
+            if (std::chrono::steady_clock::now() >= deadline) {
+                CPM_LOG_WARN("camera_sim %u: no reader of %s after 5 s; joining the lab clock without one",
+                             unsigned(impl_->options.vehicle_id), topics::camera_frame.name);
+                break;
+            }
+        }
+    }
     auto timer = Timer::create(node_id, period_ns, 0,
                                TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     bool first_tick = init_settings().simulated_time;
