@@ -130,14 +130,12 @@ LabTimer::LabTimer(Participant& participant, std::string node_id, uint64_t perio
     }
     // on_trigger is short (a lock, a notify): it runs on the DDS thread that delivers the
     // trigger, one thread hop less per step of a simulated clock.
-    ReaderOptions trigger_options = topics::system_trigger.reader;
-    trigger_options.dds_thread_callback = true;
-    trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
-        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name, trigger_options);
-    ReaderOptions live_options = live_reader_options(topics::system_trigger);
-    live_options.dds_thread_callback = true;
+    trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>([this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); },
+                                                                   participant, topics::system_trigger.name,
+                                                                   topics::system_trigger.reader.on_dds_thread());
     live_trigger_reader_ = std::make_unique<AsyncReader<SystemTrigger>>(
-        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name, live_options);
+        [this](std::vector<SystemTrigger>& triggers) { on_trigger(triggers); }, participant, topics::system_trigger.name,
+        live_reader_options(topics::system_trigger).on_dds_thread());
 }
 
 LabTimer::~LabTimer()

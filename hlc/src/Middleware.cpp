@@ -244,11 +244,7 @@ struct Middleware::Impl
     /// Handled on that thread, each command is checked and forwarded before the answer closes
     /// its period (on their readers' own threads an answer overtook a command under load, and
     /// the command was refused as answering a period already past).
-    static ReaderOptions in_arrival_order(ReaderOptions r)
-    {
-        r.dds_thread_callback = true;
-        return r;
-    }
+    static ReaderOptions in_arrival_order(const ReaderOptions& r) { return r.on_dds_thread(); }
     /// Every command the controller writes (its writers are best effort by default: a reader
     /// that keeps all of them loses none to a burst of several cars' commands).
     static ReaderOptions controller_reader()

@@ -75,7 +75,7 @@ struct LabTopics
     /// serial loop (a real-time thread) never calls into Fast DDS, whose reader lock a DDS thread
     /// of normal priority may hold (matching the writers of processes starting elsewhere).
     AsyncReader<StopRequest> stop{[this](std::vector<StopRequest>& batch) { on_stops(batch); }, topics::stop_request.name,
-                                  dds_thread_options(topics::stop_request.reader)};
+                                  topics::stop_request.reader.on_dds_thread()};
     void on_stops(const std::vector<StopRequest>& batch)
     {
         std::lock_guard<std::mutex> lock(stop_mutex);
@@ -83,11 +83,6 @@ struct LabTopics
             auto& newest = stop_requests[s.vehicle_id()];
             newest = std::max(newest.value_or(0), s.header().create_stamp().nanoseconds());
         }
-    }
-    static ReaderOptions dds_thread_options(ReaderOptions o)
-    {
-        o.dds_thread_callback = true;
-        return o;
     }
     Writer<VehicleState> state{topics::vehicle_state.name, topics::vehicle_state.writer};
     Writer<RangeSensors> ranges{topics::range_sensors.name, topics::range_sensors.writer};

@@ -23,7 +23,8 @@ class OtherCarsReader
 {
 public:
     OtherCarsReader(Participant& participant, const std::string& topic, std::set<uint8_t> own_ids)
-        : own_(std::move(own_ids)), reader_([this](std::vector<VehicleObservation>& batch) { take(batch); }, participant, topic, options())
+        : own_(std::move(own_ids)), reader_([this](std::vector<VehicleObservation>& batch) { take(batch); }, participant, topic,
+                  topics::vehicle_observation.reader.on_dds_thread())
     {
     }
     /// The other cars seen within the second before `now_ns`.
@@ -34,12 +35,6 @@ public:
     }
 
 private:
-    static ReaderOptions options()
-    {
-        ReaderOptions o = topics::vehicle_observation.reader;
-        o.dds_thread_callback = true;
-        return o;
-    }
     void take(std::vector<VehicleObservation>& batch)
     {
         std::lock_guard<std::mutex> lock(mutex_);

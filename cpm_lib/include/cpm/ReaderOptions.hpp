@@ -24,6 +24,15 @@ struct ReaderOptions
     /// inside its callback (stop() is fine). A writer in the same process delivers on its own
     /// thread, inside its write(). Other readers refuse the option.
     bool dds_thread_callback = false;
+
+    /// These options with dds_thread_callback set (a topic's reader options, for an AsyncReader
+    /// whose callback runs on the DDS thread).
+    constexpr ReaderOptions on_dds_thread() const
+    {
+        ReaderOptions o = *this;
+        o.dds_thread_callback = true;
+        return o;
+    }
 };
 
 }  // namespace cpm
