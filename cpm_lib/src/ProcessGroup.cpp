@@ -144,10 +144,16 @@ void ProcessGroup::interrupt(Member& m)
 
 void ProcessGroup::stop(Member& m)
 {
-    // A remote one's grace is spent there; the connection gets 3 s more.
-    const auto grace = m.spec.stop_grace + (m.spec.host.is_local() ? std::chrono::milliseconds(0) : std::chrono::milliseconds(3000));
-    m.end = m.child->wait(grace);
-    if (!m.end) m.end = m.child->stop(std::chrono::seconds(2));
+    // A remote one's grace is spent there, then up to 2 s of SIGTERM and 1 s of ending what it
+    // left (run_until_input_ends); the connection gets 3 s more. Ending its ssh sooner would
+    // make a process slow to stop (killed there in time) read as a lost host.
+    const bool remote = !m.spec.host.is_local();
+    m.end = m.child->wait(m.spec.stop_grace + (remote ? std::chrono::milliseconds(6000) : std::chrono::milliseconds(0)));
+    if (!m.end) {
+        m.end = m.child->stop(std::chrono::seconds(2));
+        // Its ssh, ended here (ssh then exits 255): the run's doing, not a lost host.
+        if (remote && m.end->signal == 0 && m.end->code == 255) m.end = ExitStatus{.code = -1, .signal = SIGTERM};
+    }
     m.end = as_told(m, *m.end);
 }
 

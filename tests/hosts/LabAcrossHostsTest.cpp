@@ -524,7 +524,8 @@ TEST_F(LabAcrossHosts, APythonControllerOnItsOwnHostDrivesTheCarsOfAnother)
     const std::string out = dir.file("platoon-" + std::to_string(::getpid()));
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
     // Where the controller ran: the run's summary says (its processes' hosts, below).
-    EXPECT_EQ(run.wait(120s), 0) << run.output() << run.errors();
+    ASSERT_EQ(run.wait(120s), 0) << run.output() << run.errors() << cpm_test::file_text(out + "/hlc_platoon.log")
+                                 << cpm_test::file_text(out + "/controller_platoon.log");
     std::ifstream in(out + "/summary.json");
     const auto summary = nlohmann::json::parse(in);
     const auto& c = summary["controllers"].at(0);

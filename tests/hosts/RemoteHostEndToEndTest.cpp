@@ -109,6 +109,27 @@ TEST_F(RemoteHostEndToEnd, ARemoteEndIsToldAsALocalOneWithItsHost)
     }
 }
 
+TEST_F(RemoteHostEndToEnd, ARemoteProcessThatIgnoresTheStopIsKilledThereAndToldSoNotAsALostHost)
+{
+    // Deaf to SIGINT and SIGTERM (and so is its sleep): only car_a's `cpm host run` can end it,
+    // with SIGKILL once the grace and SIGTERM's 2 s have passed. The run must wait for that,
+    // not end the ssh itself first, which would read as a lost host.
+    cpm_test::NamespaceHosts::Inside central(hosts(), 0);
+    cpm::ProcessGroup sut;
+    (void)sut.start({.name = "deaf",
+                     .argv = {"/bin/sh", "-c", "trap '' INT TERM; echo deaf; sleep 313"},
+                     .log = dir.file("deaf.log"),
+                     .stop_grace = 500ms,
+                     .host = hosts().remote(1, cpm_prefix())});
+    ASSERT_TRUE(cpm_test::wait_until([&] { return !running(hosts(), 1, "sleep 313").empty(); }, 20s)) << sut.log_text("deaf");
+    const auto ends = sut.stop_all();
+    ASSERT_EQ(ends.size(), 1u);
+    EXPECT_FALSE(ends[0].host_lost) << ends[0].describe();
+    EXPECT_EQ(ends[0].end.signal, SIGKILL) << ends[0].describe();
+    EXPECT_EQ(ends[0].describe(), "killed by SIGKILL on car_a");
+    EXPECT_TRUE(cpm_test::wait_until([&] { return running(hosts(), 1, "sleep 313").empty(); }, 10s)) << "left on car_a";
+}
+
 TEST_F(RemoteHostEndToEnd, AHostWhoseLinkIsCutIsReportedLostAndWhatRunsThereStopsWithinTheLease)
 {
     cpm_test::NamespaceHosts::Inside central(hosts(), 0);

@@ -38,7 +38,9 @@ struct ProcessSpec
     /// shares this process's group, and a signal to that group (Ctrl-C, Ctrl-Z, a supervisor's
     /// SIGSTOP) reaches it as it reaches this process.
     bool own_process_group = true;
-    /// How long it may take to end on SIGINT before SIGTERM and SIGKILL follow.
+    /// How long it may take to end on SIGINT before SIGTERM and SIGKILL follow. A remote one's
+    /// are sent on its host; its ssh is ended here only 6 s after its grace (then told as
+    /// killed by SIGTERM, not as a lost host).
     std::chrono::milliseconds stop_grace{5000};
     /// Where it runs: this host (the default), or another reached with ssh (argv[0] is then a
     /// path on that host). A remote process runs under `cpm host run` in a process group of its
