@@ -109,7 +109,9 @@ dds::DataReaderQos reader_qos(const ReaderOptions& given, const std::string& top
                  true, options.data_sharing, max_sample_bytes, topic, "Reader");
     // Fast DDS 2.9 waits 5 ms before answering a heartbeat: a keep-all writer whose window is
     // full waits that long for the acknowledgement that frees it (bench/throughput: +12 % raw).
-    qos.reliable_reader_qos().times.heartbeatResponseDelay = {0, 0};
+    // A topic whose writers keep the last sample only may ask for a wait instead.
+    const auto after_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(options.acknowledge_after).count();
+    qos.reliable_reader_qos().times.heartbeatResponseDelay = {int32_t(after_ns / 1'000'000'000), uint32_t(after_ns % 1'000'000'000)};
     return qos;
 }
 

@@ -1,4 +1,5 @@
 #pragma once
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -15,6 +16,13 @@ struct ReaderOptions
     size_t buffer_capacity = 2000; ///< Reader/MultiVehicleReader: samples buffered per vehicle; oldest arrivals go first
     std::optional<uint8_t> vehicle_id;  ///< Reader of a keyed type: only this vehicle's samples
     bool data_sharing = false;     ///< Fast DDS data sharing (see WriterOptions::data_sharing)
+    /// A reliable reader answers a writer's heartbeat (acknowledging what it has, asking for
+    /// what it lacks) this long after it: heartbeats within that time get one answer. 0 (the
+    /// default) answers at once, which a keep-all writer whose window is full waits for. A
+    /// reader of a keep-last writer that writes often may wait: Fast DDS sends a heartbeat with
+    /// every sample of a writer of depth 1, and each answer wakes a thread on both sides (the
+    /// lab clock's topics). A sample lost on the way is asked for again only after this wait.
+    std::chrono::milliseconds acknowledge_after{0};
     /// AsyncReader only: run the callback on the DDS receive thread that delivered the
     /// samples, instead of the reader's own thread. Saves a thread hop (the latency of a raw
     /// Fast DDS listener), for callbacks that are short and never block: while it runs, this

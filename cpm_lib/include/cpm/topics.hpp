@@ -61,6 +61,15 @@ constexpr ReaderOptions reliable_reader(int depth, bool transient_local, bool ke
     o.keep_all = keep_all;
     return o;
 }
+/// The lab clock's topics: a simulated clock steps thousands of times a second, each step a
+/// sample of depth-1 writers (one heartbeat each). Answered every 20 ms instead of at once, the
+/// heartbeats of a step no longer wake every reader's and writer's thread in it.
+constexpr ReaderOptions clock_reader()
+{
+    ReaderOptions o = reliable_reader(64, true);
+    o.acknowledge_after = std::chrono::milliseconds(20);
+    return o;
+}
 constexpr ReaderOptions newest_reader(int depth)
 {
     ReaderOptions o;
@@ -111,10 +120,10 @@ inline constexpr TopicSpec parameter_request{"parameterRequest", "ParameterReque
 /// writes its SystemTrigger with a plain reliable one), so cpm's timers read these topics twice:
 /// with `reader` for what was sent before they matched, and with `reader` made volatile for
 /// every sample sent after.
-inline constexpr TopicSpec ready_status{"readyStatus", "ReadyStatus", qos::reliable_writer(1, true), qos::reliable_reader(64, true),
+inline constexpr TopicSpec ready_status{"readyStatus", "ReadyStatus", qos::reliable_writer(1, true), qos::clock_reader(),
                                         "a node's timer is ready to start"};
-inline constexpr TopicSpec system_trigger{"systemTrigger", "SystemTrigger", qos::reliable_writer(1, true),
-                                          qos::reliable_reader(64, true), "the lab's start time, or stop"};
+inline constexpr TopicSpec system_trigger{"systemTrigger", "SystemTrigger", qos::reliable_writer(1, true), qos::clock_reader(),
+                                          "the lab's start time, or stop"};
 
 // ---- the history -----------------------------------------------------------------------------
 inline constexpr TopicSpec history_request{"historyRequest", "HistoryRequest", qos::reliable_writer(64, false),
