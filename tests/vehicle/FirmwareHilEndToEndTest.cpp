@@ -166,8 +166,9 @@ TEST_F(FirmwareHilEndToEnd, KillingTheBridgeLetsTheFirmwaresWatchdogBrakeWithin2
     std::this_thread::sleep_for(500ms);
     const uint64_t killed = cpm::get_time_ns();
     car.bridge->kill(SIGKILL);
+    // The bridge's own words too: a watchdog's brake before the kill (seen once under load) is its silence.
     ASSERT_TRUE(cpm_test::wait_until([&] { return !car.pwm_trace_after(killed, 0).empty(); }, 3s))
-        << car.sim->output() << car.sim->errors();
+        << "killed at " << killed << "\n" << car.sim->output() << car.sim->errors() << "the bridge:\n" << car.bridge->errors();
     const double after = double(car.pwm_trace_after(killed, 0).front().first - killed) * 1e-9;
     // 250 ms after the last command, which came up to one state period (20 ms) before the kill;
     // the outputs are sampled every 250 us of chip time.
