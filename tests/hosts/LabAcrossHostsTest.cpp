@@ -196,7 +196,9 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
         EXPECT_GE(double(states.samples.size()), 0.98 * span_s * 50)
             << "car " << car << ": " << states.samples.size() << " states in " << span_s << " s; gaps over 30 ms: "
             << cpm_test::gaps_over(stamps, stamp(states.samples.front()), 30'000'000) << "; the recording's account: "
-            << summary["recording"].dump();
+            << summary["recording"].dump() << "\nthe car's warnings (sim_" << car << ", bridge_" << car << "):\n"
+            << cpm_test::warnings_in(out + "/sim_" + std::to_string(car) + ".log")
+            << cpm_test::warnings_in(out + "/bridge_" + std::to_string(car) + ".log");
     }
     // So they came over the wire: the central host's link received at least their bytes.
     const uint64_t central_received = hosts().received_bytes(0) - central_received_before;

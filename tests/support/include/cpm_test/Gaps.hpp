@@ -2,6 +2,7 @@
 #pragma once
 #include <algorithm>
 #include <cstdint>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,18 @@ inline std::string gaps_over(std::vector<uint64_t> stamps, uint64_t t0, uint64_t
                    std::to_string((stamps[k - 1] - t0) / 1'000'000) + " ms";
     }
     return out.empty() ? "none" : out;
+}
+
+/// The warnings and errors a program logged to `path` ("[warn] …", "[error] …" lines), for a
+/// failed rate check to say what the car's own programs saw; "" when there are none.
+inline std::string warnings_in(const std::string& path)
+{
+    std::ifstream in(path);
+    std::string out;
+    for (std::string line; std::getline(in, line);) {
+        if (line.rfind("[warn]", 0) == 0 || line.rfind("[error]", 0) == 0) out += "    " + line + "\n";
+    }
+    return out;
 }
 
 }  // namespace cpm_test
