@@ -219,6 +219,36 @@ TEST(BridgeCore, StampsStatesWithTheControllersMeasurementTimeNotTheirArrival)
     EXPECT_EQ(sut.on_state_packet(moving(10, 0), t0 + 200'000'000, {}).measured_ns, t0 + 200'000'000);
 }
 
+TEST(BridgeCore, StatesThatWaitedInTheLineArePublishedEachAtItsTimeWithoutACommand)
+{
+    // Five packets read at once (the line was read 100 ms late): the first four are measured
+    // states like any other, published with their own times and poses; only the newest is
+    // answered with a command.
+    BridgeCore sut(kId, Calibration{}, {0.0, 0.0, 0.0});
+    const uint64_t t0 = 1000 * kSecond;
+    StatePacket p = moving(5000, 0.5);
+    p.odometer_steps = 0;
+    (void)sut.on_state_packet(p, t0, {});
+    const uint64_t read_at = t0 + 100'000'000;
+    for (int k = 1; k <= 4; ++k) {
+        p.tick = 5000 + 20 * k;
+        p.odometer_steps = int32_t(6 * k);  // 1 cm per 20 ms at 600 steps per metre
+        p.us_front_mm = uint16_t(1000 - k);
+        const BridgeCycle late = sut.on_waiting_state_packet(p, read_at);
+        EXPECT_EQ(late.measured_ns, t0 + uint64_t(k) * 20'000'000) << "packet " << k;
+        EXPECT_NEAR(late.state.pose().x(), 0.01 * k, 1e-9) << "packet " << k;
+        EXPECT_DOUBLE_EQ(late.state.odometer_distance(), 0.01 * k);
+        EXPECT_DOUBLE_EQ(late.ranges.front(), (1000 - k) * 1e-3);
+        EXPECT_EQ(late.state.vehicle_id(), kId);
+    }
+    p.tick = 5100;
+    p.odometer_steps = 30;
+    const BridgeCycle newest = sut.on_state_packet(p, read_at, {});
+    EXPECT_EQ(newest.measured_ns, t0 + 100'000'000);
+    EXPECT_NEAR(newest.state.pose().x(), 0.05, 1e-9);
+    EXPECT_EQ(newest.command.tick, 5100u);
+}
+
 TEST(BridgeCore, SpeedControllerReachesTheCommandedSpeedInClosedLoop)
 {
     ClosedLoop loop({0, 0, 0});

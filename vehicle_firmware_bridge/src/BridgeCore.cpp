@@ -330,14 +330,12 @@ CommandPacket BridgeCore::to_packet(const Actuation& a, uint32_t answering)
     return packet;
 }
 
-BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns, const CommandInputs& commands)
+double BridgeCore::take_in(const StatePacket& packet, uint64_t t_ns, BridgeCycle& out)
 {
     // Ticks are unsigned 32-bit ms: a small step back is a restart, a large one a wrap.
     const uint32_t tick_step = last_tick_ ? packet.tick - *last_tick_ : 20;
     const bool restarted = tick_step > 0x80000000u;
     const double tick_dt = restarted ? 0.02 : tick_step * 1e-3;
-    double dt = std::clamp(tick_dt, 1e-3, 0.1);
-    BridgeCycle out;
     if (restarted) {
         notice(out.notices, Anomaly::controller_restart,
                "the controller restarted (tick " + std::to_string(*last_tick_) + " -> " + std::to_string(packet.tick) +
@@ -348,6 +346,21 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     out.measured_ns = measured_time(packet.tick, t_ns);
     last_tick_ = packet.tick;
     dead_reckon(packet, t_ns, tick_dt, out.notices);
+    return tick_dt;
+}
+
+BridgeCycle BridgeCore::on_waiting_state_packet(const StatePacket& packet, uint64_t t_ns)
+{
+    BridgeCycle out;
+    (void)take_in(packet, t_ns, out);
+    fill_outputs(packet, packet.speed_mm_s * 1e-3, last_actuation_, out);
+    return out;
+}
+
+BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns, const CommandInputs& commands)
+{
+    BridgeCycle out;
+    const double dt = std::clamp(take_in(packet, t_ns, out), 1e-3, 0.1);
     double speed = packet.speed_mm_s * 1e-3;
     // While the controller says its watchdog holds the brake, our commands do not reach the
     // motor (a flooded or broken line): integrating the speed error then would send the car off
@@ -360,7 +373,13 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     if (out.active != last_active_) speed_controller_.reset();
     last_active_ = out.active;
     out.command = to_packet(a, packet.tick);
+    last_actuation_ = a;
+    fill_outputs(packet, speed, a, out);
+    return out;
+}
 
+void BridgeCore::fill_outputs(const StatePacket& packet, double speed, const Actuation& a, BridgeCycle& out)
+{
     VehicleState& s = out.state;
     s.vehicle_id(vehicle_id_);
     s.pose().x(pose_.x);
@@ -384,7 +403,6 @@ BridgeCycle BridgeCore::on_state_packet(const StatePacket& packet, uint64_t t_ns
     r.left(packet.us_left_mm * 1e-3);
     r.right(packet.us_right_mm * 1e-3);
     r.hall_distance(distance_);
-    return out;
 }
 
 }  // namespace cpm::vehicle

@@ -137,10 +137,14 @@ struct BridgeCar
     /// Simulated time, once per tick: answers the packet the controller just sent.
     void serve_tick(const std::function<bool()>& stop_requested);
     /// Reads the open line once (waiting up to timeout_ms) and answers the newest of this car's
-    /// state packets in it; true when it answered one.
+    /// state packets in it (the older ones in the same read are published, not answered); true
+    /// when it answered one.
     bool serve(int timeout_ms, const std::function<bool()>& stop_requested);
     bool open_line();
     void cycle(const StatePacket& packet, uint64_t t_received);
+    /// Stamps and publishes a cycle's state and ranges (the controller measured them at
+    /// measured_ns; valid once delivered).
+    void publish(BridgeCycle& out);
     void report(const std::vector<Notice>& notices);
     BridgeNodeStats final_stats() const;
 
@@ -149,6 +153,13 @@ struct BridgeCar
     BridgeCore core;
     std::unique_ptr<SerialPort> port;
     FrameDecoder decoder;
+    /// This car's state packets of one read, in order (room for more than a read can hold:
+    /// the loop never allocates).
+    std::vector<StatePacket> read_states = [] {
+        std::vector<StatePacket> v;
+        v.reserve(64);
+        return v;
+    }();
     uint64_t last_observation_ns = 0, last_packet_ns = 0;
     int foreign_in_a_row = 0;
     bool silent_logged = false, waiting_logged = false;
@@ -234,6 +245,14 @@ void BridgeCar::cycle(const StatePacket& packet, uint64_t t_received)
     port->write_all(frame.data(), frame.size());
     report(out.notices);
 
+    publish(out);
+    ++stats.cycles;
+    ++cycle_cpu_us[std::min<uint64_t>((thread_cpu_ns() - cpu0) / 1000, kCycleBins - 1)];
+    ++cycles_timed;
+}
+
+void BridgeCar::publish(BridgeCycle& out)
+{
     // create = when the controller measured; valid_after = when it is published plus the
     // expected delivery, so a sample's age says how old the measurement really is.
     const uint64_t t_publish = get_time_ns();
@@ -244,9 +263,6 @@ void BridgeCar::cycle(const StatePacket& packet, uint64_t t_received)
     stamp_message(out.ranges, out.measured_ns, delay);
     lab.state_out.write(out.state);
     lab.ranges_out.write(out.ranges);
-    ++stats.cycles;
-    ++cycle_cpu_us[std::min<uint64_t>((thread_cpu_ns() - cpu0) / 1000, kCycleBins - 1)];
-    ++cycles_timed;
 }
 
 void BridgeCar::run(const std::function<bool()>& stop_requested)
@@ -311,10 +327,10 @@ bool BridgeCar::serve(int timeout_ms, const std::function<bool()>& stop_requeste
             }
             return false;
         }
-        // Only the newest of this car's states counts: older ones in the same read waited in a
-        // buffer. Another car's packets are never used.
-        std::optional<StatePacket> newest;
-        unsigned superseded_in_read = 0;
+        // The newest of this car's states is answered; older ones in the same read waited in a
+        // buffer (measurements all the same: published, at their own times). Another car's
+        // packets are never used.
+        read_states.clear();
         std::optional<uint8_t> foreign_id;
         decoder.feed(buffer, size_t(n), [&](const Packet& packet) {
             const auto* state = std::get_if<StatePacket>(&packet);
@@ -326,11 +342,7 @@ bool BridgeCar::serve(int timeout_ms, const std::function<bool()>& stop_requeste
                 return;
             }
             foreign_in_a_row = 0;
-            if (newest) {
-                ++stats.superseded_states;
-                ++superseded_in_read;
-            }
-            newest = *state;
+            read_states.push_back(*state);
         });
         if (foreign_id && foreign_in_a_row < options.foreign_packets_to_leave) {
             uint64_t held = 0;
@@ -353,17 +365,24 @@ bool BridgeCar::serve(int timeout_ms, const std::function<bool()>& stop_requeste
                 std::this_thread::sleep_for(std::chrono::milliseconds(100));
             return false;
         }
-        if (!newest) return false;
+        if (read_states.empty()) return false;
+        const auto superseded_in_read = unsigned(read_states.size() - 1);
+        stats.superseded_states += superseded_in_read;
         if (superseded_in_read > 0) {
             // A measurement no one will see: the loop read the line late (a busy machine, a
             // stalled thread). Said, not only counted.
             uint64_t held = 0;
             if (superseded_throttle.allow(t_received, held))
-                CPM_LOG_WARN("vehicle %u: %u state packet(s) waited in the line and were passed over for the newest: "
-                             "the serial loop read late (%llu more reads like it since the last report)",
+                CPM_LOG_WARN("vehicle %u: %u state packet(s) waited in the line (published; only the newest was "
+                             "answered): the serial loop read late (%llu more reads like it since the last report)",
                              id, superseded_in_read, (unsigned long long)held);
         }
-        cycle(*newest, t_received);
+        for (size_t k = 0; k + 1 < read_states.size(); ++k) {
+            auto waited = core.on_waiting_state_packet(read_states[k], t_received);
+            report(waited.notices);
+            publish(waited);
+        }
+        cycle(read_states.back(), t_received);
         return true;
     }
 }

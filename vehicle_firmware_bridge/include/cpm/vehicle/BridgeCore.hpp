@@ -92,6 +92,11 @@ public:
     /// of the last 5 s (the least delayed packet), so a packet that waited in a buffer keeps
     /// its real, older time.
     BridgeCycle on_state_packet(const StatePacket& packet, uint64_t t_ns, const CommandInputs& commands);
+    /// A state packet read at t_ns together with a newer one (it waited in the line: the line
+    /// was read late): its state and ranges, measured at its own time, to publish like any
+    /// other; no command answers it (`command` is unset): the newest, given to on_state_packet
+    /// next, is the one answered. Call it for each older packet in order, before the newest.
+    BridgeCycle on_waiting_state_packet(const StatePacket& packet, uint64_t t_ns);
     /// An observation of this car's pose taken at t_ns (e.g. VehicleObservation): the pose
     /// estimate is moved so that it agrees with it at that time.
     void on_observation(const Pose& pose, uint64_t t_ns);
@@ -115,6 +120,11 @@ private:
         bool brake = true;
     };
 
+    /// What every state packet does to the estimate, answered or not: a restart noticed, the
+    /// measurement time, the pose dead-reckoned. Returns the time since the packet before (s).
+    double take_in(const StatePacket& packet, uint64_t t_ns, BridgeCycle& out);
+    /// The state and ranges of a packet, with the actuation in effect.
+    void fill_outputs(const StatePacket& packet, double speed, const Actuation& actuation, BridgeCycle& out);
     /// Notes whether the controller's echo of the last applied command falls far behind.
     void watch_line_lag(const StatePacket& packet, std::vector<Notice>& notices);
     void dead_reckon(const StatePacket& packet, uint64_t t_ns, double tick_dt, std::vector<Notice>& notices);
@@ -141,6 +151,7 @@ private:
     std::deque<uint32_t> answered_;  ///< the ticks the newest commands answered, oldest first
     bool line_lagging_ = false;  ///< the controller applies commands far behind the newest sent
     ActiveCommand last_active_ = ActiveCommand::none;
+    Actuation last_actuation_;  ///< what the last command sent asked for (the brake at first)
     std::deque<Estimate> history_;
     uint64_t tick_epoch_ms_ = 0;  // controller ticks are 32-bit ms; they wrap after 49 days
     std::deque<std::pair<uint64_t, int64_t>> offsets_;  // (received, offset), offsets increasing
