@@ -369,8 +369,8 @@ bool BridgeCar::serve(int timeout_ms, const std::function<bool()>& stop_requeste
         const auto superseded_in_read = unsigned(read_states.size() - 1);
         stats.superseded_states += superseded_in_read;
         if (superseded_in_read > 0) {
-            // A measurement no one will see: the loop read the line late (a busy machine, a
-            // stalled thread). Said, not only counted.
+            // Late, not lost: the loop read the line late (a busy machine, the kernel's worker
+            // that hands a pseudo-terminal's bytes over, a stalled thread). Said, not only counted.
             uint64_t held = 0;
             if (superseded_throttle.allow(t_received, held))
                 CPM_LOG_WARN("vehicle %u: %u state packet(s) waited in the line (published; only the newest was "
