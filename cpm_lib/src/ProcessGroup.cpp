@@ -144,11 +144,12 @@ void ProcessGroup::interrupt(Member& m)
 
 void ProcessGroup::stop(Member& m)
 {
-    // A remote one's grace is spent there, then up to 2 s of SIGTERM and 1 s of ending what it
-    // left (run_until_input_ends); the connection gets 3 s more. Ending its ssh sooner would
-    // make a process slow to stop (killed there in time) read as a lost host.
+    // A remote one's grace is spent there, then its SIGTERM and the end of what it left
+    // (run_until_input_ends); the connection gets 3 s more. Ending its ssh sooner would make a
+    // process slow to stop (killed there in time) read as a lost host.
     const bool remote = !m.spec.host.is_local();
-    m.end = m.child->wait(m.spec.stop_grace + (remote ? std::chrono::milliseconds(6000) : std::chrono::milliseconds(0)));
+    const auto remote_stop = kRemoteTermWait + kRemoteGroupEndWait + std::chrono::milliseconds(3000);
+    m.end = m.child->wait(m.spec.stop_grace + (remote ? remote_stop : std::chrono::milliseconds(0)));
     if (!m.end) {
         m.end = m.child->stop(std::chrono::seconds(2));
         // Its ssh, ended here (ssh then exits 255): the run's doing, not a lost host.

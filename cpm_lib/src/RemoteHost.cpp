@@ -110,7 +110,9 @@ namespace {
 int with_group_ended(int group, int code)
 {
     if (::kill(-group, SIGTERM) == 0) {
-        for (int i = 0; i < 20 && ::kill(-group, 0) == 0; ++i) ::usleep(50'000);
+        for (auto waited = std::chrono::milliseconds(0); waited < kRemoteGroupEndWait && ::kill(-group, 0) == 0;
+             waited += std::chrono::milliseconds(50))
+            ::usleep(50'000);
         ::kill(-group, SIGKILL);
     }
     return code;
@@ -144,7 +146,7 @@ int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::mill
     // The supervisor closed our input, died, or lost the connection: stop it, as a local one is stopped.
     child.signal(SIGINT);
     if (auto end = child.wait(grace)) return with_group_ended(group, shell_code(*end));
-    return with_group_ended(group, shell_code(child.stop(std::chrono::seconds(2))));
+    return with_group_ended(group, shell_code(child.stop(kRemoteTermWait)));
 }
 
 std::string port_taken(const std::string& protocol, int port)

@@ -36,6 +36,9 @@ struct RemoteHost
 /// the run writes a line to each remote process's input every second (ProcessGroup), so that a
 /// host cut off from it stops the run's processes by itself instead of leaving them running.
 inline constexpr std::chrono::milliseconds kRemoteLease{10'000};
+/// What `cpm host run` spends at most past a process's grace: SIGTERM, then SIGKILL after
+/// kRemoteTermWait; then what the process left in its group gets kRemoteGroupEndWait.
+inline constexpr std::chrono::milliseconds kRemoteTermWait{2000}, kRemoteGroupEndWait{1000};
 
 /// The argv that runs `remote_argv` (argv[0]: a path on that host) there, non-interactively
 /// (BatchMode: a host that asks for a password fails at once), tied to the connection through
