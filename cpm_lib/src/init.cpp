@@ -124,6 +124,7 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
     }
     if (const char* shm = std::getenv("CPM_SHARED_MEMORY"); shm != nullptr && *shm != '\0') {
         settings.shared_memory = parse_bool(shm, "CPM_SHARED_MEMORY");
+        settings.shared_memory_chosen = true;
     }
     if (const char* lease = std::getenv("CPM_DDS_LEASE"); lease != nullptr && *lease != '\0') {
         settings.lease = parse_lease(lease, "CPM_DDS_LEASE");
@@ -156,6 +157,7 @@ InitSettings parse_init_settings(int argc, const char* const argv[], const char*
             settings.discovery_server = *v;
         } else if (auto v = flag_value(argc, argv, i, "dds_shared_memory")) {
             settings.shared_memory = parse_bool(*v, "--dds_shared_memory");
+            settings.shared_memory_chosen = true;
         } else if (auto v = flag_value(argc, argv, i, "dds_lease")) {
             settings.lease = parse_lease(*v, "--dds_lease");
         } else if (auto v = flag_value(argc, argv, i, "security")) {

@@ -57,6 +57,8 @@ TEST(Init, ReadsFlagsInBothSpellingsAndLeavesOthersAlone)
     EXPECT_EQ(sut.security, "lab/nodes/car");
     EXPECT_FALSE(parse({"--dds_shared_memory", "off"}).shared_memory);
     EXPECT_TRUE(parse({"--dds_shared_memory=on"}).shared_memory);
+    EXPECT_TRUE(parse({"--dds_shared_memory=on"}).shared_memory_chosen) << "a lab run passes the choice on";
+    if (std::getenv("CPM_SHARED_MEMORY") == nullptr) EXPECT_FALSE(parse({}).shared_memory_chosen) << "the default (on) was not chosen";
     bool takes_value = false;
     EXPECT_TRUE(cpm::is_init_flag("--security", takes_value));
     EXPECT_TRUE(takes_value);

@@ -6,6 +6,7 @@
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <csignal>
@@ -18,6 +19,7 @@
 #include <string>
 #include <thread>
 #include <unistd.h>
+#include <vector>
 
 using namespace std::chrono_literals;
 using cpm_test::built_program;
@@ -64,6 +66,26 @@ std::set<std::string> domain_port_files(int domain)
     }
     ::closedir(dir);
     return files;
+}
+
+/// The processes whose parent is `pid`.
+std::vector<int> children_of(int pid)
+{
+    std::vector<int> out;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator("/proc", ec)) {
+        const std::string name = e.path().filename().string();
+        if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+        std::ifstream stat(e.path() / "stat");
+        std::string line;
+        std::getline(stat, line);
+        const auto close = line.rfind(')');
+        int parent = 0;
+        if (close != std::string::npos && std::sscanf(line.c_str() + close + 1, " %*c %d", &parent) == 1 && parent == pid) {
+            out.push_back(std::stoi(name));
+        }
+    }
+    return out;
 }
 
 /// Runs `argv` until `ended` says it is time to stop it with `signal` (0: it ends by itself),
@@ -113,10 +135,39 @@ TEST(SharedMemoryLeftovers, ALabRunLeavesNothingOfItsDomain)
 {
     const int domain = cpm_test::test_domain_id();
     cpm_test::TempDir dir;
+    // Shared memory on, as in real time (a simulated run does without it unless told).
     Process run({built_program("cpm"), "lab", "run", std::string(CPM_SOURCE_DIR) + "/scenarios/labs/corridor.yaml", "--duration", "2s",
-                 "--out", dir.file("run"), "--monitor", "off"});
-    ASSERT_EQ(run.wait(90s), 0) << run.errors();
+                 "--out", dir.file("run"), "--monitor", "off", "--dds_shared_memory", "on"});
+    std::set<std::string> used;
+    for (int code = -1; (code = run.wait(50ms)) == -1;) {
+        for (int pid : children_of(run.pid())) {
+            for (auto& f : shm_files_of(pid)) used.insert(f);
+        }
+    }
+    ASSERT_EQ(run.wait(0ms), 0) << run.errors();
+    EXPECT_FALSE(used.empty()) << "the run's processes used shared memory";
     // Every process of the run (history, simulator, bridge, state machine) ended on the run's
     // SIGINT or by itself: none of their ports, locks or cpm's markers stays.
     EXPECT_EQ(domain_port_files(domain), std::set<std::string>{});
+}
+
+TEST(SharedMemoryLeftovers, ASimulatedLabRunSharesNoMemoryUnlessTold)
+{
+    // Its processes talk over UDP loopback alone: Fast DDS 2.9 would send every sample both ways.
+    cpm_test::TempDir dir;
+    Process run({built_program("cpm"), "lab", "run", std::string(CPM_SOURCE_DIR) + "/scenarios/labs/corridor.yaml", "--duration", "2s",
+                 "--out", dir.file("run"), "--monitor", "off"});
+    std::set<std::string> used;
+    std::set<int> seen;
+    for (int code = -1; (code = run.wait(50ms)) == -1;) {
+        for (int pid : children_of(run.pid())) {
+            seen.insert(pid);
+            for (auto& f : shm_files_of(pid)) used.insert(f);
+        }
+        for (auto& f : shm_files_of(run.pid())) used.insert(f);
+    }
+    ASSERT_EQ(run.wait(0ms), 0) << run.errors();
+    EXPECT_GE(seen.size(), 4u) << "history, simulator, bridge and state machine were looked at";
+    EXPECT_EQ(used, std::set<std::string>{});
+    EXPECT_THAT(run.output() + run.errors(), ::testing::HasSubstr("(UDP only, no shared memory)"));
 }

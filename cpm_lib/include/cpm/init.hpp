@@ -18,6 +18,7 @@ struct InitSettings
     bool simulated_time = false;             ///< --simulated_time
     std::string security;                    ///< --security (or CPM_SECURITY): a node's security folder
     bool shared_memory = true;               ///< --dds_shared_memory on|off (or CPM_SHARED_MEMORY)
+    bool shared_memory_chosen = false;       ///< whether --dds_shared_memory or CPM_SHARED_MEMORY was given
     /// --dds_lease (or CPM_DDS_LEASE), 1s..1h: how long the others wait for this process's
     /// participants once they fall silent (a crash) before dropping them and what they wrote.
     std::chrono::milliseconds lease{10'000};
