@@ -88,6 +88,22 @@ std::vector<int> children_of(int pid)
     return out;
 }
 
+/// Waits up to 90 s for a cpm lab run to end, collecting every 50 ms the /dev/shm files it and
+/// its processes use (and their pids in `seen`); its exit code (-1: it did not end).
+int watch_lab_run(Process& run, std::set<std::string>& used, std::set<int>* seen = nullptr)
+{
+    const auto until = std::chrono::steady_clock::now() + 90s;
+    while (std::chrono::steady_clock::now() < until) {
+        for (auto& f : shm_files_of(run.pid())) used.insert(f);
+        for (int pid : children_of(run.pid())) {
+            if (seen) seen->insert(pid);
+            for (auto& f : shm_files_of(pid)) used.insert(f);
+        }
+        if (const int code = run.wait(50ms); code != -1) return code;
+    }
+    return run.wait(0ms);
+}
+
 /// Runs `argv` until `ended` says it is time to stop it with `signal` (0: it ends by itself),
 /// then checks that it exited 0 and that no file it used in /dev/shm is left.
 void expect_nothing_left(int domain, std::vector<std::string> argv, int signal, std::chrono::milliseconds run_for)
@@ -139,12 +155,7 @@ TEST(SharedMemoryLeftovers, ALabRunLeavesNothingOfItsDomain)
     Process run({built_program("cpm"), "lab", "run", std::string(CPM_SOURCE_DIR) + "/scenarios/labs/corridor.yaml", "--duration", "2s",
                  "--out", dir.file("run"), "--monitor", "off", "--dds_shared_memory", "on"});
     std::set<std::string> used;
-    for (int code = -1; (code = run.wait(50ms)) == -1;) {
-        for (int pid : children_of(run.pid())) {
-            for (auto& f : shm_files_of(pid)) used.insert(f);
-        }
-    }
-    ASSERT_EQ(run.wait(0ms), 0) << run.errors();
+    ASSERT_EQ(watch_lab_run(run, used), 0) << run.errors();
     EXPECT_FALSE(used.empty()) << "the run's processes used shared memory";
     // Every process of the run (history, simulator, bridge, state machine) ended on the run's
     // SIGINT or by itself: none of their ports, locks or cpm's markers stays.
@@ -159,14 +170,7 @@ TEST(SharedMemoryLeftovers, ASimulatedLabRunSharesNoMemoryUnlessTold)
                  "--out", dir.file("run"), "--monitor", "off"});
     std::set<std::string> used;
     std::set<int> seen;
-    for (int code = -1; (code = run.wait(50ms)) == -1;) {
-        for (int pid : children_of(run.pid())) {
-            seen.insert(pid);
-            for (auto& f : shm_files_of(pid)) used.insert(f);
-        }
-        for (auto& f : shm_files_of(run.pid())) used.insert(f);
-    }
-    ASSERT_EQ(run.wait(0ms), 0) << run.errors();
+    ASSERT_EQ(watch_lab_run(run, used, &seen), 0) << run.errors();
     EXPECT_GE(seen.size(), 4u) << "history, simulator, bridge and state machine were looked at";
     EXPECT_EQ(used, std::set<std::string>{});
     EXPECT_THAT(run.output() + run.errors(), ::testing::HasSubstr("(UDP only, no shared memory)"));
