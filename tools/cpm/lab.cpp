@@ -124,7 +124,7 @@ int lab_check(const std::vector<std::string>& args)
 
 const char* kRunHelp =
     "usage: cpm lab run FILE [--out DIR] [--duration T] [--time simulated|real] [--monitor PORT|off]\n"
-    "                   [--dds_domain N]\n"
+    "                   [--dds_domain N] [--dds_shared_memory on|off]\n"
     "\n"
     "Runs a lab scenario (see cpm lab check): checks it (every error at once, nothing started)\n"
     "and claims its domain (refused when another run on this host has it or anybody is on it),\n"
@@ -142,7 +142,10 @@ const char* kRunHelp =
     "process, recording.db (ask it with cpm history --file, replay it with cpm play),\n"
     "scenario.yaml, summary.json and the report (report.html with its plots, see cpm lab report).\n"
     "Exit 0 when every process ran its time and the report was drawn; 1 otherwise.\n"
-    "--dds_domain (or the scenario's domain: key, else CPM_DOMAIN_ID) picks the domain.\n";
+    "--dds_domain (or the scenario's domain: key, else CPM_DOMAIN_ID) picks the domain.\n"
+    "In simulated time the run's processes talk over UDP loopback only (Fast DDS would send\n"
+    "every sample over shared memory and UDP both, and each step waits for them);\n"
+    "--dds_shared_memory on (or CPM_SHARED_MEMORY=on) keeps shared memory.\n";
 
 int lab_run(const std::vector<std::string>& args)
 {
