@@ -502,18 +502,6 @@ void copy_to_hosts(const Scenario& s, const std::vector<ProcessPlan>& plan, cons
     if (!errors.empty()) throw ScenarioError(errors);
 }
 
-/// Whether the run's processes share memory with the others on their host. Not on the simulated
-/// clock, unless said (--dds_shared_memory, CPM_SHARED_MEMORY): Fast DDS 2.9 sends a reader on
-/// the same host every sample over shared memory and over UDP loopback both, and a simulated step
-/// waits for every one of them (the 8-car intersection ran 1.2-1.3x faster on UDP alone, with the
-/// same recording). In real time the second path stays: a reader stalled past shared memory's
-/// health check (200 ms) loses what was pushed into its port, a UDP socket's buffer keeps it.
-bool shared_memory_in(const RunSettings& settings)
-{
-    const cpm::InitSettings init = cpm::init_settings();
-    return init.shared_memory_chosen ? init.shared_memory : settings.time != TimeMode::simulated;
-}
-
 /// The run's spec of a planned process: its log in the run's folder, the run's domain, QoS and
 /// transports.
 ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, const RunSettings& settings, const std::string& qos, const Scenario& s)
@@ -521,7 +509,7 @@ ProcessSpec spec_of(const ProcessPlan& p, const fs::path& dir, const RunSettings
     ProcessSpec spec{.name = p.name,
                      .argv = p.argv,
                      .env = {"CPM_DOMAIN_ID=" + std::to_string(settings.domain),
-                             std::string("CPM_SHARED_MEMORY=") + (shared_memory_in(settings) ? "on" : "off")},
+                             std::string("CPM_SHARED_MEMORY=") + (settings.shared_memory ? "on" : "off")},
                      .log = (dir / (p.name + ".log")).string(),
                      .restart = p.restart,
                      .stop_order = p.stop_order,
@@ -993,6 +981,14 @@ RunSettings settings_of(const Scenario& s, const RunOptions& o)
     settings.bin_dir = o.bin_dir.empty() ? cpm::executable_dir() : o.bin_dir;
     settings.domain = o.domain.value_or(s.domain.value_or(ParticipantOptions::from_init().domain_id));
     settings.time = o.time.value_or(s.time);
+    // Not on the simulated clock, unless said (--dds_shared_memory, CPM_SHARED_MEMORY): Fast DDS
+    // 2.9 sends a reader on the same host every sample over shared memory and over UDP loopback
+    // both, and a simulated step waits for every one of them (the 8-car intersection ran 1.2-1.3x
+    // faster on UDP alone, with the same recording). In real time the second path stays: a reader
+    // stalled past shared memory's health check (200 ms) loses what was pushed into its port, a
+    // UDP socket's buffer keeps it.
+    const InitSettings init = init_settings();
+    settings.shared_memory = init.shared_memory_chosen ? init.shared_memory : settings.time != TimeMode::simulated;
     settings.duration_ns = o.duration_ns.value_or(s.duration_ns);
     const fs::path dir = fs::absolute(o.out_dir.empty() ? fs::path("runs") / (s.name + "-" + utc_now_compact()) : fs::path(o.out_dir));
     std::error_code ec;
@@ -1001,15 +997,15 @@ RunSettings settings_of(const Scenario& s, const RunOptions& o)
     return settings;
 }
 
-/// The run's own participant: its domain, shared memory with the processes on this host as they
-/// have it (shared_memory_in), and across hosts this host's address with the
+/// The run's own participant: its domain, shared memory with the processes on this host as the
+/// run's processes have it, and across hosts this host's address with the
 /// others as peers.
 ParticipantOptions participant_options(const Scenario& s, const RunSettings& settings)
 {
     ParticipantOptions po = ParticipantOptions::from_init();
     po.domain_id = settings.domain;
     po.name = "cpm_lab_run";
-    po.shared_memory = shared_memory_in(settings);
+    po.shared_memory = settings.shared_memory;
     if (const HostSpec* here = s.local_host()) {
         po.interfaces = {here->address};
         if (s.discovery_server) {
@@ -1082,7 +1078,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     result.error = start_processes(group, s, plan, dir, settings, qos, history, o.stop);
     if (o.progress) {
         std::fprintf(o.progress, "cpm lab run: %s: %zu processes on domain %d%s, logs and recording in %s\n", s.name.c_str(), plan.size(),
-                     settings.domain, shared_memory_in(settings) ? "" : " (UDP only, no shared memory)", dir.c_str());
+                     settings.domain, settings.shared_memory ? "" : " (UDP only, no shared memory)", dir.c_str());
         if (const HostSpec* there = s.host(s.monitor_host); s.monitor_port && there && !there->ssh.empty()) {
             std::fprintf(o.progress, "cpm lab run: the monitor serves on 127.0.0.1:%d on host %s (there, or here through ssh -L %d:127.0.0.1:%d %s)\n",
                          *s.monitor_port, there->name.c_str(), *s.monitor_port, *s.monitor_port, there->ssh.c_str());
