@@ -171,10 +171,16 @@ void ChildProcess::signal(int sig)
     ::kill(group_ ? -pid_ : pid_, sig);
 }
 
+void ChildProcess::ask_to_stop(int sig)
+{
+    signal(sig);
+    signal(SIGCONT);
+}
+
 ExitStatus ChildProcess::stop(std::chrono::milliseconds grace)
 {
     if (pid_ <= 0) return {};
-    signal(SIGTERM);
+    ask_to_stop(SIGTERM);
     if (auto end = wait(grace)) return *end;
     signal(SIGKILL);
     int raw = 0;

@@ -135,7 +135,7 @@ void ProcessGroup::interrupt(Member& m)
 {
     // A remote process is stopped by its `cpm host run` when its ssh's input closes; a signal to
     // ssh would end the connection without waiting for the process's end.
-    if (m.spec.host.is_local()) m.child->signal(SIGINT);
+    if (m.spec.host.is_local()) m.child->ask_to_stop(SIGINT);
     else {
         std::lock_guard<std::mutex> lock(stdin_mutex_);
         m.child->close_stdin();

@@ -106,10 +106,12 @@ std::vector<std::string> remote_command(const RemoteHost& host, const std::vecto
 namespace {
 
 /// Ends what is left of a process group whose leader has ended (what it started in the
-/// background, which would else keep the connection open): SIGTERM, then SIGKILL.
+/// background, which would else keep the connection open): SIGTERM (and SIGCONT for the frozen
+/// ones), then SIGKILL.
 int with_group_ended(int group, int code)
 {
     if (::kill(-group, SIGTERM) == 0) {
+        ::kill(-group, SIGCONT);
         for (auto waited = std::chrono::milliseconds(0); waited < kRemoteGroupEndWait && ::kill(-group, 0) == 0;
              waited += std::chrono::milliseconds(50))
             ::usleep(50'000);
@@ -144,7 +146,7 @@ int run_until_input_ends(const std::vector<std::string>& argv, std::chrono::mill
         }
     }
     // The supervisor closed our input, died, or lost the connection: stop it, as a local one is stopped.
-    child.signal(SIGINT);
+    child.ask_to_stop(SIGINT);
     if (auto end = child.wait(grace)) return with_group_ended(group, shell_code(*end));
     return with_group_ended(group, shell_code(child.stop(kRemoteTermWait)));
 }

@@ -79,6 +79,12 @@ TEST(ChildProcess, StopKillsAChildThatIgnoresSigtermAfterTheGrace)
     auto polite = sh("echo ready; while :; do sleep 0.05; done", {.capture_stdout = true});
     ASSERT_EQ(polite.read_line(), "ready");
     EXPECT_EQ(polite.stop(5s).signal, SIGTERM);
+
+    // Frozen (SIGSTOP): continued after its SIGTERM, which then ends it, not the SIGKILL.
+    auto frozen = sh("echo ready; while :; do sleep 0.05; done", {.capture_stdout = true});
+    ASSERT_EQ(frozen.read_line(), "ready");
+    frozen.signal(SIGSTOP);
+    EXPECT_EQ(frozen.stop(5s).signal, SIGTERM);
 }
 
 TEST(ChildProcess, StoppingAProcessGroupEndsTheProgramsItStarted)

@@ -60,6 +60,25 @@ TEST(ProcessGroup, StopsItsProcessesInStopOrderEachOnSigint)
     EXPECT_EQ(sut.names(), (std::vector<std::string>{"history", "car", "commands"}));
 }
 
+TEST(ProcessGroup, AFrozenProcessIsContinuedToActOnItsStopNotLeftToTheKill)
+{
+    // Frozen (SIGSTOP, Ctrl-Z, a test's stalled node): a signal waits until the process is
+    // continued, so the stop sends SIGCONT after it, as systemd does. Without, it waited the
+    // grace and the SIGTERM's 2 s, then killed it with SIGKILL.
+    cpm_test::TempDir dir;
+    cpm::ProcessGroup sut;
+    auto spec = sh("frozen", "trap 'echo stopped > " + dir.file("said") + "; exit 0' INT; echo up > " + dir.file("up") +
+                                 "; while :; do sleep 0.05; done");
+    spec.stop_grace = 20s;  // a grace this long: only a stop it acted on ends in time for the test's own limit
+    cpm::ChildProcess& child = sut.start(spec);
+    ASSERT_TRUE(cpm_test::wait_until([&] { return dir.read("up") == "up\n"; }, 5s, 10ms));
+    child.signal(SIGSTOP);
+    const auto ends = sut.stop_all();
+    ASSERT_EQ(ends.size(), 1u);
+    EXPECT_TRUE(ends[0].end.ok()) << ends[0].end.describe();
+    EXPECT_EQ(dir.read("said"), "stopped\n");
+}
+
 TEST(ProcessGroup, ARestartableProcessIsStartedAgainAndItsLogKept)
 {
     cpm_test::TempDir dir;

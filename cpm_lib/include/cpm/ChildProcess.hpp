@@ -64,7 +64,10 @@ public:
     std::optional<ExitStatus> wait(std::chrono::milliseconds timeout);
     /// Sends a signal (to its process group when it has its own).
     void signal(int sig);
-    /// SIGTERM, then SIGKILL if it has not ended within `grace`; waits for the end.
+    /// Asks it to stop with `sig` (SIGINT, SIGTERM), then SIGCONT: a frozen process (SIGSTOP,
+    /// Ctrl-Z) acts on a signal only once continued (systemd stops services so too).
+    void ask_to_stop(int sig);
+    /// SIGTERM (ask_to_stop), then SIGKILL if it has not ended within `grace`; waits for the end.
     ExitStatus stop(std::chrono::milliseconds grace = std::chrono::seconds(3));
     /// The next line of its captured stdout (without the newline), blocking; nullopt at its end.
     std::optional<std::string> read_line();
