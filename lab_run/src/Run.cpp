@@ -586,12 +586,12 @@ public:
         if (simulated()) {
             thread_ = std::thread([this, timers] {
                 try {
-                    // 30 s for every process to come up and join (as for a start in real time: over
-                    // ssh on a busy host too), then 10 s for each step.
-                    master_.run_simulated(timers, settings_.duration_ns, std::chrono::seconds(10), [this] {
+                    // timeouts.start for every process to come up and join (as for a start in real
+                    // time: over ssh on a busy host too), then timeouts.step for each step.
+                    master_.run_simulated(timers, settings_.duration_ns, step_timeout(), [this] {
                         if (before_start_) before_start_();
                         stepping_since_ = std::chrono::steady_clock::now();
-                    }, std::chrono::seconds(30));
+                    }, start_timeout());
                     until_ = settings_.duration_ns;
                     stepped_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - stepping_since_).count();
                 } catch (const std::exception& e) {
@@ -607,7 +607,7 @@ public:
                 wait_for_cars(cars);
                 if (stopped_) return;  // stopped while it waited: nothing to start
                 real_start_ = planners.empty() ? cpm::get_time_ns()
-                                               : master_.start_real_time(planners, std::chrono::milliseconds(1000), std::chrono::seconds(30));
+                                               : master_.start_real_time(planners, std::chrono::milliseconds(1000), start_timeout());
                 started_ = true;
                 if (progress_) {
                     // Over ssh the cars come up seconds late: the run's duration counts from here.
@@ -665,8 +665,8 @@ public:
     }
 
 private:
-    /// Until every car has sent its first state (30 s, as for the timers of a simulated run);
-    /// throws naming the silent cars and their processes.
+    /// Until every car has sent its first state (timeouts.start, as for the timers of a
+    /// simulated run); throws naming the silent cars and their processes.
     void wait_for_cars(const std::map<int, std::vector<std::string>>& cars)
     {
         std::set<int> ids;
@@ -676,7 +676,7 @@ private:
             std::lock_guard<std::mutex> lock(cars_mutex_);
             cars_up_.emplace(participant_, ids);
         }
-        const auto silent = cars_up_->wait(kCarsTimeout, [this] { return stopped_.load(); });
+        const auto silent = cars_up_->wait(start_timeout(), [this] { return stopped_.load(); });
         {
             std::lock_guard<std::mutex> lock(cars_mutex_);
             cars_up_.reset();  // its reader of every state is needed no more
@@ -689,9 +689,10 @@ private:
             for (size_t i = 0; i < processes.size(); ++i) named += (i ? ", '" : "'") + processes[i] + "'";
             named += ")";
         }
-        throw Error("no state within " + std::to_string(kCarsTimeout.count()) + " ms from " + named);
+        throw Error("no state within " + std::to_string(start_timeout().count()) + " ms from " + named);
     }
-    static constexpr std::chrono::milliseconds kCarsTimeout{30'000};
+    std::chrono::milliseconds start_timeout() const { return std::chrono::milliseconds(settings_.timeouts.start_ns / 1'000'000); }
+    std::chrono::milliseconds step_timeout() const { return std::chrono::milliseconds(settings_.timeouts.step_ns / 1'000'000); }
     Participant& participant_;
     TimeMaster master_;
     const RunSettings& settings_;
@@ -990,6 +991,7 @@ RunSettings settings_of(const Scenario& s, const RunOptions& o)
     const InitSettings init = init_settings();
     settings.shared_memory = init.shared_memory_chosen ? init.shared_memory : settings.time != TimeMode::simulated;
     settings.duration_ns = o.duration_ns.value_or(s.duration_ns);
+    settings.timeouts = s.timeouts;
     const fs::path dir = fs::absolute(o.out_dir.empty() ? fs::path("runs") / (s.name + "-" + utc_now_compact()) : fs::path(o.out_dir));
     std::error_code ec;
     if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) throw cpm::Error("the run's folder " + dir.string() + " exists and is not empty");

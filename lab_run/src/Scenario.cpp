@@ -500,6 +500,19 @@ void read_run_options(Checker& c, const YAML::Node& root, Scenario& s)
             }
         }
     }
+    if (const YAML::Node t = root["timeouts"]) {
+        if (!t.IsMap()) c.error(t, "timeouts", "expected a map (start, step)");
+        else {
+            c.keys(t, "timeouts", {"start", "step"});
+            for (auto [key, into] : {std::pair{"start", &s.timeouts.start_ns}, std::pair{"step", &s.timeouts.step_ns}}) {
+                if (!t[key]) continue;
+                const std::string path = std::string("timeouts.") + key;
+                const auto d = c.duration(t[key], path);
+                if (d && *d < 1'000'000) c.error(t[key], path, "must be at least 1ms");
+                else if (d) *into = *d;
+            }
+        }
+    }
     if (const YAML::Node r = root["record"]) {
         if (!r.IsMap()) c.error(r, "record", "expected a map (topics, exclude)");
         else {
@@ -542,7 +555,7 @@ Scenario load_scenario(const std::string& path)
     if (!root.IsMap()) throw ScenarioError(std::vector<Diagnostic>{{path, "expected a map of keys (name, time, duration, world, vehicles, ...)"}});
     c.keys(root, "", {"name", "domain", "time", "duration", "world", "lanes", "vehicles", "routing", "qos", "record", "monitor",
                     "parameters", "security", "hosts", "ssh_config", "max_clock_offset", "discovery", "discovery_server", "history",
-                    "controllers", "ips"});
+                    "controllers", "ips", "timeouts"});
     read_hosts(c, root, s);  // before anything names a host
     read_discovery(c, root, s);
 

@@ -76,11 +76,12 @@ int parent_of(int pid)
 
 /// A scenario file `name`.yaml in `dir`: car 5 at `start` on map `course` (corridor, gates) with
 /// the state machine of the same name, no camera, 5 s of simulated time.
-std::string one_car_in_simulated_time(const TempDir& dir, const std::string& name, const std::string& course, const std::string& start)
+std::string one_car_in_simulated_time(const TempDir& dir, const std::string& name, const std::string& course, const std::string& start,
+                                      const std::string& more = "")
 {
     const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
     return dir.write(name + ".yaml", "name: " + name + "\ntime: simulated\nduration: 5s\nworld: " + source + "maps/" + course +
-                                         ".json\nvehicles:\n  - {id: 5, start: " + start + ", fsm: " + source + "fsm/" + course + ".json}\n");
+                                         ".json\nvehicles:\n  - {id: 5, start: " + start + ", fsm: " + source + "fsm/" + course + ".json}\n" + more);
 }
 
 /// The environment entry that marks a run's processes for pid_with.
@@ -455,9 +456,9 @@ TEST(LabRun, ADashCamSaveInSimulatedTimeHoldsTheLabTimeSpanInTheRunFolder)
 TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
 {
     // A state machine frozen (SIGSTOP) before it joins the simulated clock: the clock waits for
-    // it in vain, and the run names it with the end of its log.
+    // it in vain (the scenario's timeouts.start), and the run names it with the end of its log.
     TempDir dir;
-    const std::string file = one_car_in_simulated_time(dir, "frozen", "corridor", "[0.0, -0.01, 0.0]");
+    const std::string file = one_car_in_simulated_time(dir, "frozen", "corridor", "[0.0, -0.01, 0.0]", "timeouts: {start: 10s}\n");
     const std::string out = dir.file("run");
     Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
     int pid = 0;
@@ -465,7 +466,7 @@ TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
     ::kill(pid, SIGSTOP);  // it waits for its car's first state before it announces its timer: stopped well before
     EXPECT_EQ(run.wait(90s), 1) << run.output() << run.errors();
     const std::string said = run.output() + run.errors();
-    EXPECT_NE(said.find("no announcement from 'fsm_node_5'"), std::string::npos) << said;
+    EXPECT_NE(said.find("simulated time not started within 10000 ms: no announcement from 'fsm_node_5'"), std::string::npos) << said;
     EXPECT_NE(said.find("fsm_5's log (" + out + "/fsm_5.log) ends:"), std::string::npos) << said;
     EXPECT_EQ(pid_with("/bin/fsm_node ", run_tag(out)), 0) << "the frozen node is stopped with the run";
 }
@@ -473,12 +474,13 @@ TEST(LabRun, ANodeTheSimulatedClockWaitsForInVainIsNamedWithTheEndOfItsLog)
 TEST(LabRun, InRealTimeACarThatNeverSendsAStateIsNamedWithItsProcessesLogs)
 {
     // Lab time in real time starts with every car's first state: the car's simulator frozen
-    // (SIGSTOP) before its first packet, the run waits, says for what, and after 30 s ends
-    // naming the car and its processes. Never a run whose time ran without its car.
+    // (SIGSTOP) before its first packet, the run waits, says for what, and after the scenario's
+    // timeouts.start ends naming the car and its processes. Never a run whose time ran without its car.
     TempDir dir;
     const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
     const std::string file = dir.write("silent.yaml", "name: silent\ntime: real\nduration: 10s\nworld: " + source +
-                                                          "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0]}\n");
+                                                          "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0]}\n"
+                                                          "timeouts: {start: 10s}\n");
     const std::string out = dir.file("run");
     Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
     int pid = 0;
@@ -487,7 +489,7 @@ TEST(LabRun, InRealTimeACarThatNeverSendsAStateIsNamedWithItsProcessesLogs)
     EXPECT_EQ(run.wait(90s), 1) << run.output() << run.errors();
     const std::string said = run.output() + run.errors();
     EXPECT_NE(said.find("lab time 0.0 / 10.0 s (waiting for car 5's first state)"), std::string::npos) << said;
-    EXPECT_NE(said.find("the lab clock could not start: no state within 30000 ms from car 5 ('sim_5', 'bridge_5')"), std::string::npos) << said;
+    EXPECT_NE(said.find("the lab clock could not start: no state within 10000 ms from car 5 ('sim_5', 'bridge_5')"), std::string::npos) << said;
     EXPECT_NE(said.find("sim_5's log (" + out + "/sim_5.log) ends:"), std::string::npos) << said;
     EXPECT_NE(said.find("bridge_5's log (" + out + "/bridge_5.log) ends:"), std::string::npos) << said;
     EXPECT_EQ(said.find("lab time starts"), std::string::npos) << said;
@@ -586,13 +588,14 @@ TEST(LabRun, ASecuredLabRunsEachProcessAsItsOwnNodeAndAStrangerSeesNothing)
 TEST(LabRun, ANodeThatStallsMidRunIsNamedWhenTheSimulatedClockGivesUpOnIt)
 {
     // The car's simulator frozen (SIGSTOP) while the simulated clock steps (the state machine is
-    // done after 20 s of lab time, about a second here): the clock waits its step timeout for the
-    // node's next tick, then the run ends naming it. Never a silent hang.
+    // done after 20 s of lab time, about a second here): the clock waits its step timeout (the
+    // scenario's timeouts.step) for the node's next tick, then the run ends naming it. Never a
+    // silent hang.
     TempDir dir;
     const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
     const std::string file = dir.write("stall.yaml", "name: stall\ntime: simulated\nduration: 3600s\nworld: " + source +
                                                          "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0], fsm: " + source +
-                                                         "fsm/corridor.json}\n");
+                                                         "fsm/corridor.json}\ntimeouts: {step: 3s}\n");
     const std::string out = dir.file("run");
     Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
     int pid = 0;
@@ -605,7 +608,7 @@ TEST(LabRun, ANodeThatStallsMidRunIsNamedWhenTheSimulatedClockGivesUpOnIt)
     const std::string said = run.output() + run.errors();
     EXPECT_NE(said.find("simulated time stuck at "), std::string::npos) << said;
     EXPECT_EQ(said.find("simulated time stuck at 0 ns"), std::string::npos) << "it stalled mid-run, not at the start:\n" << said;
-    EXPECT_NE(said.find("no announcement from 'firmware_sim_5'"), std::string::npos) << said;
+    EXPECT_NE(said.find("no announcement from 'firmware_sim_5' within 3000 ms"), std::string::npos) << said;
     EXPECT_NE(said.find("sim_5's log (" + out + "/sim_5.log) ends:"), std::string::npos) << said;
     EXPECT_EQ(pid_with("/bin/firmware_sim ", run_tag(out)), 0) << "the frozen node is stopped with the run";
 }

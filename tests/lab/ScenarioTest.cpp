@@ -116,6 +116,32 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
     for (const auto& v : loop.vehicles) EXPECT_EQ(v.fsm, fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/loop.json").string());
 }
 
+TEST(Scenario, TimeoutsSayHowLongTheRunWaitsForItsProcessesAndForEachSimulatedStep)
+{
+    TempDir dir;
+    dir.write("map.json", "{\"walls\": []}");
+    const std::string head = "name: t\nduration: 5s\nworld: map.json\nvehicles: [{id: 2}]\n";
+    // Unsaid: 30 s for the processes to come up (a host reached over ssh is slow), 10 s a step.
+    const Scenario plain = load_scenario(dir.write("plain.yaml", head));
+    EXPECT_EQ(plain.timeouts.start_ns, 30'000'000'000u);
+    EXPECT_EQ(plain.timeouts.step_ns, 10'000'000'000u);
+    const Scenario s = load_scenario(dir.write("t.yaml", head + "timeouts: {start: 2m, step: 500ms}\n"));
+    EXPECT_EQ(s.timeouts.start_ns, 120'000'000'000u);
+    EXPECT_EQ(s.timeouts.step_ns, 500'000'000u);
+    const Scenario one = load_scenario(dir.write("one.yaml", head + "timeouts: {step: 3s}\n"));
+    EXPECT_EQ(one.timeouts.start_ns, 30'000'000'000u) << "the other keeps its default";
+    EXPECT_EQ(one.timeouts.step_ns, 3'000'000'000u);
+
+    const std::string bad = dir.write("bad.yaml", head + "timeouts: {start: 0s, setp: 1s, step: 900us}\n");
+    EXPECT_EQ(errors_of(bad), (std::vector<std::string>{
+                                  bad + ":5: timeouts.setp: unknown key (did you mean 'step'?); known: start, step",
+                                  bad + ":5: timeouts.start: must be longer than 0",
+                                  bad + ":5: timeouts.step: must be at least 1ms",
+                              }));
+    const std::string scalar = dir.write("scalar.yaml", head + "timeouts: 5s\n");
+    EXPECT_EQ(errors_of(scalar), (std::vector<std::string>{scalar + ":5: timeouts: expected a map (start, step)"}));
+}
+
 TEST(Scenario, AMonitorIsAPortOrAPortWithItsStopButtons)
 {
     TempDir dir;
@@ -214,7 +240,7 @@ TEST(Scenario, EveryErrorIsNamedAtOnceWithItsLineAndPath)
                                        "qos: {vehicleState: {reliable: maybe}}\n"); // 14
     const auto errors = errors_of(file);
     const std::vector<std::string> expected = {
-        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, discovery_server, history, controllers, ips",
+        file + ":3: duraton: unknown key (did you mean 'duration'?); known: name, domain, time, duration, world, lanes, vehicles, routing, qos, record, monitor, parameters, security, hosts, ssh_config, max_clock_offset, discovery, discovery_server, history, controllers, ips, timeouts",
         file + ":1: name: 'bad run': use letters, digits, - and _ only",
         file + ":2: time: 'sometimes': expected real or simulated",
         file + ":1: duration: missing (how long the run lasts, e.g. 30s)",

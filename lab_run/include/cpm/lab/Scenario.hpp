@@ -121,6 +121,16 @@ struct RecordSpec
     std::vector<std::string> exclude;
 };
 
+/// `timeouts:` how long a run waits before it ends naming what it waited for.
+struct Timeouts
+{
+    /// For its processes to come up: every timer to join the simulated clock; in real time every
+    /// car's first state and the planners' readiness (over ssh on a busy host too).
+    uint64_t start_ns = 30'000'000'000;
+    /// Simulated time: for each node's tick of a step (a node that stalls mid-run).
+    uint64_t step_ns = 10'000'000'000;
+};
+
 struct Scenario
 {
     std::string file;  ///< as given
@@ -148,6 +158,7 @@ struct Scenario
     std::vector<HostSpec> hosts;  ///< empty: every process on the run's own host
     std::string ssh_config;       ///< an ssh config file for reaching the hosts (ssh -F), or empty
     uint64_t max_clock_offset_ns = 2'000'000;  ///< a host's clock further off refuses the run
+    Timeouts timeouts;
     /// The port fast-discovery-server listens on (its default).
     static constexpr int kDiscoveryServerPort = 11811;
     /// `discovery: server`: every participant finds the others through fast-discovery-server,
@@ -199,6 +210,7 @@ struct RunSettings
     uint64_t duration_ns = 0; ///< the scenario's unless overridden
     TimeMode time = TimeMode::real;
     bool shared_memory = true; ///< the run's processes share memory on their host (not in simulated time, unless told)
+    Timeouts timeouts;         ///< the scenario's
     std::string ssh_shared_dir; ///< where ssh keeps the run's one connection per other host ("": none)
     /// Each controller's own domain (by name) where the scenario names none, as the run chose
     /// it (controller_domains()).
