@@ -480,7 +480,7 @@ TEST(LabRun, InRealTimeACarThatNeverSendsAStateIsNamedWithItsProcessesLogs)
     const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
     const std::string file = dir.write("silent.yaml", "name: silent\ntime: real\nduration: 10s\nworld: " + source +
                                                           "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0]}\n"
-                                                          "timeouts: {start: 10s}\n");
+                                                          "timeouts: {start: 15s}\n");  // past the second progress line (10 s)
     const std::string out = dir.file("run");
     Process run({built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}, {run_tag(out)});
     int pid = 0;
@@ -489,7 +489,7 @@ TEST(LabRun, InRealTimeACarThatNeverSendsAStateIsNamedWithItsProcessesLogs)
     EXPECT_EQ(run.wait(90s), 1) << run.output() << run.errors();
     const std::string said = run.output() + run.errors();
     EXPECT_NE(said.find("lab time 0.0 / 10.0 s (waiting for car 5's first state)"), std::string::npos) << said;
-    EXPECT_NE(said.find("the lab clock could not start: no state within 10000 ms from car 5 ('sim_5', 'bridge_5')"), std::string::npos) << said;
+    EXPECT_NE(said.find("the lab clock could not start: no state within 15000 ms from car 5 ('sim_5', 'bridge_5')"), std::string::npos) << said;
     EXPECT_NE(said.find("sim_5's log (" + out + "/sim_5.log) ends:"), std::string::npos) << said;
     EXPECT_NE(said.find("bridge_5's log (" + out + "/bridge_5.log) ends:"), std::string::npos) << said;
     EXPECT_EQ(said.find("lab time starts"), std::string::npos) << said;
