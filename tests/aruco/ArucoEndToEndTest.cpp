@@ -14,6 +14,7 @@
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <ArucoMarkers.h>
 #include <CameraFrame.h>
@@ -38,7 +39,7 @@ using cpm_test::Process;
 
 namespace {
 
-const std::string kRoot = CPM_SOURCE_DIR;
+const std::string kRoot = cpm_test::source_dir();
 const std::string kCamera = kRoot + "/scenarios/cameras/sim_640x480.yaml";
 const std::string kGates = kRoot + "/scenarios/maps/gates.json";
 
@@ -328,8 +329,8 @@ TEST(ArucoEndToEnd, IpsNodeNamesBadFramesAndMarkersAndGoesOn)
     // ips_node on the overhead frames of the test's own writer: a good frame (two cars), a frame
     // of the wrong size, then a frame where two cars wear one marker and a marker of no car lies
     // about: each named and counted, the cars it can tell apart still published.
-    const std::string ceiling = std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/ceiling_1280x1024.yaml";
-    const std::string floor = std::string(CPM_SOURCE_DIR) + "/scenarios/maps/lab_floor.json";
+    const std::string ceiling = cpm_test::source_dir() + "/scenarios/cameras/ceiling_1280x1024.yaml";
+    const std::string floor = cpm_test::source_dir() + "/scenarios/maps/lab_floor.json";
     const auto camera = cpm::aruco::Camera::load(ceiling, cpm::aruco::CameraPlacement::overhead);
     const auto world = cpm::vehicle::World::load(floor);
     cpm::Participant participant(cpm_test::isolated_options());
@@ -397,7 +398,7 @@ TEST(ArucoEndToEnd, IpsNodeNamesBadFramesAndMarkersAndGoesOn)
     Process no_pose({built_program("ips_node"), "--camera", kCamera, "--world", floor});
     EXPECT_EQ(no_pose.wait(20s), 1);
     EXPECT_NE(no_pose.errors().find("sim_640x480.yaml: no overhead pose"), std::string::npos) << no_pose.errors();
-    Process no_roofs({built_program("ips_node"), "--camera", ceiling, "--world", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/gates.json"});
+    Process no_roofs({built_program("ips_node"), "--camera", ceiling, "--world", cpm_test::source_dir() + "/scenarios/maps/gates.json"});
     EXPECT_EQ(no_roofs.wait(20s), 1);
     EXPECT_NE(no_roofs.errors().find("gates.json: no roof_markers"), std::string::npos) << no_roofs.errors();
 }
@@ -408,8 +409,8 @@ TEST(ArucoEndToEnd, CameraLocateFindsTheOverheadCameraThatMovedAndWritesItsPose)
     // turned 1°, which the camera file does not know), drawn by cpm camera render --overhead;
     // cpm camera locate against the lab's file finds it and says how far it moved.
     const auto dir = temp_dir("locate");
-    const std::string lab = std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/ceiling_1280x1024.yaml";
-    const std::string floor = std::string(CPM_SOURCE_DIR) + "/scenarios/maps/lab_floor.json";
+    const std::string lab = cpm_test::source_dir() + "/scenarios/cameras/ceiling_1280x1024.yaml";
+    const std::string floor = cpm_test::source_dir() + "/scenarios/maps/lab_floor.json";
     auto now = cpm::aruco::Camera::load(lab, cpm::aruco::CameraPlacement::overhead);
     cv::Matx33d turn;
     cv::Rodrigues(cv::Vec3d(0, 1, 0) * (1.0 * M_PI / 180), turn);
@@ -431,11 +432,11 @@ TEST(ArucoEndToEnd, CameraLocateFindsTheOverheadCameraThatMovedAndWritesItsPose)
     EXPECT_LT(found.overhead->residual_px, 0.5);
     // A world whose floor is not this one, and a car's camera file: named, nothing written.
     std::filesystem::remove(out);
-    Process other({built_program("cpm"), "camera", "locate", "--camera", lab, "--world", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/gates.json",
+    Process other({built_program("cpm"), "camera", "locate", "--camera", lab, "--world", cpm_test::source_dir() + "/scenarios/maps/gates.json",
                    "--image", image, "--out", out});
     EXPECT_EQ(other.wait(30s), 1);
     EXPECT_NE(other.errors().find("gates.json: the world has 0 floor_markers"), std::string::npos) << other.errors();
-    Process car({built_program("cpm"), "camera", "locate", "--camera", std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/sim_640x480.yaml",
+    Process car({built_program("cpm"), "camera", "locate", "--camera", cpm_test::source_dir() + "/scenarios/cameras/sim_640x480.yaml",
                  "--world", floor, "--image", image, "--out", out});
     EXPECT_EQ(car.wait(30s), 1);
     EXPECT_NE(car.errors().find("ceiling.png: 1280×1024 px, but the camera file says 640×480"), std::string::npos) << car.errors();

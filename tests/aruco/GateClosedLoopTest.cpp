@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <random>
+#include <cpm_test/SourceDir.hpp>
 
 using namespace cpm;
 
@@ -31,10 +32,10 @@ Run drive(const vehicle::World& world, vehicle::Pose start, double seconds)
 {
     vehicle::VehicleParameters params;
     cpm_test::ClosedLoopCar car(params, world, start);
-    const auto camera = aruco::Camera::load(std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/sim_640x480.yaml");
+    const auto camera = aruco::Camera::load(cpm_test::source_dir() + "/scenarios/cameras/sim_640x480.yaml");
     aruco::Renderer renderer(world, camera, {.noise_sigma = 2, .seed = 3});
     aruco::MarkerDetector detector(camera, {}, aruco::MarkerSizes::from_world(world));
-    auto loaded = fsm::load_file(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/gates.json");
+    auto loaded = fsm::load_file(cpm_test::source_dir() + "/scenarios/fsm/gates.json");
     EXPECT_TRUE(loaded.ok()) << (loaded.errors.empty() ? "" : loaded.errors[0].text());
     Run run;
     if (!loaded.ok()) return run;

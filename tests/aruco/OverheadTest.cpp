@@ -16,14 +16,15 @@
 #include <functional>
 #include <map>
 #include <unistd.h>
+#include <cpm_test/SourceDir.hpp>
 
 using namespace cpm;
 using namespace cpm::aruco;
 
 namespace {
 
-const std::string kCamera = std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/ceiling_1280x1024.yaml";
-const std::string kWorld = std::string(CPM_SOURCE_DIR) + "/scenarios/maps/lab_floor.json";
+const std::string kCamera = cpm_test::source_dir() + "/scenarios/cameras/ceiling_1280x1024.yaml";
+const std::string kWorld = cpm_test::source_dir() + "/scenarios/maps/lab_floor.json";
 
 std::string error_from(const std::function<void()>& f)
 {
@@ -100,7 +101,7 @@ TEST(OverheadCamera, TheCameraFilesPoseIsReadSavedAndDemandedWhereItIsNeeded)
     EXPECT_DOUBLE_EQ(back.distortion[0], -0.08);
 
     // A car's camera file has no pose in the map: the IPS says so and how to get one.
-    const std::string car = std::string(CPM_SOURCE_DIR) + "/scenarios/cameras/sim_640x480.yaml";
+    const std::string car = cpm_test::source_dir() + "/scenarios/cameras/sim_640x480.yaml";
     EXPECT_NE(error_from([&] { Camera::load(car, CameraPlacement::overhead); }).find("sim_640x480.yaml: no overhead pose"), std::string::npos);
     EXPECT_FALSE(Camera::load(car, CameraPlacement::lens_only).overhead);
     // The lens alone: a ceiling camera file needs no mount on a car.

@@ -2,6 +2,7 @@
 // What both fault suites read off a running lab: the source tree, and the firmware simulator's
 // motor trace (--trace-pwm).
 #include <cpm_test/Process.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <cstdint>
 #include <sstream>
@@ -11,7 +12,7 @@
 
 namespace cpm_faults {
 
-inline const std::string kRoot = CPM_SOURCE_DIR;
+inline const std::string kRoot = cpm_test::source_dir();
 
 /// The firmware simulator's `pwm T MODE PWM` trace after time t: (time, mode); mode 0 brake,
 /// 1 forward, 2 reverse.

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <deque>
 #include <random>
+#include <cpm_test/SourceDir.hpp>
 
 using namespace cpm;
 
@@ -25,12 +26,12 @@ struct Step
 /// ranger is 0.5 m from the right wall.
 std::vector<Step> drive(const std::string& machine_file, double seconds)
 {
-    auto world = vehicle::World::load(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json");
+    auto world = vehicle::World::load(cpm_test::source_dir() + "/scenarios/maps/corridor.json");
     vehicle::VehicleParameters params;
     params.imu_yaw_rate_noise = params.imu_acceleration_noise = params.ultrasonic_noise = 0;
     const vehicle::Pose start{0, -0.01, 0};
     cpm_test::ClosedLoopCar car(params, world, start);
-    auto loaded = fsm::load_file(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/" + machine_file);
+    auto loaded = fsm::load_file(cpm_test::source_dir() + "/scenarios/fsm/" + machine_file);
     EXPECT_TRUE(loaded.ok()) << (loaded.errors.empty() ? "" : loaded.errors[0].text());
     if (!loaded.ok()) return {};
     auto& machine = *loaded.machine;
@@ -116,14 +117,14 @@ TEST(FsmClosedLoop, AcrossTheDoorNicheItHoldsItsLineWithNoisyRangersLostSamplesA
     // 2-4 ticks late. The ranger's beam crosses the niche's edges, so single readings half in
     // the niche come; a follower that took one for the wall, or steered on a stale error all
     // across the niche, swerved there (mean steering over 0.2 s up to 0.34).
-    auto world = vehicle::World::load(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json");
+    auto world = vehicle::World::load(cpm_test::source_dir() + "/scenarios/maps/corridor.json");
     vehicle::VehicleParameters params;  // the simulator's default noise
     const auto& mount = params.ultrasonic[2];
     double worst_steering = 0, worst_clearance = 0;
     for (uint32_t run = 1; run <= 100; ++run) {
         std::mt19937 rng(run);
         cpm_test::ClosedLoopCar car(params, world, {0, -0.01, 0}, run);
-        auto loaded = fsm::load_file(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json");
+        auto loaded = fsm::load_file(cpm_test::source_dir() + "/scenarios/fsm/corridor.json");
         ASSERT_TRUE(loaded.ok());
         auto& machine = *loaded.machine;
         const size_t delay = 2 + run % 3;

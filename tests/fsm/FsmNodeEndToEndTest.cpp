@@ -7,6 +7,7 @@
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <FsmStatus.h>
 #include <VehicleCommandDirect.h>
@@ -94,7 +95,7 @@ Drive drive(const std::string& machine, std::string tick = "timer")
     cpm::ReaderAbstract<VehicleCommandDirect> commands(participant, "vehicleCommandDirect", {.keep_all = true});
     // Transient-local: the status of state 0 may be published before this reader is matched.
     cpm::ReaderAbstract<FsmStatus> status(participant, "fsmStatus", {.reliable = true, .keep_all = true, .transient_local = true});
-    const std::string root = CPM_SOURCE_DIR;
+    const std::string root = cpm_test::source_dir();
     Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", root + "/scenarios/maps/corridor.json",
                  "--start", "0,-0.01,0", "--firmware", avr ? "avr" : "sim"});
     Process sut({built_program("fsm_node"), "--vehicle_id", "5", "--fsm", root + "/scenarios/fsm/" + machine, "--report", "--tick", tick});
@@ -231,7 +232,7 @@ TEST(FsmNodeEndToEnd, RampsTheClearanceFromHalfAMetreToPointEightOverTwoMetres)
 TEST(FsmNodeEndToEnd, WithoutACarItBrakesAndSaysWhy)
 {
     cpm_test::test_domain_id();
-    Process sut({built_program("fsm_node"), "--vehicle_id", "6", "--fsm", std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json"});
+    Process sut({built_program("fsm_node"), "--vehicle_id", "6", "--fsm", cpm_test::source_dir() + "/scenarios/fsm/corridor.json"});
     EXPECT_TRUE(cpm_test::wait_until([&] { return sut.errors().find("vehicle 6: no VehicleState; braking") != std::string::npos; }))
         << sut.errors();
     sut.kill(SIGTERM);
@@ -254,7 +255,7 @@ TEST(FsmNodeEndToEnd, AMachineWithErrorsIsNotStartedAndEveryErrorIsListed)
 TEST(CpmFsmCheck, ReportsAGoodFileAsOkAndABadOneWithEveryErrorAndExitCode1)
 {
     cpm_test::test_domain_id();
-    Process good({built_program("cpm"), "fsm", "check", std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json"});
+    Process good({built_program("cpm"), "fsm", "check", cpm_test::source_dir() + "/scenarios/fsm/corridor.json"});
     EXPECT_EQ(good.wait(10s), 0) << good.output() << good.errors();
     EXPECT_NE(good.output().find("corridor.json: ok (4 states, 3 transitions, 0 warning(s))"), std::string::npos) << good.output();
 
@@ -274,7 +275,7 @@ TEST(CpmFsmCheck, ReportsAGoodFileAsOkAndABadOneWithEveryErrorAndExitCode1)
 TEST(CpmFsmConvertAndRender, TheDrawingConvertsToTheJsonAndRendersItsStatesAndTransitions)
 {
     cpm_test::test_domain_id();
-    const std::string dir = std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/";
+    const std::string dir = cpm_test::source_dir() + "/scenarios/fsm/";
     Process convert({built_program("cpm"), "fsm", "convert", dir + "corridor.uxf"});
     ASSERT_EQ(convert.wait(10s), 0) << convert.errors();
     std::ifstream json_file(dir + "corridor.json");

@@ -6,6 +6,7 @@
 
 #include <fstream>
 #include <sstream>
+#include <cpm_test/SourceDir.hpp>
 
 using namespace cpm::fsm;
 using nlohmann::json;
@@ -40,7 +41,7 @@ std::string arrow(int x, const std::string& params)
 
 TEST(FsmUxf, TheShippedDrawingIsTheSameMachineAsTheShippedJson)
 {
-    const std::string dir = std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/";
+    const std::string dir = cpm_test::source_dir() + "/scenarios/fsm/";
     auto sut = convert_uxf(text_of(dir + "corridor.uxf"), "corridor.uxf");
     ASSERT_TRUE(sut.errors.empty()) << sut.errors[0].text();
     EXPECT_EQ(json::parse(sut.json), json::parse(text_of(dir + "corridor.json")));

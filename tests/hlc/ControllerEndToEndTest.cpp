@@ -4,6 +4,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -17,7 +18,7 @@ using cpm_test::TempDir;
 
 namespace {
 
-const std::string kRing = std::string(CPM_SOURCE_DIR) + "/scenarios/lanes/ring.json";
+const std::string kRing = cpm_test::source_dir() + "/scenarios/lanes/ring.json";
 
 nlohmann::json summary_of(const std::string& dir)
 {
@@ -76,7 +77,7 @@ TEST(ControllerRun, APythonPlatoonControllerDrivesFourCarsOnTheRingAndEveryComma
 {
     TempDir dir;
     const std::string out = dir.file("run");
-    const auto s = run(ring_scenario(dir, "simulated", "12s", 4, std::string(CPM_SOURCE_DIR) + "/examples/python/platoon.py",
+    const auto s = run(ring_scenario(dir, "simulated", "12s", 4, cpm_test::source_dir() + "/examples/python/platoon.py",
                                      "[\"--lanes\", \"" + kRing + "\", \"--speed\", \"0.6\"]", "[1, 2, 3, 4]"),
                        out);
     ASSERT_TRUE(s["ok"].get<bool>()) << s.dump(2);

@@ -9,6 +9,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <VehicleState.h>
 
@@ -34,7 +35,7 @@ namespace {
 using cpm_test::command_line;
 using cpm_test::cpm_prefix;
 
-const std::string kRoot = CPM_SOURCE_DIR;
+const std::string kRoot = cpm_test::source_dir();
 
 /// The pids of cpm's programs (not sshd) in a host's namespace.
 std::vector<std::string> programs_on(const cpm_test::NamespaceHosts& hosts, size_t host)

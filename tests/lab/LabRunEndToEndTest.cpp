@@ -10,6 +10,7 @@
 #include <cpm_test/McapCheck.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -33,7 +34,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::string kCorridor = std::string(CPM_SOURCE_DIR) + "/scenarios/labs/corridor.yaml";
+const std::string kCorridor = cpm_test::source_dir() + "/scenarios/labs/corridor.yaml";
 
 nlohmann::json summary_of(const std::string& dir)
 {
@@ -79,7 +80,7 @@ int parent_of(int pid)
 std::string one_car_in_simulated_time(const TempDir& dir, const std::string& name, const std::string& course, const std::string& start,
                                       const std::string& more = "")
 {
-    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string source = cpm_test::source_dir() + "/scenarios/";
     return dir.write(name + ".yaml", "name: " + name + "\ntime: simulated\nduration: 5s\nworld: " + source + "maps/" + course +
                                          ".json\nvehicles:\n  - {id: 5, start: " + start + ", fsm: " + source + "fsm/" + course + ".json}\n" + more);
 }
@@ -265,7 +266,7 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     // Real time: in simulated time the corridor's 60 s pass in about 4 s, before the test acts.
     Process run({built_program("cpm"), "lab", "run", kCorridor, "--time", "real", "--duration", "60s", "--out", out, "--monitor", "off"},
                 {run_tag(out)});
-    const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/corridor.json").string();
+    const std::string fsm_args = "--vehicle_id 5 --fsm " + fs::weakly_canonical(cpm_test::source_dir() + "/scenarios/fsm/corridor.json").string();
     int pid = 0;
     ASSERT_TRUE(cpm_test::wait_until([&] { return (pid = pid_with(fsm_args, run_tag(out))) != 0 && fs::exists(out + "/fsm_5.log"); }, 30s)) << run.errors();
     // Running, and saying so in its log (on a loaded machine that can take longer than a moment);
@@ -294,14 +295,14 @@ TEST(LabRun, ANodeKilledMidRunIsNamedWithTheEndOfItsLog)
     EXPECT_EQ(summary["ok"], false);
     EXPECT_NE(summary["error"].get<std::string>().find("fsm_5"), std::string::npos);
     EXPECT_EQ(pid_with(out + "/recording.db", run_tag(out)), 0) << "every process of the run is stopped";
-    EXPECT_EQ(pid_with("--map " + fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string() + " --start", run_tag(out)), 0);
+    EXPECT_EQ(pid_with("--map " + fs::weakly_canonical(cpm_test::source_dir() + "/scenarios/maps/corridor.json").string() + " --start", run_tag(out)), 0);
 }
 
 TEST(LabRun, ANodeWithRestartTrueIsStartedAgainAndEveryNodeGetsTheScenariosQos)
 {
     TempDir dir;
     const std::string out = dir.file("run");
-    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string source = cpm_test::source_dir() + "/scenarios/";
     // vehicleState is best effort unless a scenario says otherwise. Real time: in simulated time
     // a quick machine drove the whole corridor (its machine ends, exit 0) before the kill came.
     const std::string file = dir.write("restart.yaml", "name: restart\ntime: real\nduration: 12s\nworld: " + source +
@@ -477,7 +478,7 @@ TEST(LabRun, InRealTimeACarThatNeverSendsAStateIsNamedWithItsProcessesLogs)
     // (SIGSTOP) before its first packet, the run waits, says for what, and after the scenario's
     // timeouts.start ends naming the car and its processes. Never a run whose time ran without its car.
     TempDir dir;
-    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string source = cpm_test::source_dir() + "/scenarios/";
     const std::string file = dir.write("silent.yaml", "name: silent\ntime: real\nduration: 10s\nworld: " + source +
                                                           "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0]}\n"
                                                           "timeouts: {start: 15s}\n");  // past the second progress line (10 s)
@@ -530,7 +531,7 @@ TEST(LabRun, RoutingInRealTimeRunsItsWholeDurationFromTheCommonStart)
     // from that start (once ended at once: two clock reads in one expression underflowed).
     TempDir dir;
     const std::string out = dir.file("run");
-    Process run({built_program("cpm"), "lab", "run", std::string(CPM_SOURCE_DIR) + "/scenarios/labs/intersection.yaml", "--time", "real",
+    Process run({built_program("cpm"), "lab", "run", cpm_test::source_dir() + "/scenarios/labs/intersection.yaml", "--time", "real",
                  "--duration", "3s", "--out", out, "--monitor", "off"});
     ASSERT_EQ(run.wait(90s), 0) << run.output() << run.errors();
     const auto summary = summary_of(out);
@@ -548,7 +549,7 @@ TEST(LabRun, ASecuredLabRunsEachProcessAsItsOwnNodeAndAStrangerSeesNothing)
     const std::string lab = dir.file("lab-sec");
     Process init({built_program("cpm"), "security", "init", lab, "--days", "30"});
     ASSERT_EQ(init.wait(60s), 0) << init.errors();
-    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string source = cpm_test::source_dir() + "/scenarios/";
     // In real time, long enough that the looks below happen while it runs (checked).
     const std::string file = dir.write("secured.yaml", "name: secured\ntime: real\nduration: 12s\nworld: " + source +
                                                            "maps/corridor.json\nvehicles:\n  - id: 5\n    start: [0.0, -0.01, 0.0]\n"
@@ -592,7 +593,7 @@ TEST(LabRun, ANodeThatStallsMidRunIsNamedWhenTheSimulatedClockGivesUpOnIt)
     // scenario's timeouts.step) for the node's next tick, then the run ends naming it. Never a
     // silent hang.
     TempDir dir;
-    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string source = cpm_test::source_dir() + "/scenarios/";
     const std::string file = dir.write("stall.yaml", "name: stall\ntime: simulated\nduration: 3600s\nworld: " + source +
                                                          "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0], fsm: " + source +
                                                          "fsm/corridor.json}\ntimeouts: {step: 3s}\n");
@@ -618,7 +619,7 @@ TEST(LabRun, TheCorridorOnTheCarsAvrFirmwareInSimulatedTimeEndsInItsStopState)
     // firmware: avr - the ELF a car is flashed with, in simavr on the lab's simulated clock, the
     // same bridge and state machine as with firmware_sim: the whole corridor to its Stop state.
     TempDir dir;
-    const std::string source = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string source = cpm_test::source_dir() + "/scenarios/";
     const std::string scenario =
         dir.write("corridor_avr.yaml", "name: corridor_avr\ntime: simulated\nduration: 40s\nworld: " + source +
                                            "maps/corridor.json\nvehicles:\n  - {id: 5, start: [0.0, -0.01, 0.0], firmware: avr, fsm: " +

@@ -6,6 +6,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -41,7 +42,7 @@ bool pause_recorder(const std::string& run_dir, uintmax_t bytes, std::chrono::mi
 void expect_two_runs_alike(const std::string& name, std::vector<std::string> extra = {}, bool pause_in_b = false)
 {
     cpm_test::TempDir dir;
-    const std::string file = std::string(CPM_SOURCE_DIR) + "/scenarios/labs/" + name + ".yaml";
+    const std::string file = cpm_test::source_dir() + "/scenarios/labs/" + name + ".yaml";
     for (const char* run : {"a", "b"}) {
         std::vector<std::string> argv{built_program("cpm"), "lab", "run", file, "--time", "simulated", "--out", dir.file(run), "--monitor", "off"};
         argv.insert(argv.end(), extra.begin(), extra.end());

@@ -7,6 +7,7 @@
 #include <cpm/vehicle/World.hpp>
 
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -20,7 +21,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::string kGates = std::string(CPM_SOURCE_DIR) + "/scenarios/maps/gates.json";
+const std::string kGates = cpm_test::source_dir() + "/scenarios/maps/gates.json";
 
 /// The true poses of a car driving 0.5 m/s along the straight legs between `points`, every 20 ms
 /// of lab time from 0.

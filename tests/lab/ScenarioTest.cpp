@@ -4,6 +4,7 @@
 #include <cpm/lab/Scenario.hpp>
 
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gtest/gtest.h>
 
@@ -21,7 +22,7 @@ using cpm_test::TempDir;
 namespace {
 
 
-std::string labs(const std::string& name) { return std::string(CPM_SOURCE_DIR) + "/scenarios/labs/" + name; }
+std::string labs(const std::string& name) { return cpm_test::source_dir() + "/scenarios/labs/" + name; }
 
 std::vector<std::string> errors_of(const std::string& file)
 {
@@ -58,7 +59,7 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
     ASSERT_EQ(corridor.vehicles.size(), 1u);
     EXPECT_EQ(corridor.vehicles[0].id, 5);
     EXPECT_DOUBLE_EQ(corridor.vehicles[0].y, -0.01);
-    EXPECT_EQ(corridor.world, fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json").string());
+    EXPECT_EQ(corridor.world, fs::weakly_canonical(cpm_test::source_dir() + "/scenarios/maps/corridor.json").string());
     auto plan = plan_run(corridor, {.bin_dir = bin, .run_dir = "/runs/x", .domain = 7, .time = TimeMode::simulated});
     ASSERT_EQ(plan.size(), 5u);
     EXPECT_EQ(plan[0].name, "cpm_history");
@@ -113,7 +114,7 @@ TEST(Scenario, TheShippedScenariosLoadAndPlanTheirProcesses)
     ASSERT_EQ(loop.vehicles.size(), 4u);
     EXPECT_EQ(loop.monitor_port, std::optional<int>(8080));
     EXPECT_TRUE(loop.monitor_allow_stop);
-    for (const auto& v : loop.vehicles) EXPECT_EQ(v.fsm, fs::weakly_canonical(std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/loop.json").string());
+    for (const auto& v : loop.vehicles) EXPECT_EQ(v.fsm, fs::weakly_canonical(cpm_test::source_dir() + "/scenarios/fsm/loop.json").string());
 }
 
 TEST(Scenario, TimeoutsSayHowLongTheRunWaitsForItsProcessesAndForEachSimulatedStep)
@@ -283,7 +284,7 @@ TEST(Scenario, InSimulatedTimeACarsCameraAndItsMarkerFinderTickOnTheLabClock)
 TEST(Scenario, StartsOutsideTheWallsOnAWallOrOnAnotherCarAreRefusedNamingTheCars)
 {
     TempDir dir;
-    const std::string world = std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json";
+    const std::string world = cpm_test::source_dir() + "/scenarios/maps/corridor.json";
     const std::string file = dir.write("starts.yaml", "name: s\nduration: 5s\nworld: " + world +
                                                           "\nvehicles:\n"
                                                           "  - {id: 5, start: [0.0, -0.01, 0]}\n"
@@ -429,7 +430,7 @@ TEST(Scenario, HostsNameEachProcessesComputerAndEveryMistakeInThemIsNamed)
 TEST(Scenario, AMachineThatLooksForGatesOnACarWithoutACameraIsRefused)
 {
     TempDir dir;
-    const std::string root = std::string(CPM_SOURCE_DIR) + "/scenarios/";
+    const std::string root = cpm_test::source_dir() + "/scenarios/";
     const std::string file = dir.write("blind.yaml", "name: b\nduration: 5s\nworld: " + root + "maps/gates.json\n"
                                                      "vehicles:\n  - {id: 5, start: [0.0, 0.0, 0.3], fsm: " + root + "fsm/gates.json}\n"
                                                      "  - {id: 6, start: [0.0, 0.6, 0.3], fsm: " + root + "fsm/corridor.json}\n");

@@ -11,6 +11,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gtest/gtest.h>
 #include <httplib.h>
@@ -123,8 +124,8 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
     TempDir dir;
     const int port = cpm_test::free_tcp_port();
     std::string yaml = kScenario;
-    yaml = std::regex_replace(yaml, std::regex("WORLD"), std::string(CPM_SOURCE_DIR) + "/scenarios/maps/loop.json");
-    yaml = std::regex_replace(yaml, std::regex("FSM"), std::string(CPM_SOURCE_DIR) + "/scenarios/fsm/loop.json");
+    yaml = std::regex_replace(yaml, std::regex("WORLD"), cpm_test::source_dir() + "/scenarios/maps/loop.json");
+    yaml = std::regex_replace(yaml, std::regex("FSM"), cpm_test::source_dir() + "/scenarios/fsm/loop.json");
     yaml = std::regex_replace(yaml, std::regex("PORT"), std::to_string(port));
     const std::string out = dir.file("run");
     Process run({built_program("cpm"), "lab", "run", dir.write("four.yaml", yaml), "--out", out});
@@ -285,7 +286,7 @@ TEST(MonitorEndToEnd, FourCarsInTheBrowserMatchTheirSamplesAndTheStopButtonsStop
     ASSERT_TRUE(fs::exists(out + "/recording.db"));
 
     // The same recording played back to a monitor without --allow-stop: a replay, and no stops.
-    Process watch({built_program("cpm"), "monitor", "--port", "0", "--world", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/loop.json"});
+    Process watch({built_program("cpm"), "monitor", "--port", "0", "--world", cpm_test::source_dir() + "/scenarios/maps/loop.json"});
     std::smatch m;
     std::string said;  // m points into it: it must outlive the wait (TSan saw a use after free)
     ASSERT_TRUE(wait_until(

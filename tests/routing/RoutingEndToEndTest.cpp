@@ -11,6 +11,7 @@
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <VehicleObservation.h>
 
@@ -32,7 +33,7 @@ using cpm_test::Process;
 
 namespace {
 
-const std::string kRoot = CPM_SOURCE_DIR;
+const std::string kRoot = cpm_test::source_dir();
 const std::string kLanes = kRoot + "/scenarios/lanes/intersection.json";
 
 /// Every observation of every car, collected while `run` lasts.

@@ -11,6 +11,7 @@
 #include <future>
 #include <limits>
 #include <vector>
+#include <cpm_test/SourceDir.hpp>
 
 using namespace cpm::routing;
 
@@ -20,7 +21,7 @@ class RoutingSweep : public ::testing::TestWithParam<size_t>
 
 TEST_P(RoutingSweep, SixtySecondsWithinTheMarginAndTheLimitsForFiveSeeds)
 {
-    const auto graph = load_lane_graph_or_throw(std::string(CPM_SOURCE_DIR) + "/scenarios/lanes/intersection.json");
+    const auto graph = load_lane_graph_or_throw(cpm_test::source_dir() + "/scenarios/lanes/intersection.json");
     // The tests' own referee of the gap between bodies (not the planner's footprint_distance):
     // the least gap of every pair at every sample, per seed.
     std::array<double, 5> referee_gap;

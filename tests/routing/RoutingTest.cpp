@@ -9,12 +9,13 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <cpm_test/SourceDir.hpp>
 
 using namespace cpm::routing;
 
 namespace {
 
-const std::string kRoot = CPM_SOURCE_DIR;
+const std::string kRoot = cpm_test::source_dir();
 const std::string kIntersection = kRoot + "/scenarios/lanes/intersection.json";
 const std::string kRing = kRoot + "/scenarios/lanes/ring.json";
 

@@ -18,6 +18,7 @@
 #include "history_e2e.hpp"
 
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
@@ -500,7 +501,7 @@ TEST(RecordingEndToEnd, PlayNamesWhatIsWrong)
 /// `cpm vehicle sim` as car 3 on the corridor: a live writer stamping with the wall clock, as a car does.
 Process live_car()
 {
-    return Process({built_program("cpm"), "vehicle", "sim", "--id", "3", "--map", std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json",
+    return Process({built_program("cpm"), "vehicle", "sim", "--id", "3", "--map", cpm_test::source_dir() + "/scenarios/maps/corridor.json",
                     "--start", "0,0,0", "--realtime"});  // a car keeps its 50 Hz as a real one would
 }
 

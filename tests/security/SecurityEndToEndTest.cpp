@@ -13,6 +13,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <FsmStatus.h>
 #include <VehicleCommandDirect.h>
@@ -306,7 +307,7 @@ TEST(Security, ASecuredLabDrives)
                                              .subscribe = {"vehicleState", "rangeSensors", "arucoMarkers", "stopRequest"}});
     cpm::security::add_node(lab.dir, "history", {.publish = {"historyReply*", "historyStatus"}, .subscribe = {"*"}});
     cpm::security::add_node(lab.dir, "watcher", {.publish = {}, .subscribe = {"vehicleObservation", "vehicleState", "fsmStatus"}});
-    const std::string root = CPM_SOURCE_DIR;
+    const std::string root = cpm_test::source_dir();
     Process history({built_program("cpm_history"), "--security", lab.node("history")});
     Process car({built_program("cpm"), "vehicle", "sim", "--id", "5", "--map", root + "/scenarios/maps/corridor.json", "--start",
                  "0,-0.01,0", "--security", lab.node("car")});

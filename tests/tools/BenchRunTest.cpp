@@ -1,6 +1,7 @@
 // ./lab bench as a whole: a benchmark that fails or hangs is named, and the others still run.
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -17,7 +18,7 @@ TEST(BenchRun, AProgramThatFailsOrHangsIsNamedAndTheNextOnesStillRun)
     cpm_test::TempDir dir;
     // bench/run.sh beside stand-ins for every benchmark program: bench_timer hangs, bench_fsm fails.
     fs::create_directories(dir.path / "bench" / "python");
-    fs::copy_file(std::string(CPM_SOURCE_DIR) + "/bench/run.sh", dir.path / "bench" / "run.sh");
+    fs::copy_file(cpm_test::source_dir() + "/bench/run.sh", dir.path / "bench" / "run.sh");
     dir.write("bench/python/bench_python.py", "print('ran bench_python')\n");
     fs::create_directories(dir.path / "build" / "bin");
     for (const char* name : {"bench_latency", "bench_throughput", "bench_large", "bench_startup", "bench_timer", "bench_vehicle", "bench_firmware", "bench_fsm",

@@ -6,6 +6,7 @@
 #include <cpm/stamp_message.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <VehicleState.h>
 
@@ -153,10 +154,10 @@ TEST(CpmCommand, HostPortsNamesEachPortThatCannotBeTakenAndExitsOne)
 TEST(CpmCommand, OutputThatCannotBeWrittenIsAnError)
 {
     cpm_test::test_domain_id();
-    Process full({"/bin/sh", "-c", cpm_test::built_program("cpm") + " fsm check " + CPM_SOURCE_DIR "/scenarios/fsm/corridor.json > /dev/full"});
+    Process full({"/bin/sh", "-c", cpm_test::built_program("cpm") + " fsm check " + cpm_test::source_dir() + "/scenarios/fsm/corridor.json > /dev/full"});
     EXPECT_EQ(full.wait(10s), 1);
     EXPECT_THAT(full.errors(), HasSubstr("cpm: cannot write the output: No space left on device"));
-    auto fine = run_cpm({"fsm", "check", CPM_SOURCE_DIR "/scenarios/fsm/corridor.json"});
+    auto fine = run_cpm({"fsm", "check", cpm_test::source_dir() + "/scenarios/fsm/corridor.json"});
     EXPECT_EQ(fine.wait(10s), 0);
     EXPECT_THAT(fine.errors(), Not(HasSubstr("cannot write")));
 }
@@ -311,7 +312,7 @@ TEST(CpmPrograms, BadFlagsAndFilesOfEveryProgramAreNamedWithTheRightExitCode)
         {{"cpm_history", "--max-bytes", "abc"}, "", 2, "--max-bytes: 'abc' is not a whole number"},
         {{"cpm_history", "--max-bytes-total", "12"}, "", 2, "--max-bytes-total: '12' is not a whole number in 1024..1099511627776"},
         {{"cpm_history", "--max-bytes", "2048", "--max-bytes-total", "4096"}, "", 2, "--max-bytes is the older name of --max-bytes-total"},
-        {{"fsm_node", "--vehicle_id", "1", "--fsm", CPM_SOURCE_DIR "/scenarios/fsm/corridor.json", "--max-age", "abc"},
+        {{"fsm_node", "--vehicle_id", "1", "--fsm", cpm_test::source_dir() + "/scenarios/fsm/corridor.json", "--max-age", "abc"},
          "", 2, "--max-age: 'abc' is not a duration"},
         {{"vehicle_bridge", "--vehicle_id", "1", "--device", "/dev/null", "--calibration", "FILE"}, R"({"servo_range_us": 0})",
          1, "servo_range_us must not be 0"},
@@ -338,7 +339,7 @@ TEST(CpmPrograms, BadFlagsAndFilesOfEveryProgramAreNamedWithTheRightExitCode)
 TEST(CpmPrograms, AFolderGivenForAFileIsNamedAsAFolder)
 {
     cpm_test::test_domain_id();
-    const std::string dir = CPM_SOURCE_DIR "/scenarios/labs";
+    const std::string dir = cpm_test::source_dir() + "/scenarios/labs";
     const std::vector<std::pair<std::vector<std::string>, std::string>> cases{
         {{"lab", "check", dir}, dir + ": cannot read it as the scenario file: it is a directory"},
         {{"aruco", "detect", "x.png", "--camera", dir}, dir + ": cannot read it as the camera file: it is a directory"},

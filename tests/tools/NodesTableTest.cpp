@@ -7,6 +7,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gtest/gtest.h>
 
@@ -21,7 +22,7 @@ using cpm_test::built_program;
 
 namespace {
 
-const std::string kRoot = CPM_SOURCE_DIR;
+const std::string kRoot = cpm_test::source_dir();
 
 struct Endpoints
 {

@@ -4,6 +4,7 @@
 #include <cpm/Realtime.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -22,7 +23,7 @@ using cpm_test::Process;
 
 namespace {
 
-const std::string kMachine = std::string(CPM_SOURCE_DIR) + "/fuzz/corpus/fsm_json/lane_change.json";
+const std::string kMachine = cpm_test::source_dir() + "/fuzz/corpus/fsm_json/lane_change.json";
 
 /// The command run as a lab user without real-time privileges: no CAP_SYS_NICE or CAP_IPC_LOCK
 /// (dropped from the bounding set, so even root cannot regain them), RLIMIT_RTPRIO 0 and a

@@ -5,6 +5,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/TempDir.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -152,7 +153,7 @@ TEST(SharedMemoryLeftovers, ALabRunLeavesNothingOfItsDomain)
     const int domain = cpm_test::test_domain_id();
     cpm_test::TempDir dir;
     // Shared memory on, as in real time (a simulated run does without it unless told).
-    Process run({built_program("cpm"), "lab", "run", std::string(CPM_SOURCE_DIR) + "/scenarios/labs/corridor.yaml", "--duration", "2s",
+    Process run({built_program("cpm"), "lab", "run", cpm_test::source_dir() + "/scenarios/labs/corridor.yaml", "--duration", "2s",
                  "--out", dir.file("run"), "--monitor", "off", "--dds_shared_memory", "on"});
     std::set<std::string> used;
     ASSERT_EQ(watch_lab_run(run, used), 0) << run.errors();
@@ -166,7 +167,7 @@ TEST(SharedMemoryLeftovers, ASimulatedLabRunSharesNoMemoryUnlessTold)
 {
     // Its processes talk over UDP loopback alone: Fast DDS 2.9 would send every sample both ways.
     cpm_test::TempDir dir;
-    Process run({built_program("cpm"), "lab", "run", std::string(CPM_SOURCE_DIR) + "/scenarios/labs/corridor.yaml", "--duration", "2s",
+    Process run({built_program("cpm"), "lab", "run", cpm_test::source_dir() + "/scenarios/labs/corridor.yaml", "--duration", "2s",
                  "--out", dir.file("run"), "--monitor", "off"});
     std::set<std::string> used;
     std::set<int> seen;

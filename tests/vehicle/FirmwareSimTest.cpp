@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cpm_test/SourceDir.hpp>
 
 using namespace cpm::vehicle;
 
@@ -143,7 +144,7 @@ TEST(World, MapErrorsNameTheFileAndJsonPath)
 
 TEST(World, ShippedCorridorLoads)
 {
-    auto world = World::load(std::string(CPM_SOURCE_DIR) + "/scenarios/maps/corridor.json");
+    auto world = World::load(cpm_test::source_dir() + "/scenarios/maps/corridor.json");
     EXPECT_GE(world.walls().size(), 8u);
     // In the corridor at the start, the left wall is 1.0 m away, the right one 0.6 m.
     EXPECT_NEAR(world.cast_ray(0, 0, M_PI / 2, 3.0), 1.0, 1e-9);

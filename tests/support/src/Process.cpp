@@ -1,4 +1,5 @@
 #include <cpm_test/Process.hpp>
+#include <cpm_test/SourceDir.hpp>
 
 #include <cpm_test/Isolation.hpp>
 
@@ -83,5 +84,7 @@ int pid_with(const std::string& needle, const std::string& tag)
 }
 
 std::string built_program(const std::string& name) { return std::string(CPM_BIN_DIR) + "/" + name; }
+
+std::string source_dir() { return CPM_SOURCE_DIR; }
 
 }  // namespace cpm_test

@@ -43,7 +43,7 @@ std::string file_text(const std::string& path);
 /// with the same arguments at the same time.
 int pid_with(const std::string& needle, const std::string& tag = "");
 
-/// The path of a program built next to the tests (set by CMake as CPM_BIN_DIR).
+/// The path of a program built next to the tests (CPM_BIN_DIR, defined for the support library only).
 std::string built_program(const std::string& name);
 
 }  // namespace cpm_test
