@@ -569,8 +569,10 @@ class LabClock
 {
 public:
     /// `progress` (may be null) is told when a real-time run's lab time starts.
-    LabClock(Participant& participant, const RunSettings& settings, std::function<void()> before_start, FILE* progress)
-        : participant_(participant), master_(participant), settings_(settings), before_start_(std::move(before_start)), progress_(progress)
+    LabClock(Participant& participant, const RunSettings& settings, const Timeouts& timeouts, std::function<void()> before_start,
+             FILE* progress)
+        : participant_(participant), master_(participant), settings_(settings), timeouts_(timeouts),
+          before_start_(std::move(before_start)), progress_(progress)
     {
     }
     ~LabClock() { stop(); }  // also when the run unwinds: the clock's thread waits for its timers otherwise
@@ -691,11 +693,12 @@ private:
         }
         throw Error("no state within " + std::to_string(start_timeout().count()) + " ms from " + named);
     }
-    std::chrono::milliseconds start_timeout() const { return std::chrono::milliseconds(settings_.timeouts.start_ns / 1'000'000); }
-    std::chrono::milliseconds step_timeout() const { return std::chrono::milliseconds(settings_.timeouts.step_ns / 1'000'000); }
+    std::chrono::milliseconds start_timeout() const { return std::chrono::milliseconds(timeouts_.start_ns / 1'000'000); }
+    std::chrono::milliseconds step_timeout() const { return std::chrono::milliseconds(timeouts_.step_ns / 1'000'000); }
     Participant& participant_;
     TimeMaster master_;
     const RunSettings& settings_;
+    const Timeouts timeouts_;
     const std::function<void()> before_start_;
     FILE* const progress_;
     std::thread thread_;
@@ -991,7 +994,6 @@ RunSettings settings_of(const Scenario& s, const RunOptions& o)
     const InitSettings init = init_settings();
     settings.shared_memory = init.shared_memory_chosen ? init.shared_memory : settings.time != TimeMode::simulated;
     settings.duration_ns = o.duration_ns.value_or(s.duration_ns);
-    settings.timeouts = s.timeouts;
     const fs::path dir = fs::absolute(o.out_dir.empty() ? fs::path("runs") / (s.name + "-" + utc_now_compact()) : fs::path(o.out_dir));
     std::error_code ec;
     if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) throw cpm::Error("the run's folder " + dir.string() + " exists and is not empty");
@@ -1073,7 +1075,7 @@ RunResult run_lab(const Scenario& s, const RunOptions& o)
     Writer<StopRequest> stops(participant, topics::stop_request.name, topics::stop_request.writer);
     HistoryClient history(participant, std::chrono::milliseconds(2000));
     RunWatch watch(participant);
-    LabClock clock(participant, settings, [&] { recorder.wait(std::chrono::seconds(10), o.progress); }, o.progress);
+    LabClock clock(participant, settings, s.timeouts, [&] { recorder.wait(std::chrono::seconds(10), o.progress); }, o.progress);
     ProcessGroup group;          // every process of the run, stopped in order on every way out
     std::set<std::string> died;  // ended badly while the run went on
 

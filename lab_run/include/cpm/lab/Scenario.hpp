@@ -210,7 +210,6 @@ struct RunSettings
     uint64_t duration_ns = 0; ///< the scenario's unless overridden
     TimeMode time = TimeMode::real;
     bool shared_memory = true; ///< the run's processes share memory on their host (not in simulated time, unless told)
-    Timeouts timeouts;         ///< the scenario's
     std::string ssh_shared_dir; ///< where ssh keeps the run's one connection per other host ("": none)
     /// Each controller's own domain (by name) where the scenario names none, as the run chose
     /// it (controller_domains()).
