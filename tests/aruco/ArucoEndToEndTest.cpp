@@ -537,6 +537,25 @@ GateDrive drive_gates(const std::string& world_file, const std::string& start, C
     return run;
 }
 
+/// What the test's own reader missed of the car's 50 Hz observations (best effort, like every
+/// cpm topic): the gates are judged on this path, so a failure names it ("" when none).
+std::string missed_observations(const std::vector<cpm::aruco::PathPoint>& path)
+{
+    size_t missed = 0;
+    double widest = 0, at = 0;
+    for (size_t i = 1; i < path.size(); ++i) {
+        const double gap = path[i].t - path[i - 1].t;
+        if (gap < 0.03) continue;
+        missed += size_t(std::lround(gap / 0.02)) - 1;
+        if (gap > widest) widest = gap, at = path[i - 1].t - path.front().t;
+    }
+    if (missed == 0) return "";
+    char text[160];
+    std::snprintf(text, sizeof text, "the test's reader missed %zu observations (widest gap %.0f ms, at t %.2f s)\n", missed,
+                  widest * 1e3, at);
+    return text;
+}
+
 /// Drives the gate machine through the seeded courses and judges every gate (crossed in order,
 /// 5 cm from each marker's edge at least).
 void drive_seeded_courses(const std::vector<uint32_t>& seeds, Clock clock)
@@ -552,9 +571,12 @@ void drive_seeded_courses(const std::vector<uint32_t>& seeds, Clock clock)
         auto run = drive_gates(file, "0,0," + std::to_string(heading), clock);
         EXPECT_EQ(run.fsm_exit, 0) << run.output;
         auto passages = cpm::aruco::gate_passages(world, run.path, params.width);
+        const std::string missed = missed_observations(run.path);
         std::string why;
-        EXPECT_TRUE(cpm::aruco::all_gates_passed(passages, 0.05, &why)) << "seed " << seed << ": " << why << "\n" << run.states << run.output;
+        EXPECT_TRUE(cpm::aruco::all_gates_passed(passages, 0.05, &why)) << "seed " << seed << ": " << why << "\n" << missed << run.states << run.output;
         std::printf("seed %u, the machine's states:\n%s", seed, run.states.c_str());
+        std::printf("seed %u: %zu observations; %s", seed, run.path.size(),
+                    missed.empty() ? "none missed\n" : missed.c_str());
         for (const auto& p : passages) std::printf("seed %u gate %d: %.3f m from its centre\n", seed, p.gate + 1, p.offset);
     }
     std::filesystem::remove_all(dir);
