@@ -357,3 +357,31 @@ TEST(CpmPrograms, AFolderGivenForAFileIsNamedAsAFolder)
         EXPECT_THAT(p.errors(), Not(HasSubstr("disk I/O"))) << args[0] << " " << args[1];
     }
 }
+
+// `cpm lab check` of a good file: what a run would start, and how long it would wait before it
+// ends naming what it waited for (the scenario's timeouts, or the defaults), nothing started.
+TEST(CpmLab, CheckSaysWhatARunStartsAndHowLongItWaits)
+{
+    cpm_test::test_domain_id();
+    auto shipped = run_cpm({"lab", "check", cpm_test::source_dir() + "/scenarios/labs/gates.yaml"});
+    ASSERT_EQ(shipped.wait(20s), 0) << shipped.errors();
+    EXPECT_THAT(shipped.output(), HasSubstr("gates, 1 car(s), real time, 90.0 s"));
+    EXPECT_THAT(shipped.output(), HasSubstr("a run starts 7 processes"));
+    EXPECT_THAT(shipped.output(), HasSubstr("  fsm_6 "));
+    EXPECT_THAT(shipped.output(), HasSubstr("waits 30 s for its processes to start, 10 s for each step of simulated time"));
+
+    char name[] = "/tmp/cpm_check_XXXXXX.yaml";
+    const int fd = ::mkstemps(name, 5);
+    ASSERT_GE(fd, 0);
+    ::close(fd);
+    std::ifstream in(cpm_test::source_dir() + "/scenarios/labs/corridor.yaml");
+    std::stringstream read;
+    read << in.rdbuf();
+    std::string text = read.str();  // its files named from the shipped folder, not from /tmp
+    for (size_t at; (at = text.find(" ../")) != std::string::npos;) text.replace(at, 4, " " + cpm_test::source_dir() + "/scenarios/");
+    std::ofstream(name) << text << "timeouts: {start: 2m, step: 1.5s}\n";
+    auto own = run_cpm({"lab", "check", name});
+    EXPECT_EQ(own.wait(20s), 0) << own.errors();
+    EXPECT_THAT(own.output(), HasSubstr("waits 120 s for its processes to start, 1.5 s for each step of simulated time"));
+    std::remove(name);
+}

@@ -104,6 +104,8 @@ int lab_check(const std::vector<std::string>& args)
     std::printf("%s: ok: %s, %zu car(s), %s time, %.1f s on domain %d; a run starts %zu processes:\n", file.c_str(), s.name.c_str(),
                 s.vehicles.size(), s.time == cpm::lab::TimeMode::simulated ? "simulated" : "real", double(s.duration_ns) * 1e-9,
                 settings.domain, plan.size());
+    std::printf("  timeouts: a run waits %g s for its processes to start, %g s for each step of simulated time\n",
+                double(s.timeouts.start_ns) * 1e-9, double(s.timeouts.step_ns) * 1e-9);
     auto print = [](const cpm::lab::ProcessPlan& p) {
         std::string line;
         for (const auto& a : p.argv) line += (line.empty() ? "" : " ") + a;
