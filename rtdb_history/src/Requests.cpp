@@ -1,5 +1,6 @@
 #include <cpm/rtdb/Requests.hpp>
 
+#include <algorithm>
 #include <regex>
 #include <set>
 #include <stdexcept>
@@ -128,6 +129,64 @@ void reply_viewed(HistoryReply& reply, const Store& store, Oid oid, Which which,
     set_status(reply, st);
 }
 
+/// The objects a request by name may be answered from, in the order to ask them: every object
+/// of its topic and key (a writer restarted after it was marked dead leaves two), newest first
+/// for what was at or before a time, oldest first for what came after one. Only the one the
+/// request names by oid.
+std::vector<Oid> candidates(const Store& store, const HistoryRequest& rq, Kind kind)
+{
+    const Oid newest = object_of(store, rq);
+    if (rq.oid() != 0) return {newest};
+    std::vector<Oid> all = store.named(rq.topic(), rq.key());
+    if (all.size() < 2) return {newest};
+    if (kind != Kind::younger && kind != Kind::range) std::reverse(all.begin(), all.end());
+    return all;
+}
+
+/// A question about a time asked by name: answered from the first candidate that has a sample
+/// for it (the object of that time), else as the newest object of the name answers it.
+void reply_at_time(HistoryReply& reply, const Store& store, const std::vector<Oid>& oids, Which which, uint64_t t, By by)
+{
+    Oid chosen = which == Which::younger ? oids.back() : oids.front();
+    for (size_t i = 0; oids.size() > 1 && i < oids.size(); ++i) {
+        if (store.view(oids[i], which, t, by, [](const SampleView&) {}) == Status::ok) {
+            chosen = oids[i];
+            break;
+        }
+    }
+    if (auto info = store.info(chosen)) reply.objects().push_back(to_wire(*info));
+    reply_viewed(reply, store, chosen, which, t, by);
+}
+
+/// A range asked by name: the samples of every object of that name within it, oldest object first.
+void reply_range(HistoryReply& reply, const Store& store, const std::vector<Oid>& oids, const HistoryRequest& rq, By by)
+{
+    size_t limit = rq.limit() ? rq.limit() : kDefaultLimit;
+    Status status = Status::not_found;
+    uint64_t lost = 0;
+    bool truncated = false;
+    for (Oid oid : oids) {
+        if (limit == 0) {
+            truncated = true;
+            break;
+        }
+        auto r = store.range(oid, rq.t0(), rq.t1(), by, limit);
+        if (oid == oids.back() || !r.samples.empty()) {
+            if (auto info = store.info(oid)) reply.objects().push_back(to_wire(*info));
+        }
+        for (const auto& sample : r.samples) reply.samples().push_back(to_wire(sample, Status::ok));
+        limit -= r.samples.size();
+        lost += r.lost;
+        truncated = truncated || r.truncated;
+        // ok or partial once any object held samples there; else what the newest says.
+        if (!r.samples.empty() && status != Status::ok) status = r.status;
+        else if (reply.samples().empty() && oid == oids.back()) status = r.status;
+    }
+    reply.truncated(truncated);
+    reply.lost(lost);
+    set_status(reply, status);
+}
+
 void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
 {
     const auto [kind, by] = check(rq);
@@ -153,7 +212,16 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
         std::vector<Oid> oids;
         for (const auto& name : rq.objects()) {
             const auto slash = name.find('/');
-            oids.push_back(object_named(store, name.substr(0, slash), slash == std::string::npos ? "" : name.substr(slash + 1)));
+            const std::string topic = name.substr(0, slash), key = slash == std::string::npos ? "" : name.substr(slash + 1);
+            oids.push_back(object_named(store, topic, key));
+            // A writer restarted since: the object of that time, the newest one holding a sample then.
+            const auto all = store.named(topic, key);
+            for (auto it = all.rbegin(); all.size() > 1 && it != all.rend(); ++it) {
+                if (store.at(*it, rq.t0(), by).ok()) {
+                    oids.back() = *it;
+                    break;
+                }
+            }
         }
         auto cut = store.snapshot(rq.t0(), oids, by);
         bool all_ok = true;
@@ -166,24 +234,22 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
     }
     default: break;
     }
-    // The kinds about one object.
+    // The kinds about a time: the object of that time among those of the name.
+    switch (kind) {
+    case Kind::at: return reply_at_time(reply, store, candidates(store, rq, kind), Which::at, rq.t0(), by);
+    case Kind::older: return reply_at_time(reply, store, candidates(store, rq, kind), Which::older, rq.t0(), by);
+    case Kind::younger: return reply_at_time(reply, store, candidates(store, rq, kind), Which::younger, rq.t0(), by);
+    case Kind::range: return reply_range(reply, store, candidates(store, rq, kind), rq, by);
+    default: break;
+    }
+    // The kinds about one object, the newest of its name.
     const Oid oid = object_of(store, rq);
     if (auto info = store.info(oid)) reply.objects().push_back(to_wire(*info));
     switch (kind) {
     case Kind::info: return set_status(reply, Status::ok);
     case Kind::latest: return reply_viewed(reply, store, oid, Which::latest, 0, by);
-    case Kind::at: return reply_viewed(reply, store, oid, Which::at, rq.t0(), by);
-    case Kind::older: return reply_viewed(reply, store, oid, Which::older, rq.t0(), by);
-    case Kind::younger: return reply_viewed(reply, store, oid, Which::younger, rq.t0(), by);
     case Kind::wait_next: return reply_found(reply, store.wait_next(oid, rq.t0(), timeout));
     case Kind::successor: return reply_found(reply, store.successor(oid, rq.t0(), timeout));
-    case Kind::range: {
-        auto r = store.range(oid, rq.t0(), rq.t1(), by, rq.limit() ? rq.limit() : kDefaultLimit);
-        reply.truncated(r.truncated);
-        reply.lost(r.lost);
-        for (const auto& s : r.samples) reply.samples().push_back(to_wire(s, Status::ok));
-        return set_status(reply, r.status);
-    }
     default: return;  // answered above
     }
 }

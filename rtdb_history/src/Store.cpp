@@ -95,7 +95,7 @@ Oid Store::add_object(ObjectInfo info)
         if (info.name.empty()) info.name = info.key.empty() ? info.topic : info.topic + "/" + info.key;
         o->retention = retention;
         o->topic_bytes = &topic_bytes_[info.topic];
-        if (info.kind == ObjectKind::instance) by_name_[{info.topic, info.key}] = oid;  // the newest of that name
+        if (info.kind == ObjectKind::instance) by_name_[{info.topic, info.key}].push_back(oid);  // the newest of that name last
         o->info = std::move(info);
         if (n == slots_used_.load(std::memory_order_relaxed)) slots_used_.store(n + 1, std::memory_order_release);
     }
@@ -251,8 +251,10 @@ void Store::expire(uint64_t now_ns)
         std::unique_lock ol(o->mutex);
         total_bytes_ -= o->bytes_held;
         *o->topic_bytes -= o->bytes_held;
-        auto named = by_name_.find({o->info.topic, o->info.key});
-        if (named != by_name_.end() && named->second == o->info.oid) by_name_.erase(named);
+        if (auto named = by_name_.find({o->info.topic, o->info.key}); named != by_name_.end()) {
+            std::erase(named->second, o->info.oid);
+            if (named->second.empty()) by_name_.erase(named);
+        }
         free_slots_.push_back(uint32_t(o->info.oid));
         static_cast<ObjectState&>(*o) = ObjectState{};  // oid none; records and payload given back
         ++o->generation;
@@ -449,7 +451,14 @@ std::optional<Oid> Store::find(const std::string& topic, const std::string& key)
     std::shared_lock lock(registry_mutex_);
     auto it = by_name_.find({topic, key});
     if (it == by_name_.end()) return std::nullopt;
-    return it->second;
+    return it->second.back();
+}
+
+std::vector<Oid> Store::named(const std::string& topic, const std::string& key) const
+{
+    std::shared_lock lock(registry_mutex_);
+    auto it = by_name_.find({topic, key});
+    return it == by_name_.end() ? std::vector<Oid>{} : it->second;
 }
 
 Changes Store::changes_since(uint64_t t_ns) const

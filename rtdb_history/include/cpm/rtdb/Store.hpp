@@ -228,8 +228,11 @@ public:
     std::vector<ObjectInfo> search(const Criteria& c) const;
     /// Waits up to `timeout` for a matching object to exist.
     std::optional<ObjectInfo> wait_for_object(const Criteria& c, std::chrono::nanoseconds timeout) const;
-    /// The object of topic + key, if held (not purged).
+    /// The object of topic + key, if held (not purged): the newest of that name.
     std::optional<Oid> find(const std::string& topic, const std::string& key) const;
+    /// Every object of topic + key held, oldest first: more than one when its writer was
+    /// marked dead and a writer of the same instance came after (a restarted process).
+    std::vector<Oid> named(const std::string& topic, const std::string& key) const;
     Changes changes_since(uint64_t t_ns) const;
     StoreStats stats() const;
 
@@ -270,7 +273,7 @@ private:
     std::vector<uint32_t> free_slots_;
     std::map<std::string, Retention> retention_;
     std::map<std::string, uint64_t> topic_bytes_;  ///< objects point at their topic's node
-    std::map<std::pair<std::string, std::string>, Oid> by_name_;  ///< topic and key: the newest instance object
+    std::map<std::pair<std::string, std::string>, std::vector<Oid>> by_name_;  ///< topic and key: its instance objects, oldest first
     uint64_t total_bytes_ = 0;
     std::atomic<uint64_t> evicted_{0}, purged_{0}, lost_{0};
 
