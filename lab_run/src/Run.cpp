@@ -361,24 +361,27 @@ void name_taken_ports(const Scenario& s, const std::string& host, const std::str
     }
 }
 
-/// All a command prints on stdout ("" when it cannot run).
-std::string output_of(const std::vector<std::string>& argv)
+/// All a command prints on stdout ("" when it cannot run); `ended` (if given) says how it
+/// ended: "exited with code 255", "did not end within 10 s", or why it could not start.
+std::string output_of(const std::vector<std::string>& argv, std::string* ended = nullptr)
 {
     try {
         ChildProcess c({.argv = argv, .capture_stdout = true});
         std::string out;
         while (auto line = c.read_line()) out += *line + "\n";
-        (void)c.wait(std::chrono::seconds(10));
+        const auto end = c.wait(std::chrono::seconds(10));
+        if (ended) *ended = end ? end->describe() : "did not end within 10 s";
         return out;
-    } catch (const cpm::Error&) {
+    } catch (const cpm::Error& e) {
+        if (ended) *ended = e.what();
         return "";
     }
 }
 
-/// The first line a command prints ("" when it prints none or cannot run).
-std::string first_line_of(const std::vector<std::string>& argv)
+/// The first line a command prints ("" when it prints none or cannot run), and how it ended.
+std::string first_line_of(const std::vector<std::string>& argv, std::string* ended = nullptr)
 {
-    const std::string out = output_of(argv);
+    const std::string out = output_of(argv, ended);
     return out.substr(0, out.find('\n'));
 }
 
@@ -395,10 +398,18 @@ RunResult::Host check_host(const Scenario& s, const RunSettings& settings, const
     for (const auto& p : listen_ports(s)) {
         if (p.host == h.name) ports.push_back(p.port);
     }
-    const std::string theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}));
+    // Asked twice before the host is refused: once (2026-12-07, the first tests of a fresh
+    // clone's suite on a busy machine) it printed nothing and said nothing, and the next test
+    // reached the same host at once.
+    std::string ended;
+    std::string theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}), &ended);
     if (theirs.empty()) {
-        errors.push_back({where, "cannot run " + remote.program("cpm") + " there with ssh " + h.ssh +
-                                     " (the host unreachable, ssh asking for a password or a key, or cpm not installed there)"});
+        std::this_thread::sleep_for(std::chrono::milliseconds(500));
+        theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}), &ended);
+    }
+    if (theirs.empty()) {
+        errors.push_back({where, "cannot run " + remote.program("cpm") + " there with ssh " + h.ssh + " (ssh " + ended +
+                                     "; the host unreachable, ssh asking for a password or a key, or cpm not installed there)"});
         return entry;
     }
     if (theirs != ours) {

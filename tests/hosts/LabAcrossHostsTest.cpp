@@ -85,7 +85,9 @@ std::vector<std::string> ssh_clients_on(const cpm_test::NamespaceHosts& hosts, s
 /// state: the cars over ssh are up) within a minute.
 bool lab_time_started(cpm_test::Process& run)
 {
-    return cpm_test::wait_until([&] { return run.errors().find("lab time starts") != std::string::npos; }, 60s);
+    // Not past the run's end: a run refused at its start says so at once.
+    return cpm_test::wait_until([&] { return run.errors().find("lab time starts") != std::string::npos || run.wait(0ms) >= 0; }, 60s) &&
+           run.errors().find("lab time starts") != std::string::npos;
 }
 
 bool runs(const std::vector<std::string>& programs, const std::string& name)
@@ -341,7 +343,8 @@ TEST_F(LabAcrossHosts, AHostWithoutSshIsRefusedBeforeAnythingStarts)
     hosts().stop_sshd(2);
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", dir.file("run"), "--monitor", "off"}));
     EXPECT_EQ(run.wait(60s), 1) << run.output() << run.errors();
-    EXPECT_NE(run.errors().find("hosts.car_b: cannot run " + cpm_prefix() + "/bin/cpm there with ssh car_b"), std::string::npos) << run.errors();
+    EXPECT_NE(run.errors().find("hosts.car_b: cannot run " + cpm_prefix() + "/bin/cpm there with ssh car_b (ssh exited with code 255;"),
+              std::string::npos) << run.errors();
     for (size_t h = 0; h < 3; ++h) EXPECT_TRUE(programs_on(hosts(), h).empty()) << "started on host " << h << " though the run was refused";
 
 }
