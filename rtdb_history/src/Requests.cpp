@@ -166,20 +166,17 @@ void reply_range(HistoryReply& reply, const Store& store, const std::vector<Oid>
     uint64_t lost = 0;
     bool truncated = false;
     for (Oid oid : oids) {
-        if (limit == 0) {
-            truncated = true;
-            break;
-        }
-        auto r = store.range(oid, rq.t0(), rq.t1(), by, limit);
-        if (oid == oids.back() || !r.samples.empty()) {
+        auto r = store.range(oid, rq.t0(), rq.t1(), by, limit);  // limit 0: truncated if it holds any there
+        if (!r.samples.empty() || (oid == oids.back() && reply.objects().empty())) {
             if (auto info = store.info(oid)) reply.objects().push_back(to_wire(*info));
         }
         for (const auto& sample : r.samples) reply.samples().push_back(to_wire(sample, Status::ok));
         limit -= r.samples.size();
         lost += r.lost;
         truncated = truncated || r.truncated;
-        // ok or partial once any object held samples there; else what the newest says.
-        if (!r.samples.empty() && status != Status::ok) status = r.status;
+        // ok once any object held samples there, partial if one's window cut them; else what
+        // the newest says.
+        if (!r.samples.empty() && (status == Status::not_found || r.status == Status::partial)) status = r.status;
         else if (reply.samples().empty() && oid == oids.back()) status = r.status;
     }
     reply.truncated(truncated);

@@ -165,6 +165,9 @@ TEST(HistoryRequests, QuestionsByNameAcrossAWriterRestartAreAnsweredFromTheObjec
     EXPECT_EQ(got, (std::vector<int>{2, 3, 5, 6}));
     EXPECT_EQ(f.ask("range", 150, 650, 3).samples().size(), 3u);
     EXPECT_TRUE(f.ask("range", 150, 650, 3).truncated());
+    EXPECT_TRUE(f.ask("range", 150, 650, 2).truncated()) << "the old writer's two, and the new one's after them left out";
+    EXPECT_FALSE(f.ask("range", 150, 450, 2).truncated());
+    EXPECT_EQ(f.ask("range", 150, 450, 2).objects().size(), 1u) << "only the object the samples came from";
     // A snapshot takes each name's object of that time.
     HistoryRequest rq;
     rq.kind("snapshot");
