@@ -401,10 +401,9 @@ RunResult::Host check_host(const Scenario& s, const RunSettings& settings, const
     // Asked twice before the host is refused: once (2026-12-07, the first tests of a fresh
     // clone's suite on a busy machine) it printed nothing and said nothing, and the next test
     // reached the same host at once.
-    std::string ended;
-    std::string theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}), &ended);
-    if (theirs.empty()) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    std::string ended, theirs;
+    for (int attempt = 0; attempt < 2 && theirs.empty(); ++attempt) {
+        if (attempt > 0) std::this_thread::sleep_for(std::chrono::milliseconds(500));
         theirs = first_line_of(ssh_command(remote, {remote.program("cpm"), "--version"}), &ended);
     }
     if (theirs.empty()) {

@@ -1,6 +1,5 @@
 #include <cpm/rtdb/Requests.hpp>
 
-#include <algorithm>
 #include <regex>
 #include <set>
 #include <stdexcept>
@@ -129,31 +128,42 @@ void reply_viewed(HistoryReply& reply, const Store& store, Oid oid, Which which,
     set_status(reply, st);
 }
 
-/// The objects a request by name may be answered from, in the order to ask them: every object
-/// of its topic and key (a writer restarted after it was marked dead leaves two), newest first
-/// for what was at or before a time, oldest first for what came after one. Only the one the
-/// request names by oid.
-std::vector<Oid> candidates(const Store& store, const HistoryRequest& rq, Kind kind)
+/// Every object of topic and key, oldest first (a writer restarted after it was marked dead
+/// leaves two); throws naming what is wrong when there is none.
+std::vector<Oid> objects_named(const Store& store, const std::string& topic, const std::string& key)
 {
-    const Oid newest = object_of(store, rq);
-    if (rq.oid() != 0) return {newest};
-    std::vector<Oid> all = store.named(rq.topic(), rq.key());
-    if (all.size() < 2) return {newest};
-    if (kind != Kind::younger && kind != Kind::range) std::reverse(all.begin(), all.end());
+    std::vector<Oid> all = store.named(topic, key);
+    if (all.empty()) all.push_back(object_named(store, topic, key));  // throws
     return all;
 }
 
-/// A question about a time asked by name: answered from the first candidate that has a sample
-/// for it (the object of that time), else as the newest object of the name answers it.
+/// The objects a question about a time may be answered from, oldest first: those of its topic
+/// and key, or the one it names by oid.
+std::vector<Oid> candidates(const Store& store, const HistoryRequest& rq)
+{
+    if (rq.oid() != 0 || rq.topic().empty()) return {object_of(store, rq)};  // by oid, or the error naming what is missing
+    return objects_named(store, rq.topic(), rq.key());
+}
+
+/// The object of `oids` (oldest first) that answers `which` at t: the newest with a sample at or
+/// before t, the oldest with one after it; the newest object when none has one.
+Oid object_of_time(const Store& store, const std::vector<Oid>& oids, Which which, uint64_t t, By by)
+{
+    auto has_answer = [&](Oid oid) { return store.view(oid, which, t, by, [](const SampleView&) {}) == Status::ok; };
+    if (oids.size() > 1 && which == Which::younger) {
+        for (Oid oid : oids)
+            if (has_answer(oid)) return oid;
+    } else if (oids.size() > 1) {
+        for (auto it = oids.rbegin(); it != oids.rend(); ++it)
+            if (has_answer(*it)) return *it;
+    }
+    return oids.back();
+}
+
+/// A question about a time: answered from the object of that time.
 void reply_at_time(HistoryReply& reply, const Store& store, const std::vector<Oid>& oids, Which which, uint64_t t, By by)
 {
-    Oid chosen = which == Which::younger ? oids.back() : oids.front();
-    for (size_t i = 0; oids.size() > 1 && i < oids.size(); ++i) {
-        if (store.view(oids[i], which, t, by, [](const SampleView&) {}) == Status::ok) {
-            chosen = oids[i];
-            break;
-        }
-    }
+    const Oid chosen = object_of_time(store, oids, which, t, by);
     if (auto info = store.info(chosen)) reply.objects().push_back(to_wire(*info));
     reply_viewed(reply, store, chosen, which, t, by);
 }
@@ -210,15 +220,7 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
         for (const auto& name : rq.objects()) {
             const auto slash = name.find('/');
             const std::string topic = name.substr(0, slash), key = slash == std::string::npos ? "" : name.substr(slash + 1);
-            oids.push_back(object_named(store, topic, key));
-            // A writer restarted since: the object of that time, the newest one holding a sample then.
-            const auto all = store.named(topic, key);
-            for (auto it = all.rbegin(); all.size() > 1 && it != all.rend(); ++it) {
-                if (store.at(*it, rq.t0(), by).ok()) {
-                    oids.back() = *it;
-                    break;
-                }
-            }
+            oids.push_back(object_of_time(store, objects_named(store, topic, key), Which::at, rq.t0(), by));
         }
         auto cut = store.snapshot(rq.t0(), oids, by);
         bool all_ok = true;
@@ -233,10 +235,10 @@ void fill(const Store& store, const HistoryRequest& rq, HistoryReply& reply)
     }
     // The kinds about a time: the object of that time among those of the name.
     switch (kind) {
-    case Kind::at: return reply_at_time(reply, store, candidates(store, rq, kind), Which::at, rq.t0(), by);
-    case Kind::older: return reply_at_time(reply, store, candidates(store, rq, kind), Which::older, rq.t0(), by);
-    case Kind::younger: return reply_at_time(reply, store, candidates(store, rq, kind), Which::younger, rq.t0(), by);
-    case Kind::range: return reply_range(reply, store, candidates(store, rq, kind), rq, by);
+    case Kind::at: return reply_at_time(reply, store, candidates(store, rq), Which::at, rq.t0(), by);
+    case Kind::older: return reply_at_time(reply, store, candidates(store, rq), Which::older, rq.t0(), by);
+    case Kind::younger: return reply_at_time(reply, store, candidates(store, rq), Which::younger, rq.t0(), by);
+    case Kind::range: return reply_range(reply, store, candidates(store, rq), rq, by);
     default: break;
     }
     // The kinds about one object, the newest of its name.

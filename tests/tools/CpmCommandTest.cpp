@@ -7,6 +7,7 @@
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/SourceDir.hpp>
+#include <cpm_test/TempDir.hpp>
 
 #include <VehicleState.h>
 
@@ -370,18 +371,11 @@ TEST(CpmLab, CheckSaysWhatARunStartsAndHowLongItWaits)
     EXPECT_THAT(shipped.output(), HasSubstr("  fsm_6 "));
     EXPECT_THAT(shipped.output(), HasSubstr("waits 30 s for its processes to start, 10 s for each step of simulated time"));
 
-    char name[] = "/tmp/cpm_check_XXXXXX.yaml";
-    const int fd = ::mkstemps(name, 5);
-    ASSERT_GE(fd, 0);
-    ::close(fd);
-    std::ifstream in(cpm_test::source_dir() + "/scenarios/labs/corridor.yaml");
-    std::stringstream read;
-    read << in.rdbuf();
-    std::string text = read.str();  // its files named from the shipped folder, not from /tmp
+    // The shipped corridor with timeouts of its own, its files named from the shipped folder.
+    cpm_test::TempDir dir;
+    std::string text = cpm_test::file_text(cpm_test::source_dir() + "/scenarios/labs/corridor.yaml");
     for (size_t at; (at = text.find(" ../")) != std::string::npos;) text.replace(at, 4, " " + cpm_test::source_dir() + "/scenarios/");
-    std::ofstream(name) << text << "timeouts: {start: 2m, step: 1.5s}\n";
-    auto own = run_cpm({"lab", "check", name});
+    auto own = run_cpm({"lab", "check", dir.write("corridor.yaml", text + "timeouts: {start: 2m, step: 1.5s}\n")});
     EXPECT_EQ(own.wait(20s), 0) << own.errors();
     EXPECT_THAT(own.output(), HasSubstr("waits 120 s for its processes to start, 1.5 s for each step of simulated time"));
-    std::remove(name);
 }
