@@ -164,13 +164,13 @@ void CameraSimNode::run(const std::function<bool()>& stop_requested)
             }
         }
     }
-    auto timer = Timer::create(node_id, period_ns, 0,
+    auto timer = Timer::create(node_id, period_ns, init_settings().simulated_time ? timer_ids::simulated_camera_offset_ns(period_ns) : 0,
                                TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     bool first_tick = init_settings().simulated_time;
     timer->run_until(stop_requested, [&](uint64_t t) {
-        // The first tick is at lab time 0 with the car simulator's, which writes its pose of that
-        // time in the same step. Without waiting (1 s of real time at most: 100 ms ran out on a
-        // loaded machine) whether the first frame was rendered depended on which came first.
+        // The first tick comes a step after the car simulator's first, which wrote its pose then;
+        // but that pose may still be on its way. Without waiting (1 s of real time at most: 100 ms
+        // ran out on a loaded machine) whether the first frame was rendered depended on delivery.
         if (first_tick) {
             first_tick = false;
             const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
@@ -262,7 +262,8 @@ void OverheadCameraSimNode::run(const std::function<bool()>& stop_requested)
                          stop_requested)) {
         return;
     }
-    auto timer = Timer::create(timer_ids::ips_camera, period_ns, 0, TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
+    auto timer = Timer::create(timer_ids::ips_camera, period_ns,
+                               init_settings().simulated_time ? timer_ids::simulated_camera_offset_ns(period_ns) : 0, TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) { impl_->tick(); });
 }
 

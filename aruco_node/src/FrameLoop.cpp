@@ -9,6 +9,7 @@
 #include <cpm/Reader.hpp>
 #include <cpm/Timer.hpp>
 #include <cpm/get_time_ns.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/init.hpp>
 #include <cpm/percentile.hpp>
 
@@ -98,7 +99,7 @@ struct FrameLoop::Impl
     void run_simulated(const std::function<bool()>& stop_requested)
     {
         const auto period_ns = static_cast<uint64_t>(1e9 / options.frame_rate_hz);
-        const uint64_t offset_ns = std::min(kSimulatedDetection_ns, period_ns / 2);
+        const uint64_t offset_ns = timer_ids::simulated_camera_offset_ns(period_ns) + std::min(kSimulatedDetection_ns, period_ns / 2);
         Reader<CameraFrame> frames(options.topic, options.reader);
         std::optional<uint64_t> last_stamp;  ///< the newest frame processed
         bool missed = false;                 ///< a tick's frame never came

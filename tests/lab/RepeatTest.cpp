@@ -8,6 +8,8 @@
 #include <cpm_test/TempDir.hpp>
 #include <cpm_test/SourceDir.hpp>
 
+#include <cpm/rtdb/Recording.hpp>
+
 #include <nlohmann/json.hpp>
 
 #include <gtest/gtest.h>
@@ -38,8 +40,10 @@ bool pause_recorder(const std::string& run_dir, uintmax_t bytes, std::chrono::mi
 
 /// Runs the shipped scenario `name` twice in simulated time (`extra` flags too), then diffs the
 /// two recordings with cpm history. With `pause_in_b`, the second run's recorder is stopped for
-/// 1.5 s (real time) a quarter into the recording.
-void expect_two_runs_alike(const std::string& name, std::vector<std::string> extra = {}, bool pause_in_b = false)
+/// 1.5 s (real time) a quarter into the recording. `steps` (if given) is how many steps the
+/// first run's clock must have made (its triggers, the stops among them).
+void expect_two_runs_alike(const std::string& name, std::vector<std::string> extra = {}, bool pause_in_b = false,
+                           std::optional<uint64_t> steps = std::nullopt)
 {
     cpm_test::TempDir dir;
     const std::string file = cpm_test::source_dir() + "/scenarios/labs/" + name + ".yaml";
@@ -69,6 +73,12 @@ void expect_two_runs_alike(const std::string& name, std::vector<std::string> ext
         std::printf("%s run %s: %.1f s of lab time in %.1f s, the clock stepping %.1f s (%.1fx real time)\n", name.c_str(), run,
                     s["lab_time_s"].get<double>(), s["real_s"].get<double>(), clock_s, s["lab_time_s"].get<double>() / clock_s);
     }
+    if (steps) {
+        const auto rec = cpm::rtdb::load_recording(dir.file("a") + "/recording.db");
+        const auto triggers = rec.store->find("systemTrigger", "");
+        ASSERT_TRUE(triggers) << "the clock's steps are recorded";
+        EXPECT_EQ(rec.store->info(*triggers)->samples_total, *steps) << "the clock's steps (its triggers, the stops among them)";
+    }
     Process diff({built_program("cpm"), "history", "--file", dir.file("a"), "diff", dir.file("b")});
     EXPECT_EQ(diff.wait(60s), 0) << diff.output() << diff.errors();
     EXPECT_NE(diff.output().find(": identical"), std::string::npos) << diff.output();
@@ -91,8 +101,11 @@ TEST(Repeat, TheGatesCourseWithItsCameraAndMarkerFinderRunTwiceRecordsTheSameSam
 // 40 of its 120 s: the cars meet in the intersection within them (and the suite saves a minute).
 // The second run's recorder is paused for 1.5 s mid-run (a machine too busy for it): the clock
 // waits for it, and the recording loses none of the nodes' samples (without that wait it lost about
-// 9000 in a second).
+// 9000 in a second). Its clock steps each car's simulator and bridge in one step, 1 ms into every
+// 20 ms: 2000 steps, the recorder's every 100 ms (the planner's every 400 ms among them) 400 more,
+// and the stop, sent twice (when the clock ends and when the run stops); with the bridge a step
+// after the simulator there were 4002.
 TEST(Repeat, TheEightCarIntersectionRunTwiceRecordsTheSameSamples)
 {
-    expect_two_runs_alike("intersection", {"--duration", "40s"}, /*pause_in_b=*/true);
+    expect_two_runs_alike("intersection", {"--duration", "40s"}, /*pause_in_b=*/true, /*steps=*/2402);
 }

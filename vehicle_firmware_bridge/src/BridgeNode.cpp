@@ -229,7 +229,10 @@ void BridgeCar::cycle(const StatePacket& packet, uint64_t t_received)
     if (packet.status & kStatusBadCrc) ++stats.controller_reported_bad_crc;
 
     const uint8_t id = options.vehicle_id;
-    auto observation = lab.observation.get_sample(id, t_received);
+    // On the simulated clock the car's simulator writes its observation in the bridge's own step:
+    // the bridge takes the one before (its age is made up from the odometry), never one whose
+    // arrival races the tick.
+    auto observation = lab.observation.get_sample(id, init_settings().simulated_time ? t_received - 1 : t_received);
     uint64_t observed_ns = observation.sample.header().create_stamp().nanoseconds();
     if (observation.valid && observed_ns > last_observation_ns) {
         last_observation_ns = observed_ns;
@@ -280,8 +283,8 @@ void BridgeCar::run(const std::function<bool()>& stop_requested)
 
 void BridgeCar::serve_tick(const std::function<bool()>& stop_requested)
 {
-    // Simulated time: the controller sent its packet just before this tick (its timer ticks
-    // before ours on the lab's clock), but a pty hands bytes over asynchronously: wait for it,
+    // Simulated time: the controller writes its packet in this very step (both timers tick in
+    // it), and a pty hands bytes over asynchronously: wait for it,
     // up to kSimulatedPacketWait of real time (100 ms ran out on a loaded machine, and the run
     // then differed from the one before). A controller that stayed silent is not waited for
     // again until it sends once more: a run without it goes on at its pace.
@@ -418,8 +421,8 @@ std::string BridgeNode::timer_name(uint8_t first_vehicle_id) { return timer_ids:
 void BridgeNode::run(const std::function<bool()>& stop_requested)
 {
     if (init_settings().simulated_time) {
-        // One tick per state packet, 1 ms after the controller's on the lab's clock: the
-        // controllers' packets of a tick are answered before their next tick.
+        // One tick per state packet, in the controllers' step on the lab's clock (1 ms into the
+        // period): each waits for its packet of that step and answers it before the next.
         auto& cars = impl_->cars;
         // The bridge joins the clock once every line is open, as a node joins it once its inputs
         // have writers: opening flushes a line, and the state packet the controller sent at lab
@@ -431,7 +434,8 @@ void BridgeNode::run(const std::function<bool()>& stop_requested)
                 std::this_thread::sleep_for(std::chrono::milliseconds(200));
             }
         }
-        auto timer = Timer::create(timer_name(cars[0]->options.vehicle_id), cars[0]->options.simulated_state_period_ns, 1'000'000,
+        auto timer = Timer::create(timer_name(cars[0]->options.vehicle_id), cars[0]->options.simulated_state_period_ns,
+                                   timer_ids::kSimulatedCarOffset_ns,
                                    TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
         timer->run_until(stop_requested, [&](uint64_t) {
             for (auto& car : cars) car->serve_tick(stop_requested);

@@ -185,7 +185,7 @@ void FirmwareSimNode::Impl::read_lines()
 void FirmwareSimNode::Impl::await_answers()
 {
     // In simulated time the hosts answered the last state packets before the lab clock moved
-    // on (their timers tick between ours), but a pty hands bytes over asynchronously: wait for
+    // on (their timers tick in our step), but a pty hands bytes over asynchronously: wait for
     // answers still in flight (kSimulatedPacketWait of real time at most: 100 ms ran out on a
     // loaded machine, and that run differed from the one before). A car whose host is gone is
     // not waited for again until it answers once more.
@@ -286,7 +286,8 @@ void FirmwareSimNode::run(const std::function<bool()>& stop_requested)
     }
     const uint64_t period = d.simulated ? d.physics_period_ns * d.steps_per_state : d.physics_period_ns;
     if (d.simulated) d.steps = d.steps_per_state - 1;
-    d.timer = Timer::create(d.participant, timer_name(d.cars[0]->options.vehicle_id), period, 0,
+    d.timer = Timer::create(d.participant, timer_name(d.cars[0]->options.vehicle_id), period,
+                            d.simulated ? timer_ids::kSimulatedCarOffset_ns : 0,
                             cpm::TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     d.timer->run_until(stop_requested, [&](uint64_t t_nominal) { d.tick(t_nominal); });
 }

@@ -3,6 +3,7 @@
 // (and `cpm lab run`) waits until each named id says it is ready, so a node names its timer with
 // one of these and every program that starts nodes and tells the clock whom to wait for (`cpm
 // vehicle sim`, `cpm lab run`) names the same one.
+#include <cstdint>
 #include <string>
 
 namespace cpm::timer_ids {
@@ -23,5 +24,15 @@ inline constexpr const char* ips_camera = "ips_camera";
 inline constexpr const char* ips_node = "ips_node";
 /// The middleware of one high-level controller, named by the controller.
 inline std::string hlc_middleware(const std::string& controller) { return "hlc_middleware_" + controller; }
+
+/// Where a car's and a camera's ticks fall in their period on the simulated clock. The car's
+/// simulator and its bridge tick in one step, 1 ms into each period: the bridge answers the
+/// state packet the simulator wrote in that step (it waits for it on the line), and whoever
+/// ticks at the period's start (a state machine, a planner, a controller's middleware) reads
+/// the car of the step before, never a sample still being written in its own step. A simulated
+/// camera renders 1 ms later still (a quarter of its period at most), from the pose the simulator
+/// wrote the step before.
+inline constexpr uint64_t kSimulatedCarOffset_ns = 1'000'000;
+inline constexpr uint64_t simulated_camera_offset_ns(uint64_t period_ns) { return period_ns / 4 < 2'000'000 ? period_ns / 4 : 2'000'000; }
 
 }  // namespace cpm::timer_ids

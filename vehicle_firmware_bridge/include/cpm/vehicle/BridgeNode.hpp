@@ -12,8 +12,9 @@
 
 namespace cpm::vehicle {
 
-/// firmware_sim's state period on the lab's simulated clock (50 Hz): the bridge ticks 1 ms after
-/// each state packet, and a state machine that looks at the sensors ticks with them.
+/// firmware_sim's state period on the lab's simulated clock (50 Hz): the bridge ticks in the step
+/// of each state packet (timer_ids::kSimulatedCarOffset_ns), and a state machine that looks at
+/// the sensors ticks at the same rate, at the period's start.
 inline constexpr uint64_t kSimulatedStatePeriod_ns = 20'000'000;
 /// On the lab's simulated clock, how long (real time) the bridge waits for a tick's state packet
 /// and the controller for the answer to its last one: a pty hands bytes over asynchronously.
@@ -35,7 +36,7 @@ struct BridgeNodeOptions
     int foreign_packets_to_leave = 25;
     int foreign_retry_ms = 1000;
     /// Under --simulated_time: the controller's state period (firmware_sim's 50 Hz). The bridge
-    /// then ticks on the lab's clock 1 ms after each state packet instead of waiting on the line.
+    /// then ticks on the lab's clock in the step of each state packet instead of waiting on the line.
     uint64_t simulated_state_period_ns = kSimulatedStatePeriod_ns;
 };
 
@@ -79,7 +80,7 @@ public:
     static std::string timer_name(uint8_t first_vehicle_id);
     /// Runs until `stop_requested()` is true (asked at least every 200 ms), e.g.
     /// cpm::cli::stop_requested after cpm::cli::stop_on_signals. Under --simulated_time it
-    /// follows the lab's clock (a tick per state packet, 1 ms after the controller's) until the
+    /// follows the lab's clock (a tick per state packet, in the controller's step) until the
     /// clock stops it.
     void run(const std::function<bool()>& stop_requested);
     /// The first car's statistics.
