@@ -5,6 +5,7 @@
 #include <cpm/Writer.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/stamp_message.hpp>
+#include <cpm/timer_ids.hpp>
 #include <cpm/topics.hpp>
 
 #include <HistoryStatus.h>
@@ -116,7 +117,8 @@ struct HistoryService::Impl
         constexpr auto kClockWait = std::chrono::seconds(5);  // within the lab clock's 10 s per step
         if (options.participant) clock_participant = std::make_unique<Participant>(*options.participant);
         Participant& p = clock_participant ? *clock_participant : Participant::default_participant();
-        clock = Timer::create(p, options.clock_node, options.clock_period_ns, 0, TimerOptions{.simulated_time = true});
+        clock = Timer::create(p, options.clock_node, options.clock_period_ns,
+                              std::min(timer_ids::kSimulatedCarOffset_ns, options.clock_period_ns / 2), TimerOptions{.simulated_time = true});
         clock->start_async([this, kClockWait](uint64_t t) {
             const auto behind = ingest.wait_for_clock(t, kClockWait);
             std::string names;

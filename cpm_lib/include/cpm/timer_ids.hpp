@@ -31,7 +31,7 @@ inline std::string hlc_middleware(const std::string& controller) { return "hlc_m
 /// ticks at the period's start (a state machine, a planner, a controller's middleware) reads
 /// the car of the step before, never a sample still being written in its own step. A simulated
 /// camera renders 1 ms later still (a quarter of its period at most), from the pose the simulator
-/// wrote the step before.
+/// wrote the step before. The recorder ticks in the cars' step too (one step less of its own).
 inline constexpr uint64_t kSimulatedCarOffset_ns = 1'000'000;
 inline constexpr uint64_t simulated_camera_offset_ns(uint64_t period_ns) { return period_ns / 4 < 2'000'000 ? period_ns / 4 : 2'000'000; }
 

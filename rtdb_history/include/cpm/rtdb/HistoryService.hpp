@@ -63,7 +63,8 @@ struct ServiceOptions
     uint64_t save_before_ns = 30'000'000'000ull, save_after_ns = 10'000'000'000ull;
     std::string save_format = "sqlite";
     /// Not "": the service joins the lab's simulated clock as this node, ticking every
-    /// clock_period_ns of lab time, and each tick waits until every other node's announcement of
+    /// clock_period_ns of lab time (1 ms into it, in the simulated cars' step: a step of its own
+    /// only where no car ticks), and each tick waits until every other node's announcement of
     /// a tick at or after it has reached the recorder: all the nodes wrote before is then
     /// recorded, so a clock that runs faster than the recorder can take (a busy machine, a
     /// paused process) is held back instead of the recording losing samples. The service's own
