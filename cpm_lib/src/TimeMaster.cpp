@@ -48,7 +48,7 @@ struct TimeMaster::Impl
     {
         std::lock_guard<std::mutex> lock(mutex);
         for (const auto& r : statuses) merge(r);
-        (void)advance();
+        advance();
         // The master's thread is woken to start the clock and when it ended, not for every step.
         if (stepping && (!stepping->started || stepping->finished)) changed.notify_all();
     }
@@ -94,25 +94,22 @@ struct TimeMaster::Impl
         }
         return out;
     }
-    /// Moves a started clock on when every node is ahead of it; true when it did (or ended).
-    bool advance()
+    /// Moves a started clock on when every node is ahead of it (or ends it).
+    void advance()
     {
-        if (!stepping || !stepping->started || stepping->finished) return false;
+        if (!stepping || !stepping->started || stepping->finished) return;
         uint64_t next = 0;
-        if (!waiting_for(next).empty()) return false;
+        if (!waiting_for(next).empty()) return;
         if (next >= stepping->end_ns) {
             stepping->finished = true;
-            return true;
-        }
-        if (!send(next)) {
+        } else if (!send(next)) {
             stepping->error = "the SystemTrigger could not be written";
             stepping->finished = true;
-            return true;
+        } else {
+            stepping->now = next;
+            simulated_now = next;
+            ++stepping->steps;
         }
-        stepping->now = next;
-        simulated_now = next;
-        ++stepping->steps;
-        return true;
     }
     bool send(uint64_t next_start)
     {
@@ -183,7 +180,7 @@ uint64_t TimeMaster::run_simulated(const std::vector<std::string>& node_ids, uin
             }
             d.stepping->started = true;
         }
-        (void)d.advance();
+        d.advance();
         if (d.stepping->finished) break;
         if (d.stepping->steps != steps_seen) {
             steps_seen = d.stepping->steps;
