@@ -141,7 +141,7 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
     // While it runs (its lab time started: every car's programs are up): each car's programs on
     // its own host, none of them on the others.
-    ASSERT_TRUE(lab_time_started(run)) << run.errors();
+    ASSERT_TRUE(lab_time_started(run)) << run.output() << run.errors();
     bool seen = false;
     cpm_test::wait_until([&] {
         const auto a = programs_on(hosts(), 1), b = programs_on(hosts(), 2), central = programs_on(hosts(), 0);
@@ -371,7 +371,7 @@ TEST_F(LabAcrossHosts, ACarHostLostMidRunIsNamedAndTheOtherCarDrivesOnToTheEnd)
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", out, "--monitor", "off", "--duration", "12s"}));
     // Mid-run: 2 s after the lab time started (every car's first state; on a loaded machine a
     // cut 2 s after car_b's bridge came up came before its first state, and the clock never started).
-    ASSERT_TRUE(lab_time_started(run)) << run.errors();
+    ASSERT_TRUE(lab_time_started(run)) << run.output() << run.errors();
     ASSERT_TRUE(runs(programs_on(hosts(), 2), "vehicle_bridge")) << run.errors();
     std::this_thread::sleep_for(2s);
     const uint64_t cut_ns = cpm::get_time_ns();
@@ -408,7 +408,7 @@ TEST_F(LabAcrossHosts, ACarHostLostJustBeforeTheEndIsNamedThoughSshNoticesItOnly
     const std::string out = dir.file("late-" + std::to_string(::getpid()));
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", scenario(), "--out", out, "--monitor", "off", "--duration", "6s"}));
     // The run's 6 s count from every car's first state (over ssh seconds after the start).
-    ASSERT_TRUE(lab_time_started(run)) << run.errors();
+    ASSERT_TRUE(lab_time_started(run)) << run.output() << run.errors();
     std::this_thread::sleep_for(4500ms);
     ASSERT_TRUE(hosts().cut(2));
     EXPECT_EQ(run.wait(90s), 1) << "a run that lost a host is not ok\n" << run.output() << run.errors();
@@ -443,7 +443,7 @@ TEST_F(LabAcrossHosts, APlannerHostLostMidRunBrakesTheCarsOnTheirOwnHostAndEndsT
     cpm_test::Process run(hosts().in(0, {built_program("cpm"), "lab", "run", file, "--out", out, "--monitor", "off"}));
     // Mid-run: once the lab time started (routing starts with it), polled from the run's own
     // output, not from car_b's process list (a fresh build's first tests missed it within 30 s).
-    ASSERT_TRUE(lab_time_started(run)) << run.errors();
+    ASSERT_TRUE(lab_time_started(run)) << run.output() << run.errors();
     ASSERT_TRUE(runs(programs_on(hosts(), 2), "central_routing")) << run.errors();
     std::this_thread::sleep_for(5s);  // the cars drive on its trajectories
     const uint64_t cut_ns = cpm::get_time_ns();
