@@ -64,6 +64,10 @@ private:
     bool any_ = false, has_previous_ = false;
 };
 
+/// Where a simulated camera's tick falls in its period: on the simulated clock a step after the
+/// car's simulator (timer_ids), in real time at its start.
+uint64_t tick_offset_ns(uint64_t period_ns) { return init_settings().simulated_time ? timer_ids::simulated_camera_offset_ns(period_ns) : 0; }
+
 /// The frame's bytes and stamps from a mono8 image.
 void fill_frame(CameraFrame& message, const cv::Mat& image, uint64_t exposure)
 {
@@ -164,7 +168,7 @@ void CameraSimNode::run(const std::function<bool()>& stop_requested)
             }
         }
     }
-    auto timer = Timer::create(node_id, period_ns, init_settings().simulated_time ? timer_ids::simulated_camera_offset_ns(period_ns) : 0,
+    auto timer = Timer::create(node_id, period_ns, tick_offset_ns(period_ns),
                                TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     bool first_tick = init_settings().simulated_time;
     timer->run_until(stop_requested, [&](uint64_t t) {
@@ -263,7 +267,7 @@ void OverheadCameraSimNode::run(const std::function<bool()>& stop_requested)
         return;
     }
     auto timer = Timer::create(timer_ids::ips_camera, period_ns,
-                               init_settings().simulated_time ? timer_ids::simulated_camera_offset_ns(period_ns) : 0, TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
+                               tick_offset_ns(period_ns), TimerOptions{.wait_for_start = false, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t) { impl_->tick(); });
 }
 
