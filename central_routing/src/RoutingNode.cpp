@@ -7,6 +7,7 @@
 #include <cpm/Logging.hpp>
 #include <cpm/MultiVehicleReader.hpp>
 #include <cpm/Timer.hpp>
+#include <cpm/init.hpp>
 #include <cpm/timer_ids.hpp>
 #include <cpm/topics.hpp>
 #include <cpm/Writer.hpp>
@@ -43,6 +44,11 @@ struct RoutingNode::Impl
     std::set<uint8_t> commanded;  // cars sent a trajectory this cycle
     std::map<uint8_t, Pose> last_pose;
     bool started = false, said_waiting = false;
+    /// On the simulated clock the planner ticks in the cars' step (kSimulatedCarOffset_ns), so
+    /// the clock takes no step for it alone: it reads the cars' states as of a nanosecond before
+    /// that step (those the bridge writes in it would be there or not as threads ran), and its
+    /// plans are valid a nanosecond after it (the cars take them in their next step, never in it).
+    const bool simulated = init_settings().simulated_time;
     std::vector<double> plan_ms, follow_errors;
     size_t cycles = 0, overruns = 0, refused_writes = 0;
     double min_distance = std::numeric_limits<double>::infinity();
@@ -62,7 +68,7 @@ void RoutingNode::Impl::cycle(uint64_t t_ns)
     const double t = double(t_ns - t_first) * 1e-9;
     std::vector<CarState> measured;
     commanded.clear();
-    for (auto& [id, result] : states.get_samples(t_ns)) {
+    for (auto& [id, result] : states.get_samples(simulated ? t_ns - 1 : t_ns)) {
         const bool fresh = result.valid && result.age_ns <= options.stale_ns;
         if (!fresh) {
             if (planner.has_car(id)) {
@@ -138,7 +144,7 @@ void RoutingNode::Impl::cycle(uint64_t t_ns)
 void RoutingNode::Impl::send(uint8_t id, uint64_t t_ns, double t)
 {
     VehicleCommandTrajectory command;
-    stamp_message(command, t_ns, 0);
+    stamp_message(command, t_ns, simulated ? 1 : 0);
     command.vehicle_id(id);
     std::vector<TrajectoryPoint> points;
     for (const auto& p : planner.trajectory(id, t, options.trajectory_step)) {
@@ -167,7 +173,7 @@ RoutingNode::~RoutingNode() = default;
 void RoutingNode::run(const std::function<bool()>& stop_requested)
 {
     auto& d = *impl_;
-    auto timer = Timer::create(timer_ids::central_routing, d.options.period_ns, 0,
+    auto timer = Timer::create(timer_ids::central_routing, d.options.period_ns, d.simulated ? timer_ids::kSimulatedCarOffset_ns : 0,
                                cpm::TimerOptions{.wait_for_start = d.options.wait_for_start, .simulated_time_allowed = true});
     timer->run_until(stop_requested, [&](uint64_t t_nominal) { d.cycle(t_nominal); });
 }

@@ -7,12 +7,14 @@
 #include <cpm/ReaderAbstract.hpp>
 #include <cpm/get_time_ns.hpp>
 #include <cpm/routing/TrafficWatch.hpp>
+#include <cpm/timer_ids.hpp>
 
 #include <cpm_test/Dds.hpp>
 #include <cpm_test/Isolation.hpp>
 #include <cpm_test/Process.hpp>
 #include <cpm_test/SourceDir.hpp>
 
+#include <VehicleCommandTrajectory.h>
 #include <VehicleObservation.h>
 
 #include <gtest/gtest.h>
@@ -87,25 +89,38 @@ TEST(RoutingEndToEnd, EightCarsDriveTwoSimulatedMinutesWithoutTouchingAndNoneSta
     // planner and the clock that steps them, 120 s of lab time as fast as the machine computes.
     cpm::Participant participant(cpm_test::isolated_options());
     cpm::ReaderAbstract<VehicleObservation> observations(participant, "vehicleObservation", {.keep_all = true});
+    cpm::ReaderAbstract<VehicleCommandTrajectory> plans(participant, "vehicleCommandTrajectory", {.keep_all = true});
     Process cars({built_program("cpm"), "vehicle", "sim", "--id", "1", "--count", "8", "--lanes", kLanes, "--simulated_time"});
     Process routing({built_program("central_routing"), "--vehicle_ids", "1,2,3,4,5,6,7,8", "--lanes", kLanes, "--simulated_time"});
     Process clock({built_program("cpm"), "lab", "clock", "--nodes", "firmware_sim_1,vehicle_bridge_1,central_routing", "--simulated",
                    "--until", "120s"});
     std::map<int, std::vector<VehicleObservation>> seen;
+    std::vector<VehicleCommandTrajectory> sent;
+    const auto take_all = [&] {
+        for (auto& o : observations.take()) seen[o.vehicle_id()].push_back(o);
+        for (auto& p : plans.take()) sent.push_back(std::move(p));
+    };
     const auto give_up = std::chrono::steady_clock::now() + 150s;
     int clock_exit = -1;
-    while ((clock_exit = clock.wait(20ms)) == -1 && std::chrono::steady_clock::now() < give_up) {
-        for (auto& o : observations.take()) seen[o.vehicle_id()].push_back(o);
-    }
+    while ((clock_exit = clock.wait(20ms)) == -1 && std::chrono::steady_clock::now() < give_up) take_all();
     ASSERT_EQ(clock_exit, 0) << clock.output() << clock.errors();
     std::this_thread::sleep_for(500ms);
-    for (auto& o : observations.take()) seen[o.vehicle_id()].push_back(o);
+    take_all();
     // The clock's stop ends every timer: the planner and the cars end by themselves.
     ASSERT_EQ(routing.wait(10s), 0) << log_text(routing);
     EXPECT_EQ(cars.wait(15s), 0) << log_text(cars);
     std::printf("%s", clock.output().c_str());
 
     ASSERT_EQ(seen.size(), 8u) << log_text(cars);
+    // The planner plans in the cars' step (it takes no step of its own on the clock), from the
+    // cars' states of the step before, and its plans count from the cars' next step: never read
+    // in the step that made them, where the cars would see them or not as threads happened to run.
+    EXPECT_GT(sent.size(), 8u * 250u) << "a plan for each car every 400 ms";
+    for (const auto& p : sent) {
+        const uint64_t made = p.header().create_stamp().nanoseconds();
+        ASSERT_EQ(made % 20'000'000, cpm::timer_ids::kSimulatedCarOffset_ns) << "vehicle " << int(p.vehicle_id()) << "'s plan of " << made;
+        ASSERT_EQ(p.header().valid_after_stamp().nanoseconds(), made + 1) << "vehicle " << int(p.vehicle_id()) << "'s plan of " << made;
+    }
     // Every pose in the order it was taken: bodies compared with the others' newest poses
     // (at most 40 ms old), distance and standstills per car.
     std::vector<VehicleObservation> all;

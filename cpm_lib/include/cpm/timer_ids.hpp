@@ -28,10 +28,12 @@ inline std::string hlc_middleware(const std::string& controller) { return "hlc_m
 /// Where a car's and a camera's ticks fall in their period on the simulated clock. The car's
 /// simulator and its bridge tick in one step, 1 ms into each period: the bridge answers the
 /// state packet the simulator wrote in that step (it waits for it on the line), and whoever
-/// ticks at the period's start (a state machine, a planner, a controller's middleware) reads
-/// the car of the step before, never a sample still being written in its own step. A simulated
-/// camera renders 1 ms later still (a quarter of its period at most), from the pose the simulator
-/// wrote the step before. The recorder ticks in the cars' step too (one step less of its own).
+/// ticks at the period's start (a state machine, a controller's middleware) reads the car of the
+/// step before, never a sample still being written in its own step. A simulated camera renders
+/// 1 ms later still (a quarter of its period at most), from the pose the simulator wrote the step
+/// before. The recorder ticks in the cars' step too (one step less of its own), and so does
+/// central_routing: it reads the cars' states as of a nanosecond before the step and makes its
+/// plans valid a nanosecond after it, so the cars take them in their next step.
 inline constexpr uint64_t kSimulatedCarOffset_ns = 1'000'000;
 inline constexpr uint64_t simulated_camera_offset_ns(uint64_t period_ns) { return period_ns / 4 < 2'000'000 ? period_ns / 4 : 2'000'000; }
 
