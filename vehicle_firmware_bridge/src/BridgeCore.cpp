@@ -8,19 +8,31 @@ namespace cpm::vehicle {
 
 namespace {
 
+/// A command's field: its name is spelled out ("trajectory_points[3].vx") only when it is at
+/// fault. Every cycle of every car checks the newest commands, a trajectory's 80 points and
+/// more among them, and building their names cost the bridge's loop 400 strings a cycle.
+struct Field
+{
+    const char* member;
+    const char* array = nullptr;  ///< the member is in array[index]
+    size_t index = 0;
+
+    std::string name() const { return array ? std::string(array) + "[" + std::to_string(index) + "]." + member : std::string(member); }
+};
+
 /// Finds the first field of a command that is not finite or not within its range.
 class FieldCheck
 {
 public:
-    void finite(const std::string& name, double value)
+    void finite(const Field& field, double value)
     {
-        if (problem.empty() && !std::isfinite(value)) problem = name + " = " + text(value) + " is not a finite number";
+        if (problem.empty() && !std::isfinite(value)) problem = field.name() + " = " + text(value) + " is not a finite number";
     }
-    void within(const std::string& name, double value, double lo, double hi)
+    void within(const Field& field, double value, double lo, double hi)
     {
-        finite(name, value);
+        finite(field, value);
         if (problem.empty() && (value < lo || value > hi))
-            problem = name + " = " + text(value) + " is outside [" + text(lo) + ", " + text(hi) + "]";
+            problem = field.name() + " = " + text(value) + " is outside [" + text(lo) + ", " + text(hi) + "]";
     }
     std::string problem;
 
@@ -38,16 +50,16 @@ private:
 std::string command_problem(const VehicleCommandDirect& command, const Calibration&)
 {
     FieldCheck check;
-    check.within("motor_throttle", command.motor_throttle(), -1, 1);
-    check.within("steering_servo", command.steering_servo(), -1, 1);
+    check.within({"motor_throttle"}, command.motor_throttle(), -1, 1);
+    check.within({"steering_servo"}, command.steering_servo(), -1, 1);
     return check.problem;
 }
 
 std::string command_problem(const VehicleCommandSpeedCurvature& command, const Calibration& c)
 {
     FieldCheck check;
-    check.within("speed", command.speed(), -c.max_speed, c.max_speed);
-    check.finite("curvature", command.curvature());
+    check.within({"speed"}, command.speed(), -c.max_speed, c.max_speed);
+    check.finite({"curvature"}, command.curvature());
     return check.problem;
 }
 
@@ -56,11 +68,10 @@ std::string command_problem(const VehicleCommandTrajectory& command, const Calib
     FieldCheck check;
     const auto& points = command.trajectory_points();
     for (size_t i = 0; i < points.size() && check.problem.empty(); ++i) {
-        const std::string at = "trajectory_points[" + std::to_string(i) + "].";
-        check.finite(at + "px", points[i].px());
-        check.finite(at + "py", points[i].py());
-        check.within(at + "vx", points[i].vx(), -c.max_speed, c.max_speed);
-        check.within(at + "vy", points[i].vy(), -c.max_speed, c.max_speed);
+        check.finite({"px", "trajectory_points", i}, points[i].px());
+        check.finite({"py", "trajectory_points", i}, points[i].py());
+        check.within({"vx", "trajectory_points", i}, points[i].vx(), -c.max_speed, c.max_speed);
+        check.within({"vy", "trajectory_points", i}, points[i].vy(), -c.max_speed, c.max_speed);
     }
     return check.problem;
 }
@@ -68,14 +79,13 @@ std::string command_problem(const VehicleCommandTrajectory& command, const Calib
 std::string command_problem(const VehicleCommandPathTracking& command, const Calibration& c)
 {
     FieldCheck check;
-    check.within("speed", command.speed(), -c.max_speed, c.max_speed);
+    check.within({"speed"}, command.speed(), -c.max_speed, c.max_speed);
     const auto& path = command.path();
     for (size_t i = 0; i < path.size() && check.problem.empty(); ++i) {
-        const std::string at = "path[" + std::to_string(i) + "].";
-        check.finite(at + "pose.x", path[i].pose().x());
-        check.finite(at + "pose.y", path[i].pose().y());
-        check.finite(at + "pose.yaw", path[i].pose().yaw());
-        check.finite(at + "s", path[i].s());
+        check.finite({"pose.x", "path", i}, path[i].pose().x());
+        check.finite({"pose.y", "path", i}, path[i].pose().y());
+        check.finite({"pose.yaw", "path", i}, path[i].pose().yaw());
+        check.finite({"s", "path", i}, path[i].s());
     }
     return check.problem;
 }
