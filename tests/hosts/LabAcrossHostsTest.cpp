@@ -238,8 +238,17 @@ TEST_F(LabAcrossHosts, InSimulatedTimeTheClockWaitsForTheCarsOnTheirHostsAndEver
         const auto states = recording.range_of<VehicleState>("vehicleState", car, 0, UINT64_MAX, cpm::HistoryBy::data, 100000);
         ASSERT_GE(states.samples.size(), 2u) << "car " << car;
         const uint64_t span_ns = states.samples.back().data_ns - states.samples.front().data_ns;
-        EXPECT_GE(span_ns, 9'000'000'000u) << "car " << car;
-        EXPECT_EQ(states.samples.size(), span_ns / 20'000'000 + 1) << "car " << car << ": one state per 20 ms tick of lab time";
+        // What a failure needs to be told apart: a late first state or an early last one, what
+        // the recording says it lost, and what the car's programs warned of.
+        const auto account = [&] {
+            return "car " + std::to_string(car) + ": states from lab time " + std::to_string(states.samples.front().data_ns) + " to " +
+                   std::to_string(states.samples.back().data_ns) + " ns; the recording's account: " + summary["recording"].dump() +
+                   "\nthe car's warnings (sim_" + std::to_string(car) + ", bridge_" + std::to_string(car) + "):\n" +
+                   cpm_test::warnings_in(out + "/sim_" + std::to_string(car) + ".log") +
+                   cpm_test::warnings_in(out + "/bridge_" + std::to_string(car) + ".log");
+        };
+        EXPECT_GE(span_ns, 9'000'000'000u) << account();
+        EXPECT_EQ(states.samples.size(), span_ns / 20'000'000 + 1) << account() << "\none state per 20 ms tick of lab time";
     }
     // Car 6 on car_b ran the machine its file included (its wall follower drove it; the outer
     // machine alone has nothing that moves a car).
