@@ -68,7 +68,7 @@ void RoutingNode::Impl::cycle(uint64_t t_ns)
     const double t = double(t_ns - t_first) * 1e-9;
     std::vector<CarState> measured;
     commanded.clear();
-    for (auto& [id, result] : states.get_samples(simulated ? t_ns - 1 : t_ns)) {
+    for (auto& [id, result] : states.get_samples(simulated ? timer_ids::simulated_read_before_step(t_ns) : t_ns)) {
         const bool fresh = result.valid && result.age_ns <= options.stale_ns;
         if (!fresh) {
             if (planner.has_car(id)) {

@@ -90,6 +90,14 @@ bool lab_time_started(cpm_test::Process& run)
            run.errors().find("lab time starts") != std::string::npos;
 }
 
+/// What a car's simulator and bridge warned of in the run's folder `out`, for a failure's message.
+std::string car_warnings(const std::string& out, int car)
+{
+    const std::string id = std::to_string(car);
+    return "the car's warnings (sim_" + id + ", bridge_" + id + "):\n" + cpm_test::warnings_in(out + "/sim_" + id + ".log") +
+           cpm_test::warnings_in(out + "/bridge_" + id + ".log");
+}
+
 bool runs(const std::vector<std::string>& programs, const std::string& name)
 {
     return std::any_of(programs.begin(), programs.end(), [&](const std::string& p) { return std::filesystem::path(p).filename() == name; });
@@ -199,9 +207,7 @@ TEST_F(LabAcrossHosts, EachCarRunsOnItsHostTheRecordingIsCentralAndNothingIsLeft
         EXPECT_GE(double(states.samples.size()), 0.98 * span_s * 50)
             << "car " << car << ": " << states.samples.size() << " states in " << span_s << " s; gaps over 30 ms: "
             << cpm_test::gaps_over(stamps, stamp(states.samples.front()), 30'000'000) << "; the recording's account: "
-            << summary["recording"].dump() << "\nthe car's warnings (sim_" << car << ", bridge_" << car << "):\n"
-            << cpm_test::warnings_in(out + "/sim_" + std::to_string(car) + ".log")
-            << cpm_test::warnings_in(out + "/bridge_" + std::to_string(car) + ".log");
+            << summary["recording"].dump() << "\n" << car_warnings(out, car);
     }
     // So they came over the wire: the central host's link received at least their bytes.
     const uint64_t central_received = hosts().received_bytes(0) - central_received_before;
@@ -242,10 +248,8 @@ TEST_F(LabAcrossHosts, InSimulatedTimeTheClockWaitsForTheCarsOnTheirHostsAndEver
         // the recording says it lost, and what the car's programs warned of.
         const auto account = [&] {
             return "car " + std::to_string(car) + ": states from lab time " + std::to_string(states.samples.front().data_ns) + " to " +
-                   std::to_string(states.samples.back().data_ns) + " ns; the recording's account: " + summary["recording"].dump() +
-                   "\nthe car's warnings (sim_" + std::to_string(car) + ", bridge_" + std::to_string(car) + "):\n" +
-                   cpm_test::warnings_in(out + "/sim_" + std::to_string(car) + ".log") +
-                   cpm_test::warnings_in(out + "/bridge_" + std::to_string(car) + ".log");
+                   std::to_string(states.samples.back().data_ns) + " ns; the recording's account: " + summary["recording"].dump() + "\n" +
+                   car_warnings(out, car);
         };
         EXPECT_GE(span_ns, 9'000'000'000u) << account();
         EXPECT_EQ(states.samples.size(), span_ns / 20'000'000 + 1) << account() << "\none state per 20 ms tick of lab time";

@@ -232,7 +232,7 @@ void BridgeCar::cycle(const StatePacket& packet, uint64_t t_received)
     // On the simulated clock the car's simulator writes its observation in the bridge's own step:
     // the bridge takes the one before (its age is made up from the odometry), never one whose
     // arrival races the tick.
-    auto observation = lab.observation.get_sample(id, init_settings().simulated_time ? t_received - 1 : t_received);
+    auto observation = lab.observation.get_sample(id, init_settings().simulated_time ? timer_ids::simulated_read_before_step(t_received) : t_received);
     uint64_t observed_ns = observation.sample.header().create_stamp().nanoseconds();
     if (observation.valid && observed_ns > last_observation_ns) {
         last_observation_ns = observed_ns;

@@ -35,6 +35,10 @@ inline std::string hlc_middleware(const std::string& controller) { return "hlc_m
 /// central_routing: it reads the cars' states as of a nanosecond before the step and makes its
 /// plans valid a nanosecond after it, so the cars take them in their next step.
 inline constexpr uint64_t kSimulatedCarOffset_ns = 1'000'000;
+/// The lab time a node ticking at t in the cars' step reads the others' samples at on the
+/// simulated clock: a nanosecond before its step, so a sample written in that step (whose arrival
+/// races the tick) is never taken; what it writes there is valid a nanosecond after it.
+inline constexpr uint64_t simulated_read_before_step(uint64_t t_ns) { return t_ns - 1; }
 inline constexpr uint64_t simulated_camera_offset_ns(uint64_t period_ns) { return period_ns / 4 < 2'000'000 ? period_ns / 4 : 2'000'000; }
 
 }  // namespace cpm::timer_ids
